@@ -1,0 +1,300 @@
+//! Every tunable in one value, with the two profiles.
+//!
+//! - [`Config::reference()`] is the ST reference's R release, number for number, including
+//!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
+//!   reference's golden vectors bit for bit.
+//! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings,
+//!   gains and stick mapping, with the documented differences D1–D12 of product.md §3, each a
+//!   field here so a test can switch it on its own.
+//!
+//! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
+//! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
+
+use crate::ahrs::{EstimatorConfig, MahonyConfig};
+use crate::control::{ControlConfig, Derivative};
+use crate::filter::BiquadCoeffs;
+use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
+use crate::math::InvSqrt;
+use crate::mixer::{MixerConfig, Saturate};
+use crate::rc::{PulseRules, RcConfig, YawStick};
+use crate::supervisor::{SafetyConfig, SupervisorConfig};
+
+/// The control tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Timing {
+    /// TIM9 prescaler and auto-reload: the tick is 84 MHz / ((psc + 1)(arr + 1)).
+    pub tick_timer_psc: u16,
+    pub tick_timer_arr: u16,
+    /// The dt every per-tick integration assumes, s (a C double in the reference).
+    pub tick_dt_s: f64,
+}
+
+/// The timers' input clock, Hz (APB2 timers at 84 MHz).
+pub const TIMER_CLOCK_HZ: u32 = 84_000_000;
+
+impl Timing {
+    /// The tick rate the timer really produces, Hz.
+    pub fn tick_hz(&self) -> f32 {
+        let div = (u32::from(self.tick_timer_psc) + 1) * (u32::from(self.tick_timer_arr) + 1);
+        TIMER_CLOCK_HZ as f32 / div as f32
+    }
+}
+
+/// Every tunable of the flight core.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    pub timing: Timing,
+    pub imu: ImuConfig,
+    pub calibration: CalibrationConfig,
+    /// In-flight sensor health checks (`None` in the reference).
+    pub health: Option<HealthConfig>,
+    /// The gyro low-pass run every tick.
+    pub gyro_filter: BiquadCoeffs,
+    pub estimator: EstimatorConfig,
+    pub rc: RcConfig,
+    pub control: ControlConfig,
+    pub mixer: MixerConfig,
+    pub supervisor: SupervisorConfig,
+    /// Evaluate the reference's double-precision expressions in f64 (bit-exact replay).
+    /// Off, everything is f32 (much cheaper on the Cortex-M4, whose FPU is single only).
+    pub reference_arithmetic: bool,
+}
+
+/// A configuration value that cannot fly.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConfigError {
+    Timing,
+    ImuSensitivity,
+    Mount,
+    Calibration,
+    Health,
+    GyroFilter,
+    Estimator,
+    Rc,
+    Control,
+    Mixer,
+    Supervisor,
+}
+
+impl ConfigError {
+    /// The offending part of the configuration, for a message.
+    pub fn field(self) -> &'static str {
+        match self {
+            ConfigError::Timing => "timing (tick timer and dt)",
+            ConfigError::ImuSensitivity => "imu sensitivity",
+            ConfigError::Mount => "imu mount",
+            ConfigError::Calibration => "calibration",
+            ConfigError::Health => "sensor health limits",
+            ConfigError::GyroFilter => "gyro filter",
+            ConfigError::Estimator => "estimator",
+            ConfigError::Rc => "radio",
+            ConfigError::Control => "control gains and limits",
+            ConfigError::Mixer => "mixer",
+            ConfigError::Supervisor => "supervisor",
+        }
+    }
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "invalid configuration: {}", self.field())
+    }
+}
+
+impl Config {
+    /// The ST reference firmware, R release (221117), DC motors, Devo 7E radio.
+    pub fn reference() -> Config {
+        Config {
+            timing: Timing { tick_timer_psc: 51, tick_timer_arr: 1999, tick_dt_s: 0.00125 },
+            imu: ImuConfig::REFERENCE,
+            calibration: CalibrationConfig::REFERENCE,
+            health: None,
+            gyro_filter: BiquadCoeffs::REFERENCE_GYRO,
+            estimator: EstimatorConfig::Mahony(MahonyConfig::REFERENCE),
+            rc: RcConfig::REFERENCE,
+            control: ControlConfig::REFERENCE,
+            mixer: MixerConfig::REFERENCE_DC,
+            supervisor: SupervisorConfig::Reference,
+            reference_arithmetic: true,
+        }
+    }
+
+    /// The ESC build of the product: TIM4 at 400 Hz, idle 850, max 1700, MIN_THR 20.
+    pub fn esc() -> Config {
+        let d = Config::default();
+        Config {
+            mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_ESC },
+            rc: RcConfig { min_throttle: 20, ..d.rc },
+            ..d
+        }
+    }
+
+    /// Check every field; the error names the first part that cannot fly.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let t = &self.timing;
+        if !(t.tick_dt_s.is_finite() && t.tick_dt_s > 0.0 && t.tick_dt_s < 0.1) {
+            return Err(ConfigError::Timing);
+        }
+        let sens = [self.imu.accel_mg_per_lsb, self.imu.gyro_mdps_per_lsb];
+        if !sens.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(ConfigError::ImuSensitivity);
+        }
+        if !self.imu.mount.is_valid() {
+            return Err(ConfigError::Mount);
+        }
+        let cal = &self.calibration;
+        let check_ok = cal.motion_check.is_none_or(|m| {
+            m.gyro_max_dev_mdps.is_finite() && m.gyro_max_dev_mdps > 0.0 && m.accel_norm_tol_mg.is_finite() && m.accel_norm_tol_mg > 0.0
+        });
+        if cal.samples == 0 || !check_ok {
+            return Err(ConfigError::Calibration);
+        }
+        if let Some(h) = self.health {
+            let ok = h.stuck_ticks > 0
+                && h.accel_limit_mg.is_finite()
+                && h.accel_limit_mg > 0.0
+                && h.gyro_limit_mdps.is_finite()
+                && h.gyro_limit_mdps > 0.0;
+            if !ok {
+                return Err(ConfigError::Health);
+            }
+        }
+        if !self.gyro_filter.is_stable() || (self.gyro_filter.dc_gain() - 1.0).abs() > 0.01 {
+            return Err(ConfigError::GyroFilter);
+        }
+        if !self.estimator.is_valid() {
+            return Err(ConfigError::Estimator);
+        }
+        if !self.rc.is_valid() {
+            return Err(ConfigError::Rc);
+        }
+        if !self.control.is_valid() {
+            return Err(ConfigError::Control);
+        }
+        if !self.mixer.is_valid() {
+            return Err(ConfigError::Mixer);
+        }
+        if let SupervisorConfig::Safe(s) = self.supervisor {
+            if !s.is_valid() {
+                return Err(ConfigError::Supervisor);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for Config {
+    /// The product: the reference's structure and tuning with differences D1–D12.
+    fn default() -> Config {
+        let r = Config::reference();
+        let tick_hz = 800.0;
+        Config {
+            // D1: TIM9 at exactly 800 Hz (84 MHz / 105 / 1000), so dt is the real period.
+            timing: Timing { tick_timer_psc: 104, tick_timer_arr: 999, tick_dt_s: 1.0 / tick_hz },
+            imu: r.imu,
+            // D11: calibration with a motion check, retried for 10 s.
+            calibration: CalibrationConfig {
+                motion_check: Some(MotionCheck { gyro_max_dev_mdps: 2000.0, accel_norm_tol_mg: 100.0, timeout_ticks: 8000 }),
+                ..r.calibration
+            },
+            // §4: non-finite, impossible or stuck (100 ms) sensor values are faults.
+            health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100.0, gyro_limit_mdps: 2_300_000.0 }),
+            gyro_filter: r.gyro_filter,
+            // D4 and D5: exact normalisation and a better estimator (see `ahrs`).
+            estimator: EstimatorConfig::Mahony(MahonyConfig {
+                inv_sqrt: InvSqrt::Exact,
+                sequential_update: false,
+                reference_arithmetic: false,
+                ..MahonyConfig::REFERENCE
+            }),
+            rc: RcConfig {
+                // D9: 800..2200 µs pulses from both edges of one pulse; 100 ms channel timeout.
+                pulses: PulseRules::Validated { min_counts: 3200, max_counts: 8800 },
+                link_timeout_ticks: 80,
+                // D8: yaw rate proportional to the stick beyond the dead band.
+                yaw_stick: YawStick::Proportional,
+                ..r.rc
+            },
+            control: ControlConfig {
+                // D3: the same D low-pass on yaw.
+                yaw: crate::control::AxisGains { d_lowpass: true, ..r.control.yaw },
+                // D7: derivative on measurement.
+                derivative: Derivative::OnMeasurement,
+                // D2: the outer integrator steps by the real outer period.
+                outer_integrator_dt_s: 5.0 / tick_hz as f32,
+                inner_dt_s: 1.0 / tick_hz as f32,
+                // D6: anti-windup against mixer saturation.
+                anti_windup: true,
+                ..r.control
+            },
+            // D6: attitude priority when a motor saturates.
+            mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..r.mixer },
+            // D10, D11: the safety layer.
+            supervisor: SupervisorConfig::Safe(SafetyConfig::DEFAULT),
+            reference_arithmetic: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_profiles_are_valid() {
+        assert_eq!(Config::reference().validate(), Ok(()));
+        assert_eq!(Config::default().validate(), Ok(()));
+        assert_eq!(Config::esc().validate(), Ok(()));
+    }
+
+    #[test]
+    fn reference_tick_is_807_hz_and_default_is_exactly_800() {
+        assert!((Config::reference().timing.tick_hz() - 807.6923).abs() < 1e-3);
+        assert_eq!(Config::default().timing.tick_hz(), 800.0);
+    }
+
+    #[test]
+    #[allow(clippy::approx_constant)] // 3.141592654 is the reference's own PI literal
+    fn reference_constants_round_to_the_golden_bit_patterns() {
+        let r = Config::reference();
+        assert_eq!(r.rc.max_tilt_rad.to_bits(), 0x3eb2_b8c2);
+        assert_eq!(r.rc.yaw_max_step_rad.to_bits(), 0x3c56_7750);
+        assert_eq!(((3.141_592_654f64 * 20.0 / 180.0) as f32).to_bits(), 0x3eb2_b8c2);
+        assert_eq!(r.control.inner_dt_s.to_bits(), 0x3aa3_d70a);
+        assert_eq!((1.0 / r.control.inner_dt_s).to_bits(), 0x4448_0000);
+        assert_eq!(r.mixer.throttle_slope.to_bits(), 0x3eaa_aa3b);
+        assert_eq!(r.mixer.throttle_offset.to_bits(), 0x441e_5550);
+        assert_eq!(r.gyro_filter.a1.to_bits(), 0x3f71_5bef);
+        assert_eq!(r.gyro_filter.b1.to_bits(), 0x3e47_f2cd);
+    }
+
+    #[test]
+    fn a_negative_gain_is_an_error_not_a_crash() {
+        let mut c = Config::default();
+        c.control.roll.inner_kp = -1.0;
+        assert_eq!(c.validate(), Err(ConfigError::Control));
+    }
+
+    #[test]
+    fn a_zero_sample_time_is_an_error() {
+        let mut c = Config::reference();
+        c.timing.tick_dt_s = 0.0;
+        assert_eq!(c.validate(), Err(ConfigError::Timing));
+        let mut c = Config::default();
+        c.control.inner_dt_s = 0.0;
+        assert_eq!(c.validate(), Err(ConfigError::Control));
+    }
+
+    #[test]
+    fn a_non_finite_value_is_an_error() {
+        let mut c = Config::default();
+        c.rc.max_tilt_rad = f32::NAN;
+        assert_eq!(c.validate(), Err(ConfigError::Rc));
+        let mut c = Config::default();
+        c.mixer.max_compare = f32::INFINITY;
+        assert_eq!(c.validate(), Err(ConfigError::Mixer));
+        let mut c = Config::default();
+        c.gyro_filter.b0 = f32::NAN;
+        assert_eq!(c.validate(), Err(ConfigError::GyroFilter));
+    }
+}

@@ -1,0 +1,324 @@
+//! The cascade: an outer angle loop (P, optional I) at the estimator rate produces rate
+//! demands; an inner rate loop (PID) every tick produces the torque commands for the mixer.
+//!
+//! Axis order everywhere is `[x, y, z]` = `[pitch, roll, yaw]` (the reference's naming:
+//! pitch is the rotation about body X).
+
+use crate::math::clamp_nan_low;
+
+/// Gains and limits of one axis of the cascade.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisGains {
+    /// Outer (angle) loop: rate demand = kp·e + ki·∫e, rad/s per rad.
+    pub outer_kp: f32,
+    pub outer_ki: f32,
+    pub outer_i_limit: f32,
+    /// Inner (rate) loop, compare counts per rad/s.
+    pub inner_kp: f32,
+    pub inner_ki: f32,
+    pub inner_kd: f32,
+    pub inner_i_limit: f32,
+    /// Clamp of the inner output (the reference's MAX_ADJ_AMOUNT, ±800 counts).
+    pub output_limit: f32,
+    /// Low-pass the derivative (the reference does on pitch and roll, not on yaw: B6/D3).
+    pub d_lowpass: bool,
+}
+
+impl AxisGains {
+    fn is_valid(&self) -> bool {
+        let v = [
+            self.outer_kp,
+            self.outer_ki,
+            self.outer_i_limit,
+            self.inner_kp,
+            self.inner_ki,
+            self.inner_kd,
+            self.inner_i_limit,
+            self.output_limit,
+        ];
+        v.iter().all(|g| g.is_finite() && *g >= 0.0)
+    }
+}
+
+/// Where the derivative term looks (difference D7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Derivative {
+    /// d/dt of the rate error: a step in the demand kicks the output (reference).
+    OnError,
+    /// d/dt of the negated measured rate: no kick on demand steps.
+    OnMeasurement,
+}
+
+/// The whole cascade's tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlConfig {
+    pub pitch: AxisGains,
+    pub roll: AxisGains,
+    pub yaw: AxisGains,
+    /// EMA factor of the derivative low-pass (0.025 at 800 Hz ≈ 3.2 Hz).
+    pub d_filter_k: f32,
+    pub derivative: Derivative,
+    /// Inner-loop step, s (the reference's `pid.ts`, 0.00125 though it ticks at 807.69 Hz).
+    pub inner_dt_s: f32,
+    /// Step of the outer integrator, s: the reference uses the inner `ts` (B5), the default
+    /// profile the real outer period (D2).
+    pub outer_integrator_dt_s: f32,
+    /// Stop integrating in the direction the mixer saturates (D6).
+    pub anti_windup: bool,
+}
+
+impl ControlConfig {
+    pub const REFERENCE: ControlConfig = ControlConfig {
+        pitch: AxisGains {
+            outer_kp: 3.0,
+            outer_ki: 0.0,
+            outer_i_limit: 2.0,
+            inner_kp: 100.0,
+            inner_ki: 100.0,
+            inner_kd: 10.0,
+            inner_i_limit: 20.0,
+            output_limit: 800.0,
+            d_lowpass: true,
+        },
+        roll: AxisGains {
+            outer_kp: 3.0,
+            outer_ki: 0.0,
+            outer_i_limit: 2.0,
+            inner_kp: 100.0,
+            inner_ki: 100.0,
+            inner_kd: 10.0,
+            inner_i_limit: 20.0,
+            output_limit: 800.0,
+            d_lowpass: true,
+        },
+        yaw: AxisGains {
+            outer_kp: 4.0,
+            outer_ki: 0.0,
+            outer_i_limit: 2.0,
+            inner_kp: 1000.0,
+            inner_ki: 0.0,
+            inner_kd: 0.0,
+            inner_i_limit: 2.0,
+            output_limit: 800.0,
+            d_lowpass: false,
+        },
+        d_filter_k: 0.025,
+        derivative: Derivative::OnError,
+        inner_dt_s: 0.00125,
+        outer_integrator_dt_s: 0.00125,
+        anti_windup: false,
+    };
+
+    pub fn axes(&self) -> [&AxisGains; 3] {
+        [&self.pitch, &self.roll, &self.yaw]
+    }
+
+    pub fn is_valid(&self) -> bool {
+        let dt_ok = |dt: f32| dt.is_finite() && dt > 0.0;
+        self.axes().iter().all(|a| a.is_valid())
+            && self.d_filter_k.is_finite()
+            && self.d_filter_k > 0.0
+            && self.d_filter_k <= 1.0
+            && dt_ok(self.inner_dt_s)
+            && dt_ok(self.outer_integrator_dt_s)
+    }
+}
+
+/// The outer (angle) loop: `s1 = kp·(target − estimate) + ki·∫`, per axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AngleLoop {
+    integ: [f32; 3],
+}
+
+impl AngleLoop {
+    /// One outer step. `throttle_low` resets the integrators first, as the reference.
+    pub fn step(&mut self, cfg: &ControlConfig, target_rad: [f32; 3], estimate_rad: [f32; 3], throttle_low: bool) -> [f32; 3] {
+        if throttle_low {
+            self.integ = [0.0; 3];
+        }
+        let ts = cfg.outer_integrator_dt_s;
+        let mut s1 = [0.0f32; 3];
+        for (((s, integ), gains), (t, e_est)) in
+            s1.iter_mut().zip(self.integ.iter_mut()).zip(cfg.axes()).zip(target_rad.iter().zip(estimate_rad))
+        {
+            let e = t - e_est;
+            *integ = clamp_symmetric(*integ + e * ts, gains.outer_i_limit);
+            *s = gains.outer_kp * e + gains.outer_ki * *integ;
+        }
+        s1
+    }
+}
+
+/// Which direction of an axis' output the mixer could not deliver on the last tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Saturation {
+    pub positive: bool,
+    pub negative: bool,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct RateAxis {
+    integ: f32,
+    prev_error: f32,
+    prev_rate: f32,
+    d: f32,
+}
+
+/// The inner (rate) loop: PID per axis on the filtered gyro, every tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RateLoop {
+    axes: [RateAxis; 3],
+}
+
+impl RateLoop {
+    /// One tick: rate demands `s1` and measured rates (rad/s) in, clamped commands out.
+    /// `saturation` is the mixer's verdict of the previous tick (used only with anti-windup).
+    pub fn step(
+        &mut self,
+        cfg: &ControlConfig,
+        demand_rad_s: [f32; 3],
+        rate_rad_s: [f32; 3],
+        throttle_low: bool,
+        saturation: [Saturation; 3],
+    ) -> [f32; 3] {
+        if throttle_low {
+            for a in &mut self.axes {
+                a.integ = 0.0;
+            }
+        }
+        let ts = cfg.inner_dt_s;
+        let dt_recip = 1.0 / ts;
+        let mut out = [0.0f32; 3];
+        let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(demand_rad_s.iter().zip(rate_rad_s)).zip(saturation);
+        for (o, (((st, g), (s1, rate)), sat)) in out.iter_mut().zip(per_axis) {
+            let e = s1 - rate;
+            let blocked = cfg.anti_windup && ((e > 0.0 && sat.positive) || (e < 0.0 && sat.negative));
+            if !blocked {
+                st.integ = clamp_symmetric(st.integ + e * ts, g.inner_i_limit);
+            }
+            let raw_d = match cfg.derivative {
+                Derivative::OnError => (e - st.prev_error) * dt_recip,
+                Derivative::OnMeasurement => (st.prev_rate - rate) * dt_recip,
+            };
+            st.prev_error = e;
+            st.prev_rate = rate;
+            let d = if g.d_lowpass {
+                st.d = st.d + (raw_d - st.d) * cfg.d_filter_k;
+                st.d
+            } else {
+                raw_d
+            };
+            *o = clamp_symmetric(g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d, g.output_limit);
+            if !st.integ.is_finite() || !st.d.is_finite() || !st.prev_error.is_finite() || !st.prev_rate.is_finite() {
+                // A non-finite sample must not live on in the state.
+                *st = RateAxis::default();
+            }
+        }
+        out
+    }
+
+    /// The integrator of each axis (for tests and telemetry).
+    pub fn integrators(&self) -> [f32; 3] {
+        self.axes.map(|a| a.integ)
+    }
+}
+
+/// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`.
+/// NaN passes through unchanged, as in C; the mixer's final clamp catches it.
+fn clamp_symmetric(v: f32, lim: f32) -> f32 {
+    if v > lim {
+        lim
+    } else if v < -lim {
+        -lim
+    } else {
+        v
+    }
+}
+
+/// Clamp that maps NaN to 0, for places where the product wants it gone.
+pub fn clamp_or_zero(v: f32, lim: f32) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        clamp_nan_low(v, -lim, lim)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inner_d_filter_matches_the_reference_worked_example() {
+        // reference-firmware.md §13.8: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
+        let cfg = ControlConfig::REFERENCE;
+        let mut r = RateLoop::default();
+        let none = [Saturation::default(); 3];
+        let out = r.step(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+        let p = 100.0 * 0.1;
+        let i = 100.0 * 0.1 * 0.00125;
+        assert!((out[0] - (p + i + 20.0)).abs() < 1e-3, "{}", out[0]);
+        let out2 = r.step(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+        let i2 = 100.0 * 0.1 * 0.0025;
+        assert!((out2[0] - (p + i2 + 19.5)).abs() < 1e-3, "{}", out2[0]);
+    }
+
+    #[test]
+    fn derivative_on_measurement_has_no_kick_on_a_demand_step() {
+        let mut cfg = ControlConfig::REFERENCE;
+        cfg.derivative = Derivative::OnMeasurement;
+        let none = [Saturation::default(); 3];
+        let mut on_meas = RateLoop::default();
+        let mut on_err = RateLoop::default();
+        let a = on_meas.step(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+        let b = on_err.step(&ControlConfig::REFERENCE, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+        // P + I only, vs P + I + a 200-count derivative kick.
+        assert!(a < 101.0, "{a}");
+        assert!(b > 290.0, "{b}");
+    }
+
+    #[test]
+    fn integrator_resets_while_throttle_is_low_and_is_clamped() {
+        let cfg = ControlConfig::REFERENCE;
+        let none = [Saturation::default(); 3];
+        let mut r = RateLoop::default();
+        for _ in 0..100_000 {
+            r.step(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
+        }
+        assert_eq!(r.integrators()[0], 20.0);
+        assert_eq!(r.integrators()[1], -20.0);
+        r.step(&cfg, [35.0, -35.0, 0.0], [0.0; 3], true, none);
+        assert_eq!(r.integrators()[0], 35.0 * 0.00125);
+    }
+
+    #[test]
+    fn anti_windup_freezes_the_saturated_direction_only() {
+        let mut cfg = ControlConfig::REFERENCE;
+        cfg.anti_windup = true;
+        let sat = [Saturation { positive: true, negative: false }, Saturation::default(), Saturation::default()];
+        let mut r = RateLoop::default();
+        r.step(&cfg, [1.0, 1.0, 0.0], [0.0; 3], false, sat);
+        assert_eq!(r.integrators()[0], 0.0);
+        assert!(r.integrators()[1] > 0.0);
+        r.step(&cfg, [-1.0, 0.0, 0.0], [0.0; 3], false, sat);
+        assert!(r.integrators()[0] < 0.0);
+    }
+
+    #[test]
+    fn outer_loop_is_proportional_with_the_reference_gains() {
+        let cfg = ControlConfig::REFERENCE;
+        let mut o = AngleLoop::default();
+        let s1 = o.step(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
+        assert!((s1[0] - 0.3).abs() < 1e-6 && (s1[1] + 0.6).abs() < 1e-6 && (s1[2] - 0.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_nan_rate_does_not_stay_in_the_state() {
+        let cfg = ControlConfig::REFERENCE;
+        let none = [Saturation::default(); 3];
+        let mut r = RateLoop::default();
+        r.step(&cfg, [0.0; 3], [f32::NAN, 0.0, 0.0], false, none);
+        let out = r.step(&cfg, [0.0; 3], [0.0; 3], false, none);
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+}

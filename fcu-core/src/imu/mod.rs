@@ -1,0 +1,439 @@
+//! The IMU boundary: raw LSM6DSL words in sensor axes → integer mg / mdps in body axes,
+//! offset calibration and sensor health.
+//!
+//! The conversions are the ST driver's, bit for bit: `accel_mg = trunc(raw · 0.122f)` and
+//! `gyro_mdps = trunc(raw · 70.0f)`, computed in f32 and truncated toward zero.
+
+pub mod registers;
+
+/// One LSM6DSL reading as it comes off the bus: int16 words in **sensor** axes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RawImu {
+    pub accel: [i16; 3],
+    pub gyro: [i16; 3],
+}
+
+/// A reading in **body** axes, integer milli-g and milli-degrees per second, as the reference
+/// carries it from the driver to the offset removal.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BodyImu {
+    pub accel_mg: [i32; 3],
+    pub gyro_mdps: [i32; 3],
+}
+
+/// Sensor-to-body mount as a signed permutation: body axis `i` = `sign[i]` × sensor axis
+/// `source[i]`. The board's mount (the reference's `COORDINATE_SYSTEM 3`) is
+/// X = −sensor Y, Y = +sensor X, Z = +sensor Z.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Mount {
+    pub source: [u8; 3],
+    pub sign: [i8; 3],
+}
+
+impl Mount {
+    /// The reference's mode 3 (the only one of its four modes that works).
+    pub const STEVAL_FCU001: Mount = Mount { source: [1, 0, 2], sign: [-1, 1, 1] };
+
+    /// True when `source` is a permutation of 0..3 and every sign is ±1.
+    pub fn is_valid(&self) -> bool {
+        let mut seen = [false; 3];
+        for &s in &self.source {
+            match seen.get_mut(usize::from(s)) {
+                Some(slot) if !*slot => *slot = true,
+                _ => return false,
+            }
+        }
+        self.sign.iter().all(|&s| s == 1 || s == -1)
+    }
+
+    /// Apply to an integer vector (a valid mount never fails; an invalid one reads 0).
+    pub fn apply_i32(&self, v: [i32; 3]) -> [i32; 3] {
+        let mut out = [0i32; 3];
+        for ((o, &src), &sign) in out.iter_mut().zip(&self.source).zip(&self.sign) {
+            let x = v.get(usize::from(src)).copied().unwrap_or(0);
+            *o = if sign < 0 { x.wrapping_neg() } else { x };
+        }
+        out
+    }
+
+    /// Apply to a float vector.
+    pub fn apply_f32(&self, v: [f32; 3]) -> [f32; 3] {
+        let mut out = [0f32; 3];
+        for ((o, &src), &sign) in out.iter_mut().zip(&self.source).zip(&self.sign) {
+            let x = v.get(usize::from(src)).copied().unwrap_or(0.0);
+            *o = if sign < 0 { -x } else { x };
+        }
+        out
+    }
+
+    /// The inverse mount: body vector → sensor axes (used by the simulator's IMU model).
+    pub fn body_to_sensor_f32(&self, body: [f32; 3]) -> [f32; 3] {
+        let mut out = [0f32; 3];
+        for ((&b, &src), &sign) in body.iter().zip(&self.source).zip(&self.sign) {
+            if let Some(o) = out.get_mut(usize::from(src)) {
+                *o = if sign < 0 { -b } else { b };
+            }
+        }
+        out
+    }
+}
+
+/// Sensitivities and mount of the accelerometer and gyroscope.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImuConfig {
+    /// LSM6DSL at ±4 g: 0.122 mg/LSB.
+    pub accel_mg_per_lsb: f32,
+    /// LSM6DSL at ±2000 dps: 70 mdps/LSB.
+    pub gyro_mdps_per_lsb: f32,
+    pub mount: Mount,
+}
+
+impl ImuConfig {
+    pub const REFERENCE: ImuConfig = ImuConfig { accel_mg_per_lsb: 0.122, gyro_mdps_per_lsb: 70.0, mount: Mount::STEVAL_FCU001 };
+
+    /// Driver conversion and mount: `trunc(raw·sensitivity)` in f32, then the mount.
+    /// A saturating float→int cast keeps any sensitivity from producing undefined values.
+    pub fn to_body(&self, raw: RawImu) -> BodyImu {
+        let conv = |w: [i16; 3], k: f32| -> [i32; 3] { w.map(|r| (f32::from(r) * k) as i32) };
+        BodyImu {
+            accel_mg: self.mount.apply_i32(conv(raw.accel, self.accel_mg_per_lsb)),
+            gyro_mdps: self.mount.apply_i32(conv(raw.gyro, self.gyro_mdps_per_lsb)),
+        }
+    }
+}
+
+/// Offsets removed from every body sample. The accelerometer Z offset keeps 1 g: the
+/// reference subtracts `(offset_z − 1000)` so a level board reads (0, 0, +1000) mg.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Offsets {
+    pub accel_mg: [i32; 3],
+    pub gyro_mdps: [i32; 3],
+}
+
+/// The reference's gravity rule: the Z offset keeps this much of the mean.
+pub const ACCEL_Z_REFERENCE_MG: i32 = 1000;
+
+impl Offsets {
+    /// The reference's statics before calibration: accel (0, 0, 1000), gyro 0 (a no-op).
+    pub const UNCALIBRATED: Offsets = Offsets { accel_mg: [0, 0, ACCEL_Z_REFERENCE_MG], gyro_mdps: [0; 3] };
+
+    /// Offset removal in wrapping int32, as the reference (which cannot overflow for
+    /// 16-bit inputs, but must not panic if it did).
+    pub fn apply(&self, s: BodyImu) -> BodyImu {
+        let [ax, ay, az] = s.accel_mg;
+        let [ox, oy, oz] = self.accel_mg;
+        let mut g = s.gyro_mdps;
+        for (v, o) in g.iter_mut().zip(self.gyro_mdps) {
+            *v = v.wrapping_sub(o);
+        }
+        BodyImu {
+            accel_mg: [ax.wrapping_sub(ox), ay.wrapping_sub(oy), az.wrapping_sub(oz.wrapping_sub(ACCEL_Z_REFERENCE_MG))],
+            gyro_mdps: g,
+        }
+    }
+}
+
+/// Motion check of a calibration (difference D11): while averaging, a gyro axis that moves
+/// more than `gyro_max_dev_mdps` from its running mean, or an accelerometer norm outside
+/// `1 g ± accel_norm_tol_mg`, restarts the average; after `timeout_ticks` it gives up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionCheck {
+    pub gyro_max_dev_mdps: f32,
+    pub accel_norm_tol_mg: f32,
+    pub timeout_ticks: u32,
+}
+
+/// How offsets are measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibrationConfig {
+    /// Ticks ignored after boot before the start-up average begins (the reference's 800).
+    pub settle_ticks: u32,
+    /// Samples averaged (800); the factor is `1/samples` applied as the reference does.
+    pub samples: u32,
+    /// `None` in the reference profile: any motion is accepted (B16).
+    pub motion_check: Option<MotionCheck>,
+}
+
+impl CalibrationConfig {
+    pub const REFERENCE: CalibrationConfig = CalibrationConfig { settle_ticks: 800, samples: 800, motion_check: None };
+}
+
+/// What a calibration attempt ended in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CalibrationOutcome {
+    Passed,
+    /// The motion check never allowed a full average within the timeout.
+    FailedMotion,
+}
+
+/// Where the calibrator is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CalibrationPhase {
+    /// Boot settling: samples are ignored, nothing else runs.
+    Settling,
+    /// Averaging (start-up or requested). `restarts` counts motion-check restarts.
+    Averaging { restarts: u16 },
+    /// Not averaging; the last attempt ended in `last` (or none yet).
+    Idle { last: Option<CalibrationOutcome> },
+}
+
+/// Offset calibration: the reference's start-up and stick-requested averages, optionally
+/// with a motion check. Feed it one body sample per tick.
+#[derive(Clone, Debug)]
+pub struct Calibrator {
+    cfg: CalibrationConfig,
+    phase: CalibrationPhase,
+    ticks_in_phase: u32,
+    count: u32,
+    sums: [i64; 6],
+    attempt_ticks: u32,
+    passed_once: bool,
+}
+
+impl Calibrator {
+    pub fn new(cfg: CalibrationConfig) -> Self {
+        Calibrator {
+            cfg,
+            phase: CalibrationPhase::Settling,
+            ticks_in_phase: 0,
+            count: 0,
+            sums: [0; 6],
+            attempt_ticks: 0,
+            passed_once: false,
+        }
+    }
+
+    pub fn phase(&self) -> CalibrationPhase {
+        self.phase
+    }
+
+    /// True once any calibration has passed since boot.
+    pub fn has_passed(&self) -> bool {
+        self.passed_once
+    }
+
+    /// True while averaging (start-up or requested).
+    pub fn is_averaging(&self) -> bool {
+        matches!(self.phase, CalibrationPhase::Averaging { .. })
+    }
+
+    /// True while the boot settling delay or the start-up average runs: the reference's
+    /// `sensor_init_cali == 0`, when the control tick does nothing else.
+    pub fn in_startup(&self) -> bool {
+        !self.passed_once && !matches!(self.phase, CalibrationPhase::Idle { .. })
+    }
+
+    /// Start a requested calibration (ignored while one is running or during settling).
+    pub fn request(&mut self) {
+        if let CalibrationPhase::Idle { .. } = self.phase {
+            self.begin_average();
+        }
+    }
+
+    fn begin_average(&mut self) {
+        self.phase = CalibrationPhase::Averaging { restarts: 0 };
+        self.clear_sums();
+        self.attempt_ticks = 0;
+    }
+
+    fn clear_sums(&mut self) {
+        self.sums = [0; 6];
+        self.count = 0;
+    }
+
+    /// Count a boot-settling tick. Returns true while still settling.
+    pub fn settle(&mut self) -> bool {
+        if self.phase != CalibrationPhase::Settling {
+            return false;
+        }
+        self.ticks_in_phase = self.ticks_in_phase.saturating_add(1);
+        if self.ticks_in_phase > self.cfg.settle_ticks {
+            self.begin_average();
+            return false;
+        }
+        true
+    }
+
+    /// Add one raw body sample (before offset removal). Returns the new offsets when an
+    /// average completes, on exactly the sample that completes it.
+    pub fn feed(&mut self, s: BodyImu) -> Option<Offsets> {
+        let CalibrationPhase::Averaging { restarts } = self.phase else {
+            return None;
+        };
+        self.attempt_ticks = self.attempt_ticks.saturating_add(1);
+        if let Some(check) = self.cfg.motion_check {
+            if self.moving(&check, &s) {
+                self.clear_sums();
+                if self.attempt_ticks >= check.timeout_ticks {
+                    self.phase = CalibrationPhase::Idle { last: Some(CalibrationOutcome::FailedMotion) };
+                } else {
+                    self.phase = CalibrationPhase::Averaging { restarts: restarts.saturating_add(1) };
+                }
+                return None;
+            }
+        }
+        let all = [s.accel_mg[0], s.accel_mg[1], s.accel_mg[2], s.gyro_mdps[0], s.gyro_mdps[1], s.gyro_mdps[2]];
+        for (sum, v) in self.sums.iter_mut().zip(all) {
+            *sum = sum.saturating_add(i64::from(v));
+        }
+        self.count = self.count.saturating_add(1);
+        if self.count < self.cfg.samples {
+            return None;
+        }
+        // The reference multiplies the int32 sum by 0.00125 (= 1/800) in double and truncates.
+        let factor = 1.0 / f64::from(self.cfg.samples.max(1));
+        let mean = |sum: i64| -> i32 { (sum as f64 * factor) as i32 };
+        let [a0, a1, a2, g0, g1, g2] = self.sums.map(mean);
+        self.clear_sums();
+        self.passed_once = true;
+        self.phase = CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) };
+        Some(Offsets { accel_mg: [a0, a1, a2], gyro_mdps: [g0, g1, g2] })
+    }
+
+    fn moving(&self, check: &MotionCheck, s: &BodyImu) -> bool {
+        let [ax, ay, az] = s.accel_mg.map(|v| v as f32);
+        let norm = libm::sqrtf(ax * ax + ay * ay + az * az);
+        if (norm - ACCEL_Z_REFERENCE_MG as f32).abs() > check.accel_norm_tol_mg {
+            return true;
+        }
+        if self.count == 0 {
+            return false;
+        }
+        let n = self.count as f32;
+        let gyro_sums = [self.sums[3], self.sums[4], self.sums[5]];
+        s.gyro_mdps.iter().zip(gyro_sums).any(|(&g, sum)| (g as f32 - sum as f32 / n).abs() > check.gyro_max_dev_mdps)
+    }
+}
+
+/// In-flight sensor health (safety layer, §4 of the product spec).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HealthConfig {
+    /// Identical raw accel and gyro words for this many ticks = stuck sensor (100 ms).
+    pub stuck_ticks: u32,
+    /// Converted values beyond these magnitudes are out of range (a wrong full scale or a
+    /// corrupt read; the LSM6DSL at ±4 g / ±2000 dps cannot produce them).
+    pub accel_limit_mg: f32,
+    pub gyro_limit_mdps: f32,
+}
+
+/// Why the sensor was declared faulty.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SensorFault {
+    NotFinite,
+    OutOfRange,
+    Stuck,
+}
+
+/// Watches raw words for a stuck sensor and converted values for impossible ones.
+#[derive(Clone, Debug, Default)]
+pub struct HealthMonitor {
+    last: Option<RawImu>,
+    same_count: u32,
+}
+
+impl HealthMonitor {
+    pub fn check(&mut self, cfg: &HealthConfig, raw: RawImu, accel_mg: [f32; 3], gyro_mdps: [f32; 3]) -> Option<SensorFault> {
+        if self.last == Some(raw) {
+            self.same_count = self.same_count.saturating_add(1);
+        } else {
+            self.same_count = 0;
+            self.last = Some(raw);
+        }
+        if !(accel_mg.iter().chain(&gyro_mdps).all(|v| v.is_finite())) {
+            return Some(SensorFault::NotFinite);
+        }
+        if accel_mg.iter().any(|v| v.abs() > cfg.accel_limit_mg) || gyro_mdps.iter().any(|v| v.abs() > cfg.gyro_limit_mdps) {
+            return Some(SensorFault::OutOfRange);
+        }
+        if self.same_count >= cfg.stuck_ticks {
+            return Some(SensorFault::Stuck);
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conversion_truncates_toward_zero_like_the_driver() {
+        let b = ImuConfig::REFERENCE.to_body(RawImu { accel: [9, -9, 8197], gyro: [1, -1, 32767] });
+        // sensor X=9 → body Y; sensor Y=−9 → body X = +trunc(−9·0.122)·(−1) = 1
+        assert_eq!(b.accel_mg, [1, 1, 1000]);
+        assert_eq!(b.gyro_mdps, [70, 70, 2_293_690]);
+    }
+
+    #[test]
+    fn mount_mode_3_is_a_rotation_about_z() {
+        let m = Mount::STEVAL_FCU001;
+        assert!(m.is_valid());
+        assert_eq!(m.apply_i32([1, 2, 3]), [-2, 1, 3]);
+        assert_eq!(m.body_to_sensor_f32(m.apply_f32([1.0, 2.0, 3.0])), [1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn invalid_mount_is_detected() {
+        assert!(!Mount { source: [0, 0, 2], sign: [1, 1, 1] }.is_valid());
+        assert!(!Mount { source: [0, 1, 2], sign: [1, 0, 1] }.is_valid());
+        assert!(!Mount { source: [0, 1, 3], sign: [1, 1, 1] }.is_valid());
+    }
+
+    #[test]
+    fn offsets_keep_one_g_on_z() {
+        let o = Offsets { accel_mg: [10, -20, 1030], gyro_mdps: [5, 6, 7] };
+        let s = o.apply(BodyImu { accel_mg: [10, -20, 1030], gyro_mdps: [5, 6, 7] });
+        assert_eq!(s.accel_mg, [0, 0, 1000]);
+        assert_eq!(s.gyro_mdps, [0, 0, 0]);
+    }
+
+    #[test]
+    fn calibration_averages_after_settling_and_truncates() {
+        let mut c = Calibrator::new(CalibrationConfig { settle_ticks: 3, samples: 4, motion_check: None });
+        for _ in 0..3 {
+            assert!(c.settle());
+        }
+        assert!(!c.settle());
+        let s = BodyImu { accel_mg: [1, -3, 1001], gyro_mdps: [7, 0, -7] };
+        assert_eq!(c.feed(s), None);
+        assert_eq!(c.feed(s), None);
+        assert_eq!(c.feed(s), None);
+        let s2 = BodyImu { accel_mg: [2, -2, 1002], gyro_mdps: [8, 1, -8] };
+        let o = c.feed(s2).unwrap();
+        // (3+2)/4 = 1.25 → 1; (−9−2)/4 = −2.75 → −2 (toward zero)
+        assert_eq!(o.accel_mg, [1, -2, 1001]);
+        assert_eq!(o.gyro_mdps, [7, 0, -7]);
+        assert!(c.has_passed());
+    }
+
+    #[test]
+    fn motion_check_restarts_and_gives_up() {
+        let check = MotionCheck { gyro_max_dev_mdps: 2000.0, accel_norm_tol_mg: 100.0, timeout_ticks: 50 };
+        let mut c = Calibrator::new(CalibrationConfig { settle_ticks: 0, samples: 10, motion_check: Some(check) });
+        assert!(!c.settle());
+        let still = BodyImu { accel_mg: [0, 0, 1000], gyro_mdps: [100, 0, 0] };
+        let shaken = BodyImu { accel_mg: [0, 0, 1300], gyro_mdps: [100, 0, 0] };
+        for _ in 0..5 {
+            assert_eq!(c.feed(still), None);
+        }
+        assert_eq!(c.feed(shaken), None);
+        assert_eq!(c.phase(), CalibrationPhase::Averaging { restarts: 1 });
+        for _ in 0..60 {
+            c.feed(shaken);
+        }
+        assert_eq!(c.phase(), CalibrationPhase::Idle { last: Some(CalibrationOutcome::FailedMotion) });
+        assert!(!c.has_passed());
+    }
+
+    #[test]
+    fn a_stuck_sensor_is_reported_after_the_configured_ticks() {
+        let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100.0, gyro_limit_mdps: 2.3e6 };
+        let mut h = HealthMonitor::default();
+        let raw = RawImu { accel: [1, 2, 3], gyro: [4, 5, 6] };
+        for _ in 0..3 {
+            assert_eq!(h.check(&cfg, raw, [0.0; 3], [0.0; 3]), None);
+        }
+        assert_eq!(h.check(&cfg, raw, [0.0; 3], [0.0; 3]), Some(SensorFault::Stuck));
+        assert_eq!(h.check(&cfg, raw, [f32::NAN, 0.0, 0.0], [0.0; 3]), Some(SensorFault::NotFinite));
+    }
+}

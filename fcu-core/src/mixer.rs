@@ -1,0 +1,220 @@
+//! Throttle mapping, quad-X mixing and the compare-value clamp.
+//!
+//! Motor numbering and signs are the reference's (reference-firmware.md §7.3), with
+//! `s = [x, y, z]` = pitch, roll and yaw commands:
+//!
+//! | motor | position | spin | mix |
+//! |---|---|---|---|
+//! | M1 (TIM4 CH1, PB6) | rear right | CW | thr − x − y + z |
+//! | M2 (CH2, PB7) | front right | CCW | thr + x − y − z |
+//! | M3 (CH3, PB8) | front left | CW | thr + x + y + z |
+//! | M4 (CH4, PB9) | rear left | CCW | thr − x + y − z |
+//!
+//! Positive pitch (nose up) raises the front motors, positive roll (right side down)
+//! raises the left ones, positive yaw (counter-clockwise) raises the CW-spinning pair.
+
+use crate::control::Saturation;
+
+/// Sign of each command axis `[x, y, z]` in each motor.
+pub const MIX: [[f32; 3]; 4] = [[-1.0, -1.0, 1.0], [1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, -1.0]];
+
+/// What happens when a motor command leaves the compare range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Saturate {
+    /// Each motor clamped on its own (reference): a saturated motor loses the attitude
+    /// correction it was asked for.
+    Clip,
+    /// Shift all four (and, if the spread itself does not fit, scale the corrections) so
+    /// the differences between motors, i.e. the torques, survive (difference D6).
+    AttitudePriority,
+}
+
+/// Throttle map and compare range of one motor build.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MixerConfig {
+    /// `motor_thr = (int16)(slope·gTHR + offset)`, counts.
+    pub throttle_slope: f32,
+    pub throttle_offset: f32,
+    /// Compare range: a command ≤ min writes min, ≥ max writes max.
+    pub min_compare: f32,
+    pub max_compare: f32,
+    /// TIM4 prescaler and auto-reload (the period is `arr + 1` counts).
+    pub timer_psc: u16,
+    pub timer_arr: u16,
+    pub saturate: Saturate,
+}
+
+impl MixerConfig {
+    /// DC build (on-board MOSFETs, 494 Hz): 0.33333·gTHR + 633.333, compare 0..1900 of 2000.
+    pub const REFERENCE_DC: MixerConfig = MixerConfig {
+        throttle_slope: 0.33333,
+        throttle_offset: 633.333,
+        min_compare: 0.0,
+        max_compare: 1900.0,
+        timer_psc: 84,
+        timer_arr: 1999,
+        saturate: Saturate::Clip,
+    };
+
+    /// ESC build (400 Hz): 0.32·gTHR + 900, idle 850, max 1700 of 2076.
+    pub const REFERENCE_ESC: MixerConfig = MixerConfig {
+        throttle_slope: 0.32,
+        throttle_offset: 900.0,
+        min_compare: 850.0,
+        max_compare: 1700.0,
+        timer_psc: 100,
+        timer_arr: 2075,
+        saturate: Saturate::Clip,
+    };
+
+    pub fn is_valid(&self) -> bool {
+        let finite = [self.throttle_slope, self.throttle_offset, self.min_compare, self.max_compare].iter().all(|v| v.is_finite());
+        finite
+            && self.throttle_slope >= 0.0
+            && self.min_compare >= 0.0
+            && self.min_compare < self.max_compare
+            && self.max_compare <= f32::from(self.timer_arr) + 1.0
+    }
+
+    /// The compare value written when the motors must not run: 0 (DC) or the ESC idle pulse.
+    pub fn off_compare(&self) -> u16 {
+        self.to_compare(self.min_compare)
+    }
+
+    /// The reference's `(int16)(slope·gTHR + offset)`, saturating instead of undefined.
+    pub fn throttle_counts(&self, throttle: i16) -> i16 {
+        (self.throttle_slope * f32::from(throttle) + self.throttle_offset) as i16
+    }
+
+    /// Distribute throttle and commands to the four motors. Returns the motor commands
+    /// (before the compare clamp) and, per axis, the direction the mix could not deliver.
+    pub fn mix(&self, throttle_counts: i16, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
+        let thr = f32::from(throttle_counts);
+        let [x, y, z] = s;
+        // The reference's exact expressions: ((thr ∓ x) ∓ y) ± z, then "+ MOTOR_OFF" (0).
+        let reference = [thr - x - y + z + 0.0, thr + x - y - z + 0.0, thr + x + y + z + 0.0, thr - x + y - z + 0.0];
+        match self.saturate {
+            Saturate::Clip => (reference, [Saturation::default(); 3]),
+            Saturate::AttitudePriority => self.mix_attitude_priority(thr, s),
+        }
+    }
+
+    fn mix_attitude_priority(&self, thr: f32, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
+        let rel = MIX.map(|row| row[0] * s[0] + row[1] * s[1] + row[2] * s[2]);
+        let lo_rel = rel.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+        let hi_rel = rel.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        let range = self.max_compare - self.min_compare;
+        let spread = hi_rel - lo_rel;
+        let mut sat = [Saturation::default(); 3];
+        if !(spread.is_finite() && thr.is_finite()) {
+            return ([self.min_compare; 4], sat);
+        }
+        let (scale, base) = if spread > range {
+            // Even the corrections alone do not fit: keep their proportions, centred.
+            for (a, v) in sat.iter_mut().zip(s) {
+                *a = Saturation { positive: v > 0.0, negative: v < 0.0 };
+            }
+            let k = range / spread;
+            (k, self.min_compare - lo_rel * k)
+        } else {
+            // Shift the throttle (never above what fits) so no motor clips.
+            let hi_thr = self.max_compare - hi_rel;
+            let lo_thr = self.min_compare - lo_rel;
+            (1.0, thr.min(hi_thr).max(lo_thr))
+        };
+        (rel.map(|r| base + r * scale), sat)
+    }
+
+    /// The reference's `set_motor_pwm`: `cmd ≥ max → max`, `cmd ≤ min → min`, otherwise
+    /// truncated. NaN, which the C would turn into an undefined compare value, gives `min`.
+    pub fn to_compare(&self, cmd: f32) -> u16 {
+        let v = if cmd >= self.max_compare {
+            self.max_compare
+        } else if cmd > self.min_compare {
+            cmd
+        } else {
+            self.min_compare
+        };
+        v as u16
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reference_throttle_map_spot_values() {
+        let m = MixerConfig::REFERENCE_DC;
+        assert_eq!(m.throttle_counts(200), 699);
+        assert_eq!(m.throttle_counts(1500), 1133);
+        assert_eq!(m.throttle_counts(3630), 1843);
+    }
+
+    #[test]
+    fn reference_mixer_worked_example() {
+        let m = MixerConfig::REFERENCE_DC;
+        let (cmd, _) = m.mix(1133, [50.0, -20.0, 10.0]);
+        let ccr = cmd.map(|c| m.to_compare(c));
+        assert_eq!(ccr, [1113, 1193, 1173, 1053]);
+    }
+
+    #[test]
+    fn compare_clamp_handles_nan_and_infinities() {
+        let m = MixerConfig::REFERENCE_DC;
+        assert_eq!(m.to_compare(f32::NAN), 0);
+        assert_eq!(m.to_compare(f32::INFINITY), 1900);
+        assert_eq!(m.to_compare(f32::NEG_INFINITY), 0);
+        assert_eq!(m.to_compare(1899.9), 1899);
+        let esc = MixerConfig::REFERENCE_ESC;
+        assert_eq!(esc.to_compare(f32::NAN), 850);
+        assert_eq!(esc.off_compare(), 850);
+    }
+
+    #[test]
+    fn attitude_priority_keeps_the_roll_torque_when_a_motor_hits_the_top() {
+        let mut m = MixerConfig::REFERENCE_DC;
+        let s = [0.0, 300.0, 0.0];
+        let (clipped, _) = m.mix(1800, s);
+        let clip_ccr = clipped.map(|c| m.to_compare(c));
+        m.saturate = Saturate::AttitudePriority;
+        let (kept, sat) = m.mix(1800, s);
+        let ccr = kept.map(|c| m.to_compare(c));
+        let torque = |c: [u16; 4]| (i32::from(c[2]) + i32::from(c[3])) - (i32::from(c[0]) + i32::from(c[1]));
+        // Reference: left motors clip at 1900, torque shrinks to 2·(1900 − 1500) = 800.
+        assert_eq!(torque(clip_ccr), 2 * (1900 - 1500));
+        // Attitude priority: the full 4·300 = 1200 survives, the throttle gives way.
+        assert!((torque(ccr) - 1200).abs() <= 2, "{ccr:?}");
+        assert_eq!(sat, [Saturation::default(); 3]);
+    }
+
+    #[test]
+    fn attitude_priority_scales_when_the_spread_does_not_fit() {
+        let m = MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_DC };
+        let (cmd, sat) = m.mix(1000, [800.0, 800.0, 0.0]);
+        for c in cmd {
+            assert!((-0.01..=1900.01).contains(&c), "{c}");
+        }
+        assert!(sat[0].positive && sat[1].positive && !sat[2].positive);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn compare_values_stay_in_range_for_any_input(
+            thr in proptest::num::i16::ANY,
+            x in proptest::num::f32::ANY,
+            y in proptest::num::f32::ANY,
+            z in proptest::num::f32::ANY,
+            priority in proptest::bool::ANY,
+            esc in proptest::bool::ANY,
+        ) {
+            let mut m = if esc { MixerConfig::REFERENCE_ESC } else { MixerConfig::REFERENCE_DC };
+            if priority { m.saturate = Saturate::AttitudePriority; }
+            let (cmd, _) = m.mix(thr, [x, y, z]);
+            for c in cmd {
+                let ccr = m.to_compare(c);
+                proptest::prop_assert!(f32::from(ccr) >= m.min_compare && f32::from(ccr) <= m.max_compare);
+            }
+        }
+    }
+}

@@ -1,0 +1,524 @@
+//! Radio: capture edges → pulse widths → sticks → attitude targets, and stick gestures.
+//!
+//! Widths and sticks are in TIM2 counts of 0.25 µs (4000 = 1 ms). Channel order is the
+//! receiver wiring: 0 = AIL (PA0), 1 = ELE (PA1), 2 = THR (PA2), 3 = RUD (PA3).
+//! Sticks are the reference's `gAIL, gELE, gTHR, gRUD`: width minus the channel centre
+//! (throttle: minus the bottom, never negative).
+
+/// Number of radio channels.
+pub const CHANNELS: usize = 4;
+pub const AIL: usize = 0;
+pub const ELE: usize = 1;
+pub const THR: usize = 2;
+pub const RUD: usize = 3;
+
+/// The capture counter wraps every 32768 counts (8.192 ms): a 15-bit timer.
+pub const CAPTURE_WRAP: u32 = 32_768;
+/// Capture counts per microsecond.
+pub const COUNTS_PER_US: u32 = 4;
+
+/// Stick values, reference counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sticks {
+    pub ail: i16,
+    pub ele: i16,
+    pub thr: i16,
+    pub rud: i16,
+}
+
+/// How pulses are accepted (difference D9).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PulseRules {
+    /// The reference: any falling edge reports the stored width, even when no rising edge
+    /// of the same pulse was seen (B10), no range check (B11); the edge state is cleared
+    /// when no edge arrived on any channel for `reset_after_ticks`.
+    Reference { reset_after_ticks: u32 },
+    /// A width counts only from a rising and the next falling edge of the same channel and
+    /// only inside `[min_counts, max_counts]`.
+    Validated { min_counts: u16, max_counts: u16 },
+}
+
+/// Yaw stick behaviour (difference D8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum YawStick {
+    /// ±`max_step` per outer step beyond the dead band (reference).
+    BangBang,
+    /// Proportional beyond the dead band, reaching `max_step` at full scale.
+    Proportional,
+}
+
+/// Radio calibration and stick mapping.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RcConfig {
+    pub ail_center: i16,
+    pub ele_center: i16,
+    pub thr_bottom: i16,
+    pub rud_center: i16,
+    /// Stick full scale, counts (1800 = 450 µs).
+    pub full_scale: i16,
+    /// Gesture threshold, counts (strict inequality, 1200).
+    pub gesture_threshold: i16,
+    /// `MIN_THR`: below it the throttle is "low" (200 DC, 20 ESC).
+    pub min_throttle: i16,
+    /// Roll and pitch target at full stick, rad (20° = 0.34906584).
+    pub max_tilt_rad: f32,
+    /// Yaw dead band, counts (600, inclusive).
+    pub yaw_deadband: i16,
+    /// Yaw target change per outer step at full rate, rad (120°/s × 6.25 ms).
+    pub yaw_max_step_rad: f32,
+    pub yaw_stick: YawStick,
+    pub pulses: PulseRules,
+    /// Link timeout, control ticks since the last edge (reference: 31 ms) or, with validated
+    /// pulses, since the last accepted pulse of a channel (100 ms).
+    pub link_timeout_ticks: u32,
+}
+
+impl RcConfig {
+    /// The reference's R release, Walkera Devo 7E centres.
+    pub const REFERENCE: RcConfig = RcConfig {
+        ail_center: 5862,
+        ele_center: 6151,
+        thr_bottom: 4450,
+        rud_center: 6397,
+        full_scale: 1800,
+        gesture_threshold: 1200,
+        min_throttle: 200,
+        // (float)(3.141592654*20/180.0) and (float)(3.141592654*(120.0*0.00625)/180.0)
+        max_tilt_rad: 0.349_065_84,
+        yaw_deadband: 600,
+        yaw_max_step_rad: 0.013_089_97,
+        yaw_stick: YawStick::BangBang,
+        pulses: PulseRules::Reference { reset_after_ticks: 25 },
+        link_timeout_ticks: 25,
+    };
+
+    pub fn is_valid(&self) -> bool {
+        let pulses_ok = match self.pulses {
+            PulseRules::Reference { .. } => true,
+            PulseRules::Validated { min_counts, max_counts } => min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP,
+        };
+        self.full_scale > 0
+            && self.gesture_threshold > 0
+            && self.min_throttle >= 0
+            && self.max_tilt_rad.is_finite()
+            && self.max_tilt_rad > 0.0
+            && self.max_tilt_rad < 1.5
+            && self.yaw_deadband >= 0
+            && self.yaw_deadband < self.full_scale
+            && self.yaw_max_step_rad.is_finite()
+            && self.yaw_max_step_rad >= 0.0
+            && self.link_timeout_ticks > 0
+            && pulses_ok
+    }
+
+    /// The reference's `update_rc_data` for one channel: width → stick (int16).
+    pub fn stick_from_width(&self, channel: usize, width_counts: u16) -> i16 {
+        let w = i32::from(width_counts);
+        let v = match channel {
+            AIL => w - i32::from(self.ail_center),
+            ELE => w - i32::from(self.ele_center),
+            THR => {
+                if w > i32::from(self.thr_bottom) {
+                    w - i32::from(self.thr_bottom)
+                } else {
+                    0
+                }
+            }
+            _ => w - i32::from(self.rud_center),
+        };
+        v as i16
+    }
+
+    /// Store a width into the sticks (one channel), as `update_rc_data`.
+    pub fn apply_width(&self, sticks: &mut Sticks, channel: usize, width_counts: u16) {
+        let v = self.stick_from_width(channel, width_counts);
+        match channel {
+            AIL => sticks.ail = v,
+            ELE => sticks.ele = v,
+            THR => sticks.thr = v,
+            _ => sticks.rud = v,
+        }
+    }
+
+    pub fn throttle_low(&self, sticks: &Sticks) -> bool {
+        sticks.thr < self.min_throttle
+    }
+
+    fn saturate(&self, v: i16) -> i32 {
+        i32::from(v).clamp(-i32::from(self.full_scale), i32::from(self.full_scale))
+    }
+
+    /// Pitch and roll targets, rad: `(float)(−sat(stick))·max/full_scale` in f32, left to
+    /// right, as `GetTargetEulerAngle`. Elevator forward (positive) is nose down.
+    pub fn tilt_targets(&self, sticks: &Sticks) -> (f32, f32) {
+        let fs = f32::from(self.full_scale);
+        let pitch = (-self.saturate(sticks.ele)) as f32 * self.max_tilt_rad / fs;
+        let roll = (-self.saturate(sticks.ail)) as f32 * self.max_tilt_rad / fs;
+        (pitch, roll)
+    }
+
+    /// The yaw target change of one outer step, rad.
+    pub fn yaw_step(&self, sticks: &Sticks) -> f32 {
+        let t = self.saturate(sticks.rud);
+        let db = i32::from(self.yaw_deadband);
+        match self.yaw_stick {
+            YawStick::BangBang => {
+                if t > db {
+                    self.yaw_max_step_rad
+                } else if t < -db {
+                    -self.yaw_max_step_rad
+                } else {
+                    0.0
+                }
+            }
+            YawStick::Proportional => {
+                let span = (i32::from(self.full_scale) - db) as f32;
+                let beyond = if t > db {
+                    (t - db) as f32
+                } else if t < -db {
+                    (t + db) as f32
+                } else {
+                    0.0
+                };
+                self.yaw_max_step_rad * beyond / span
+            }
+        }
+    }
+
+    /// Which gesture the sticks make (strict comparisons, throttle exactly 0 for the
+    /// reference's arm and calibration gestures).
+    pub fn gesture(&self, s: &Sticks) -> Option<Gesture> {
+        let th = self.gesture_threshold;
+        if s.thr == 0 && s.ele < -th && s.ail > th && s.rud < -th {
+            return Some(Gesture::Calibrate);
+        }
+        if s.thr == 0 && s.ele < -th && s.ail < -th && s.rud > th {
+            return Some(Gesture::Arm);
+        }
+        // Ours (the reference has no disarm): throttle low, rudder hard over the other way,
+        // elevator and aileron near centre.
+        let centred = |v: i16| i32::from(v).abs() <= 300;
+        if self.throttle_low(s) && s.rud < -th && centred(s.ele) && centred(s.ail) {
+            return Some(Gesture::Disarm);
+        }
+        None
+    }
+}
+
+/// A stick gesture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gesture {
+    /// Throttle down, elevator down, aileron beyond −threshold, rudder beyond +threshold.
+    Arm,
+    /// Throttle low, rudder beyond −threshold, elevator and aileron centred (±300).
+    Disarm,
+    /// Throttle down, elevator down, aileron beyond +threshold, rudder beyond −threshold.
+    Calibrate,
+}
+
+/// What the capture side saw since the last control tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PulseBatch {
+    /// The latest width each channel produced since the last tick (counts), if any.
+    pub width_counts: [Option<u16>; CHANNELS],
+    /// Whether any edge arrived on the channel since the last tick.
+    pub edge_seen: [bool; CHANNELS],
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct EdgeState {
+    rise: u16,
+    rise_pending: bool,
+    width: u16,
+    edges: u8,
+}
+
+/// Turns capture timestamps into pulse widths. Owned by the capture interrupt in the
+/// firmware; the control tick [`take`](EdgeDecoder::take)s what it produced.
+#[derive(Clone, Debug)]
+pub struct EdgeDecoder {
+    rules: PulseRules,
+    ch: [EdgeState; CHANNELS],
+    batch: PulseBatch,
+    idle_ticks: u32,
+}
+
+/// Width between two capture timestamps on the 15-bit counter (`fall == rise` is a full
+/// wrap, as the reference computes it).
+pub fn pulse_width(rise_counts: u16, fall_counts: u16) -> u32 {
+    let (r, f) = (u32::from(rise_counts) % CAPTURE_WRAP, u32::from(fall_counts) % CAPTURE_WRAP);
+    if f > r {
+        f - r
+    } else {
+        f + CAPTURE_WRAP - r
+    }
+}
+
+impl EdgeDecoder {
+    pub fn new(rules: PulseRules) -> Self {
+        EdgeDecoder { rules, ch: [EdgeState::default(); CHANNELS], batch: PulseBatch::default(), idle_ticks: 0 }
+    }
+
+    /// One capture event: the channel, the captured counter value and the pin level read in
+    /// the interrupt (high = rising edge). Out-of-range channels are ignored.
+    pub fn on_edge(&mut self, channel: usize, capture_counts: u16, level_high: bool) {
+        let (Some(st), Some(seen), Some(out)) =
+            (self.ch.get_mut(channel), self.batch.edge_seen.get_mut(channel), self.batch.width_counts.get_mut(channel))
+        else {
+            return;
+        };
+        *seen = true;
+        let t = capture_counts & 0x7FFF;
+        match self.rules {
+            PulseRules::Reference { .. } => {
+                st.edges = st.edges.saturating_add(1).min(2);
+                if level_high {
+                    st.rise = t;
+                } else {
+                    if st.edges >= 2 {
+                        st.width = pulse_width(st.rise, t) as u16;
+                    }
+                    // B10: the stored width is reported even when it was not updated.
+                    *out = Some(st.width);
+                }
+            }
+            PulseRules::Validated { min_counts, max_counts } => {
+                if level_high {
+                    st.rise = t;
+                    st.rise_pending = true;
+                } else if st.rise_pending {
+                    st.rise_pending = false;
+                    let w = pulse_width(st.rise, t);
+                    if (u32::from(min_counts)..=u32::from(max_counts)).contains(&w) {
+                        *out = Some(w as u16);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Hand over what arrived since the last call; called once per control tick.
+    pub fn take(&mut self) -> PulseBatch {
+        let b = self.batch;
+        self.batch = PulseBatch::default();
+        if b.edge_seen.iter().any(|&e| e) {
+            self.idle_ticks = 0;
+        } else {
+            self.idle_ticks = self.idle_ticks.saturating_add(1);
+        }
+        if let PulseRules::Reference { reset_after_ticks } = self.rules {
+            // The reference's SysTick clears the whole capture state while disconnected.
+            if self.idle_ticks > reset_after_ticks {
+                self.ch = [EdgeState::default(); CHANNELS];
+            }
+        }
+        b
+    }
+}
+
+/// The control side of the radio: link state, per-channel validity and the sticks.
+#[derive(Clone, Debug)]
+pub struct Receiver {
+    sticks: Sticks,
+    ticks_since_edge: u32,
+    channel_age: [u32; CHANNELS],
+    link: bool,
+}
+
+/// One tick's view of the radio.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RadioState {
+    pub sticks: Sticks,
+    /// The link is good: reference, an edge within the timeout on any channel; validated,
+    /// every channel had an accepted pulse within the timeout.
+    pub link: bool,
+    /// Every channel had an accepted pulse within the timeout.
+    pub all_channels_valid: bool,
+}
+
+impl Default for Receiver {
+    fn default() -> Self {
+        Receiver::new()
+    }
+}
+
+impl Receiver {
+    pub fn new() -> Self {
+        // Disconnected at boot, as the reference's `rc_timeout = 1000`.
+        Receiver { sticks: Sticks::default(), ticks_since_edge: u32::MAX, channel_age: [u32::MAX; CHANNELS], link: false }
+    }
+
+    pub fn sticks(&self) -> Sticks {
+        self.sticks
+    }
+
+    /// Take in one tick's pulses. `on_stick_update` runs after every single-channel update
+    /// with the sticks as they are then (the reference evaluates its gestures there).
+    pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
+        if batch.edge_seen.iter().any(|&e| e) {
+            self.ticks_since_edge = 0;
+        } else {
+            self.ticks_since_edge = self.ticks_since_edge.saturating_add(1);
+        }
+        for ((age, width), channel) in self.channel_age.iter_mut().zip(batch.width_counts).zip(0..) {
+            match width {
+                Some(w) => {
+                    *age = 0;
+                    cfg.apply_width(&mut self.sticks, channel, w);
+                    on_stick_update(&self.sticks);
+                }
+                None => *age = age.saturating_add(1),
+            }
+        }
+        let all_valid = self.channel_age.iter().all(|&a| a < cfg.link_timeout_ticks);
+        self.link = match cfg.pulses {
+            PulseRules::Reference { .. } => self.ticks_since_edge < cfg.link_timeout_ticks,
+            PulseRules::Validated { .. } => all_valid,
+        };
+        RadioState { sticks: self.sticks, link: self.link, all_channels_valid: all_valid }
+    }
+
+    /// Set the radio state directly (golden replay): with `link`, the four widths are
+    /// applied in channel order as the reference's capture would; without it, the sticks keep
+    /// their last values.
+    pub fn force(&mut self, cfg: &RcConfig, widths: [u16; CHANNELS], link: bool) -> RadioState {
+        if link {
+            for (channel, w) in widths.into_iter().enumerate() {
+                cfg.apply_width(&mut self.sticks, channel, w);
+            }
+        }
+        self.link = link;
+        RadioState { sticks: self.sticks, link, all_channels_valid: link }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const REF: RcConfig = RcConfig::REFERENCE;
+    const VALID: PulseRules = PulseRules::Validated { min_counts: 3200, max_counts: 8800 };
+
+    #[test]
+    fn centred_widths_give_the_reference_sticks() {
+        let mut s = Sticks::default();
+        for ch in 0..CHANNELS {
+            REF.apply_width(&mut s, ch, 6000);
+        }
+        assert_eq!(s, Sticks { ail: 138, ele: -151, thr: 1550, rud: -397 });
+        REF.apply_width(&mut s, THR, 4450);
+        assert_eq!(s.thr, 0);
+    }
+
+    #[test]
+    fn pulse_width_handles_the_15_bit_wrap() {
+        assert_eq!(pulse_width(1000, 7000), 6000);
+        assert_eq!(pulse_width(32000, 1000), 1768);
+        assert_eq!(pulse_width(5, 5), 32768);
+    }
+
+    #[test]
+    fn gestures_use_strict_thresholds() {
+        let g = |ele, ail, rud| REF.gesture(&Sticks { ail, ele, thr: 0, rud });
+        assert_eq!(g(-1300, 1300, -1300), Some(Gesture::Calibrate));
+        assert_eq!(g(-1300, -1300, 1300), Some(Gesture::Arm));
+        assert_eq!(g(-1200, -1300, 1300), None);
+        assert_eq!(g(0, 0, -1300), Some(Gesture::Disarm));
+        assert_eq!(g(0, 301, -1300), None);
+    }
+
+    #[test]
+    fn targets_match_the_reference_examples() {
+        let (p, _) = REF.tilt_targets(&Sticks { ele: 900, ..Sticks::default() });
+        assert!((p + 0.174_532_93).abs() < 1e-7);
+        let (_, r) = REF.tilt_targets(&Sticks { ail: -2500, ..Sticks::default() });
+        assert!((r - 0.349_065_87).abs() < 1e-7);
+        assert_eq!(REF.yaw_step(&Sticks { rud: 601, ..Sticks::default() }), 0.013_089_97);
+        assert_eq!(REF.yaw_step(&Sticks { rud: 600, ..Sticks::default() }), 0.0);
+    }
+
+    #[test]
+    fn proportional_yaw_reaches_the_same_maximum() {
+        let cfg = RcConfig { yaw_stick: YawStick::Proportional, ..REF };
+        assert_eq!(cfg.yaw_step(&Sticks { rud: 600, ..Sticks::default() }), 0.0);
+        assert!((cfg.yaw_step(&Sticks { rud: 1800, ..Sticks::default() }) - REF.yaw_max_step_rad).abs() < 1e-9);
+        assert!((cfg.yaw_step(&Sticks { rud: -1200, ..Sticks::default() }) + REF.yaw_max_step_rad * 0.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn reference_decoder_reports_a_bogus_width_on_the_first_falling_edge() {
+        let mut d = EdgeDecoder::new(REF.pulses);
+        d.on_edge(AIL, 1000, false);
+        assert_eq!(d.take().width_counts[AIL], Some(0));
+    }
+
+    #[test]
+    fn validated_decoder_needs_both_edges_of_one_pulse() {
+        let mut d = EdgeDecoder::new(VALID);
+        d.on_edge(AIL, 1000, false);
+        assert_eq!(d.take().width_counts[AIL], None);
+        d.on_edge(AIL, 30000, true);
+        d.on_edge(AIL, 30000u16.wrapping_add(6000) % 32768, false);
+        assert_eq!(d.take().width_counts[AIL], Some(6000));
+    }
+
+    #[test]
+    fn validated_decoder_rejects_out_of_range_widths() {
+        let mut d = EdgeDecoder::new(VALID);
+        d.on_edge(THR, 100, true);
+        d.on_edge(THR, 100, false); // fall == rise: 32768 counts
+        d.on_edge(ELE, 100, true);
+        d.on_edge(ELE, 300, false); // 50 µs glitch
+        let b = d.take();
+        assert_eq!(b.width_counts, [None; CHANNELS]);
+        assert!(b.edge_seen[THR] && b.edge_seen[ELE]);
+    }
+
+    #[test]
+    fn receiver_link_needs_every_channel_with_validated_pulses() {
+        let cfg = RcConfig { pulses: VALID, link_timeout_ticks: 80, ..REF };
+        let mut r = Receiver::new();
+        let mut b = PulseBatch { width_counts: [Some(6000), Some(6000), None, Some(6000)], ..PulseBatch::default() };
+        assert!(!r.update(&cfg, &b, |_| {}).link);
+        b.width_counts[THR] = Some(4400);
+        assert!(r.update(&cfg, &b, |_| {}).link);
+        let empty = PulseBatch::default();
+        for _ in 0..79 {
+            assert!(r.update(&cfg, &empty, |_| {}).link);
+        }
+        assert!(!r.update(&cfg, &empty, |_| {}).link);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn width_is_correct_across_the_wrap(rise in 0u32..32768, width in 1u32..32768) {
+            let fall = (rise + width) % CAPTURE_WRAP;
+            proptest::prop_assert_eq!(pulse_width(rise as u16, fall as u16), width);
+        }
+
+        #[test]
+        fn a_stick_beyond_full_scale_saturates_at_the_configured_angle(ele in proptest::num::i16::ANY, ail in proptest::num::i16::ANY) {
+            let (p, r) = REF.tilt_targets(&Sticks { ele, ail, ..Sticks::default() });
+            // Full scale gives the configured angle to f32 rounding (the reference's own
+            // arithmetic lands one ulp above it), and anything beyond gives exactly that.
+            let full = REF.tilt_targets(&Sticks { ele: 1800, ail: -1800, ..Sticks::default() });
+            proptest::prop_assert!((full.1 - REF.max_tilt_rad).abs() <= 1e-6 * REF.max_tilt_rad);
+            proptest::prop_assert!(p.abs() <= full.1 && r.abs() <= full.1);
+            if ele >= 1800 { proptest::prop_assert_eq!(p, full.0); }
+            if ail <= -1800 { proptest::prop_assert_eq!(r, full.1); }
+        }
+
+        #[test]
+        fn decoder_never_panics_and_validated_widths_are_in_range(
+            edges in proptest::collection::vec((0usize..6, proptest::num::u16::ANY, proptest::bool::ANY), 0..200)
+        ) {
+            let mut d = EdgeDecoder::new(VALID);
+            for (ch, t, lvl) in edges {
+                d.on_edge(ch, t, lvl);
+            }
+            for w in d.take().width_counts.into_iter().flatten() {
+                proptest::prop_assert!((3200..=8800).contains(&w));
+            }
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Telemetry lines (being built).

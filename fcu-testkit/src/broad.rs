@@ -1,0 +1,1 @@
+//! Scoring attitude estimators on BROAD recordings (being built).

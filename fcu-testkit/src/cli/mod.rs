@@ -1,0 +1,71 @@
+//! The `fcu-sim` command line: one subcommand per job, each in its own module.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+pub mod estimate;
+pub mod fly;
+pub mod replay;
+
+#[derive(Parser, Debug)]
+#[command(name = "fcu-sim", version, about = "Fly, replay and score the fcu flight core on a laptop")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Fly a scenario against the simulated STEVAL-DRONE01 and draw what happened.
+    Fly(fly::FlyArgs),
+    /// Fly one scenario and seed under both profiles and print their metrics side by side.
+    Compare(fly::CompareArgs),
+    /// Run the golden replay format (one row per control tick) and print the output rows.
+    Replay(replay::ReplayArgs),
+    /// Run the attitude estimator over a BROAD-format IMU recording.
+    Estimate(estimate::EstimateArgs),
+}
+
+/// Parse the arguments, run the subcommand, and turn any error into a message and exit 2
+/// (exit 1 is kept for "ran fine, but the scenario's criteria failed").
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Fly(a) => fly::run(&a),
+        Command::Compare(a) => fly::run_compare(&a),
+        Command::Replay(a) => replay::run(&a),
+        Command::Estimate(a) => estimate::run(&a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("fcu-sim: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// A CLI error: a message meant for the person at the terminal.
+#[derive(Debug)]
+pub struct CliError(pub String);
+
+impl std::fmt::Display for CliError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl From<String> for CliError {
+    fn from(s: String) -> Self {
+        CliError(s)
+    }
+}
+
+impl From<std::io::Error> for CliError {
+    fn from(e: std::io::Error) -> Self {
+        CliError(e.to_string())
+    }
+}

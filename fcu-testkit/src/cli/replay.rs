@@ -1,0 +1,98 @@
+//! `fcu-sim replay`: the golden replay format through the flight core.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use super::CliError;
+use crate::replay;
+
+/// Which configuration a run uses.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Profile {
+    /// The ST reference's numbers (`Config::reference()`).
+    Reference,
+    /// The product (`Config::default()`).
+    Default,
+}
+
+impl Profile {
+    pub fn config(self) -> fcu_core::Config {
+        match self {
+            Profile::Reference => fcu_core::Config::reference(),
+            Profile::Default => fcu_core::Config::default(),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::Reference => "reference",
+            Profile::Default => "default",
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ReplayArgs {
+    /// Configuration to run. The golden files are the reference's; the default profile's
+    /// own safety layer ignores the file's `armed` column.
+    #[arg(long, value_enum, default_value = "reference")]
+    pub profile: Profile,
+    /// Write the output here instead of stdout.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Compare with this golden output file and report the differences (exit 1 if any value
+    /// is outside the tolerances).
+    #[arg(long)]
+    pub expect: Option<PathBuf>,
+    /// Replay input file (`tick,acc_x,…,cal_request`), plain or `.gz`.
+    pub input: PathBuf,
+}
+
+/// Read a text file, gunzipping it when its name ends in `.gz`.
+pub fn read_text(path: &std::path::Path) -> Result<String, CliError> {
+    use std::io::Read;
+    let fail = |e: std::io::Error| CliError(format!("cannot read {}: {e}", path.display()));
+    if path.extension().is_some_and(|e| e == "gz") {
+        let f = std::fs::File::open(path).map_err(fail)?;
+        let mut s = String::new();
+        flate2::read::GzDecoder::new(f).read_to_string(&mut s).map_err(fail)?;
+        Ok(s)
+    } else {
+        std::fs::read_to_string(path).map_err(fail)
+    }
+}
+
+pub fn run(a: &ReplayArgs) -> Result<ExitCode, CliError> {
+    let text = read_text(&a.input)?;
+    let rows = replay::parse_input(&text).map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
+    let out = replay::run(a.profile.config(), &rows).map_err(|e| CliError(e.to_string()))?;
+    let csv = replay::format_output(&out);
+    match &a.out {
+        Some(p) => std::fs::write(p, &csv).map_err(|e| CliError(format!("cannot write {}: {e}", p.display())))?,
+        None => {
+            use std::io::Write;
+            let mut stdout = std::io::stdout().lock();
+            // A closed pipe (`| head`) is not an error worth a message.
+            let _ = stdout.write_all(csv.as_bytes());
+        }
+    }
+    if let Some(p) = &a.expect {
+        let text = read_text(p)?;
+        let want = replay::parse_output(&text).map_err(|e| CliError(format!("{}: {e}", p.display())))?;
+        let c = replay::compare(&out, &want);
+        eprintln!(
+            "{} rows: {} compare values and {} floats not bit-identical, {} outside tolerance",
+            c.rows,
+            c.inexact_ccr,
+            c.inexact_floats,
+            c.out_of_tolerance.len()
+        );
+        for m in c.out_of_tolerance.iter().take(20) {
+            eprintln!("  {m}");
+        }
+        if !c.out_of_tolerance.is_empty() {
+            return Ok(ExitCode::from(1));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

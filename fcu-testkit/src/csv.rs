@@ -1,0 +1,165 @@
+//! A small CSV reader for the project's numeric files: header by name, every error names the
+//! line (1-based, the header is line 1) and the column.
+
+use std::fmt;
+
+/// A CSV problem, with where it is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CsvError {
+    pub line: usize,
+    pub message: String,
+}
+
+impl fmt::Display for CsvError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "line {}: {}", self.line, self.message)
+    }
+}
+
+impl std::error::Error for CsvError {}
+
+/// The header of a CSV file: column names in order.
+#[derive(Debug, Clone)]
+pub struct Header {
+    names: Vec<String>,
+}
+
+impl Header {
+    pub fn parse(line: &str) -> Header {
+        Header { names: line.trim_end_matches('\r').split(',').map(|s| s.trim().to_string()).collect() }
+    }
+
+    /// The index of each required column, or an error naming the missing one.
+    pub fn indices<const N: usize>(&self, wanted: [&str; N]) -> Result<[usize; N], CsvError> {
+        let mut out = [0usize; N];
+        for (o, w) in out.iter_mut().zip(wanted) {
+            *o = self
+                .names
+                .iter()
+                .position(|n| n == w)
+                .ok_or_else(|| CsvError { line: 1, message: format!("missing column `{w}` in the header") })?;
+        }
+        Ok(out)
+    }
+
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+}
+
+/// One data row, split, with its line number for messages.
+pub struct Row<'a> {
+    pub line: usize,
+    fields: Vec<&'a str>,
+    names: &'a Header,
+}
+
+impl<'a> Row<'a> {
+    pub fn split(line_no: usize, text: &'a str, header: &'a Header) -> Result<Row<'a>, CsvError> {
+        let fields: Vec<&str> = text.trim_end_matches('\r').split(',').map(str::trim).collect();
+        if fields.len() != header.len() {
+            return Err(CsvError { line: line_no, message: format!("expected {} columns, found {}", header.len(), fields.len()) });
+        }
+        Ok(Row { line: line_no, fields, names: header })
+    }
+
+    fn raw(&self, idx: usize) -> Result<(&str, &str), CsvError> {
+        let name = self.names.names.get(idx).map(String::as_str).unwrap_or("?");
+        let v = self.fields.get(idx).copied().ok_or_else(|| CsvError { line: self.line, message: format!("missing column `{name}`") })?;
+        Ok((name, v))
+    }
+
+    /// Parse a column as `T`, or an error naming the line, the column and the text.
+    pub fn get<T: std::str::FromStr>(&self, idx: usize) -> Result<T, CsvError> {
+        let (name, v) = self.raw(idx)?;
+        v.parse::<T>()
+            .map_err(|_| CsvError { line: self.line, message: format!("column `{name}`: `{v}` is not a valid {}", short_type_name::<T>()) })
+    }
+
+    /// Parse a 0/1 flag column.
+    pub fn flag(&self, idx: usize) -> Result<bool, CsvError> {
+        let (name, v) = self.raw(idx)?;
+        match v {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            _ => Err(CsvError { line: self.line, message: format!("column `{name}`: `{v}` is not 0 or 1") }),
+        }
+    }
+}
+
+fn short_type_name<T>() -> &'static str {
+    let n = std::any::type_name::<T>();
+    n.rsplit("::").next().unwrap_or(n)
+}
+
+/// Iterate the data lines of a CSV text (skipping the header and blank lines), with their
+/// 1-based line numbers.
+pub fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines().enumerate().skip(1).map(|(i, l)| (i + 1, l)).filter(|(_, l)| !l.trim().is_empty())
+}
+
+/// Format an f32 like C's `printf("%.9g")`, which round-trips binary32 exactly.
+pub fn fmt_g9(v: f32) -> String {
+    if v.is_nan() {
+        return "nan".into();
+    }
+    if v.is_infinite() {
+        return if v > 0.0 { "inf".into() } else { "-inf".into() };
+    }
+    if v == 0.0 {
+        return if v.is_sign_negative() { "-0".into() } else { "0".into() };
+    }
+    let e = format!("{:.8e}", f64::from(v));
+    let (mantissa, exp) = e.split_once('e').unwrap_or((&e, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    if (-4..9).contains(&exp) {
+        let decimals = (8 - exp).max(0) as usize;
+        let s = format!("{:.*}", decimals, f64::from(v));
+        trim_zeros(&s)
+    } else {
+        let m = trim_zeros(mantissa);
+        let sign = if exp < 0 { '-' } else { '+' };
+        format!("{m}e{sign}{:02}", exp.abs())
+    }
+}
+
+fn trim_zeros(s: &str) -> String {
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn g9_matches_c_printf() {
+        assert_eq!(fmt_g9(0.998_307_17), "0.998307168");
+        assert_eq!(fmt_g9(1.0), "1");
+        assert_eq!(fmt_g9(-0.0), "-0");
+        assert_eq!(fmt_g9(800.0), "800");
+        assert_eq!(fmt_g9("1.98177537e+19".parse().unwrap()), "1.98177537e+19");
+        assert_eq!(fmt_g9("9.99999997e-07".parse().unwrap()), "9.99999997e-07");
+        assert_eq!(fmt_g9("0.000998304575".parse().unwrap()), "0.000998304575");
+        assert_eq!(fmt_g9("-150.697479".parse().unwrap()), "-150.697479");
+        assert_eq!(fmt_g9(f32::NAN), "nan");
+    }
+
+    #[test]
+    fn errors_name_the_line_and_column() {
+        let h = Header::parse("a,b");
+        let r = Row::split(7, "1,x", &h).unwrap();
+        let e = r.get::<i32>(1).unwrap_err();
+        assert_eq!(e.to_string(), "line 7: column `b`: `x` is not a valid i32");
+        let e = Row::split(8, "1", &h).err().unwrap();
+        assert_eq!(e.to_string(), "line 8: expected 2 columns, found 1");
+        assert!(h.indices(["c"]).is_err());
+    }
+}

@@ -1,0 +1,12 @@
+//! fcu-testkit: the flight core on a laptop.
+//!
+//! - [`replay`]: the golden replay format of `shared/golden` (reference profile oracle);
+//! - [`sim`]: a simulated STEVAL-DRONE01 (plant, IMU, radio) flown in closed loop;
+//! - [`broad`]: attitude estimation scored on real BROAD recordings;
+//! - [`cli`]: the `fcu-sim` command line.
+
+pub mod broad;
+pub mod cli;
+pub mod csv;
+pub mod replay;
+pub mod sim;

@@ -1,0 +1,1 @@
+//! The simulated STEVAL-DRONE01 (being built).
