@@ -10,11 +10,10 @@
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
-use crate::ahrs::{EstimatorConfig, MahonyConfig};
+use crate::ahrs::{EstimatorConfig, MahonyConfig, VqfConfig};
 use crate::control::{ControlConfig, Derivative};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
-use crate::math::InvSqrt;
 use crate::mixer::{MixerConfig, Saturate};
 use crate::rc::{PulseRules, RcConfig, YawStick};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
@@ -200,13 +199,9 @@ impl Default for Config {
             // §4: non-finite, impossible or stuck (100 ms) sensor values are faults.
             health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100.0, gyro_limit_mdps: 2_300_000.0 }),
             gyro_filter: r.gyro_filter,
-            // D4 and D5: exact normalisation and a better estimator (see `ahrs`).
-            estimator: EstimatorConfig::Mahony(MahonyConfig {
-                inv_sqrt: InvSqrt::Exact,
-                sequential_update: false,
-                reference_arithmetic: false,
-                ..MahonyConfig::REFERENCE
-            }),
+            // D4 and D5: a VQF-style estimator (exact normalisation, accelerometer low-passed
+            // in a quasi-inertial frame, rest detection, gyro bias estimation); see `ahrs::vqf`.
+            estimator: EstimatorConfig::Vqf(VqfConfig::DEFAULT),
             rc: RcConfig {
                 // D9: 800..2200 µs pulses from both edges of one pulse; 100 ms channel timeout.
                 pulses: PulseRules::Validated { min_counts: 3200, max_counts: 8800 },

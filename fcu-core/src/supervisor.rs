@@ -367,7 +367,7 @@ impl Supervisor {
                 self.low_throttle_ticks = if i.throttle_low { self.low_throttle_ticks.saturating_add(1) } else { 0 };
                 if !i.link {
                     self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
-                    self.lost_ticks = 0;
+                    self.lost_ticks = 1;
                     FlightState::FailsafeLevel
                 } else if gesture == Some(Gesture::Disarm) {
                     self.hold_ticks = self.hold_ticks.saturating_add(1);
@@ -429,4 +429,440 @@ impl Supervisor {
 
 fn without(b: Blockers, x: Blocker) -> Blockers {
     Blockers(b.0 & !(x as u16))
+}
+
+#[cfg(test)]
+mod tests {
+    //! One test per rule of product.md §4, named after it.
+    use super::*;
+
+    const CFG: SafetyConfig = SafetyConfig::DEFAULT;
+    const ARM: Sticks = Sticks { ail: -1500, ele: -1500, thr: 0, rud: 1500 };
+    const DISARM: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: -1500 };
+    const CAL: Sticks = Sticks { ail: 1500, ele: -1500, thr: 0, rud: -1500 };
+    const IDLE: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: 0 };
+    const FLY: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+
+    /// A supervisor driven tick by tick, with a good link, calibrated, level, no fault.
+    struct Rig {
+        s: Supervisor,
+        i: Inputs,
+        last: Decision,
+    }
+
+    impl Rig {
+        fn new() -> Rig {
+            let i = Inputs {
+                link: true,
+                sticks: IDLE,
+                gesture: None,
+                throttle_low: true,
+                calibrated: true,
+                calibrating: false,
+                sensor_fault: None,
+                tilt_rad: 0.0,
+            };
+            let mut r = Rig { s: Supervisor::new(), i, last: Supervisor::new().step_reference(false, None, false) };
+            r.run(IDLE, CFG.boot_settle_ticks);
+            assert_eq!(r.last.state, FlightState::Disarmed);
+            r
+        }
+
+        fn sticks(&mut self, s: Sticks) {
+            self.i.sticks = s;
+            self.i.throttle_low = s.thr < 200;
+            self.i.gesture = crate::rc::RcConfig::REFERENCE.gesture(&s);
+        }
+
+        fn run(&mut self, s: Sticks, ticks: u32) -> Decision {
+            self.sticks(s);
+            for _ in 0..ticks {
+                self.last = self.s.step(&CFG, &self.i);
+            }
+            self.last
+        }
+
+        fn arm(&mut self) {
+            self.run(ARM, CFG.arm_hold_ticks);
+            let d = self.run(IDLE, 1);
+            assert_eq!(d.state, FlightState::Armed, "blockers {:?}", d.blockers);
+        }
+
+        fn lose_link(&mut self, ticks: u32) -> Decision {
+            self.i.link = false;
+            for _ in 0..ticks {
+                self.last = self.s.step(&CFG, &self.i);
+            }
+            self.last
+        }
+
+        fn restore_link(&mut self, ticks: u32) -> Decision {
+            self.i.link = true;
+            for _ in 0..ticks {
+                self.last = self.s.step(&CFG, &self.i);
+            }
+            self.last
+        }
+    }
+
+    #[test]
+    fn boot_starts_calibrating_with_motors_off() {
+        let mut s = Supervisor::new();
+        let i = Inputs {
+            link: true,
+            sticks: IDLE,
+            gesture: None,
+            throttle_low: true,
+            calibrated: false,
+            calibrating: true,
+            sensor_fault: None,
+            tilt_rad: 0.0,
+        };
+        let d = s.step(&CFG, &i);
+        assert_eq!(d.state, FlightState::Calibrating);
+        assert!(!d.motors_enabled);
+        assert!(d.blockers.contains(Blocker::Calibrating) && d.blockers.contains(Blocker::NotCalibrated));
+        assert!(d.blockers.contains(Blocker::BootSettling));
+    }
+
+    #[test]
+    fn arm_requires_the_gesture_held_one_second() {
+        let mut r = Rig::new();
+        r.run(ARM, CFG.arm_hold_ticks - 1);
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Disarmed);
+        let mut r = Rig::new();
+        r.arm();
+    }
+
+    #[test]
+    fn arm_happens_on_release_not_while_held() {
+        let mut r = Rig::new();
+        let d = r.run(ARM, 5 * CFG.arm_hold_ticks);
+        assert_eq!(d.state, FlightState::Arming);
+        assert!(!d.motors_enabled);
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Armed);
+    }
+
+    #[test]
+    fn arm_is_refused_until_a_calibration_passed() {
+        let mut r = Rig::new();
+        r.i.calibrated = false;
+        let d = r.run(ARM, CFG.arm_hold_ticks);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::NotCalibrated));
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn arm_is_refused_while_calibrating() {
+        let mut r = Rig::new();
+        r.i.calibrating = true;
+        r.run(ARM, CFG.arm_hold_ticks);
+        let d = r.run(IDLE, 1);
+        assert_ne!(d.state, FlightState::Armed);
+        assert!(d.blockers.contains(Blocker::Calibrating));
+    }
+
+    #[test]
+    fn arm_is_refused_without_a_good_link() {
+        let mut r = Rig::new();
+        r.i.link = false;
+        let d = r.run(ARM, CFG.arm_hold_ticks);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::LinkNotGood));
+    }
+
+    #[test]
+    fn arm_is_refused_if_the_throttle_is_up_at_release() {
+        let mut r = Rig::new();
+        r.run(ARM, CFG.arm_hold_ticks);
+        let d = r.run(FLY, 1);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::ThrottleNotLow));
+    }
+
+    #[test]
+    fn arm_is_refused_beyond_25_degrees_from_level() {
+        let mut r = Rig::new();
+        r.i.tilt_rad = 26f32.to_radians();
+        r.run(ARM, CFG.arm_hold_ticks);
+        let d = r.run(IDLE, 1);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::NotLevel));
+        let mut r = Rig::new();
+        r.i.tilt_rad = 24f32.to_radians();
+        r.arm();
+    }
+
+    #[test]
+    fn a_nan_attitude_counts_as_not_level() {
+        let mut r = Rig::new();
+        r.i.tilt_rad = f32::NAN;
+        assert!(r.run(IDLE, 1).blockers.contains(Blocker::NotLevel));
+    }
+
+    #[test]
+    fn arm_is_refused_during_the_first_two_seconds() {
+        let mut s = Supervisor::new();
+        let mut i = Rig::new().i;
+        i.sticks = IDLE;
+        s.step(&CFG, &i);
+        i.sticks = ARM;
+        i.gesture = Some(Gesture::Arm);
+        let mut d = s.step(&CFG, &i);
+        for _ in 0..CFG.arm_hold_ticks {
+            d = s.step(&CFG, &i);
+        }
+        assert!(d.blockers.contains(Blocker::BootSettling));
+        i.sticks = IDLE;
+        i.gesture = None;
+        assert_eq!(s.step(&CFG, &i).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn arm_is_refused_after_a_sensor_fault() {
+        let mut r = Rig::new();
+        r.i.sensor_fault = Some(SensorFault::Stuck);
+        r.run(IDLE, 1);
+        r.i.sensor_fault = None;
+        r.run(ARM, CFG.arm_hold_ticks);
+        let d = r.run(IDLE, 1);
+        assert_eq!(d.state, FlightState::Fault);
+        assert!(d.blockers.contains(Blocker::SensorFault));
+    }
+
+    #[test]
+    fn holding_the_arm_gesture_while_the_link_comes_up_does_not_arm() {
+        let mut r = Rig::new();
+        r.lose_link(10);
+        r.sticks(ARM);
+        let d = r.restore_link(3 * CFG.arm_hold_ticks);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::GestureNotReleased));
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Disarmed);
+        // Letting go and doing it properly then works.
+        r.arm();
+    }
+
+    #[test]
+    fn the_gesture_must_be_released_after_a_disarm_before_arming_again() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(DISARM, CFG.disarm_hold_ticks);
+        assert_eq!(r.last.state, FlightState::Disarmed);
+        // Straight from the disarm gesture into the arm gesture, no neutral in between.
+        let d = r.run(ARM, CFG.arm_hold_ticks);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::GestureNotReleased));
+    }
+
+    #[test]
+    fn a_blocker_during_the_hold_aborts_arming() {
+        let mut r = Rig::new();
+        r.run(ARM, CFG.arm_hold_ticks / 2);
+        r.i.tilt_rad = 1.0;
+        r.run(ARM, 1);
+        r.i.tilt_rad = 0.0;
+        r.run(ARM, CFG.arm_hold_ticks);
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn disarm_gesture_held_one_second_disarms() {
+        let mut r = Rig::new();
+        r.arm();
+        let d = r.run(DISARM, CFG.disarm_hold_ticks);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn a_short_disarm_gesture_does_not_disarm() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(DISARM, CFG.disarm_hold_ticks - 1);
+        assert_eq!(r.run(FLY, 1).state, FlightState::Armed);
+        // The hold starts again from zero.
+        r.run(DISARM, CFG.disarm_hold_ticks - 1);
+        assert_eq!(r.last.state, FlightState::Armed);
+    }
+
+    #[test]
+    fn auto_disarm_after_five_seconds_armed_with_throttle_low() {
+        let mut r = Rig::new();
+        r.arm();
+        assert_eq!(r.run(IDLE, CFG.auto_disarm_ticks - 2).state, FlightState::Armed);
+        assert_eq!(r.run(IDLE, 2).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn throttle_up_restarts_the_auto_disarm_timer() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(IDLE, CFG.auto_disarm_ticks - 10);
+        r.run(FLY, 1);
+        assert_eq!(r.run(IDLE, CFG.auto_disarm_ticks - 10).state, FlightState::Armed);
+    }
+
+    #[test]
+    fn link_loss_enters_failsafe_stage_1_holding_the_last_throttle() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 100);
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeLevel);
+        assert!(d.motors_enabled);
+        assert_eq!(d.failsafe_throttle, Some(FLY.thr));
+        assert!(d.blockers.contains(Blocker::Failsafe));
+    }
+
+    #[test]
+    fn failsafe_throttle_is_never_raised() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 100);
+        // Stale sticks claiming more throttle while the link is down change nothing.
+        r.i.sticks.thr = 3000;
+        let d = r.lose_link(50);
+        assert_eq!(d.failsafe_throttle, Some(FLY.thr));
+    }
+
+    #[test]
+    fn link_back_within_stage_1_returns_control_after_100ms() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(200);
+        assert_eq!(r.restore_link(CFG.recovery_ticks - 1).state, FlightState::FailsafeLevel);
+        assert_eq!(r.restore_link(1).state, FlightState::Armed);
+    }
+
+    #[test]
+    fn link_lost_for_one_second_turns_the_motors_off_and_disarms() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - 1).state, FlightState::FailsafeLevel);
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff);
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn a_flickering_link_cannot_stretch_stage_1() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        let mut lost = 0;
+        loop {
+            lost += 20;
+            if r.lose_link(20).state == FlightState::FailsafeOff {
+                break;
+            }
+            assert_eq!(r.restore_link(CFG.recovery_ticks / 2).state, FlightState::FailsafeLevel);
+            assert!(lost <= CFG.failsafe_off_ticks, "stage 1 outlasted its loss budget");
+        }
+        assert!(lost >= CFG.failsafe_off_ticks);
+    }
+
+    #[test]
+    fn after_stage_2_the_link_returning_gives_disarmed_and_needs_a_full_arming() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(CFG.failsafe_off_ticks + 10);
+        let d = r.restore_link(1000);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(!d.motors_enabled);
+        r.arm();
+    }
+
+    #[test]
+    fn motors_never_restart_by_themselves_after_stage_2() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(CFG.failsafe_off_ticks + 1);
+        r.sticks(FLY);
+        for _ in 0..10 {
+            assert!(!r.restore_link(100).motors_enabled);
+            assert!(!r.lose_link(5).motors_enabled);
+        }
+    }
+
+    #[test]
+    fn link_loss_while_disarmed_stays_disarmed() {
+        let mut r = Rig::new();
+        let d = r.lose_link(2000);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::LinkNotGood));
+    }
+
+    #[test]
+    fn calibration_gesture_requests_a_calibration_while_disarmed() {
+        let mut r = Rig::new();
+        let d = r.run(CAL, 1);
+        assert!(d.request_calibration);
+        assert_eq!(d.state, FlightState::Calibrating);
+        // Held on, it does not ask again.
+        assert!(!r.run(CAL, 10).request_calibration);
+    }
+
+    #[test]
+    fn calibration_gesture_is_ignored_while_armed() {
+        let mut r = Rig::new();
+        r.arm();
+        let d = r.run(CAL, 100);
+        assert!(!d.request_calibration);
+        assert_eq!(d.state, FlightState::Armed);
+    }
+
+    #[test]
+    fn a_sensor_fault_in_flight_stops_the_motors_and_latches() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.sensor_fault = Some(SensorFault::NotFinite);
+        let d = r.run(FLY, 1);
+        assert_eq!(d.state, FlightState::Fault);
+        assert!(!d.motors_enabled);
+        r.i.sensor_fault = None;
+        assert_eq!(r.run(FLY, 10_000).state, FlightState::Fault);
+    }
+
+    #[test]
+    fn motors_may_run_only_armed_or_in_stage_1() {
+        for s in [FlightState::Disarmed, FlightState::Arming, FlightState::FailsafeOff, FlightState::Calibrating, FlightState::Fault] {
+            assert!(!s.motors_may_run(), "{}", s.name());
+        }
+        assert!(FlightState::Armed.motors_may_run() && FlightState::FailsafeLevel.motors_may_run());
+    }
+
+    #[test]
+    fn every_blocker_has_a_distinct_name() {
+        let mut all = Blockers::default();
+        for b in Blocker::ALL {
+            all.insert(b);
+        }
+        let mut names = [""; 9];
+        for (n, b) in names.iter_mut().zip(all.iter()) {
+            *n = b.name();
+        }
+        assert!(names.iter().all(|n| !n.is_empty()));
+        for (i, a) in names.iter().enumerate() {
+            assert!(!names[i + 1..].contains(a), "{a}");
+        }
+    }
+
+    #[test]
+    fn reference_latch_never_disarms() {
+        let mut s = Supervisor::new();
+        s.reference_gesture(Some(Gesture::Arm));
+        assert!(s.step_reference(true, None, false).motors_enabled);
+        s.reference_gesture(Some(Gesture::Disarm));
+        assert!(s.step_reference(true, None, false).motors_enabled);
+        // Link loss stops the motors but keeps "armed": they resume when edges return (B8).
+        assert!(!s.step_reference(false, None, false).motors_enabled);
+        assert!(s.step_reference(true, None, false).motors_enabled);
+    }
 }

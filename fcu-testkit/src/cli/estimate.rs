@@ -1,12 +1,60 @@
-//! `fcu-sim estimate` (being built: see the estimator issue).
+//! `fcu-sim estimate`: run an attitude estimator over a BROAD-format IMU recording.
 
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use super::CliError;
+use crate::broad::{self, Profile, Recording};
+
+/// Which estimator to run.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EstimateProfile {
+    /// The default profile's VQF.
+    Default,
+    /// The reference's Mahony (kP 0.4 in flight, kI 0.1).
+    Reference,
+}
 
 #[derive(clap::Args, Debug)]
-pub struct EstimateArgs {}
+pub struct EstimateArgs {
+    /// Estimator profile.
+    #[arg(long, value_enum, default_value = "default")]
+    pub profile: EstimateProfile,
+    /// BROAD CSV (`t_s,gyr_x..z [rad/s],acc_x..z [m/s²],ref_qw..qz,movement`), plain or gzip.
+    pub input: PathBuf,
+    /// Where to write `t_s,qw,qx,qy,qz` (standard output when absent).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
-pub fn run(_a: &EstimateArgs) -> Result<ExitCode, CliError> {
-    Err(CliError("`estimate` is not available in this build yet".into()))
+/// Run the estimator from rest (identity, no prior) at the file's own sample period, write one
+/// estimate per sample, and print the inclination RMSE to stderr when the file has ground truth.
+pub fn run(a: &EstimateArgs) -> Result<ExitCode, CliError> {
+    let rec = Recording::read(&a.input).map_err(|e| CliError(e.to_string()))?;
+    let dt_s =
+        rec.sample_period_s().ok_or_else(|| CliError(format!("{}: need at least two samples with increasing t_s", a.input.display())))?;
+    let profile = match a.profile {
+        EstimateProfile::Default => Profile::Default,
+        EstimateProfile::Reference => Profile::Reference,
+    };
+    let est = broad::run(&rec, profile.estimator_config(dt_s));
+    match &a.out {
+        Some(path) => {
+            let f = File::create(path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
+            broad::write_estimates(BufWriter::new(f), &rec, &est)?;
+        }
+        None => broad::write_estimates(BufWriter::new(std::io::stdout().lock()), &rec, &est)?,
+    }
+    if let Some(rmse) = broad::inclination_rmse_deg(&rec, &est) {
+        eprintln!(
+            "{}: {} profile, {} samples at {:.1} Hz, inclination RMSE {rmse:.3}°",
+            a.input.display(),
+            profile.name(),
+            rec.samples.len(),
+            1.0 / dt_s
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -1,19 +1,176 @@
-//! `fcu-sim fly` and `fcu-sim compare` (being built: see the simulator issue).
+//! `fcu-sim fly` and `fcu-sim compare`: fly a scenario against the simulated STEVAL-DRONE01.
+//!
+//! Exit codes: 0 the scenario's criteria passed, 1 they did not, 2 bad usage or input
+//! (returned as a [`CliError`] for the dispatcher to print).
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use super::CliError;
+use crate::sim::metrics::{self, Metrics, Verdict};
+use crate::sim::scenario::{self, Scenario, Timeline};
+use crate::sim::{self as sim, FlightLog, Profile, RunOptions};
 
 #[derive(clap::Args, Debug)]
-pub struct FlyArgs {}
-
-#[derive(clap::Args, Debug)]
-pub struct CompareArgs {}
-
-pub fn run(_a: &FlyArgs) -> Result<ExitCode, CliError> {
-    Err(CliError("`fly` is not available in this build yet".into()))
+pub struct FlyArgs {
+    /// Scenario name (hover, steps, sweeps, yaw, link-short, link-long, gust, weak-motor,
+    /// calibration-motion).
+    #[arg(long)]
+    pub scenario: String,
+    /// Flight-controller profile: `default` (the product) or `reference` (ST's firmware).
+    #[arg(long, default_value = "default")]
+    pub profile: String,
+    /// Seed for sensor noise, radio jitter and (with --spread) the airframe.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stick timeline CSV (`t_s,ail_us,ele_us,thr_us,rud_us,link`) replacing the scenario's.
+    #[arg(long)]
+    pub sticks: Option<PathBuf>,
+    /// Simulated duration in seconds (default: the scenario's own).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Randomise every airframe parameter by ±this fraction from the seed (0 = nominal drone).
+    #[arg(long, default_value_t = 0.0)]
+    pub spread: f64,
+    /// Output directory for flight.csv and flight.svg (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
-pub fn run_compare(_a: &CompareArgs) -> Result<ExitCode, CliError> {
-    Err(CliError("`compare` is not available in this build yet".into()))
+#[derive(clap::Args, Debug)]
+pub struct CompareArgs {
+    /// Scenario name (see `fly --help`).
+    #[arg(long)]
+    pub scenario: String,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Randomise every airframe parameter by ±this fraction from the seed (0 = nominal drone).
+    #[arg(long, default_value_t = 0.0)]
+    pub spread: f64,
+}
+
+fn scenario_named(name: &str) -> Result<Scenario, CliError> {
+    scenario::by_name(name).ok_or_else(|| CliError(format!("--scenario: unknown scenario `{name}`; known: {}", scenario::NAMES.join(", "))))
+}
+
+fn check_spread(spread: f64) -> Result<f64, CliError> {
+    if spread.is_finite() && (0.0..=0.9).contains(&spread) {
+        Ok(spread)
+    } else {
+        Err(CliError(format!("--spread: {spread} must be a fraction between 0 and 0.9")))
+    }
+}
+
+pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
+    let mut sc = scenario_named(&a.scenario)?;
+    let profile = Profile::parse(&a.profile)
+        .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
+    let spread = check_spread(a.spread)?;
+    if let Some(d) = a.duration {
+        if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
+            return Err(CliError(format!("--duration: {d} must be a number of seconds in (0, 3600]")));
+        }
+    }
+    if let Some(path) = &a.sticks {
+        let text = std::fs::read_to_string(path).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
+        let tl = Timeline::parse_csv(&text).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
+        let last_row_s = tl.rows.last().map_or(0.0, |r| r.t_s);
+        let name = format!("{} + sticks from {}", sc.name, path.display());
+        // A file replaces the pilot; the scenario keeps its world (gusts, weak motor, hand).
+        let world = sc.clone();
+        sc = scenario::from_timeline(&name, tl, (last_row_s + 2.0).max(a.duration.unwrap_or(0.0)));
+        sc.gusts = world.gusts;
+        sc.hand = world.hand;
+        sc.motor_thrust_scale = world.motor_thrust_scale;
+        sc.radio = world.radio;
+    }
+    std::fs::create_dir_all(&a.out).map_err(|e| CliError(format!("--out {}: {e}", a.out.display())))?;
+
+    let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
+    let log = sim::run(&sc, profile, &opts).map_err(|e| CliError(e.to_string()))?;
+    let m = metrics::compute(&log, &sc);
+    let verdicts = metrics::check_all(&log, &sc);
+
+    let csv_path = a.out.join("flight.csv");
+    let svg_path = a.out.join("flight.svg");
+    std::fs::write(&csv_path, log.to_csv()).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))?;
+    let title = format!("fcu-sim fly: {} — profile {}, seed {}", sc.name, profile.name(), a.seed);
+    sim::plot::write_svg(&log, &title, &svg_path).map_err(CliError)?;
+
+    print_summary(&sc, &log, &m, &verdicts);
+    println!("wrote {} ({} rows at {:.2} Hz) and {}", csv_path.display(), log.rows.len(), log.tick_hz, svg_path.display());
+    let passed = verdicts.iter().all(|v| v.passed);
+    println!("{}", if passed { "PASS" } else { "FAIL" });
+    Ok(if passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+fn print_summary(sc: &Scenario, log: &FlightLog, m: &Metrics, verdicts: &[Verdict]) {
+    println!("scenario {}: {}", sc.name, sc.about);
+    println!(
+        "profile {}, seed {}, {:.1} s at {:.2} Hz; drone {:.1} g, F_max {:.3} N/motor",
+        log.profile.name(),
+        log.seed,
+        log.rows.last().map_or(0.0, |r| r.t_s),
+        log.tick_hz,
+        log.plant.mass_kg * 1000.0,
+        log.plant.motor_max_thrust_n
+    );
+    println!("metrics:");
+    for (name, value) in metrics::lines(m) {
+        println!("  {name:<38} {value}");
+    }
+    if verdicts.is_empty() {
+        println!("criteria: none (stick file)");
+    } else {
+        println!("criteria:");
+    }
+    for v in verdicts {
+        println!("  [{}] {} — {}", if v.passed { "pass" } else { "FAIL" }, v.criterion, v.detail);
+    }
+}
+
+pub fn run_compare(a: &CompareArgs) -> Result<ExitCode, CliError> {
+    let sc = scenario_named(&a.scenario)?;
+    let spread = check_spread(a.spread)?;
+    let opts = RunOptions { seed: a.seed, plant_spread: spread, progress: true, ..RunOptions::default() };
+    let mut results = Vec::new();
+    for profile in [Profile::Reference, Profile::Default] {
+        let log = sim::run(&sc, profile, &opts).map_err(|e| CliError(e.to_string()))?;
+        let m = metrics::compute(&log, &sc);
+        let v = metrics::check_all(&log, &sc);
+        results.push((profile, m, v));
+    }
+    println!("scenario {} (seed {}): {}", sc.name, a.seed, sc.about);
+    println!("{:<40} {:>14} {:>14}", "metric", "reference", "default");
+    let cols: Vec<Vec<(&str, String)>> = results.iter().map(|(_, m, _)| metrics::lines(m)).collect();
+    if let [r, d] = cols.as_slice() {
+        for ((name, rv), (_, dv)) in r.iter().zip(d) {
+            println!("{name:<40} {rv:>14} {dv:>14}");
+        }
+    }
+    println!("{:<40} {:>14} {:>14}", "criteria", "reference", "default");
+    for (i, c) in sc.criteria.iter().enumerate() {
+        let cell = |k: usize| {
+            results
+                .get(k)
+                .and_then(|(_, _, v)| v.get(i))
+                .map_or("n/a".to_string(), |v| if v.passed { "pass".into() } else { "FAIL".into() })
+        };
+        println!("  {:<38} {:>14} {:>14}", truncate(&scenario::describe(c), 38), cell(0), cell(1));
+    }
+    for (p, _, v) in &results {
+        let failed: Vec<&Verdict> = v.iter().filter(|v| !v.passed).collect();
+        for f in failed {
+            println!("{} failed: {} — {}", p.name(), f.criterion, f.detail);
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn truncate(s: &str, n: usize) -> String {
+    if s.chars().count() <= n {
+        s.to_string()
+    } else {
+        s.chars().take(n.saturating_sub(1)).chain(std::iter::once('…')).collect()
+    }
 }

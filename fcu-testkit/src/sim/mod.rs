@@ -1,1 +1,343 @@
-//! The simulated STEVAL-DRONE01 (being built).
+//! The simulated STEVAL-DRONE01 flown in closed loop by the real [`fcu_core::FlightController`].
+//!
+//! One control tick (800 Hz default, 807.69 Hz reference — whatever the profile's TIM9 really
+//! produces) is, in order:
+//! 1. the receiver emits the capture edges that happen during the tick; they go to the core's
+//!    edge decoder in time order (the capture interrupt outranks the control tick);
+//! 2. the plant integrates over the tick in `substeps` RK4 steps with the compare values the
+//!    previous tick wrote (zero-order hold, like TIM4), and the IMU model follows each substep;
+//! 3. at the end of the tick the core reads the IMU words and the pulses, returns compare
+//!    values, and runs its outer step inline when one is due (as the replay does).
+
+pub mod imu_model;
+pub mod metrics;
+pub mod plant;
+pub mod plot;
+pub mod radio_model;
+pub mod rng;
+pub mod scenario;
+
+use std::time::{Duration, Instant};
+
+use fcu_core::imu::{CalibrationOutcome, CalibrationPhase};
+use fcu_core::{Config, FlightController};
+
+use imu_model::{ImuModel, ImuModelParams, Vibration};
+use plant::{Disturbance, Plant, PlantParams};
+use radio_model::{CaptureEdge, RadioModel, TxFrame};
+use scenario::{Scenario, Throttle};
+
+/// Which `Config` flies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Profile {
+    /// `Config::default()`: the product, with the safety supervisor.
+    Default,
+    /// `Config::reference()`: the ST reference firmware's numbers and behaviour.
+    Reference,
+}
+
+impl Profile {
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::Default => "default",
+            Profile::Reference => "reference",
+        }
+    }
+
+    pub fn config(self) -> Config {
+        match self {
+            Profile::Default => Config::default(),
+            Profile::Reference => Config::reference(),
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Profile> {
+        match s {
+            "default" => Some(Profile::Default),
+            "reference" => Some(Profile::Reference),
+            _ => None,
+        }
+    }
+}
+
+/// How to run a scenario.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub seed: u64,
+    /// ±fraction applied to every plant parameter from the seed (0 = the nominal drone).
+    pub plant_spread: f64,
+    /// Plant RK4 steps per control tick (5 at 800 Hz = 4 kHz).
+    pub substeps: u32,
+    /// Override of the scenario's length, s.
+    pub duration_s: Option<f64>,
+    /// Print a progress line on stderr once the run has taken more than a couple of seconds.
+    pub progress: bool,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions { seed: 1, plant_spread: 0.0, substeps: 5, duration_s: None, progress: false }
+    }
+}
+
+/// One logged control tick.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogRow {
+    pub t_s: f64,
+    /// The supervisor's state name (`fcu_core::supervisor::FlightState::name`).
+    pub state: &'static str,
+    pub armed: bool,
+    /// The transmitter's link flag from the timeline (what the receiver is sending).
+    pub link_tx: bool,
+    /// The core's own link verdict.
+    pub link_core: bool,
+    /// True attitude (reference convention: roll about body Y, pitch about body X).
+    pub roll_deg: f64,
+    pub pitch_deg: f64,
+    pub yaw_deg: f64,
+    pub yaw_rate_dps: f64,
+    pub est_roll_deg: f64,
+    pub est_pitch_deg: f64,
+    pub roll_target_deg: f64,
+    pub pitch_target_deg: f64,
+    pub yaw_target_deg: f64,
+    pub motors: [u16; 4],
+    pub alt_m: f64,
+    pub battery_v: f64,
+    pub thr_us: f64,
+    pub calibrated: bool,
+    pub calibrating: bool,
+    pub calibration_restarts: u16,
+}
+
+/// Everything one flight produced.
+#[derive(Clone, Debug)]
+pub struct FlightLog {
+    pub scenario: String,
+    pub profile: Profile,
+    pub seed: u64,
+    pub tick_hz: f64,
+    pub plant: PlantParams,
+    pub rows: Vec<LogRow>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimError {
+    Config(String),
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SimError::Config(m) => write!(f, "{m}"),
+        }
+    }
+}
+
+/// The simulated pilot on the throttle stick: knows roughly where hover is and holds a height.
+#[derive(Clone, Debug, Default)]
+struct Pilot {
+    integral: f64,
+}
+
+impl Pilot {
+    /// Throttle pulse (µs) to hold `alt_m`, from what a pilot sees (height, climb rate, tilt).
+    fn throttle_us(&mut self, alt_target_m: f64, plant: &Plant, cfg: &Config, dt_s: f64) -> f64 {
+        let p = &plant.params;
+        let s = &plant.state;
+        let alt_err = alt_target_m - s.pos_earth_m[2];
+        let vz_wanted = (1.2 * alt_err).clamp(-0.4, 0.6);
+        let vz_err = vz_wanted - s.vel_earth_m_s[2];
+        if !s.on_ground {
+            self.integral = (self.integral + 0.3 * alt_err * dt_s).clamp(-0.2, 0.2);
+        }
+        let factor = (1.0 + 0.6 * vz_err + self.integral).clamp(0.5, 1.5);
+        let up = plant::quat_rotate(s.quat, [0.0, 0.0, 1.0])[2].max(0.5);
+        let frac = p.hover_fraction(s.battery_v) * factor / up;
+        let ccr = p.duty_for_fraction(frac) * p.pwm_full_scale_counts;
+        let m = &cfg.mixer;
+        let g_thr = if m.throttle_slope > 0.0 { (ccr - f64::from(m.throttle_offset)) / f64::from(m.throttle_slope) } else { 0.0 };
+        // Never below MIN_THR + margin: below it the core cuts the motors (a pilot flying
+        // knows not to pull the stick to the bottom).
+        let g_thr = g_thr.max(f64::from(cfg.rc.min_throttle) + 40.0);
+        (f64::from(cfg.rc.thr_bottom) + g_thr) / 4.0
+    }
+}
+
+/// Fly `scenario` with `profile`. Deterministic for a given seed.
+pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<FlightLog, SimError> {
+    let cfg = profile.config();
+    let mut fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
+    let mut decoder = fc.edge_decoder();
+
+    let mut params = if opts.plant_spread > 0.0 { PlantParams::randomized(opts.seed, opts.plant_spread) } else { PlantParams::default() };
+    for (s, w) in params.motor_thrust_scale.iter_mut().zip(scenario.motor_thrust_scale) {
+        *s *= w;
+    }
+    let mut plant = Plant::new(params.clone());
+    let mut imu = ImuModel::new(ImuModelParams::default(), opts.seed);
+    let mut radio = RadioModel::new(scenario.radio.clone(), opts.seed);
+    let mut pilot = Pilot::default();
+
+    let tick_hz = f64::from(cfg.timing.tick_hz());
+    let tick_s = 1.0 / tick_hz;
+    let substeps = opts.substeps.clamp(1, 100);
+    let sub_s = tick_s / f64::from(substeps);
+    let duration_s = opts.duration_s.unwrap_or(scenario.duration_s).max(0.0);
+    let n_ticks = (duration_s * tick_hz).round() as u64;
+    let vibration = Vibration { amplitude_g_at_full_speed: params.vibration_accel_g, full_speed_hz: params.motor_full_speed_hz };
+
+    let mut rows = Vec::with_capacity(n_ticks as usize);
+    let mut edges: Vec<CaptureEdge> = Vec::with_capacity(32);
+    let mut calibrated = false;
+    let mut last_thr_us = scenario::THR_LOW_US;
+    let started = Instant::now();
+    let mut next_progress = Duration::from_secs(2);
+
+    for k in 0..n_ticks {
+        let t0 = k as f64 * tick_s;
+        let t1 = t0 + tick_s;
+
+        // 1. Radio: the transmitter frame uses the pilot's sticks at the frame's start.
+        edges.clear();
+        radio.advance(
+            t1,
+            |tf| {
+                let row = scenario.timeline.at(tf);
+                let thr_us = match row.thr {
+                    Throttle::Us(u) => u,
+                    Throttle::HoldAltitude { alt_m } => pilot.throttle_us(alt_m, &plant, &cfg, 0.02),
+                };
+                last_thr_us = thr_us;
+                TxFrame { width_us: [row.ail_us, row.ele_us, thr_us, row.rud_us], link: row.link }
+            },
+            &mut edges,
+        );
+        for e in &edges {
+            decoder.on_edge(e.channel, e.capture_counts, e.level_high);
+        }
+
+        // 2. Plant and sensor over the tick, motors held.
+        for j in 0..substeps {
+            let t = t0 + f64::from(j) * sub_s;
+            match scenario.hand.filter(|h| t >= h.start_s && t < h.end_s) {
+                Some(h) => {
+                    let ph = std::f64::consts::TAU * h.freq_hz * (t - h.start_s);
+                    plant.carry(sub_s, [h.peak_rate_rad_s * ph.sin(), 0.5 * h.peak_rate_rad_s * ph.cos(), 0.0]);
+                }
+                None => {
+                    let mut dist = Disturbance::default();
+                    for g in &scenario.gusts {
+                        if t >= g.start_s && t < g.start_s + g.duration_s {
+                            for i in 0..3 {
+                                dist.wind_earth_m_s[i] += g.push.wind_earth_m_s[i];
+                                dist.force_earth_n[i] += g.push.force_earth_n[i];
+                                dist.torque_body_nm[i] += g.push.torque_body_nm[i];
+                            }
+                        }
+                    }
+                    plant.step(sub_s, &dist);
+                }
+            }
+            imu.step(sub_s, &plant.kinematics(), vibration);
+        }
+
+        // 3. The flight controller's tick (and its outer step, inline).
+        let raw = imu.read();
+        let batch = decoder.take();
+        let out = fc.tick(raw, &batch);
+        if let Some(job) = out.outer_job {
+            fc.run_outer(&job);
+        }
+        plant.set_compare(out.compare);
+
+        let st = fc.status();
+        let (calibrating, restarts) = match st.calibration {
+            CalibrationPhase::Averaging { restarts } => (true, restarts),
+            CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) } => {
+                calibrated = true;
+                (false, 0)
+            }
+            _ => (false, 0),
+        };
+        let (pitch, roll, yaw) = plant.euler_rad();
+        let row = scenario.timeline.at(t1);
+        let deg = |r: f32| f64::from(r).to_degrees();
+        rows.push(LogRow {
+            t_s: t1,
+            state: st.state.name(),
+            armed: st.state.motors_may_run(),
+            link_tx: row.link,
+            link_core: st.link,
+            roll_deg: roll.to_degrees(),
+            pitch_deg: pitch.to_degrees(),
+            yaw_deg: yaw.to_degrees(),
+            yaw_rate_dps: plant.state.rate_body_rad_s[2].to_degrees(),
+            est_roll_deg: deg(st.tilt.roll_rad),
+            est_pitch_deg: deg(st.tilt.pitch_rad),
+            // target_rad is (pitch about X, roll about Y, yaw) like the reference's thx/thy/thz.
+            roll_target_deg: deg(st.target_rad[1]),
+            pitch_target_deg: deg(st.target_rad[0]),
+            yaw_target_deg: deg(st.target_rad[2]),
+            motors: out.compare,
+            alt_m: plant.state.pos_earth_m[2],
+            battery_v: plant.state.battery_v,
+            thr_us: last_thr_us,
+            calibrated,
+            calibrating,
+            calibration_restarts: restarts,
+        });
+
+        if opts.progress && started.elapsed() >= next_progress {
+            next_progress += Duration::from_secs(1);
+            eprint!("\r{} ({}): {:.1} / {:.1} s simulated", scenario.name, profile.name(), t1, duration_s);
+            if k + 1 == n_ticks {
+                eprintln!();
+            }
+        }
+    }
+    if opts.progress && started.elapsed() >= Duration::from_secs(2) {
+        eprintln!("\r{} ({}): {:.1} s simulated in {:.1} s", scenario.name, profile.name(), duration_s, started.elapsed().as_secs_f64());
+    }
+
+    Ok(FlightLog { scenario: scenario.name.clone(), profile, seed: opts.seed, tick_hz, plant: params, rows })
+}
+
+impl FlightLog {
+    /// The flight as CSV, one row per control tick.
+    pub fn to_csv(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::with_capacity(self.rows.len() * 160);
+        s.push_str(
+            "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,roll_target_deg,pitch_target_deg,\
+             yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us\n",
+        );
+        for r in &self.rows {
+            let _ = writeln!(
+                s,
+                "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
+                r.t_s,
+                r.state,
+                u8::from(r.armed),
+                u8::from(r.link_tx),
+                r.roll_deg,
+                r.pitch_deg,
+                r.yaw_deg,
+                r.est_roll_deg,
+                r.est_pitch_deg,
+                r.roll_target_deg,
+                r.pitch_target_deg,
+                r.yaw_target_deg,
+                r.yaw_rate_dps,
+                r.motors[0],
+                r.motors[1],
+                r.motors[2],
+                r.motors[3],
+                r.alt_m,
+                r.battery_v,
+                r.thr_us
+            );
+        }
+        s
+    }
+}

@@ -1,0 +1,458 @@
+//! STEVAL-FCU001V1 firmware: RTIC 2 wiring between the STM32F401 peripherals and fcu-core.
+//!
+//! Every flight decision (arming, throttle, failsafe, calibration, what the LEDs say) is made
+//! by `fcu_core`; each task here moves bytes between a peripheral and one core call.
+//!
+//! | task         | binds / kind            | prio | work                                         |
+//! |--------------|-------------------------|------|----------------------------------------------|
+//! | rc_capture   | TIM2 (both edges)       | 4    | CCRx + pin level → `EdgeDecoder::on_edge`    |
+//! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `Inner::tick` → TIM4, feed IWDG  |
+//! | outer_step   | software                | 2    | `Outer::step`, result back to `control`      |
+//! | report       | software                | 1    | status snapshots → lines into the UART queue |
+//! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
+//! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC                            |
+#![no_std]
+#![no_main]
+// RTIC's generated `spawn` hands the message back in `Err` when the task is busy; for the
+// outer step that message is the 136-byte `OuterJob`, by design (it lives in a static slot).
+#![allow(clippy::result_large_err)]
+
+mod sensor_bus;
+mod timers;
+
+use defmt_rtt as _;
+use panic_probe as _;
+
+rtic_monotonics::systick_monotonic!(Mono, 1000);
+
+/// The flight profile this build flies: the product (`Config::default()`), or its ESC
+/// variant with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max).
+fn flight_config() -> fcu_core::Config {
+    #[cfg(feature = "esc")]
+    {
+        fcu_core::Config::esc()
+    }
+    #[cfg(not(feature = "esc"))]
+    {
+        fcu_core::Config::default()
+    }
+}
+
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
+mod app {
+    use crate::sensor_bus::SensorBus;
+    use crate::timers::{Motors, RcCapture, TickTimer};
+    use crate::Mono;
+    use fcu_core::flight::{Inner, Outer, OuterJob, OuterResult, Status};
+    use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
+    use fcu_core::rc::EdgeDecoder;
+    use fcu_core::telemetry::{self as tlm, FirmwareCounters, LedPattern, LineBuf, Reporter};
+    use heapless::Deque;
+    use rtic_monotonics::systick::prelude::*;
+    use stm32f4xx_hal::adc::{config::AdcConfig, config::SampleTime, Adc};
+    use stm32f4xx_hal::gpio::{Analog, Output, PB1, PB4, PB5};
+    use stm32f4xx_hal::pac::{ADC1, USART1};
+    use stm32f4xx_hal::serial::{Tx, TxListen};
+    use stm32f4xx_hal::watchdog::IndependentWatchdog;
+
+    /// Bytes of telemetry waiting for the UART: about 90 ms of output at 115200 baud, enough
+    /// for a status line and a debug line together.
+    const UART_QUEUE_BYTES: usize = 1024;
+    /// Control ticks between status snapshots to the telemetry task (800 Hz / 4 = 200 Hz), so
+    /// a flight-state change is seen within 5 ms.
+    const SNAPSHOT_EVERY_TICKS: u16 = 4;
+    /// Snapshots per debug line: 200 Hz / 8 = 25 lines per second (~80 bytes each, 2 kB/s of
+    /// the UART's 11.5 kB/s).
+    const DEBUG_LINE_EVERY_SNAPSHOTS: u16 = 8;
+    /// LED refresh period; the fastest LED code toggles every 50 ms.
+    const HOUSEKEEPING_PERIOD_MS: u32 = 10;
+    /// Housekeeping periods between battery conversions (10 Hz).
+    const BATTERY_EVERY_PERIODS: u32 = 10;
+    /// Independent watchdog timeout: 40 missed control ticks at 800 Hz. Fed only at the end of
+    /// a completed control tick.
+    const WATCHDOG_TIMEOUT_MS: u32 = 50;
+    /// How often a fatal boot fault is repeated on the UART.
+    const FAULT_REPEAT_MS: u32 = 2000;
+    /// SPI2 clock: 42 MHz / 16, the reference's 2.625 MHz.
+    const SENSOR_SPI_HZ: u32 = 2_625_000;
+    const UART_BAUD: u32 = 115_200;
+    const SYSCLK_HZ: u32 = 84_000_000;
+    const HSE_HZ: u32 = 16_000_000;
+
+    /// What the control task hands to telemetry.
+    #[derive(Clone, Copy)]
+    pub struct Snapshot {
+        status: Status,
+        outer_overruns: u32,
+    }
+
+    /// The debug UART's transmit side and the bytes waiting for it.
+    pub struct UartOut {
+        tx: Tx<USART1>,
+        queue: Deque<u8, UART_QUEUE_BYTES>,
+        /// Bytes dropped because the queue was full (the line is cut, never blocks).
+        dropped_bytes: u32,
+    }
+
+    impl UartOut {
+        fn send(&mut self, bytes: &[u8]) {
+            for &b in bytes {
+                if self.queue.push_back(b).is_err() {
+                    self.dropped_bytes = self.dropped_bytes.saturating_add(1);
+                }
+            }
+            if !self.queue.is_empty() {
+                self.tx.listen();
+            }
+        }
+
+        fn on_tx_empty(&mut self) {
+            match self.queue.pop_front() {
+                Some(b) => {
+                    // TXE is set (this is its interrupt), so the write cannot block.
+                    let _accepted = embedded_hal_nb::serial::Write::write(&mut self.tx, b);
+                }
+                None => self.tx.unlisten(),
+            }
+        }
+    }
+
+    pub struct Leds {
+        led1: PB5<Output>,
+        led2: PB4<Output>,
+    }
+
+    impl Leds {
+        /// Both LEDs are active low: lit = pin low.
+        fn show(&mut self, l: tlm::Leds) {
+            self.led1.set_state((!l.led1).into());
+            self.led2.set_state((!l.led2).into());
+        }
+    }
+
+    #[shared]
+    struct Shared {
+        decoder: EdgeDecoder,
+        outer_result: Option<OuterResult>,
+        uart: UartOut,
+        led_pattern: LedPattern,
+        battery_mv: u32,
+    }
+
+    #[local]
+    struct Local {
+        capture: RcCapture,
+        tick_timer: TickTimer,
+        bus: SensorBus,
+        inner: Inner,
+        outer: Outer,
+        motors: Motors,
+        watchdog: Option<IndependentWatchdog>,
+        leds: Leds,
+        adc: Adc<ADC1>,
+        battery_pin: PB1<Analog>,
+        reporter: Reporter,
+    }
+
+    #[init]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        // The HAL prelude lives only here: its fugit 0.3 `.millis()` clashes with the
+        // monotonic's fugit 0.6 used by the tasks.
+        use stm32f4xx_hal::prelude::*;
+        use stm32f4xx_hal::{rcc, serial, spi};
+
+        let dp = cx.device;
+        // HSE 16 MHz → 84 MHz SYSCLK/HCLK/PCLK2, 42 MHz PCLK1; the HAL sets 2 flash wait
+        // states. It picks M 8, N 168, P 4, Q 7: the reference's VCO (336 MHz) and outputs
+        // with a 2 MHz PLL input instead of 1 MHz.
+        let mut rcc = dp.RCC.freeze(
+            rcc::Config::hse(HSE_HZ.Hz()).sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()),
+        );
+        Mono::start(cx.core.SYST, SYSCLK_HZ);
+
+        let gpioa = dp.GPIOA.split(&mut rcc);
+        let gpiob = dp.GPIOB.split(&mut rcc);
+        let gpioc = dp.GPIOC.split(&mut rcc);
+
+        let cfg = crate::flight_config();
+
+        // Motors first: PB6..PB9 driven by TIM4 at compare 0 (off) from the very start.
+        let _motor_pins = (
+            gpiob.pb6.into_alternate::<2>(),
+            gpiob.pb7.into_alternate::<2>(),
+            gpiob.pb8.into_alternate::<2>(),
+            gpiob.pb9.into_alternate::<2>(),
+        );
+        let motors = Motors::new(dp.TIM4, cfg.mixer.timer_psc, cfg.mixer.timer_arr, &mut rcc);
+
+        let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
+        leds.show(tlm::Leds { led1: true, led2: true });
+
+        let tx = serial::Serial::tx(dp.USART1, gpioa.pa9, serial::Config::default().baudrate(UART_BAUD.bps()), &mut rcc)
+            .unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
+        let mut uart = UartOut { tx, queue: Deque::new(), dropped_bytes: 0 };
+        uart.send(tlm::BOOT_BANNER.as_bytes());
+
+        // Sensor bus: all chip selects high before the bus is clocked.
+        let cs = [
+            gpioa.pa8.into_push_pull_output_in_state(true.into()).erase(),
+            gpiob.pb12.into_push_pull_output_in_state(true.into()).erase(),
+            gpioc.pc13.into_push_pull_output_in_state(true.into()).erase(),
+        ];
+        let sck = gpiob.pb13.into_alternate::<5>().speed(stm32f4xx_hal::gpio::Speed::High);
+        let sda = gpiob.pb15.into_alternate::<5>().speed(stm32f4xx_hal::gpio::Speed::High);
+        let spi2 = spi::Spi::new_bidi(
+            dp.SPI2,
+            (Some(sck), Some(sda)),
+            spi::Mode { polarity: spi::Polarity::IdleHigh, phase: spi::Phase::CaptureOnSecondTransition },
+            SENSOR_SPI_HZ.Hz(),
+            &mut rcc,
+        );
+        let (spi2, _sensor_pins) = spi2.release();
+        let mut bus = SensorBus::new(spi2, cs);
+        // Boot-time waits only (the LPS22HB's 1 s reset); cycle counting is enough.
+        let mut delay_ms = |ms: u32| cortex_m::asm::delay(ms.saturating_mul(SYSCLK_HZ / 1000));
+        let boot = init_sensors(&mut bus, &mut delay_ms, &mut uart);
+
+        let capture_pins = [
+            gpioa.pa0.into_pull_down_input().into_alternate::<1>().erase(),
+            gpioa.pa1.into_pull_down_input().into_alternate::<1>().erase(),
+            gpioa.pa2.into_pull_down_input().into_alternate::<1>().erase(),
+            gpioa.pa3.into_pull_down_input().into_alternate::<1>().erase(),
+        ];
+        let capture = RcCapture::new(dp.TIM2, capture_pins, &mut rcc);
+        let mut tick_timer = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
+
+        let adc = Adc::new(dp.ADC1, true, AdcConfig::default(), &mut rcc);
+        let battery_pin = gpiob.pb1.into_analog();
+
+        let fc = match fcu_core::FlightController::new(cfg) {
+            Ok(fc) => fc,
+            Err(e) => halt(&mut leds, Some(&mut uart.tx), e.field()),
+        };
+        let decoder = fc.edge_decoder();
+        let (inner, outer) = fc.into_parts();
+
+        let (led_pattern, watchdog) = match boot {
+            Ok(()) => {
+                // Armed only once the sensors answered: from here a control tick that does
+                // not complete within the timeout resets the board (motors off at reset).
+                let mut iwdg = IndependentWatchdog::new(dp.IWDG);
+                // A core halted by the debugger does not reset under the probe.
+                iwdg.stop_on_debug(&dp.DBGMCU, true);
+                iwdg.start(_fugit_ExtU32::millis(WATCHDOG_TIMEOUT_MS));
+                tick_timer.start();
+                (LedPattern::Off, Some(iwdg))
+            }
+            Err(missing) => {
+                // No flight without every sensor: TIM9 stays stopped, so `control` never runs
+                // and the motors stay at compare 0. The watchdog is not armed, so the LED code
+                // and the UART message stay visible instead of a silent reset loop.
+                if fault_report::spawn(missing).is_err() {
+                    defmt::error!("fault report already running");
+                }
+                (LedPattern::SensorFault { blinks: missing.sensor.blink_count() }, None)
+            }
+        };
+
+        if housekeeping::spawn().is_err() {
+            defmt::error!("housekeeping already running");
+        }
+
+        (
+            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0 },
+            Local {
+                capture,
+                tick_timer,
+                bus,
+                inner,
+                outer,
+                motors,
+                watchdog,
+                leds,
+                adc,
+                battery_pin,
+                reporter: Reporter::new(DEBUG_LINE_EVERY_SNAPSHOTS),
+            },
+        )
+    }
+
+    /// A boot step that cannot be flown past (a build defect, not a field condition): motors
+    /// stay at compare 0, both LEDs on, the reason on the UART, no watchdog, no tasks.
+    fn halt(leds: &mut Leds, tx: Option<&mut Tx<USART1>>, reason: &str) -> ! {
+        leds.show(tlm::Leds { led1: true, led2: true });
+        defmt::error!("boot halted: {}", reason);
+        if let Some(tx) = tx {
+            // Interrupts are still off in `init`: a blocking write is the only way out.
+            for &b in b"FATAL boot halted: ".iter().chain(reason.as_bytes()).chain(b"\n") {
+                let _sent = nb::block!(embedded_hal_nb::serial::Write::write(tx, b));
+            }
+        }
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    /// A sensor whose `WHO_AM_I` was wrong (or unreadable).
+    #[derive(Clone, Copy)]
+    pub struct MissingSensor {
+        sensor: Sensor,
+        who_am_i: u8,
+    }
+
+    /// Plays each sensor's boot table from `fcu_core::imu::registers`, checking `WHO_AM_I`.
+    fn init_sensors(bus: &mut SensorBus, delay_ms: &mut dyn FnMut(u32), uart: &mut UartOut) -> Result<(), MissingSensor> {
+        for sensor in Sensor::ALL {
+            init_sensor(bus, sensor, delay_ms).map_err(|who_am_i| MissingSensor { sensor, who_am_i })?;
+            let mut line = LineBuf::<64>::new();
+            line.push_str(sensor.name());
+            line.push_str(" initialized and enabled");
+            line.finish_line();
+            uart.send(line.as_bytes());
+        }
+        Ok(())
+    }
+
+    /// One sensor's boot sequence. The error is the `WHO_AM_I` answer seen (0x00, which no
+    /// sensor answers, when the bus itself failed).
+    fn init_sensor(bus: &mut SensorBus, sensor: Sensor, delay_ms: &mut dyn FnMut(u32)) -> Result<(), u8> {
+        const BUS_FAILED: u8 = 0x00;
+        let play = |bus: &mut SensorBus, writes: &[registers::RegWrite]| writes.iter().try_for_each(|w| bus.write(sensor, w.addr, w.value));
+        play(bus, sensor.interface_writes()).map_err(|_| BUS_FAILED)?;
+        delay_ms(sensor.settle_ms());
+        play(bus, sensor.after_settle_writes()).map_err(|_| BUS_FAILED)?;
+        let who_am_i = bus.read_u8(sensor, sensor.who_am_i_addr()).unwrap_or(BUS_FAILED);
+        if !sensor.identifies(who_am_i) {
+            return Err(who_am_i);
+        }
+        play(bus, sensor.config_writes()).map_err(|_| who_am_i)
+    }
+
+    /// Radio capture: timestamps and pin levels into the core's decoder, nothing else.
+    #[task(binds = TIM2, priority = 4, shared = [decoder], local = [capture])]
+    fn rc_capture(mut cx: rc_capture::Context) {
+        let edges = cx.local.capture.take_edges();
+        cx.shared.decoder.lock(|decoder| {
+            for edge in edges.into_iter().flatten() {
+                decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
+            }
+        });
+    }
+
+    /// The control tick: IMU burst → `Inner::tick` → TIM4; the outer step when due.
+    #[task(
+        binds = TIM1_BRK_TIM9,
+        priority = 3,
+        shared = [decoder, outer_result],
+        local = [tick_timer, bus, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, snapshot_countdown: u16 = 0]
+    )]
+    fn control(mut cx: control::Context) {
+        cx.local.tick_timer.clear_update();
+        let inner = cx.local.inner;
+
+        if let Some(result) = cx.shared.outer_result.lock(Option::take) {
+            inner.apply_outer(&result);
+        }
+        let pulses = cx.shared.decoder.lock(|decoder| decoder.take());
+
+        let mut burst = [0u8; lsm6dsl::BURST_LEN];
+        if cx.local.bus.read(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G, &mut burst).is_err() {
+            // No sample, no tick: the core never sees invented data. The watchdog is not fed,
+            // so a bus that stays dead resets the board within WATCHDOG_TIMEOUT_MS.
+            *cx.local.bus_errors = cx.local.bus_errors.saturating_add(1);
+            return;
+        }
+        let imu = registers::decode_lsm6dsl_burst(&burst);
+
+        let out = inner.tick(imu, &pulses);
+        cx.local.motors.write(out.compare);
+
+        if let Some(job) = out.outer_job {
+            if outer_step::spawn(job).is_err() {
+                // The previous outer step is still running: this job is lost; counted and
+                // reported on the status line.
+                *cx.local.outer_overruns = cx.local.outer_overruns.saturating_add(1);
+            }
+        }
+
+        *cx.local.snapshot_countdown = cx.local.snapshot_countdown.saturating_sub(1);
+        if *cx.local.snapshot_countdown == 0 {
+            *cx.local.snapshot_countdown = SNAPSHOT_EVERY_TICKS;
+            let snapshot = Snapshot { status: inner.status(), outer_overruns: *cx.local.outer_overruns };
+            // A busy telemetry task means the UART side is behind: skipping a snapshot only
+            // delays the next line by 5 ms.
+            let _skipped = report::spawn(snapshot);
+        }
+
+        if let Some(watchdog) = cx.local.watchdog.as_mut() {
+            watchdog.feed();
+        }
+    }
+
+    /// The outer step (estimator + angle loop) on the job's snapshot.
+    #[task(priority = 2, shared = [outer_result], local = [outer])]
+    async fn outer_step(mut cx: outer_step::Context, job: OuterJob) {
+        let result = cx.local.outer.step(&job);
+        cx.shared.outer_result.lock(|slot| *slot = Some(result));
+    }
+
+    /// Status snapshots → LED code and UART lines (status on every state change, debug line
+    /// at its rate).
+    #[task(priority = 1, shared = [uart, led_pattern, battery_mv], local = [reporter])]
+    async fn report(mut cx: report::Context, snapshot: Snapshot) {
+        let status = &snapshot.status;
+        let pattern = tlm::led_pattern(status);
+        cx.shared.led_pattern.lock(|p| *p = pattern);
+
+        let emit = cx.local.reporter.observe(status.state);
+        if emit.status_line {
+            let counters = FirmwareCounters { battery_mv: cx.shared.battery_mv.lock(|mv| *mv), outer_overruns: snapshot.outer_overruns };
+            let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();
+            tlm::write_status(&mut line, status, counters);
+            cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+        }
+        if emit.debug_line {
+            let mut line = LineBuf::<{ tlm::DEBUG_LINE_MAX }>::new();
+            tlm::write_debug_line(&mut line, &tlm::debug_fields(status));
+            cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+        }
+    }
+
+    /// USART1 transmit-empty: one queued byte out per interrupt.
+    #[task(binds = USART1, priority = 1, shared = [uart])]
+    fn uart_tx(mut cx: uart_tx::Context) {
+        cx.shared.uart.lock(UartOut::on_tx_empty);
+    }
+
+    /// LEDs from the core's pattern, battery voltage for telemetry.
+    #[task(priority = 1, shared = [led_pattern, battery_mv], local = [leds, adc, battery_pin])]
+    async fn housekeeping(mut cx: housekeeping::Context) {
+        let mut periods: u32 = 0;
+        loop {
+            let now_ms = Mono::now().duration_since_epoch().as_millis();
+            let pattern = cx.shared.led_pattern.lock(|p| *p);
+            cx.local.leds.show(pattern.leds_at(now_ms));
+
+            if periods % BATTERY_EVERY_PERIODS == 0 {
+                let counts = cx.local.adc.convert(cx.local.battery_pin, SampleTime::Cycles_480);
+                let mv = tlm::battery_mv(counts);
+                cx.shared.battery_mv.lock(|b| *b = mv);
+            }
+            periods = periods.wrapping_add(1);
+            Mono::delay(HOUSEKEEPING_PERIOD_MS.millis()).await;
+        }
+    }
+
+    /// A fatal boot fault, repeated on the UART until reset (product.md §4: never a silent
+    /// hang).
+    #[task(priority = 1, shared = [uart])]
+    async fn fault_report(mut cx: fault_report::Context, missing: MissingSensor) {
+        let mut line = LineBuf::<96>::new();
+        tlm::write_sensor_missing_line(&mut line, missing.sensor.name(), missing.who_am_i, missing.sensor.who_am_i_value());
+        loop {
+            defmt::error!("sensor {} missing (WHO_AM_I {=u8:#x})", missing.sensor.name(), missing.who_am_i);
+            cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+            Mono::delay(FAULT_REPEAT_MS.millis()).await;
+        }
+    }
+}

@@ -1,0 +1,154 @@
+//! SPI2 as the board wires it: 3-wire half-duplex (one bidirectional data line, PB15), mode 3,
+//! with a software chip select per sensor. Only moves bytes; what to write where is in
+//! `fcu_core::imu::registers`.
+//!
+//! The HAL configures the peripheral (`Spi::new_bidi`), but its bidirectional receive path
+//! leaves BIDIOE set, so reads are done here on the registers with the receive sequence of
+//! the reference manual (RM0368, "bidirectional receive-only procedure"): in 1-line receive
+//! mode the master clocks continuously from the moment SPE is set, so the clock is stopped by
+//! clearing SPE during the last byte.
+
+use fcu_core::imu::registers::{read_address, write_address, Sensor};
+use stm32f4xx_hal::gpio::{AnyPin, Output};
+use stm32f4xx_hal::pac::SPI2;
+
+/// Busy-wait bound for one status flag. One byte at 2.625 MHz is about 260 CPU cycles; the
+/// bound is far above that and only ends a wait on a broken bus.
+const FLAG_WAIT_POLLS: u32 = 2_000;
+
+/// CPU cycles in a bit and a half of SPI clock (84 MHz / 2.625 MHz = 32 per bit): the wait
+/// between starting the clock for a single-byte read and stopping it again.
+const HALF_BYTE_START_CYCLES: u32 = 48;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum BusError {
+    /// A status flag never came: the peripheral is not clocking (never expected).
+    Timeout,
+}
+
+pub struct SensorBus {
+    spi: SPI2,
+    /// Chip selects in `Sensor::ALL` order (PA8 LSM6DSL, PB12 LIS2MDL, PC13 LPS22HB), idle high.
+    cs: [AnyPin<Output>; 3],
+}
+
+impl SensorBus {
+    /// Takes SPI2 already set up by `Spi::new_bidi` (mode 3, ~2.6 MHz, bidirectional,
+    /// transmitting) and the three chip-select outputs, which must already be high.
+    pub fn new(spi: SPI2, cs: [AnyPin<Output>; 3]) -> Self {
+        SensorBus { spi, cs }
+    }
+
+    fn cs_index(sensor: Sensor) -> usize {
+        match sensor {
+            Sensor::Lsm6dsl => 0,
+            Sensor::Lis2mdl => 1,
+            Sensor::Lps22hb => 2,
+        }
+    }
+
+    fn select(&mut self, sensor: Sensor, active: bool) {
+        if let Some(pin) = self.cs.get_mut(Self::cs_index(sensor)) {
+            if active {
+                pin.set_low();
+            } else {
+                pin.set_high();
+            }
+        }
+    }
+
+    fn wait(&self, mut done: impl FnMut(&SPI2) -> bool) -> Result<(), BusError> {
+        for _ in 0..FLAG_WAIT_POLLS {
+            if done(&self.spi) {
+                return Ok(());
+            }
+        }
+        Err(BusError::Timeout)
+    }
+
+    fn send(&mut self, byte: u8) -> Result<(), BusError> {
+        self.wait(|spi| spi.sr().read().txe().bit_is_set())?;
+        self.spi.dr().write(|w| w.dr().set(u16::from(byte)));
+        Ok(())
+    }
+
+    /// Waits until the last transmitted byte has left the shift register.
+    fn finish_tx(&mut self) -> Result<(), BusError> {
+        self.wait(|spi| spi.sr().read().txe().bit_is_set())?;
+        self.wait(|spi| spi.sr().read().bsy().bit_is_clear())
+    }
+
+    /// One register write: address then value, chip select held around both.
+    pub fn write(&mut self, sensor: Sensor, addr: u8, value: u8) -> Result<(), BusError> {
+        self.select(sensor, true);
+        let sent = self.send(write_address(addr)).and_then(|()| self.send(value)).and_then(|()| self.finish_tx());
+        self.select(sensor, false);
+        sent
+    }
+
+    /// A burst read from `addr` (the sensors auto-increment) into `buf`.
+    pub fn read(&mut self, sensor: Sensor, addr: u8, buf: &mut [u8]) -> Result<(), BusError> {
+        self.select(sensor, true);
+        let result = self.send(read_address(addr)).and_then(|()| self.finish_tx()).and_then(|()| {
+            // The receive sequence is timed against the SPI clock: a pre-emption between
+            // the second-to-last byte and stopping the clock would clock in extra bytes and
+            // overrun. It lasts about 3 µs per byte (37 µs for the 12-byte IMU burst);
+            // radio edges are timestamped by the TIM2 capture hardware meanwhile, so the
+            // deferred capture interrupt loses nothing.
+            cortex_m::interrupt::free(|_| self.receive(buf))
+        });
+        self.select(sensor, false);
+        result
+    }
+
+    fn receive(&mut self, buf: &mut [u8]) -> Result<(), BusError> {
+        // Drop anything left in the receive register so the first RXNE is our first byte.
+        let _stale = self.spi.dr().read().bits();
+        let _status = self.spi.sr().read().bits();
+
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
+        // Setting SPE in 1-line receive mode starts the clock.
+        self.spi.cr1().modify(|_, w| w.spe().set_bit());
+
+        let (last, head) = match buf.split_last_mut() {
+            Some(parts) => parts,
+            None => return self.back_to_tx(),
+        };
+        let mut result = Ok(());
+        for byte in head.iter_mut() {
+            result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
+            if result.is_err() {
+                break;
+            }
+            *byte = self.spi.dr().read().dr().bits() as u8;
+        }
+        if head.is_empty() {
+            // Single byte: let its first bit start before stopping the clock.
+            cortex_m::asm::delay(HALF_BYTE_START_CYCLES);
+        }
+        // Clearing SPE now stops the clock at the end of the byte in flight: the last one.
+        cortex_m::asm::dsb();
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        if result.is_ok() {
+            result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
+            *last = self.spi.dr().read().dr().bits() as u8;
+        }
+        self.back_to_tx().and(result)
+    }
+
+    fn back_to_tx(&mut self) -> Result<(), BusError> {
+        let idle = self.wait(|spi| spi.sr().read().bsy().bit_is_clear());
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.spi.cr1().modify(|_, w| w.bidioe().set_bit());
+        self.spi.cr1().modify(|_, w| w.spe().set_bit());
+        idle
+    }
+
+    pub fn read_u8(&mut self, sensor: Sensor, addr: u8) -> Result<u8, BusError> {
+        let mut b = [0u8; 1];
+        self.read(sensor, addr, &mut b)?;
+        let [value] = b;
+        Ok(value)
+    }
+}

@@ -1,0 +1,132 @@
+//! The three timers of the board, set up on the registers because the HAL offers neither
+//! input capture on both edges nor raw PSC/ARR values from a run-time configuration:
+//! TIM2 captures the radio, TIM4 drives the motors, TIM9 paces the control tick.
+
+use fcu_core::rc::CHANNELS;
+use stm32f4xx_hal::gpio::{Alternate, AnyPin};
+use stm32f4xx_hal::pac::{TIM2, TIM4, TIM9};
+use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
+
+/// TIM2 prescaler: 84 MHz / (20 + 1) = 4 MHz, 0.25 µs per count (the reference's RC LSB).
+pub const RC_CAPTURE_PSC: u16 = 20;
+/// TIM2 auto-reload: the core's 15-bit capture wrap (32768 counts, 8.192 ms) on a 32-bit timer.
+pub const RC_CAPTURE_ARR: u32 = fcu_core::rc::CAPTURE_WRAP - 1;
+
+/// One captured radio edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Edge {
+    pub channel: usize,
+    pub capture_counts: u16,
+    pub level_high: bool,
+}
+
+/// TIM2 CH1..CH4 on PA0..PA3 capturing both edges.
+pub struct RcCapture {
+    tim: TIM2,
+    /// PA0..PA3 in channel order; read at interrupt time to tell a rising from a falling edge,
+    /// as the reference does.
+    pins: [AnyPin<Alternate<1>>; CHANNELS],
+}
+
+impl RcCapture {
+    pub fn new(tim: TIM2, pins: [AnyPin<Alternate<1>>; CHANNELS], rcc: &mut Rcc) -> Self {
+        TIM2::enable(rcc);
+        TIM2::reset(rcc);
+        tim.psc().write(|w| w.psc().set(RC_CAPTURE_PSC));
+        tim.arr().write(|w| w.arr().set(RC_CAPTURE_ARR));
+        // CCxS = 01: channel x captures its own input TIx; no prescaler, no filter.
+        tim.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        tim.ccmr2_input().write(|w| w.cc3s().ti3().cc4s().ti4());
+        // CCxP = CCxNP = 1: capture on both edges.
+        tim.ccer().write(|w| {
+            for n in 0..4 {
+                w.cce(n).set_bit().ccp(n).set_bit().ccnp(n).set_bit();
+            }
+            w
+        });
+        tim.egr().write(|w| w.ug().set_bit());
+        // Writing 0 clears every flag (they are rc_w0); nothing is pending at boot anyway.
+        tim.sr().write(|w| w);
+        tim.dier().write(|w| w.cc1ie().set_bit().cc2ie().set_bit().cc3ie().set_bit().cc4ie().set_bit());
+        tim.cr1().write(|w| w.cen().set_bit());
+        RcCapture { tim, pins }
+    }
+
+    /// The edges captured since the last call, one per channel at most. Reading CCRx clears
+    /// its flag. An over-capture (a second edge before the first was read) cannot happen
+    /// with RC pulses of 0.8 ms or more, and would only lose one width that the core rejects.
+    pub fn take_edges(&mut self) -> [Option<Edge>; CHANNELS] {
+        let sr = self.tim.sr().read();
+        let mut edges = [None; CHANNELS];
+        for (channel, (edge, pin)) in edges.iter_mut().zip(self.pins.iter()).enumerate() {
+            if sr.ccif(channel as u8).bit_is_set() {
+                let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
+                *edge = Some(Edge { channel, capture_counts, level_high: pin.is_high() });
+            }
+        }
+        // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
+        // a capture flag arriving between the read above and that write.
+        edges
+    }
+}
+
+/// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, compare 0 (motors off) from reset.
+pub struct Motors {
+    tim: TIM4,
+}
+
+impl Motors {
+    pub fn new(tim: TIM4, psc: u16, arr: u16, rcc: &mut Rcc) -> Self {
+        TIM4::enable(rcc);
+        TIM4::reset(rcc);
+        tim.psc().write(|w| w.psc().set(psc));
+        tim.arr().write(|w| w.arr().set(arr));
+        for n in 0..4 {
+            tim.ccr(n).write(|w| w.ccr().set(0));
+        }
+        // Preload on: a compare written mid-period takes effect at the next period, so a
+        // pulse is never cut or stretched by a write.
+        tim.ccmr1_output().write(|w| w.oc1m().pwm_mode1().oc1pe().set_bit().oc2m().pwm_mode1().oc2pe().set_bit());
+        tim.ccmr2_output().write(|w| w.oc3m().pwm_mode1().oc3pe().set_bit().oc4m().pwm_mode1().oc4pe().set_bit());
+        tim.ccer().write(|w| w.cc1e().set_bit().cc2e().set_bit().cc3e().set_bit().cc4e().set_bit());
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
+        Motors { tim }
+    }
+
+    /// Writes the four compare values the core computed (motor 1..4 = CH1..CH4).
+    pub fn write(&mut self, compare: [u16; 4]) {
+        for (n, value) in compare.into_iter().enumerate() {
+            self.tim.ccr(n).write(|w| w.ccr().set(value));
+        }
+    }
+}
+
+/// TIM9 update interrupt: the control tick.
+pub struct TickTimer {
+    tim: TIM9,
+}
+
+impl TickTimer {
+    /// Configures TIM9 but does not start it: [`TickTimer::start`] is the last step of boot.
+    pub fn new(tim: TIM9, psc: u16, arr: u16, rcc: &mut Rcc) -> Self {
+        TIM9::enable(rcc);
+        TIM9::reset(rcc);
+        tim.psc().write(|w| w.psc().set(psc));
+        tim.arr().write(|w| w.arr().set(arr));
+        // Load PSC/ARR now; URS keeps this forced update from raising the interrupt.
+        tim.cr1().write(|w| w.urs().set_bit());
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.sr().write(|w| w.uif().clear_bit());
+        tim.dier().write(|w| w.uie().set_bit());
+        TickTimer { tim }
+    }
+
+    pub fn start(&mut self) {
+        self.tim.cr1().modify(|_, w| w.cen().set_bit());
+    }
+
+    pub fn clear_update(&mut self) {
+        self.tim.sr().write(|w| w.uif().clear_bit());
+    }
+}

@@ -1,0 +1,150 @@
+//! One SVG page per flight: roll and pitch (true, estimated, target), the four motor compare
+//! values, and the supervisor's state with the altitude, on a shared time axis.
+
+use plotters::prelude::*;
+
+use super::FlightLog;
+
+/// States in the order they are drawn (bottom to top) on the state panel.
+const STATES: [&str; 7] = ["fault", "calibrating", "disarmed", "arming", "failsafe2", "failsafe1", "armed"];
+
+/// (label, colour, stroke width, which of (true, estimated, target) to draw).
+type Series = (&'static str, RGBColor, u32, fn((f64, f64, f64)) -> f64);
+
+fn state_level(name: &str) -> f64 {
+    STATES.iter().position(|s| *s == name).map_or(-1.0, |i| i as f64)
+}
+
+/// At most this many points per series: a 26 s flight at 800 Hz has 20 800 rows, far more
+/// than a page can show, and the SVG stays small.
+const MAX_POINTS: usize = 2500;
+
+/// Write the plot to `path`. `title` goes on top.
+pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    let root = SVGBackend::new(path, (1200, 1300)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let (top, body) = root.split_vertically(40);
+    top.titled(title, ("sans-serif", 22)).map_err(|e| err(&e))?;
+    let panels = body.split_evenly((4, 1));
+
+    let t_end = log.rows.last().map_or(1.0, |r| r.t_s).max(0.1);
+    let stride = (log.rows.len() / MAX_POINTS).max(1);
+    let rows: Vec<_> = log.rows.iter().step_by(stride).collect();
+
+    let blue = RGBColor(31, 119, 180);
+    let orange = RGBColor(255, 127, 14);
+    let green = RGBColor(44, 160, 44);
+    let red = RGBColor(214, 39, 40);
+    let purple = RGBColor(148, 103, 189);
+
+    // Roll and pitch panels.
+    for (i, (name, get)) in [
+        (
+            "roll (° , right side down +)",
+            (|r: &super::LogRow| (r.roll_deg, r.est_roll_deg, r.roll_target_deg)) as fn(&super::LogRow) -> (f64, f64, f64),
+        ),
+        ("pitch (°, nose up +)", |r: &super::LogRow| (r.pitch_deg, r.est_pitch_deg, r.pitch_target_deg)),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let lim = rows
+            .iter()
+            .map(|r| {
+                let (a, b, c) = get(r);
+                a.abs().max(b.abs()).max(c.abs())
+            })
+            .fold(5.0f64, f64::max)
+            .min(90.0)
+            * 1.1;
+        let area = panels.get(i).ok_or_else(|| "plot layout".to_string())?;
+        let mut ch = ChartBuilder::on(area)
+            .caption(name, ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..t_end, -lim..lim)
+            .map_err(|e| err(&e))?;
+        ch.configure_mesh().x_desc("t (s)").y_desc("deg").light_line_style(WHITE.mix(0.0)).draw().map_err(|e| err(&e))?;
+        let series: [Series; 3] = [("target", red, 2, |v| v.2), ("true", blue, 2, |v| v.0), ("estimated", orange, 1, |v| v.1)];
+        for (label, color, width, pick) in series {
+            ch.draw_series(LineSeries::new(rows.iter().map(|r| (r.t_s, pick(get(r)))), color.stroke_width(width)))
+                .map_err(|e| err(&e))?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| err(&e))?;
+    }
+
+    // Motors.
+    {
+        let area = panels.get(2).ok_or_else(|| "plot layout".to_string())?;
+        let mut ch = ChartBuilder::on(area)
+            .caption("motor compare values (TIM4 CCR, 0..2000 = 0..100 % duty)", ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..t_end, 0.0..2000.0)
+            .map_err(|e| err(&e))?;
+        ch.configure_mesh().x_desc("t (s)").light_line_style(WHITE.mix(0.0)).draw().map_err(|e| err(&e))?;
+        let names = ["M1 rear-right CW", "M2 front-right CCW", "M3 front-left CW", "M4 rear-left CCW"];
+        for (m, (label, color)) in names.into_iter().zip([blue, orange, green, purple]).enumerate() {
+            ch.draw_series(LineSeries::new(
+                rows.iter().map(|r| (r.t_s, f64::from(r.motors.get(m).copied().unwrap_or(0)))),
+                color.stroke_width(1),
+            ))
+            .map_err(|e| err(&e))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| err(&e))?;
+    }
+
+    // State and altitude (altitude scaled onto the state axis: 1 level = 0.5 m).
+    {
+        let area = panels.get(3).ok_or_else(|| "plot layout".to_string())?;
+        let mut ch = ChartBuilder::on(area)
+            .caption("flight state (steps) and altitude (m × 2, dashed)", ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(90)
+            .build_cartesian_2d(0.0..t_end, -0.5..(STATES.len() as f64 - 0.5))
+            .map_err(|e| err(&e))?;
+        ch.configure_mesh()
+            .x_desc("t (s)")
+            .y_labels(STATES.len())
+            .y_label_formatter(&|v| {
+                let i = v.round();
+                if (v - i).abs() < 0.01 && i >= 0.0 {
+                    STATES.get(i as usize).map_or(String::new(), |s| (*s).to_string())
+                } else {
+                    String::new()
+                }
+            })
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(|e| err(&e))?;
+        ch.draw_series(LineSeries::new(rows.iter().map(|r| (r.t_s, state_level(r.state))), BLACK.stroke_width(2)))
+            .map_err(|e| err(&e))?
+            .label("state")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        ch.draw_series(rows.iter().step_by(4).map(|r| Circle::new((r.t_s, 2.0 * r.alt_m), 1, green.filled())))
+            .map_err(|e| err(&e))?
+            .label("altitude (m × 2)")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2)));
+        // Link lost as seen by the transmitter script: a red band at the bottom.
+        ch.draw_series(rows.iter().filter(|r| !r.link_tx).map(|r| Circle::new((r.t_s, -0.35), 2, red.filled())))
+            .map_err(|e| err(&e))?
+            .label("radio link off")
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, red.filled()));
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}

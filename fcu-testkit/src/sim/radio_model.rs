@@ -1,0 +1,247 @@
+//! The simulated PWM receiver and the TIM2 capture unit behind it (reference §6.1).
+//!
+//! Every 20 ms frame the receiver drives its four outputs one after the other (AIL, ELE, THR,
+//! RUD: each channel rises when the previous one falls), each pulse 800..2200 µs wide. The MCU
+//! timestamps every edge with TIM2 counting at 4 MHz (0.25 µs) and wrapping every 32768 counts
+//! (8.192 ms), so a 2 ms pulse spans a quarter of the counter and the wrap is hit every frame.
+//! Edges carry jitter; optionally whole frames drop out and short spurious spikes appear.
+
+use std::collections::VecDeque;
+
+use super::rng::Rng;
+
+/// TIM2 counts per second (84 MHz / (PSC 20 + 1)).
+pub const CAPTURE_COUNTS_PER_S: f64 = 4.0e6;
+/// TIM2 wraps at ARR + 1 = 32768 (a 15-bit wrap on a 32-bit timer).
+pub const CAPTURE_WRAP_COUNTS: u32 = 32_768;
+
+/// Number of receiver channels wired to the board: 0 AIL, 1 ELE, 2 THR, 3 RUD.
+pub const CHANNELS: usize = 4;
+
+/// What the transmitter sends in one frame: pulse widths in µs and whether the link is up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TxFrame {
+    pub width_us: [f64; CHANNELS],
+    /// False: the receiver outputs nothing (signal lost, receiver without failsafe pulses).
+    pub link: bool,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct RadioParams {
+    pub frame_period_s: f64,
+    /// Edge timing jitter, µs rms (receiver clock and interrupt latency).
+    pub jitter_us: f64,
+    /// Probability that a whole frame is missing (a brief radio fade).
+    pub frame_dropout_probability: f64,
+    /// Probability per frame of one spurious short spike on a random channel.
+    pub glitch_probability: f64,
+}
+
+impl Default for RadioParams {
+    fn default() -> Self {
+        RadioParams { frame_period_s: 0.020, jitter_us: 0.5, frame_dropout_probability: 0.0, glitch_probability: 0.0 }
+    }
+}
+
+impl RadioParams {
+    /// A noisy receiver: a frame in fifty missing and a spike every ten frames.
+    pub fn noisy() -> Self {
+        RadioParams { jitter_us: 2.0, frame_dropout_probability: 0.02, glitch_probability: 0.1, ..Self::default() }
+    }
+}
+
+/// One capture event as the TIM2 interrupt sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CaptureEdge {
+    /// Simulation time of the edge (for ordering and tests; the core never sees it).
+    pub t_s: f64,
+    pub channel: usize,
+    /// The captured TIM2 value, 0..32767.
+    pub capture_counts: u16,
+    /// Pin level read in the interrupt: high = rising edge.
+    pub level_high: bool,
+}
+
+#[derive(Clone, Debug)]
+pub struct RadioModel {
+    params: RadioParams,
+    rng: Rng,
+    next_frame_s: f64,
+    /// Edges scheduled but not yet delivered, in time order.
+    pending: VecDeque<CaptureEdge>,
+    frames_sent: u64,
+}
+
+/// TIM2 value at simulation time `t_s` (the timer starts with the simulation).
+pub fn capture_counts_at(t_s: f64) -> u16 {
+    let counts = (t_s.max(0.0) * CAPTURE_COUNTS_PER_S).floor() as u64;
+    (counts % u64::from(CAPTURE_WRAP_COUNTS)) as u16
+}
+
+impl RadioModel {
+    /// `first_frame_s` sets the receiver's phase relative to the control ticks.
+    pub fn new(params: RadioParams, seed: u64) -> Self {
+        let mut rng = Rng::fork(seed, 0x0052_4144_494F);
+        let first_frame_s = params.frame_period_s * rng.uniform();
+        RadioModel { params, rng, next_frame_s: first_frame_s, pending: VecDeque::new(), frames_sent: 0 }
+    }
+
+    pub fn frames_sent(&self) -> u64 {
+        self.frames_sent
+    }
+
+    /// Schedule every frame that starts before `t_end_s` (with the transmitter state `tx`
+    /// given by `tx_at(frame_start_s)`), then move the edges that happen before `t_end_s`
+    /// into `out`, oldest first.
+    pub fn advance(&mut self, t_end_s: f64, mut tx_at: impl FnMut(f64) -> TxFrame, out: &mut Vec<CaptureEdge>) {
+        while self.next_frame_s < t_end_s {
+            let start = self.next_frame_s;
+            self.next_frame_s += self.params.frame_period_s.max(1e-3);
+            let tx = tx_at(start);
+            if !tx.link || self.rng.chance(self.params.frame_dropout_probability) {
+                continue;
+            }
+            self.schedule_frame(start, &tx);
+        }
+        while let Some(e) = self.pending.front() {
+            if e.t_s >= t_end_s {
+                break;
+            }
+            if let Some(e) = self.pending.pop_front() {
+                out.push(e);
+            }
+        }
+    }
+
+    fn schedule_frame(&mut self, start_s: f64, tx: &TxFrame) {
+        self.frames_sent += 1;
+        let mut new = Vec::with_capacity(2 * CHANNELS + 2);
+        let mut rise_s = start_s;
+        for (ch, &w_us) in tx.width_us.iter().enumerate() {
+            // A width that is not a number is what a broken transmitter script would give;
+            // the receiver then holds the line low for that channel.
+            let w_s = if w_us.is_finite() { w_us.clamp(0.0, 19_000.0) * 1e-6 } else { 0.0 };
+            let fall_s = rise_s + w_s;
+            if w_s > 0.0 {
+                let j1 = self.jitter_s();
+                let j2 = self.jitter_s();
+                new.push(self.edge(rise_s + j1, ch, true));
+                new.push(self.edge(fall_s + j2, ch, false));
+            }
+            rise_s = fall_s;
+        }
+        if self.rng.chance(self.params.glitch_probability) {
+            let ch = (self.rng.next_u64() % CHANNELS as u64) as usize;
+            // A spike somewhere in the frame, a few µs long.
+            let at = start_s + self.params.frame_period_s * self.rng.uniform();
+            let len = (2.0 + 20.0 * self.rng.uniform()) * 1e-6;
+            new.push(self.edge(at, ch, true));
+            new.push(self.edge(at + len, ch, false));
+        }
+        self.pending.extend(new);
+        // Jitter and glitches can reorder neighbouring edges: deliver them in time order.
+        self.pending.make_contiguous().sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    }
+
+    fn jitter_s(&mut self) -> f64 {
+        self.params.jitter_us * 1e-6 * self.rng.gaussian()
+    }
+
+    fn edge(&self, t_s: f64, channel: usize, level_high: bool) -> CaptureEdge {
+        CaptureEdge { t_s, channel, capture_counts: capture_counts_at(t_s), level_high }
+    }
+}
+
+/// Stick width (µs) for a stick value `g` in RC counts around a centre in counts (reference §6.4).
+pub fn width_us_for(centre_counts: f64, g_counts: f64) -> f64 {
+    (centre_counts + g_counts) / 4.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tx(width_us: [f64; 4]) -> impl FnMut(f64) -> TxFrame {
+        move |_| TxFrame { width_us, link: true }
+    }
+
+    /// Wrap-safe width, as the capture decoder computes it.
+    fn width_counts(rise: u16, fall: u16) -> u32 {
+        (u32::from(fall) + CAPTURE_WRAP_COUNTS - u32::from(rise)) % CAPTURE_WRAP_COUNTS
+    }
+
+    #[test]
+    fn capture_counter_wraps_every_8_192_ms() {
+        assert_eq!(capture_counts_at(0.0), 0);
+        assert_eq!(capture_counts_at(0.001), 4000);
+        assert_eq!(capture_counts_at(0.008_192), 0);
+        assert_eq!(capture_counts_at(0.008_192 + 0.000_25), 1000);
+    }
+
+    #[test]
+    fn frames_come_at_50_hz_with_widths_that_decode_through_the_wrap() {
+        let widths = [1465.5, 1537.75, 1000.0, 1599.25];
+        let mut r = RadioModel::new(RadioParams { jitter_us: 0.0, ..RadioParams::default() }, 1);
+        let mut edges = Vec::new();
+        let mut t = 0.0;
+        while t < 1.0 {
+            t += 0.00125;
+            r.advance(t, tx(widths), &mut edges);
+        }
+        assert!((49..=51).contains(&r.frames_sent()), "{} frames", r.frames_sent());
+        assert!(edges.windows(2).all(|w| w[0].t_s <= w[1].t_s), "edges out of order");
+        let mut rise = [None; 4];
+        let mut seen = 0;
+        for e in &edges {
+            if e.level_high {
+                rise[e.channel] = Some(e.capture_counts);
+            } else if let Some(r0) = rise[e.channel] {
+                let w = width_counts(r0, e.capture_counts);
+                let want = (widths[e.channel] * 4.0) as u32;
+                assert!(w.abs_diff(want) <= 1, "channel {} width {w} counts, want {want}", e.channel);
+                seen += 1;
+            }
+        }
+        assert!(seen >= 4 * 49);
+    }
+
+    #[test]
+    fn edges_are_delivered_only_once_their_time_has_come() {
+        let mut r = RadioModel::new(RadioParams::default(), 3);
+        let mut t = 0.0;
+        for _ in 0..2000 {
+            let mut edges = Vec::new();
+            let t0 = t;
+            t += 0.00125;
+            r.advance(t, tx([1500.0; 4]), &mut edges);
+            assert!(edges.iter().all(|e| e.t_s < t && e.t_s >= t0 - 1e-5));
+        }
+    }
+
+    #[test]
+    fn no_link_means_no_edges() {
+        let mut r = RadioModel::new(RadioParams::default(), 1);
+        let mut edges = Vec::new();
+        r.advance(1.0, |_| TxFrame { width_us: [1500.0; 4], link: false }, &mut edges);
+        assert!(edges.is_empty());
+    }
+
+    #[test]
+    fn dropouts_and_glitches_happen_at_their_rates() {
+        let params = RadioParams { frame_dropout_probability: 0.2, glitch_probability: 0.5, ..RadioParams::default() };
+        let mut r = RadioModel::new(params, 9);
+        let mut edges = Vec::new();
+        r.advance(20.0, tx([1500.0; 4]), &mut edges);
+        let frames = r.frames_sent() as f64;
+        assert!((700.0..900.0).contains(&frames), "{frames} of 1000 frames sent");
+        let extra = edges.len() as f64 - 8.0 * frames;
+        // Each glitch adds 2 edges; expected 0.5 per sent frame.
+        assert!((extra / 2.0 / frames - 0.5).abs() < 0.1, "{extra} glitch edges");
+    }
+
+    #[test]
+    fn stick_widths_follow_the_reference_centres() {
+        // Full right aileron (gAIL = −1800 around 5862 counts) is 1015.5 µs.
+        assert_eq!(width_us_for(5862.0, -1800.0), 1015.5);
+    }
+}

@@ -1,0 +1,594 @@
+//! Scenarios: what the pilot does (a stick timeline), what the world does (gusts, a weak
+//! motor, a hand rocking the drone) and what must come out (pass criteria).
+//!
+//! Arming and disarming happen only through stick gestures in the timeline, exactly as a pilot
+//! would do it: the simulator has no back door into the supervisor.
+
+use std::fmt::Write as _;
+
+use super::plant::Disturbance;
+use super::radio_model::RadioParams;
+
+/// Reference radio constants in TIM2 counts (reference §6.4).
+pub const AIL_CENTRE_COUNTS: f64 = 5862.0;
+pub const ELE_CENTRE_COUNTS: f64 = 6151.0;
+pub const RUD_CENTRE_COUNTS: f64 = 6397.0;
+pub const THR_BOTTOM_COUNTS: f64 = 4450.0;
+/// Stick full scale and the tilt it commands.
+pub const FULL_SCALE_COUNTS: f64 = 1800.0;
+pub const MAX_TILT_DEG: f64 = 20.0;
+/// Gesture deflection used by the scripts: beyond the 1200-count threshold with margin.
+const GESTURE_COUNTS: f64 = 1500.0;
+
+pub const AIL_CENTRE_US: f64 = AIL_CENTRE_COUNTS / 4.0;
+pub const ELE_CENTRE_US: f64 = ELE_CENTRE_COUNTS / 4.0;
+pub const RUD_CENTRE_US: f64 = RUD_CENTRE_COUNTS / 4.0;
+/// A throttle pulse well below THR_BOTTOM (1112.5 µs): "throttle low".
+pub const THR_LOW_US: f64 = 1000.0;
+
+/// The throttle channel: a fixed pulse, or the simulated pilot holding an altitude (a human
+/// pilot keeps a toy quad at eye level with the throttle; the core has no altitude hold).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Throttle {
+    Us(f64),
+    HoldAltitude { alt_m: f64 },
+}
+
+/// One row of a stick timeline: from `t_s` until the next row.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StickRow {
+    pub t_s: f64,
+    pub ail_us: f64,
+    pub ele_us: f64,
+    pub thr: Throttle,
+    pub rud_us: f64,
+    /// False: the receiver outputs no pulses at all.
+    pub link: bool,
+}
+
+impl StickRow {
+    /// Sticks centred, throttle low, link up.
+    pub fn idle(t_s: f64) -> Self {
+        StickRow { t_s, ail_us: AIL_CENTRE_US, ele_us: ELE_CENTRE_US, thr: Throttle::Us(THR_LOW_US), rud_us: RUD_CENTRE_US, link: true }
+    }
+}
+
+/// A stick script: rows sorted by time, each holding until the next.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Timeline {
+    pub rows: Vec<StickRow>,
+}
+
+impl Timeline {
+    /// The row in force at `t_s` (before the first row: sticks idle, link up).
+    pub fn at(&self, t_s: f64) -> StickRow {
+        let i = self.rows.partition_point(|r| r.t_s <= t_s);
+        match i.checked_sub(1).and_then(|k| self.rows.get(k)) {
+            Some(r) => *r,
+            None => StickRow::idle(t_s),
+        }
+    }
+
+    fn push(&mut self, row: StickRow) {
+        self.rows.push(row);
+        self.rows.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    }
+
+    /// Parse the `--sticks` CSV: header `t_s,ail_us,ele_us,thr_us,rud_us,link`; times must
+    /// not decrease; `link` is 0 or 1. Errors name the line.
+    pub fn parse_csv(text: &str) -> Result<Timeline, String> {
+        const HEADER: [&str; 6] = ["t_s", "ail_us", "ele_us", "thr_us", "rud_us", "link"];
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+        let Some((hn, header)) = lines.next() else {
+            return Err("the file is empty (expected the header t_s,ail_us,ele_us,thr_us,rud_us,link)".into());
+        };
+        let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+        if cols != HEADER {
+            return Err(format!("line {}: header must be `{}`, found `{}`", hn + 1, HEADER.join(","), header.trim()));
+        }
+        let mut rows = Vec::new();
+        let mut last_t = f64::NEG_INFINITY;
+        for (n, line) in lines {
+            let line_no = n + 1;
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            if fields.len() != HEADER.len() {
+                return Err(format!("line {line_no}: expected {} fields, found {}", HEADER.len(), fields.len()));
+            }
+            let mut v = [0.0f64; 6];
+            for ((slot, text), name) in v.iter_mut().zip(&fields).zip(HEADER) {
+                *slot = text
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| format!("line {line_no}: `{name}` is not a number: `{text}`"))?;
+            }
+            let [t, ail, ele, thr, rud, link] = v;
+            if t < 0.0 || t < last_t {
+                return Err(format!("line {line_no}: t_s {t} must be ≥ 0 and not go back in time"));
+            }
+            for (name, w) in [("ail_us", ail), ("ele_us", ele), ("thr_us", thr), ("rud_us", rud)] {
+                if !(0.0..=19_000.0).contains(&w) {
+                    return Err(format!("line {line_no}: `{name}` {w} µs is outside 0..19000 (a 20 ms frame)"));
+                }
+            }
+            let link = if link == 0.0 {
+                false
+            } else if link == 1.0 {
+                true
+            } else {
+                return Err(format!("line {line_no}: `link` must be 0 or 1, found {link}"));
+            };
+            last_t = t;
+            rows.push(StickRow { t_s: t, ail_us: ail, ele_us: ele, thr: Throttle::Us(thr), rud_us: rud, link });
+        }
+        if rows.is_empty() {
+            return Err(format!("line {}: no rows after the header", hn + 1));
+        }
+        Ok(Timeline { rows })
+    }
+
+    /// The timeline as the `--sticks` CSV (pilot-held throttle written as `hold:ALT`-free µs
+    /// is not possible, so such rows are written with the hover estimate `hover_us`).
+    pub fn to_csv(&self, hover_us: f64) -> String {
+        let mut s = String::from("t_s,ail_us,ele_us,thr_us,rud_us,link\n");
+        for r in &self.rows {
+            let thr = match r.thr {
+                Throttle::Us(u) => u,
+                Throttle::HoldAltitude { .. } => hover_us,
+            };
+            let _ = writeln!(s, "{},{},{},{},{},{}", r.t_s, r.ail_us, r.ele_us, thr, r.rud_us, u8::from(r.link));
+        }
+        s
+    }
+}
+
+/// Aileron pulse for a roll target (right side down positive), reference §6.6.
+pub fn ail_us_for_roll_deg(deg: f64) -> f64 {
+    (AIL_CENTRE_COUNTS - deg / MAX_TILT_DEG * FULL_SCALE_COUNTS) / 4.0
+}
+
+/// Elevator pulse for a pitch target (nose up positive).
+pub fn ele_us_for_pitch_deg(deg: f64) -> f64 {
+    (ELE_CENTRE_COUNTS - deg / MAX_TILT_DEG * FULL_SCALE_COUNTS) / 4.0
+}
+
+/// Rudder pulse for a fraction of full deflection (positive = left = counter-clockwise).
+pub fn rud_us_for(fraction: f64) -> f64 {
+    (RUD_CENTRE_COUNTS + fraction.clamp(-1.0, 1.0) * FULL_SCALE_COUNTS) / 4.0
+}
+
+/// A timed push on the airframe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gust {
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub push: Disturbance,
+}
+
+/// Someone holding the drone and rocking it (about body X and Y) — calibration under motion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HandMotion {
+    pub start_s: f64,
+    pub end_s: f64,
+    /// Peak rate of the rocking, rad/s, and its frequency.
+    pub peak_rate_rad_s: f64,
+    pub freq_hz: f64,
+}
+
+/// A check on the flight log. Windows are in seconds of simulated time.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Criterion {
+    /// The supervisor reports armed by this time.
+    ArmedBy { t_s: f64 },
+    /// Never armed at any time (e.g. with a calibration that cannot pass).
+    NeverArmedBefore { t_s: f64 },
+    /// RMS of (true − target) roll and pitch over the window below `max_deg`.
+    AttitudeRmsBelow { from_s: f64, to_s: f64, max_deg: f64 },
+    /// Max true tilt from level in the window below `max_deg`.
+    TiltBelow { from_s: f64, to_s: f64, max_deg: f64 },
+    /// Altitude stays above `min_m` (did not fall out of the sky).
+    AltitudeAbove { from_s: f64, to_s: f64, min_m: f64 },
+    /// A 20°-class step on `axis` at `t_s`: rise (10→90 %) within, overshoot below.
+    Step { axis: Axis, t_s: f64, target_deg: f64, rise_max_s: f64, overshoot_max_pct: f64 },
+    /// The state name is seen somewhere in the window.
+    StateSeen { from_s: f64, to_s: f64, state: &'static str },
+    /// Over the window, the state is always this one.
+    StateHolds { from_s: f64, to_s: f64, state: &'static str },
+    /// All four compare values are 0 and the supervisor is not armed from `t_s` to the end.
+    MotorsOffDisarmedFrom { t_s: f64 },
+    /// After the link drops at `t_s`, roll and pitch come within 3° of level within `max_s`.
+    LevelAfterLinkLoss { t_s: f64, max_s: f64 },
+    /// Yaw rate tracks the stick: RMS (commanded − true) over the window below `max_dps`.
+    YawRateRmsBelow { from_s: f64, to_s: f64, max_dps: f64 },
+    /// Calibration is still running (not passed) at `t_s` — it rejected the motion.
+    CalibrationNotDoneAt { t_s: f64 },
+    /// Calibration passed by `t_s`.
+    CalibratedBy { t_s: f64 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    Roll,
+    Pitch,
+}
+
+/// One flight to simulate.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    pub name: String,
+    pub about: String,
+    pub duration_s: f64,
+    pub timeline: Timeline,
+    pub gusts: Vec<Gust>,
+    pub hand: Option<HandMotion>,
+    /// Per-motor thrust multiplier (a weak motor).
+    pub motor_thrust_scale: [f64; 4],
+    pub radio: RadioParams,
+    pub criteria: Vec<Criterion>,
+    /// Where the metrics look: the steady hover window, step times, link-loss time, yaw window.
+    pub hover_window_s: Option<(f64, f64)>,
+    pub steps: Vec<(Axis, f64, f64)>,
+    pub link_loss_s: Option<f64>,
+    pub yaw_window_s: Option<(f64, f64)>,
+}
+
+/// The names `fly --scenario` accepts.
+pub const NAMES: [&str; 9] = ["hover", "steps", "sweeps", "yaw", "link-short", "link-long", "gust", "weak-motor", "calibration-motion"];
+
+/// Standard script pieces. Boot: the core settles about 1 s and calibrates about 1 s, and
+/// arming is blocked for the first 2 s; the arm gesture is held 1.5 s from 2.5 s.
+pub const ARM_AT_S: f64 = 2.5;
+pub const ARM_RELEASE_S: f64 = 4.0;
+pub const TAKEOFF_S: f64 = 4.5;
+pub const HOVER_ALT_M: f64 = 1.0;
+
+struct Script {
+    tl: Timeline,
+}
+
+impl Script {
+    fn new() -> Self {
+        let mut tl = Timeline::default();
+        tl.push(StickRow::idle(0.0));
+        Script { tl }
+    }
+
+    fn row(&mut self, t_s: f64, f: impl FnOnce(&mut StickRow)) -> &mut Self {
+        let mut r = StickRow { t_s, ..self.tl.at(t_s) };
+        f(&mut r);
+        self.tl.push(r);
+        self
+    }
+
+    /// Arm gesture: throttle low, gELE < −1200, gAIL < −1200, gRUD > +1200, held, released.
+    fn arm(&mut self, at_s: f64, release_s: f64) -> &mut Self {
+        self.row(at_s, |r| {
+            r.thr = Throttle::Us(THR_LOW_US);
+            r.ele_us = (ELE_CENTRE_COUNTS - GESTURE_COUNTS) / 4.0;
+            r.ail_us = (AIL_CENTRE_COUNTS - GESTURE_COUNTS) / 4.0;
+            r.rud_us = (RUD_CENTRE_COUNTS + GESTURE_COUNTS) / 4.0;
+        });
+        self.row(release_s, |r| *r = StickRow { t_s: release_s, link: r.link, ..StickRow::idle(release_s) })
+    }
+
+    /// Disarm gesture: throttle low, gRUD < −1200, gELE and gAIL centred, held, released.
+    fn disarm(&mut self, at_s: f64, release_s: f64) -> &mut Self {
+        self.row(at_s, |r| {
+            *r = StickRow { t_s: at_s, ..StickRow::idle(at_s) };
+            r.rud_us = (RUD_CENTRE_COUNTS - GESTURE_COUNTS) / 4.0;
+        });
+        self.row(release_s, |r| *r = StickRow::idle(release_s))
+    }
+
+    fn hover(&mut self, at_s: f64) -> &mut Self {
+        self.row(at_s, |r| r.thr = Throttle::HoldAltitude { alt_m: HOVER_ALT_M })
+    }
+
+    /// Pilot lets it sink to the floor, then throttle low and the disarm gesture.
+    fn land_and_disarm(&mut self, at_s: f64) -> &mut Self {
+        self.row(at_s, |r| {
+            *r = StickRow { t_s: at_s, thr: Throttle::HoldAltitude { alt_m: -1.0 }, ..StickRow::idle(at_s) };
+        });
+        self.row(at_s + 3.0, |r| r.thr = Throttle::Us(THR_LOW_US));
+        self.disarm(at_s + 3.5, at_s + 5.0)
+    }
+
+    fn standard(&mut self) -> &mut Self {
+        self.arm(ARM_AT_S, ARM_RELEASE_S).hover(TAKEOFF_S)
+    }
+}
+
+fn base(name: &str, about: &str, duration_s: f64, tl: Timeline) -> Scenario {
+    Scenario {
+        name: name.into(),
+        about: about.into(),
+        duration_s,
+        timeline: tl,
+        gusts: Vec::new(),
+        hand: None,
+        motor_thrust_scale: [1.0; 4],
+        radio: RadioParams::default(),
+        criteria: Vec::new(),
+        hover_window_s: None,
+        steps: Vec::new(),
+        link_loss_s: None,
+        yaw_window_s: None,
+    }
+}
+
+/// Pass criteria shared by every flight that arms, hovers and lands.
+fn flight_criteria(hover: (f64, f64), rms_max_deg: f64, end_s: f64) -> Vec<Criterion> {
+    vec![
+        Criterion::ArmedBy { t_s: ARM_RELEASE_S + 0.2 },
+        Criterion::AttitudeRmsBelow { from_s: hover.0, to_s: hover.1, max_deg: rms_max_deg },
+        Criterion::AltitudeAbove { from_s: hover.0, to_s: hover.1, min_m: 0.3 },
+        Criterion::MotorsOffDisarmedFrom { t_s: end_s },
+    ]
+}
+
+/// Build a named scenario, or `None` if the name is unknown (see [`NAMES`]).
+pub fn by_name(name: &str) -> Option<Scenario> {
+    let s = match name {
+        "hover" => {
+            let mut sc = Script::new();
+            sc.standard().land_and_disarm(20.0);
+            let mut s = base("hover", "arm by gesture, hold 1 m for 15 s, land, disarm by gesture", 26.0, sc.tl);
+            s.hover_window_s = Some((8.0, 19.0));
+            s.criteria = flight_criteria((8.0, 19.0), 1.0, 25.5);
+            s.criteria.push(Criterion::TiltBelow { from_s: 8.0, to_s: 19.0, max_deg: 4.0 });
+            s
+        }
+        "steps" => {
+            let mut sc = Script::new();
+            sc.standard();
+            // Each step is held 1 s, then the stick is centred for 3.5 s so the drone settles.
+            let steps = [(Axis::Roll, 8.0, 20.0), (Axis::Pitch, 12.5, 20.0)];
+            for &(axis, t_s, deg) in &steps {
+                sc.row(t_s, |r| match axis {
+                    Axis::Roll => r.ail_us = ail_us_for_roll_deg(deg),
+                    Axis::Pitch => r.ele_us = ele_us_for_pitch_deg(deg),
+                });
+                sc.row(t_s + 1.0, |r| {
+                    r.ail_us = AIL_CENTRE_US;
+                    r.ele_us = ELE_CENTRE_US;
+                });
+            }
+            sc.land_and_disarm(21.0);
+            let mut s = base("steps", "20° roll and pitch steps from hover (full stick, held 1 s)", 27.0, sc.tl);
+            s.hover_window_s = Some((6.0, 8.0));
+            s.steps = steps.to_vec();
+            s.criteria = flight_criteria((6.0, 8.0), 1.0, 26.5);
+            for &(axis, t_s, target_deg) in &s.steps {
+                // The outer P gain of 3 /s makes a ~0.35 s time constant: the nominal drone rises
+                // (10→90 %) in 0.49 s; +30 % inertia in the randomised airframes slows that to
+                // ~0.52 s, hence 0.6 s. Overshoot is a few per cent; 20 % flags a real regression.
+                s.criteria.push(Criterion::Step { axis, t_s, target_deg, rise_max_s: 0.6, overshoot_max_pct: 20.0 });
+            }
+            s.criteria.push(Criterion::AltitudeAbove { from_s: 6.0, to_s: 20.0, min_m: 0.2 });
+            s
+        }
+        "sweeps" => {
+            let mut sc = Script::new();
+            sc.standard();
+            // Stick sweeps: 10° sine on roll, then pitch, from 0.2 to 1 Hz, one row per frame.
+            let (t0, len) = (7.0, 5.0);
+            for (k, axis) in [Axis::Roll, Axis::Pitch].into_iter().enumerate() {
+                let start = t0 + k as f64 * (len + 1.0);
+                let mut t = 0.0;
+                while t < len {
+                    // Linear chirp: instantaneous frequency 0.2 Hz rising to 1 Hz.
+                    let phase = std::f64::consts::TAU * (0.2 * t + 0.5 * (1.0 - 0.2) / len * t * t);
+                    let deg = 10.0 * phase.sin();
+                    sc.row(start + t, |r| match axis {
+                        Axis::Roll => r.ail_us = ail_us_for_roll_deg(deg),
+                        Axis::Pitch => r.ele_us = ele_us_for_pitch_deg(deg),
+                    });
+                    t += 0.02;
+                }
+                sc.row(start + len, |r| {
+                    r.ail_us = AIL_CENTRE_US;
+                    r.ele_us = ELE_CENTRE_US;
+                });
+            }
+            sc.land_and_disarm(20.0);
+            let mut s = base("sweeps", "roll then pitch stick sweeps, ±10°, 0.2→1 Hz", 26.0, sc.tl);
+            s.hover_window_s = Some((5.5, 7.0));
+            s.criteria = flight_criteria((7.0, 19.0), 5.0, 25.5);
+            s.criteria.push(Criterion::TiltBelow { from_s: 7.0, to_s: 19.0, max_deg: 25.0 });
+            s
+        }
+        "yaw" => {
+            let mut sc = Script::new();
+            sc.standard();
+            sc.row(8.0, |r| r.rud_us = rud_us_for(1.0));
+            sc.row(11.0, |r| r.rud_us = RUD_CENTRE_US);
+            sc.row(13.0, |r| r.rud_us = rud_us_for(-0.7));
+            sc.row(16.0, |r| r.rud_us = RUD_CENTRE_US);
+            sc.land_and_disarm(19.0);
+            let mut s = base("yaw", "yaw turns: full left rudder 3 s, then 70 % right 3 s", 25.0, sc.tl);
+            s.hover_window_s = Some((6.0, 8.0));
+            s.yaw_window_s = Some((8.5, 16.0));
+            s.criteria = flight_criteria((8.0, 18.0), 2.0, 24.5);
+            s.criteria.push(Criterion::YawRateRmsBelow { from_s: 8.5, to_s: 16.0, max_dps: 25.0 });
+            s
+        }
+        "link-short" => {
+            let mut sc = Script::new();
+            sc.standard();
+            sc.row(7.5, |r| r.ail_us = ail_us_for_roll_deg(10.0));
+            sc.row(8.0, |r| r.link = false);
+            sc.row(8.5, |r| {
+                r.link = true;
+                r.ail_us = AIL_CENTRE_US;
+            });
+            sc.land_and_disarm(16.0);
+            let mut s = base("link-short", "0.5 s radio loss while rolled 10°: level, hold, recover", 22.0, sc.tl);
+            s.hover_window_s = Some((5.5, 7.0));
+            s.link_loss_s = Some(8.0);
+            s.criteria = flight_criteria((10.0, 15.5), 2.5, 21.5);
+            s.criteria.extend([
+                Criterion::StateSeen { from_s: 8.0, to_s: 8.6, state: "failsafe1" },
+                Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
+                Criterion::StateHolds { from_s: 9.0, to_s: 15.5, state: "armed" },
+                Criterion::AltitudeAbove { from_s: 6.0, to_s: 15.5, min_m: 0.3 },
+            ]);
+            s
+        }
+        "link-long" => {
+            let mut sc = Script::new();
+            sc.standard();
+            sc.row(8.0, |r| r.link = false);
+            // The link returns with the pilot still asking for hover: motors must stay off.
+            sc.row(12.0, |r| r.link = true);
+            sc.row(15.0, |r| r.thr = Throttle::Us(THR_LOW_US));
+            let mut s = base("link-long", "3 s radio loss: level, then motors off and disarmed; no restart", 18.0, sc.tl);
+            s.hover_window_s = Some((5.5, 8.0));
+            s.link_loss_s = Some(8.0);
+            s.criteria = vec![
+                Criterion::ArmedBy { t_s: ARM_RELEASE_S + 0.2 },
+                Criterion::StateSeen { from_s: 8.0, to_s: 8.9, state: "failsafe1" },
+                Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
+                Criterion::StateSeen { from_s: 8.9, to_s: 9.3, state: "failsafe2" },
+                Criterion::MotorsOffDisarmedFrom { t_s: 9.3 },
+            ];
+            s
+        }
+        "gust" => {
+            let mut sc = Script::new();
+            sc.standard().land_and_disarm(16.0);
+            let mut s = base("gust", "a 0.3 s gust (2 m/s wind, torque on roll and pitch) while hovering", 22.0, sc.tl);
+            s.gusts.push(Gust {
+                start_s: 8.0,
+                duration_s: 0.3,
+                push: Disturbance { wind_earth_m_s: [2.0, 1.0, 0.0], force_earth_n: [0.0; 3], torque_body_nm: [1.5e-3, -1.5e-3, 0.0] },
+            });
+            s.hover_window_s = Some((5.5, 8.0));
+            s.criteria = flight_criteria((10.0, 15.5), 1.0, 21.5);
+            s.criteria.push(Criterion::TiltBelow { from_s: 8.0, to_s: 10.0, max_deg: 25.0 });
+            s.criteria.push(Criterion::TiltBelow { from_s: 9.5, to_s: 15.5, max_deg: 4.0 });
+            s
+        }
+        "weak-motor" => {
+            let mut sc = Script::new();
+            sc.standard().land_and_disarm(16.0);
+            let mut s = base("weak-motor", "M1 (rear right) gives 15 % less thrust", 22.0, sc.tl);
+            s.motor_thrust_scale = [0.85, 1.0, 1.0, 1.0];
+            s.hover_window_s = Some((8.0, 15.5));
+            // The rate-loop integrators take over the lost thrust; what remains is the slow
+            // horizontal drift an accelerometer-only estimator cannot see (0.6–0.9° measured).
+            s.criteria = flight_criteria((8.0, 15.5), 1.5, 21.5);
+            s.criteria.push(Criterion::TiltBelow { from_s: 6.0, to_s: 15.5, max_deg: 8.0 });
+            s
+        }
+        "calibration-motion" => {
+            let mut sc = Script::new();
+            sc.arm(6.5, 8.0).hover(8.5).land_and_disarm(16.0);
+            let mut s = base(
+                "calibration-motion",
+                "rocked by hand during the boot calibration: rejected while moving, passes when still",
+                22.0,
+                sc.tl,
+            );
+            s.hand = Some(HandMotion { start_s: 0.5, end_s: 4.0, peak_rate_rad_s: 0.6, freq_hz: 1.0 });
+            s.hover_window_s = Some((11.0, 15.5));
+            s.criteria = vec![
+                Criterion::CalibrationNotDoneAt { t_s: 3.9 },
+                Criterion::NeverArmedBefore { t_s: 4.0 },
+                Criterion::CalibratedBy { t_s: 6.0 },
+                Criterion::ArmedBy { t_s: 8.2 },
+                Criterion::AttitudeRmsBelow { from_s: 11.0, to_s: 15.5, max_deg: 1.5 },
+                Criterion::AltitudeAbove { from_s: 11.0, to_s: 15.5, min_m: 0.3 },
+                Criterion::MotorsOffDisarmedFrom { t_s: 21.5 },
+            ];
+            s
+        }
+        _ => return None,
+    };
+    Some(s)
+}
+
+/// A scenario from a `--sticks` file: the timeline is the pilot, the criteria are generic
+/// (no crash while the throttle is up).
+pub fn from_timeline(name: &str, timeline: Timeline, duration_s: f64) -> Scenario {
+    let mut s = base(name, "stick timeline from a file", duration_s, timeline);
+    s.criteria = Vec::new();
+    s
+}
+
+/// A human-readable list of criteria.
+pub fn describe(c: &Criterion) -> String {
+    match c {
+        Criterion::ArmedBy { t_s } => format!("armed by gesture by {t_s:.1} s"),
+        Criterion::NeverArmedBefore { t_s } => format!("not armed before {t_s:.1} s"),
+        Criterion::AttitudeRmsBelow { from_s, to_s, max_deg } => {
+            format!("attitude RMS error < {max_deg}° over {from_s:.1}–{to_s:.1} s")
+        }
+        Criterion::TiltBelow { from_s, to_s, max_deg } => format!("tilt < {max_deg}° over {from_s:.1}–{to_s:.1} s"),
+        Criterion::AltitudeAbove { from_s, to_s, min_m } => {
+            format!("altitude > {min_m} m over {from_s:.1}–{to_s:.1} s")
+        }
+        Criterion::Step { axis, t_s, target_deg, rise_max_s, overshoot_max_pct } => {
+            format!("{axis:?} step to {target_deg}° at {t_s:.1} s: rise < {rise_max_s} s, overshoot < {overshoot_max_pct} %")
+        }
+        Criterion::StateSeen { from_s, to_s, state } => format!("state `{state}` seen in {from_s:.1}–{to_s:.1} s"),
+        Criterion::StateHolds { from_s, to_s, state } => format!("state `{state}` throughout {from_s:.1}–{to_s:.1} s"),
+        Criterion::MotorsOffDisarmedFrom { t_s } => format!("motors off and disarmed from {t_s:.1} s to the end"),
+        Criterion::LevelAfterLinkLoss { t_s, max_s } => {
+            format!("within 3° of level by {max_s} s after the link drops at {t_s:.1} s")
+        }
+        Criterion::YawRateRmsBelow { from_s, to_s, max_dps } => {
+            format!("yaw rate RMS error < {max_dps} °/s over {from_s:.1}–{to_s:.1} s")
+        }
+        Criterion::CalibrationNotDoneAt { t_s } => format!("calibration still rejected at {t_s:.1} s (motion)"),
+        Criterion::CalibratedBy { t_s } => format!("calibration passed by {t_s:.1} s"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_name_builds_and_has_criteria() {
+        for n in NAMES {
+            let s = by_name(n).unwrap_or_else(|| panic!("{n}"));
+            assert!(!s.criteria.is_empty(), "{n}");
+            assert!(s.timeline.rows.windows(2).all(|w| w[0].t_s <= w[1].t_s));
+        }
+        assert!(by_name("loop-the-loop").is_none());
+    }
+
+    #[test]
+    fn arm_gesture_crosses_the_reference_thresholds() {
+        let s = by_name("hover").unwrap_or_else(|| panic!("hover"));
+        let r = s.timeline.at(ARM_AT_S + 0.1);
+        assert!(r.ele_us * 4.0 - ELE_CENTRE_COUNTS < -1200.0);
+        assert!(r.ail_us * 4.0 - AIL_CENTRE_COUNTS < -1200.0);
+        assert!(r.rud_us * 4.0 - RUD_CENTRE_COUNTS > 1200.0);
+        assert_eq!(r.thr, Throttle::Us(THR_LOW_US));
+    }
+
+    #[test]
+    fn stick_mapping_matches_reference_signs() {
+        // Full right aileron → +20° roll target: gAIL = −1800.
+        assert_eq!(ail_us_for_roll_deg(20.0) * 4.0 - AIL_CENTRE_COUNTS, -1800.0);
+        assert_eq!(ele_us_for_pitch_deg(-20.0) * 4.0 - ELE_CENTRE_COUNTS, 1800.0);
+    }
+
+    #[test]
+    fn csv_round_trip_and_errors_name_the_line() {
+        let text = "t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1465.5,1537.75,1000,1599.25,1\n2.5,1100,1100,1000,1900,0\n";
+        let t = Timeline::parse_csv(text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(t.rows.len(), 2);
+        assert!(!t.at(3.0).link);
+        assert_eq!(t.at(1.0).ail_us, 1465.5);
+        let e = Timeline::parse_csv("t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1,2,3,4,1\n1,x,2,3,4,1\n").err();
+        assert!(e.is_some_and(|e| e.contains("line 3") && e.contains("ail_us")));
+        let e = Timeline::parse_csv("t,a\n").err();
+        assert!(e.is_some_and(|e| e.contains("line 1")));
+        let e = Timeline::parse_csv("t_s,ail_us,ele_us,thr_us,rud_us,link\n1,1,2,3,4,1\n0.5,1,2,3,4,1\n").err();
+        assert!(e.is_some_and(|e| e.contains("line 3")));
+        let e = Timeline::parse_csv("t_s,ail_us,ele_us,thr_us,rud_us,link\n1,1,2,3,4,2\n").err();
+        assert!(e.is_some_and(|e| e.contains("link")));
+    }
+}

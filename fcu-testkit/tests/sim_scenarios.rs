@@ -1,0 +1,92 @@
+//! Every scenario flies with the default profile and passes its criteria, for several seeds
+//! and with the airframe randomised ±30 % (product.md §6).
+
+use fcu_testkit::sim::{self, metrics, scenario, Profile, RunOptions};
+
+fn fly(name: &str, seed: u64, spread: f64) -> (sim::FlightLog, scenario::Scenario) {
+    let sc = scenario::by_name(name).unwrap_or_else(|| panic!("unknown scenario {name}"));
+    let opts = RunOptions { seed, plant_spread: spread, ..RunOptions::default() };
+    let log = sim::run(&sc, Profile::Default, &opts).unwrap_or_else(|e| panic!("{e}"));
+    (log, sc)
+}
+
+fn assert_passes(name: &str, seed: u64, spread: f64) {
+    let (log, sc) = fly(name, seed, spread);
+    let failed: Vec<String> =
+        metrics::check_all(&log, &sc).into_iter().filter(|v| !v.passed).map(|v| format!("{} — {}", v.criterion, v.detail)).collect();
+    assert!(failed.is_empty(), "{name}, seed {seed}, spread {spread}: {failed:#?}");
+}
+
+const SEEDS: [u64; 3] = [1, 7, 42];
+
+macro_rules! scenario_tests {
+    ($($fn_name:ident => $name:literal),* $(,)?) => {
+        $(
+            #[test]
+            fn $fn_name() {
+                assert_passes($name, 1, 0.0);
+                for seed in SEEDS {
+                    assert_passes($name, seed, 0.3);
+                }
+            }
+        )*
+    };
+}
+
+scenario_tests! {
+    hover_passes => "hover",
+    attitude_steps_pass => "steps",
+    stick_sweeps_pass => "sweeps",
+    yaw_turns_pass => "yaw",
+    short_link_loss_recovers => "link-short",
+    long_link_loss_ends_disarmed_with_motors_off => "link-long",
+    gust_is_rejected => "gust",
+    weak_motor_is_compensated => "weak-motor",
+    calibration_rejects_motion_then_passes_when_still => "calibration-motion",
+}
+
+#[test]
+fn hover_rms_attitude_error_is_below_one_degree() {
+    let (log, sc) = fly("hover", 1, 0.0);
+    let m = metrics::compute(&log, &sc);
+    let rms = m.hover_rms_deg.unwrap_or(f64::INFINITY);
+    assert!(rms < 1.0, "hover RMS {rms}°");
+}
+
+#[test]
+fn motors_never_run_before_the_arm_gesture_completes() {
+    let (log, _) = fly("hover", 3, 0.3);
+    for r in log.rows.iter().filter(|r| r.t_s < scenario::ARM_AT_S + 1.0) {
+        assert!(!r.armed && r.motors == [0; 4], "at {} s: {:?} {:?}", r.t_s, r.state, r.motors);
+    }
+}
+
+#[test]
+fn same_seed_same_flight() {
+    let (a, _) = fly("gust", 5, 0.3);
+    let (b, _) = fly("gust", 5, 0.3);
+    assert_eq!(a.rows, b.rows);
+    let (c, _) = fly("gust", 6, 0.3);
+    assert_ne!(a.rows, c.rows);
+}
+
+#[test]
+fn reference_profile_has_no_disarm_and_keeps_motors_armed_after_landing() {
+    // The reference ignores the disarm gesture (it has none): the comparison must show it.
+    let sc = scenario::by_name("hover").unwrap_or_else(|| panic!("hover"));
+    let log = sim::run(&sc, Profile::Reference, &RunOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(log.rows.iter().any(|r| r.armed), "the reference arms on its gesture");
+    let last = log.rows.last().unwrap_or_else(|| panic!("empty log"));
+    assert!(last.armed, "the reference has no disarm, state at end: {}", last.state);
+    let verdicts = metrics::check_all(&log, &sc);
+    assert!(verdicts.iter().any(|v| !v.passed), "reference should fail the disarm criterion");
+}
+
+#[test]
+fn reference_profile_runs_at_its_real_tick_rate() {
+    let sc = scenario::by_name("hover").unwrap_or_else(|| panic!("hover"));
+    let opts = RunOptions { duration_s: Some(1.0), ..RunOptions::default() };
+    let log = sim::run(&sc, Profile::Reference, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!((log.tick_hz - 807.69).abs() < 0.01, "{}", log.tick_hz);
+    assert_eq!(log.rows.len(), 808);
+}
