@@ -193,6 +193,7 @@ impl RateLoop {
         for (o, (((st, g), (s1, rate)), sat)) in out.iter_mut().zip(per_axis) {
             let e = s1 - rate;
             let blocked = cfg.anti_windup && ((e > 0.0 && sat.positive) || (e < 0.0 && sat.negative));
+            let integ_before = st.integ;
             if !blocked {
                 st.integ = clamp_symmetric(st.integ + e * ts, g.inner_i_limit);
             }
@@ -208,7 +209,14 @@ impl RateLoop {
             } else {
                 raw_d
             };
-            *o = clamp_symmetric(g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d, g.output_limit);
+            let mut unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
+            if cfg.anti_windup && unclamped.abs() > g.output_limit && (unclamped > 0.0) == (e > 0.0) {
+                // The output clamp already holds it: integrating further only stores error that
+                // will have to be unwound later (conditional integration).
+                st.integ = integ_before;
+                unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
+            }
+            *o = clamp_symmetric(unclamped, g.output_limit);
             if !st.integ.is_finite() || !st.d.is_finite() || !st.prev_error.is_finite() || !st.prev_rate.is_finite() {
                 // A non-finite sample must not live on in the state.
                 *st = RateAxis::default();

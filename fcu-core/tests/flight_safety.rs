@@ -1,0 +1,354 @@
+//! The safety layer through the whole pipeline, driven the way the firmware drives it: raw
+//! LSM6DSL words and radio capture edges on the 15-bit TIM2 counter, one control tick at a time.
+//! Each test is a rule of product.md §4; several show the reference's accident beside ours.
+
+use fcu_core::flight::TickOutput;
+use fcu_core::imu::RawImu;
+use fcu_core::rc::{EdgeDecoder, CAPTURE_WRAP};
+use fcu_core::supervisor::FlightState;
+use fcu_core::{Config, FlightController};
+
+/// TIM2 counts (0.25 µs) per control tick at 800 Hz, and per 50 Hz radio frame.
+const TICK_COUNTS: u64 = 5_000;
+const FRAME_COUNTS: u64 = 80_000;
+const TICKS_PER_S: u32 = 800;
+
+/// Stick positions as pulse widths in µs: [AIL, ELE, THR, RUD].
+const NEUTRAL: [f64; 4] = [1465.5, 1537.75, 1000.0, 1599.25];
+const ARM: [f64; 4] = [1100.0, 1100.0, 1000.0, 1950.0];
+const DISARM: [f64; 4] = [1465.5, 1537.75, 1000.0, 1100.0];
+const FLY: [f64; 4] = [1465.5, 1537.75, 1600.0, 1599.25];
+
+/// A board on the bench: a level IMU with a little noise, a PWM receiver, the core.
+struct Bench {
+    fc: FlightController,
+    decoder: EdgeDecoder,
+    now_counts: u64,
+    sticks_us: [f64; 4],
+    sending: bool,
+    /// Delay between the channels' pulses in a frame (0: all rise together, as many receivers).
+    channel_spacing_counts: u64,
+    extra_edges: Vec<(usize, u64, bool)>,
+    stuck_imu: bool,
+    noise: u32,
+    last: Option<TickOutput>,
+}
+
+impl Bench {
+    fn new(cfg: Config) -> Bench {
+        let fc = FlightController::new(cfg).unwrap();
+        let decoder = fc.edge_decoder();
+        Bench {
+            fc,
+            decoder,
+            now_counts: 0,
+            sticks_us: NEUTRAL,
+            sending: true,
+            channel_spacing_counts: 10_000,
+            extra_edges: Vec::new(),
+            stuck_imu: false,
+            noise: 12345,
+            last: None,
+        }
+    }
+
+    fn imu(&mut self) -> RawImu {
+        if !self.stuck_imu {
+            self.noise = self.noise.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        }
+        let d = |shift: u32| ((self.noise >> shift) % 3) as i16 - 1;
+        RawImu { accel: [d(4), d(8), 8197 + d(12)], gyro: [d(16), d(20), d(24)] }
+    }
+
+    /// Edges of the receiver's frames inside (now, now + tick], in time order.
+    fn radio_edges(&self) -> Vec<(u64, usize, bool)> {
+        let (from, to) = (self.now_counts, self.now_counts + TICK_COUNTS);
+        let mut edges = Vec::new();
+        if self.sending {
+            let first_frame = from / FRAME_COUNTS;
+            for frame in first_frame..=to / FRAME_COUNTS {
+                for (ch, w) in self.sticks_us.iter().enumerate() {
+                    let rise = frame * FRAME_COUNTS + ch as u64 * self.channel_spacing_counts;
+                    let fall = rise + (w * 4.0) as u64;
+                    for (t, level) in [(rise, true), (fall, false)] {
+                        if t > from && t <= to {
+                            edges.push((t, ch, level));
+                        }
+                    }
+                }
+            }
+        }
+        for &(ch, offset, level) in &self.extra_edges {
+            edges.push((from + offset, ch, level));
+        }
+        edges.sort_by_key(|e| e.0);
+        edges
+    }
+
+    fn tick(&mut self) -> TickOutput {
+        for (t, ch, level) in self.radio_edges() {
+            self.decoder.on_edge(ch, (t % u64::from(CAPTURE_WRAP)) as u16, level);
+        }
+        self.extra_edges.clear();
+        self.now_counts += TICK_COUNTS;
+        let pulses = self.decoder.take();
+        let imu = self.imu();
+        let out = self.fc.tick(imu, &pulses);
+        if let Some(job) = out.outer_job {
+            self.fc.run_outer(&job);
+        }
+        self.last = Some(out);
+        out
+    }
+
+    fn run(&mut self, sticks: [f64; 4], ticks: u32) -> TickOutput {
+        self.sticks_us = sticks;
+        let mut out = self.tick();
+        for _ in 1..ticks {
+            out = self.tick();
+        }
+        out
+    }
+
+    fn state(&self) -> FlightState {
+        self.fc.status().state
+    }
+
+    /// Boot (settle + calibrate + 2 s boot blocker) with the sticks neutral.
+    fn boot(&mut self) {
+        self.run(NEUTRAL, 5 * TICKS_PER_S / 2);
+        assert_eq!(self.state(), FlightState::Disarmed, "{:?}", self.fc.status().blockers);
+    }
+
+    fn arm(&mut self) {
+        self.run(ARM, 5 * TICKS_PER_S / 4);
+        self.run(NEUTRAL, 40);
+        assert_eq!(self.state(), FlightState::Armed, "{:?}", self.fc.status().blockers);
+    }
+}
+
+fn motors_off(out: &TickOutput) -> bool {
+    out.compare == [0; 4]
+}
+
+#[test]
+fn arming_takes_the_stick_gesture_and_nothing_else() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    assert!(motors_off(&b.run(FLY, TICKS_PER_S)), "throttle up while disarmed");
+    b.run(NEUTRAL, 40);
+    let out = b.run(ARM, 5 * TICKS_PER_S / 4);
+    assert_eq!(b.state(), FlightState::Arming);
+    assert!(motors_off(&out));
+    b.run(NEUTRAL, 40);
+    assert_eq!(b.state(), FlightState::Armed);
+    let out = b.run(FLY, 100);
+    assert!(out.compare.iter().all(|&c| c > 600), "{:?}", out.compare);
+}
+
+#[test]
+fn disarm_gesture_stops_the_motors() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 200);
+    // The rudder pulse of the next 20 ms frame starts the hold.
+    b.run(DISARM, TICKS_PER_S - 20);
+    assert_eq!(b.state(), FlightState::Armed, "released before a full second");
+    b.run(DISARM, 40);
+    assert_eq!(b.state(), FlightState::Disarmed);
+    assert!(motors_off(&b.run(FLY, 100)));
+}
+
+#[test]
+fn holding_the_arm_gesture_while_the_link_comes_up_does_not_arm() {
+    let mut b = Bench::new(Config::default());
+    b.sending = false;
+    b.run(ARM, 3 * TICKS_PER_S);
+    b.sending = true;
+    b.run(ARM, 3 * TICKS_PER_S);
+    b.run(NEUTRAL, 100);
+    assert_eq!(b.state(), FlightState::Disarmed);
+    assert!(motors_off(&b.run(FLY, 400)));
+}
+
+#[test]
+fn reference_arms_by_accident_when_the_link_comes_back_with_the_rudder_held() {
+    // B10: after a link loss the reference clears its capture state; if the link comes back
+    // in the middle of the pulses, the first edge of each channel is a falling one and reports
+    // the reset width 0: aileron −5862, elevator −6151, throttle 0 for one update each. With
+    // the rudder held left (its stick keeps the last value) that is the arm gesture, and the
+    // reference latches "armed" although the pilot never made it.
+    let rudder_left = [1465.5, 1537.75, 1600.0, 1950.0];
+    let fly_after = |cfg: Config| -> Bench {
+        let mut b = Bench::new(cfg);
+        b.channel_spacing_counts = 0;
+        b.run(rudder_left, 5 * TICKS_PER_S / 2);
+        b.sending = false;
+        // Lose the link for 0.2 s, and come back just after a frame's pulses started (every
+        // frame starts on a tick boundary: 16 ticks of 1.25 ms per 20 ms).
+        b.run(rudder_left, 160);
+        b.sending = true;
+        b.run(rudder_left, 40);
+        b.run(FLY, 400);
+        b
+    };
+    let reference = fly_after(Config::reference());
+    assert_eq!(reference.state(), FlightState::Armed);
+    assert!(!motors_off(reference.last.as_ref().unwrap()));
+
+    let ours = fly_after(Config::default());
+    assert_eq!(ours.state(), FlightState::Disarmed);
+    assert!(motors_off(ours.last.as_ref().unwrap()));
+}
+
+#[test]
+fn a_single_glitch_pulse_does_not_change_any_stick() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    let before = b.fc.status().sticks;
+    // A 20 µs spike on the throttle wire, a lone falling edge on aileron, and a capture with
+    // fall == rise on rudder (a full-wrap "width" of 8.192 ms).
+    b.extra_edges = vec![(2, 100, true), (2, 180, false), (0, 300, false), (3, 400, true), (3, 400 + 32_768, false)];
+    b.tick();
+    for _ in 0..40 {
+        b.tick();
+        assert_eq!(b.fc.status().sticks, before);
+    }
+    assert_eq!(b.state(), FlightState::Armed);
+}
+
+#[test]
+fn reference_turns_a_full_wrap_glitch_into_95_percent_throttle() {
+    // B11: fall == rise gives a width of 32768 counts; gTHR ≈ 28000 and the clamp writes 1900.
+    let mut b = Bench::new(Config::reference());
+    b.run(NEUTRAL, 2 * TICKS_PER_S);
+    b.run(ARM, 20);
+    b.run(FLY, 200);
+    // The throttle pulse of the next frame rises at frame + 20000 counts.
+    let next_frame = (b.now_counts / FRAME_COUNTS + 1) * FRAME_COUNTS;
+    let ticks_to_frame = ((next_frame - b.now_counts) / TICK_COUNTS) as u32;
+    b.run(FLY, ticks_to_frame);
+    b.sending = false;
+    b.extra_edges = vec![(2, 10, true), (2, 10 + 32_768, false)];
+    let out = b.tick();
+    assert_eq!(i32::from(b.fc.status().sticks.thr), 32_768 - 4450);
+    assert!(out.compare.contains(&1900), "{:?}", out.compare);
+}
+
+#[test]
+fn a_receiver_that_stops_sending_always_ends_with_the_motors_off() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.sending = false;
+    let mut stage1 = false;
+    let mut off_at = None;
+    for t in 0..2 * TICKS_PER_S {
+        let out = b.tick();
+        stage1 |= b.state() == FlightState::FailsafeLevel;
+        if off_at.is_none() && motors_off(&out) {
+            off_at = Some(t);
+        }
+        if let Some(t_off) = off_at {
+            assert!(motors_off(&out), "motors restarted at tick {t} after stopping at {t_off}");
+        }
+    }
+    assert!(stage1, "stage 1 (level, hold throttle) came first");
+    let off_at = off_at.expect("motors never stopped");
+    // 1.0 s after the last pulse: the last pulse is up to one 20 ms frame before the cut.
+    assert!((TICKS_PER_S - 20..=TICKS_PER_S + 2).contains(&off_at), "stopped after {off_at} ticks");
+    assert_eq!(b.state(), FlightState::FailsafeOff);
+    // The link coming back with the throttle up does not restart anything.
+    b.sending = true;
+    assert!(motors_off(&b.run(FLY, 2 * TICKS_PER_S)));
+    assert_eq!(b.state(), FlightState::Disarmed);
+}
+
+#[test]
+fn stage_1_levels_and_never_raises_the_throttle() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run([1300.0, 1700.0, 1600.0, 1800.0], 400);
+    let before = b.fc.status();
+    b.sending = false;
+    b.run(FLY, 100);
+    let st = b.fc.status();
+    assert_eq!(st.state, FlightState::FailsafeLevel);
+    assert_eq!(st.target_rad[0], 0.0);
+    assert_eq!(st.target_rad[1], 0.0);
+    assert!(before.target_rad[0] != 0.0 && before.target_rad[1] != 0.0);
+    let mean = |c: [u16; 4]| c.iter().map(|&v| f32::from(v)).sum::<f32>() / 4.0;
+    assert!(mean(st.compare) <= mean(before.compare) + 50.0, "{:?} vs {:?}", st.compare, before.compare);
+}
+
+#[test]
+fn a_short_link_loss_hands_control_back_to_the_sticks() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.sending = false;
+    b.run(FLY, 300);
+    assert_eq!(b.state(), FlightState::FailsafeLevel);
+    b.sending = true;
+    b.run(FLY, 200);
+    assert_eq!(b.state(), FlightState::Armed);
+    assert!(!motors_off(b.last.as_ref().unwrap()));
+}
+
+#[test]
+fn failsafe_pulses_inside_the_valid_window_are_a_radio_setting() {
+    // A receiver set to "hold" or to send its own failsafe pulses keeps the link good: the core
+    // cannot tell them from a pilot. Configure the receiver's failsafe as "no pulses" (then the
+    // rule above applies) or as throttle low: then the motors stop at once and the 5 s auto
+    // disarm follows, as this test shows.
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    let out = b.run(NEUTRAL, 10);
+    assert!(motors_off(&out));
+    assert_eq!(b.state(), FlightState::Armed);
+    b.run(NEUTRAL, 5 * TICKS_PER_S);
+    assert_eq!(b.state(), FlightState::Disarmed);
+}
+
+#[test]
+fn a_stuck_imu_in_flight_stops_the_motors_and_latches_a_fault() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.stuck_imu = true;
+    let out = b.run(FLY, 100);
+    assert_eq!(b.state(), FlightState::Fault);
+    assert!(motors_off(&out));
+    b.stuck_imu = false;
+    b.run(NEUTRAL, 100);
+    b.arm_attempt_expect_refused();
+}
+
+impl Bench {
+    fn arm_attempt_expect_refused(&mut self) {
+        self.run(ARM, 5 * TICKS_PER_S / 4);
+        self.run(NEUTRAL, 40);
+        assert_ne!(self.state(), FlightState::Armed);
+        assert!(motors_off(&self.run(FLY, 100)));
+    }
+}
+
+#[test]
+fn motors_stay_off_until_the_boot_calibration_passed() {
+    let mut b = Bench::new(Config::default());
+    for _ in 0..2 * TICKS_PER_S {
+        b.sticks_us = ARM;
+        let out = b.tick();
+        assert!(motors_off(&out));
+        assert_ne!(b.state(), FlightState::Armed);
+    }
+}
