@@ -15,7 +15,7 @@ use crate::ahrs::{Estimator, EstimatorConfig, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
 use crate::filter::{block_average, Biquad, BLOCK};
-use crate::imu::{BodyImu, CalibrationPhase, Calibrator, HealthMonitor, Offsets, RawImu, SensorFault};
+use crate::imu::{BodyImu, CalibrationPhase, Calibrator, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
@@ -99,6 +99,8 @@ pub struct Inner {
     offsets: Offsets,
     health: HealthMonitor,
     fault: Option<SensorFault>,
+    last_raw: RawImu,
+    missing_samples: u32,
     gyro_lpf: [Biquad; 3],
     fifo_k: usize,
     accel_fifo: [[f32; 3]; BLOCK],
@@ -158,6 +160,11 @@ impl FlightController {
         self.inner.tick_forced(imu, radio)
     }
 
+    /// One control tick when the sensor read failed (see [`Inner::tick_without_sample`]).
+    pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
+        self.inner.tick_without_sample(pulses)
+    }
+
     /// Run an outer step now and apply its result.
     pub fn run_outer(&mut self, job: &OuterJob) {
         let r = self.outer.step(job);
@@ -207,6 +214,8 @@ impl Inner {
             offsets: Offsets::UNCALIBRATED,
             health: HealthMonitor::default(),
             fault: None,
+            last_raw: RawImu::default(),
+            missing_samples: 0,
             gyro_lpf: [Biquad::new(cfg.gyro_filter); 3],
             fifo_k: 0,
             accel_fifo: [[0.0; 3]; BLOCK],
@@ -225,6 +234,23 @@ impl Inner {
 
     /// One control tick: the radio from capture pulses.
     pub fn tick(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
+        self.missing_samples = 0;
+        self.last_raw = imu;
+        self.tick_with(imu, pulses)
+    }
+
+    /// One control tick when the sensor read failed: the last sample is held for up to
+    /// [`MAX_MISSING_SAMPLES`] ticks (a single bus glitch must not drop the drone); after that
+    /// the sensor is faulty, the motors stop and the fault latches, as for any sensor fault.
+    pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
+        self.missing_samples = self.missing_samples.saturating_add(1);
+        if self.missing_samples > MAX_MISSING_SAMPLES {
+            self.fault.get_or_insert(SensorFault::NoData);
+        }
+        self.tick_with(self.last_raw, pulses)
+    }
+
+    fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
         let rc = self.cfg.rc;
         let mut cal_gesture = false;
         let radio = match self.cfg.supervisor {
@@ -337,7 +363,7 @@ impl Inner {
 
         // 6. Guard, last and unconditional: compare values come from here only.
         self.compare = self.motor_command.map(|c| cfg.mixer.to_compare(c));
-        if !self.decision.motors_enabled {
+        if !self.decision.motors_enabled || self.fault.is_some() {
             self.compare = [cfg.mixer.off_compare(); 4];
         }
 

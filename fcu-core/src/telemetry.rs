@@ -392,6 +392,7 @@ pub mod words {
             Some(SensorFault::NotFinite) => "not-finite",
             Some(SensorFault::OutOfRange) => "out-of-range",
             Some(SensorFault::Stuck) => "stuck",
+            Some(SensorFault::NoData) => "no-data",
         }
     }
 }

@@ -333,6 +333,28 @@ fn a_stuck_imu_in_flight_stops_the_motors_and_latches_a_fault() {
     b.arm_attempt_expect_refused();
 }
 
+#[test]
+fn a_single_failed_sensor_read_is_bridged_but_a_dead_bus_stops_the_motors() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    let pulses = b.decoder.take();
+    for _ in 0..fcu_core::imu::MAX_MISSING_SAMPLES {
+        let out = b.fc.tick_without_sample(&pulses);
+        assert!(!motors_off(&out));
+    }
+    assert_eq!(b.state(), FlightState::Armed);
+    b.run(FLY, 100);
+    for _ in 0..=fcu_core::imu::MAX_MISSING_SAMPLES {
+        b.fc.tick_without_sample(&pulses);
+    }
+    let out = b.run(FLY, 1);
+    assert_eq!(b.state(), FlightState::Fault);
+    assert_eq!(b.fc.status().fault, Some(fcu_core::imu::SensorFault::NoData));
+    assert!(motors_off(&out));
+}
+
 impl Bench {
     fn arm_attempt_expect_refused(&mut self) {
         self.run(ARM, 5 * TICKS_PER_S / 4);

@@ -19,18 +19,63 @@ fn flight_10_s_hover(profile: &str) {
     divan::black_box(log.ok());
 }
 
+/// A controller armed by the stick gesture and flying, with a noisy level IMU: the tick then
+/// runs the whole pipeline (radio, supervisor, filters, rate loop, mixer, guard).
+struct Flying {
+    fc: FlightController,
+    noise: u32,
+}
+
+impl Flying {
+    fn new(cfg: Config) -> Flying {
+        let mut f = Flying { fc: FlightController::new(cfg).unwrap_or_else(|e| panic!("{e}")), noise: 1 };
+        let neutral = [5862, 6151, 4000, 6397];
+        let arm = [4400, 4400, 4000, 7800];
+        let fly = [5862, 6151, 6400, 6397];
+        for (widths, ticks) in [(neutral, 2000), (arm, 1000), (neutral, 40), (fly, 400)] {
+            for _ in 0..ticks {
+                let (imu, pulses) = f.inputs(widths);
+                f.fc.step(imu, &pulses);
+            }
+        }
+        assert!(f.fc.status().state.motors_may_run(), "the benchmark must measure a flying tick");
+        f
+    }
+
+    fn inputs(&mut self, widths: [u16; 4]) -> (RawImu, PulseBatch) {
+        self.noise = self.noise.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let d = |shift: u32| ((self.noise >> shift) % 5) as i16 - 2;
+        let imu = RawImu { accel: [12 + d(3), -30 + d(7), 8197 + d(11)], gyro: [3 + d(15), -2 + d(19), 1 + d(23)] };
+        (imu, PulseBatch { width_counts: widths.map(Some), edge_seen: [true; 4] })
+    }
+}
+
+fn config(profile: &str) -> Config {
+    if profile == "reference" {
+        Config::reference()
+    } else {
+        Config::default()
+    }
+}
+
 #[divan::bench(args = ["default", "reference"])]
 fn one_tick(bencher: divan::Bencher, profile: &str) {
-    let cfg = if profile == "reference" { Config::reference() } else { Config::default() };
-    let mut fc = FlightController::new(cfg).unwrap_or_else(|e| panic!("{e}"));
-    let imu = RawImu { accel: [12, -30, 8197], gyro: [3, -2, 1] };
-    let pulses = PulseBatch::default();
-    // Past boot settling and calibration, so the tick runs the whole pipeline.
-    for _ in 0..2000 {
-        fc.step(imu, &pulses);
-    }
+    let mut f = Flying::new(config(profile));
     bencher.bench_local(|| {
-        let out = fc.tick(divan::black_box(imu), divan::black_box(&pulses));
+        let (imu, pulses) = f.inputs([5862, 6151, 6400, 6397]);
+        let out = f.fc.tick(divan::black_box(imu), divan::black_box(&pulses));
         divan::black_box(out.compare)
     });
+}
+
+#[divan::bench(args = ["default", "reference"])]
+fn one_outer_step(bencher: divan::Bencher, profile: &str) {
+    let mut f = Flying::new(config(profile));
+    let job = loop {
+        let (imu, pulses) = f.inputs([5862, 6151, 6400, 6397]);
+        if let Some(job) = f.fc.tick(imu, &pulses).outer_job {
+            break job;
+        }
+    };
+    bencher.bench_local(|| f.fc.run_outer(divan::black_box(&job)));
 }

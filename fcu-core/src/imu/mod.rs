@@ -322,7 +322,13 @@ pub enum SensorFault {
     NotFinite,
     OutOfRange,
     Stuck,
+    /// The bus delivered no sample for more than [`MAX_MISSING_SAMPLES`] ticks in a row.
+    NoData,
 }
+
+/// Missing samples (a failed bus read) bridged by holding the last one before the sensor is
+/// declared faulty: 3 ticks, under 4 ms, shorter than anything the airframe notices.
+pub const MAX_MISSING_SAMPLES: u32 = 3;
 
 /// Watches raw words for a stuck sensor and converted values for impossible ones.
 #[derive(Clone, Debug, Default)]

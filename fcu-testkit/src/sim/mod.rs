@@ -177,6 +177,7 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
     let mut plant = Plant::new(params.clone());
     let mut imu = ImuModel::new(ImuModelParams::default(), opts.seed);
     let mut radio = RadioModel::new(scenario.radio.clone(), opts.seed);
+    let mut air = Air::new(scenario.turbulence, opts.seed);
     let mut pilot = Pilot::default();
 
     let tick_hz = f64::from(cfg.timing.tick_hz());
@@ -226,7 +227,7 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
                     plant.carry(sub_s, [h.peak_rate_rad_s * ph.sin(), 0.5 * h.peak_rate_rad_s * ph.cos(), 0.0]);
                 }
                 None => {
-                    let mut dist = Disturbance::default();
+                    let mut dist = air.disturbance();
                     for g in &scenario.gusts {
                         if t >= g.start_s && t < g.start_s + g.duration_s {
                             for i in 0..3 {
@@ -241,6 +242,8 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
             }
             imu.step(sub_s, &plant.kinematics(), vibration);
         }
+
+        air.advance(tick_s);
 
         // 3. The flight controller's tick (and its outer step, inline).
         let raw = imu.read();
@@ -339,5 +342,42 @@ impl FlightLog {
             );
         }
         s
+    }
+}
+
+/// The scenario's turbulence as it evolves: first-order Gauss–Markov processes, advanced once
+/// per control tick (their correlation time is hundreds of ticks).
+struct Air {
+    turbulence: Option<scenario::Turbulence>,
+    rng: rng::Rng,
+    /// Wind east, north; torque about body X, Y (unit-variance states, scaled on use).
+    state: [f64; 4],
+}
+
+impl Air {
+    fn new(turbulence: Option<scenario::Turbulence>, seed: u64) -> Air {
+        Air { turbulence, rng: rng::Rng::fork(seed, 0x7475_7262), state: [0.0; 4] }
+    }
+
+    fn advance(&mut self, dt_s: f64) {
+        if let Some(t) = self.turbulence {
+            let a = (-dt_s / t.correlation_s).exp();
+            let b = (1.0 - a * a).sqrt();
+            for x in &mut self.state {
+                *x = a * *x + b * self.rng.gaussian();
+            }
+        }
+    }
+
+    fn disturbance(&self) -> Disturbance {
+        let Some(t) = self.turbulence else {
+            return Disturbance::default();
+        };
+        let [we, wn, tx, ty] = self.state;
+        Disturbance {
+            wind_earth_m_s: [t.wind_rms_m_s * we, t.wind_rms_m_s * wn, 0.0],
+            force_earth_n: [0.0; 3],
+            torque_body_nm: [t.torque_rms_nm * tx, t.torque_rms_nm * ty, 0.0],
+        }
     }
 }

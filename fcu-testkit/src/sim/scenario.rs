@@ -165,6 +165,23 @@ pub struct Gust {
     pub push: Disturbance,
 }
 
+/// Continuous turbulence: wind and a torque on roll and pitch, each a first-order Gauss–Markov
+/// process (random, correlated over `correlation_s`), the air a real hover never lacks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Turbulence {
+    /// RMS of each horizontal wind component, m/s.
+    pub wind_rms_m_s: f64,
+    /// RMS of the roll and pitch disturbance torque, N·m (uneven prop wash, ground effect).
+    pub torque_rms_nm: f64,
+    pub correlation_s: f64,
+}
+
+impl Turbulence {
+    /// Light air: 0.3 m/s wind, 1e-4 N·m (the torque a 1.5 mm shift of the centre of mass
+    /// gives at hover).
+    pub const LIGHT: Turbulence = Turbulence { wind_rms_m_s: 0.3, torque_rms_nm: 1.0e-4, correlation_s: 0.5 };
+}
+
 /// Someone holding the drone and rocking it (about body X and Y) — calibration under motion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HandMotion {
@@ -220,6 +237,7 @@ pub struct Scenario {
     pub duration_s: f64,
     pub timeline: Timeline,
     pub gusts: Vec<Gust>,
+    pub turbulence: Option<Turbulence>,
     pub hand: Option<HandMotion>,
     /// Per-motor thrust multiplier (a weak motor).
     pub motor_thrust_scale: [f64; 4],
@@ -305,6 +323,7 @@ fn base(name: &str, about: &str, duration_s: f64, tl: Timeline) -> Scenario {
         duration_s,
         timeline: tl,
         gusts: Vec::new(),
+        turbulence: None,
         hand: None,
         motor_thrust_scale: [1.0; 4],
         radio: RadioParams::default(),
@@ -332,7 +351,8 @@ pub fn by_name(name: &str) -> Option<Scenario> {
         "hover" => {
             let mut sc = Script::new();
             sc.standard().land_and_disarm(20.0);
-            let mut s = base("hover", "arm by gesture, hold 1 m for 15 s, land, disarm by gesture", 26.0, sc.tl);
+            let mut s = base("hover", "arm by gesture, hold 1 m for 15 s in light turbulence, land, disarm by gesture", 26.0, sc.tl);
+            s.turbulence = Some(Turbulence::LIGHT);
             s.hover_window_s = Some((8.0, 19.0));
             s.criteria = flight_criteria((8.0, 19.0), 1.0, 25.5);
             s.criteria.push(Criterion::TiltBelow { from_s: 8.0, to_s: 19.0, max_deg: 4.0 });
