@@ -149,11 +149,7 @@ impl Config {
             return Err(ConfigError::Calibration);
         }
         if let Some(h) = self.health {
-            let ok = h.stuck_ticks > 0
-                && h.accel_limit_mg.is_finite()
-                && h.accel_limit_mg > 0.0
-                && h.gyro_limit_mdps.is_finite()
-                && h.gyro_limit_mdps > 0.0;
+            let ok = h.stuck_ticks > 0 && h.accel_limit_mg > 0 && h.gyro_limit_mdps > 0;
             if !ok {
                 return Err(ConfigError::Health);
             }
@@ -197,7 +193,7 @@ impl Default for Config {
                 ..r.calibration
             },
             // §4: non-finite, impossible or stuck (100 ms) sensor values are faults.
-            health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100.0, gyro_limit_mdps: 2_300_000.0 }),
+            health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 }),
             gyro_filter: r.gyro_filter,
             // D4 and D5: a VQF-style estimator (exact normalisation, accelerometer low-passed
             // in a quasi-inertial frame, rest detection, gyro bias estimation); see `ahrs::vqf`.

@@ -192,6 +192,12 @@ impl RateLoop {
         let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(demand_rad_s.iter().zip(rate_rad_s)).zip(saturation);
         for (o, (((st, g), (s1, rate)), sat)) in out.iter_mut().zip(per_axis) {
             let e = s1 - rate;
+            if !e.is_finite() {
+                // A non-finite demand or rate (either makes `e` so) must not enter the state:
+                // no correction on this axis this tick, the state holds.
+                *o = 0.0;
+                continue;
+            }
             let blocked = cfg.anti_windup && ((e > 0.0 && sat.positive) || (e < 0.0 && sat.negative));
             let integ_before = st.integ;
             if !blocked {
@@ -217,10 +223,6 @@ impl RateLoop {
                 unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
             }
             *o = clamp_symmetric(unclamped, g.output_limit);
-            if !st.integ.is_finite() || !st.d.is_finite() || !st.prev_error.is_finite() || !st.prev_rate.is_finite() {
-                // A non-finite sample must not live on in the state.
-                *st = RateAxis::default();
-            }
         }
         out
     }
@@ -233,6 +235,7 @@ impl RateLoop {
 
 /// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`.
 /// NaN passes through unchanged, as in C; the mixer's final clamp catches it.
+#[inline(always)]
 fn clamp_symmetric(v: f32, lim: f32) -> f32 {
     if v > lim {
         lim

@@ -90,13 +90,6 @@ impl Biquad {
         self.y1 = y;
         self.y2 = y;
     }
-
-    /// Recover from a non-finite state so one bad input cannot poison the filter forever.
-    pub fn sanitize(&mut self) {
-        if !(self.x1.is_finite() && self.x2.is_finite() && self.y1.is_finite() && self.y2.is_finite()) {
-            self.reset_to(0.0);
-        }
-    }
 }
 
 /// First-order low-pass (PT1) in the reference's EMA form `y += (x − y)·k`.

@@ -16,7 +16,7 @@ use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
 use crate::filter::{block_average, Biquad, BLOCK};
 use crate::imu::{BodyImu, CalibrationPhase, Calibrator, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
-use crate::math::{quat_to_tilt, tilt_angle_rad, Quat, Tilt};
+use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
 
@@ -107,6 +107,10 @@ pub struct Inner {
     gyro_fifo: [[f32; 3]; BLOCK],
     gyro_rad_s: [f32; 3],
     yaw_est_rad: f32,
+    /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
+    tilt_rad: f32,
+    /// `cfg.timing.tick_dt_s` rounded to f32 once (the f64 → f32 conversion is a library call).
+    tick_dt_s: f32,
     yaw_target_rad: f32,
     yaw_target_reset: bool,
     rate_loop: RateLoop,
@@ -222,6 +226,8 @@ impl Inner {
             gyro_fifo: [[0.0; 3]; BLOCK],
             gyro_rad_s: [0.0; 3],
             yaw_est_rad: 0.0,
+            tilt_rad: 0.0,
+            tick_dt_s: cfg.timing.tick_dt_s as f32,
             yaw_target_rad: 0.0,
             yaw_target_reset: false,
             rate_loop: RateLoop::default(),
@@ -251,15 +257,15 @@ impl Inner {
     }
 
     fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
-        let rc = self.cfg.rc;
+        let rc = &self.cfg.rc;
         let mut cal_gesture = false;
         let radio = match self.cfg.supervisor {
             SupervisorConfig::Reference => {
                 let supervisor = &mut self.supervisor;
                 // The reference evaluates its gestures after every single-channel update.
-                self.receiver.update(&rc, pulses, |s| cal_gesture |= supervisor.reference_gesture(rc.gesture(s)))
+                self.receiver.update(rc, pulses, |s| cal_gesture |= supervisor.reference_gesture(rc.gesture(s)))
             }
-            SupervisorConfig::Safe(_) => self.receiver.update(&rc, pulses, |_| {}),
+            SupervisorConfig::Safe(_) => self.receiver.update(rc, pulses, |_| {}),
         };
         self.run(imu, radio, None, cal_gesture)
     }
@@ -273,14 +279,18 @@ impl Inner {
     /// Take in an outer step's result (at the start of the next tick in the firmware).
     pub fn apply_outer(&mut self, r: &OuterResult) {
         self.outer = *r;
+        // Only the safe supervisor's arming check reads it (sqrt + acos: ~300 instructions).
+        if let SupervisorConfig::Safe(_) = self.cfg.supervisor {
+            self.tilt_rad = tilt_angle_rad(r.quat);
+        }
         self.yaw_target_rad = r.target_rad[2];
     }
 
     /// The pipeline, top to bottom. Every decision that touches a motor is in this function.
     fn run(&mut self, imu: RawImu, radio: RadioState, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
-        let cfg = self.cfg;
+        // No `let cfg = self.cfg`: copying the whole Config costs ~350 instructions per tick.
         self.radio = radio;
-        let body = cfg.imu.to_body(imu);
+        let body = self.cfg.imu.to_body(imu);
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
         self.check_health(imu, &body);
@@ -292,7 +302,7 @@ impl Inner {
             self.cal_pending = true;
         }
         let sticks = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
-        let throttle_low = cfg.rc.throttle_low(&sticks);
+        let throttle_low = self.cfg.rc.throttle_low(&sticks);
 
         // 2. Start-up calibration: nothing else runs until the first offsets exist.
         if self.calibrator.in_startup() {
@@ -311,15 +321,27 @@ impl Inner {
             self.calibrator.request();
         }
         self.cal_pending = false;
-        if let Some(o) = self.calibrator.feed(body) {
-            self.offsets = o;
+        if self.calibrator.is_averaging() {
+            if let Some(o) = self.calibrator.feed(body) {
+                self.offsets = o;
+            }
         }
         let s = self.offsets.apply(body);
         let slot = self.fifo_k.saturating_sub(1).min(BLOCK - 1);
         let mut gyro_f = [0.0f32; 3];
         for ((g, f), raw) in gyro_f.iter_mut().zip(self.gyro_lpf.iter_mut()).zip(s.gyro_mdps) {
             *g = f.update(raw as f32);
-            f.sanitize();
+        }
+        if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
+            // Integer inputs cannot make this happen; if it ever did, restart the filters and
+            // (in the product) treat it as the sensor fault it would be.
+            for f in &mut self.gyro_lpf {
+                f.reset_to(0.0);
+            }
+            gyro_f = [0.0; 3];
+            if self.cfg.health.is_some() {
+                self.fault.get_or_insert(SensorFault::NotFinite);
+            }
         }
         if let (Some(a), Some(g)) = (self.accel_fifo.get_mut(slot), self.gyro_fifo.get_mut(slot)) {
             *a = s.accel_mg.map(|v| v as f32);
@@ -330,13 +352,13 @@ impl Inner {
             self.fifo_k = 0;
         }
         self.gyro_rad_s =
-            gyro_f.map(|g| if cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
+            gyro_f.map(|g| if self.cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
         // 4. Yaw: gyro-integrated heading, reset with the target while the throttle is low.
-        self.yaw_est_rad = if cfg.reference_arithmetic {
-            (f64::from(self.yaw_est_rad) + f64::from(self.gyro_rad_s[2]) * cfg.timing.tick_dt_s) as f32
+        self.yaw_est_rad = if self.cfg.reference_arithmetic {
+            (f64::from(self.yaw_est_rad) + f64::from(self.gyro_rad_s[2]) * self.cfg.timing.tick_dt_s) as f32
         } else {
-            self.yaw_est_rad + self.gyro_rad_s[2] * cfg.timing.tick_dt_s as f32
+            self.yaw_est_rad + self.gyro_rad_s[2] * self.tick_dt_s
         };
         if !self.yaw_est_rad.is_finite() {
             self.yaw_est_rad = 0.0;
@@ -349,8 +371,8 @@ impl Inner {
 
         // 5. Rate loop and mixer, only while the supervisor lets the motors run.
         if self.decision.motors_enabled {
-            let s2 = self.rate_loop.step(&cfg.control, self.outer.rate_demand_rad_s, self.gyro_rad_s, throttle_low, self.saturation);
-            let (cmd, sat) = cfg.mixer.mix(cfg.mixer.throttle_counts(sticks.thr), s2);
+            let s2 = self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, self.gyro_rad_s, throttle_low, self.saturation);
+            let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), s2);
             self.motor_command = cmd;
             self.saturation = sat;
         } else {
@@ -362,31 +384,35 @@ impl Inner {
         }
 
         // 6. Guard, last and unconditional: compare values come from here only.
-        self.compare = self.motor_command.map(|c| cfg.mixer.to_compare(c));
+        self.compare = self.motor_command.map(|c| self.cfg.mixer.to_compare(c));
         if !self.decision.motors_enabled || self.fault.is_some() {
-            self.compare = [cfg.mixer.off_compare(); 4];
+            self.compare = [self.cfg.mixer.off_compare(); 4];
         }
 
-        let outer_job = job_due.then(|| {
-            let job = OuterJob {
-                accel_mg: self.accel_fifo,
-                gyro_mdps: self.gyro_fifo,
-                sticks,
-                throttle_low,
-                yaw_est_rad: self.yaw_est_rad,
-                yaw_target_reset: self.yaw_target_reset,
-            };
+        // Built in place: a 144-byte `Option<OuterJob>` moved into the output was copied
+        // (memcpy) on every tick, job or not.
+        let yaw_target_reset = self.yaw_target_reset;
+        if job_due {
             self.yaw_target_reset = false;
-            job
-        });
-        TickOutput { compare: self.compare, outer_job }
+            TickOutput {
+                compare: self.compare,
+                outer_job: Some(OuterJob {
+                    accel_mg: self.accel_fifo,
+                    gyro_mdps: self.gyro_fifo,
+                    sticks,
+                    throttle_low,
+                    yaw_est_rad: self.yaw_est_rad,
+                    yaw_target_reset,
+                }),
+            }
+        } else {
+            TickOutput { compare: self.compare, outer_job: None }
+        }
     }
 
     fn check_health(&mut self, raw: RawImu, body: &BodyImu) {
-        if let Some(h) = self.cfg.health {
-            let accel = body.accel_mg.map(|v| v as f32);
-            let gyro = body.gyro_mdps.map(|v| v as f32);
-            if let Some(f) = self.health.check(&h, raw, accel, gyro) {
+        if let Some(h) = &self.cfg.health {
+            if let Some(f) = self.health.check(h, raw, body) {
                 self.fault.get_or_insert(f);
             }
         }
@@ -406,7 +432,7 @@ impl Inner {
                     calibrated: self.calibrator.has_passed(),
                     calibrating,
                     sensor_fault: self.fault,
-                    tilt_rad: tilt_angle_rad(self.outer.quat),
+                    tilt_rad: self.tilt_rad,
                 };
                 self.supervisor.step(&safety, &inputs)
             }
@@ -461,7 +487,7 @@ impl Outer {
         let gyro = block_average(&job.gyro_mdps, self.reference_arithmetic);
         self.estimator.update(accel, gyro, job.throttle_low);
         let quat = self.estimator.quat();
-        let tilt = quat_to_tilt(quat);
+        let tilt = quat_to_tilt_with(quat, self.reference_arithmetic);
 
         let (pitch_target, roll_target) = self.rc.tilt_targets(&job.sticks);
         if job.yaw_target_reset {

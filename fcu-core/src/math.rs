@@ -179,6 +179,11 @@ pub struct Tilt {
 /// exceeds 1 near ±90° roll gives ±π/2 instead of NaN (the only rows of `quat2euler.csv` where
 /// this port differs, on purpose).
 pub fn quat_to_tilt(q: Quat) -> Tilt {
+    quat_to_tilt_with(q, true)
+}
+
+/// `quat_to_tilt`, or with `reference_arithmetic == false` the same expressions in f32.
+pub fn quat_to_tilt_with(q: Quat, reference_arithmetic: bool) -> Tilt {
     let (q0, q1, q2, q3) = (q.w, q.x, q.y, q.z);
     let q0q0 = q0 * q0;
     let q1q1 = q1 * q1;
@@ -191,6 +196,10 @@ pub fn quat_to_tilt(q: Quat) -> Tilt {
     let dq2q3 = dq2 * q3;
     let dq0q2 = dq0 * q2;
     let dq1q3 = dq1 * q3;
+    if !reference_arithmetic {
+        let pitch = libm::atan2f(dq0q1 + dq2q3, ((q0q0 + q3q3) - q1q1) - q2q2);
+        return Tilt { pitch_rad: pitch, roll_rad: libm::asinf((dq0q2 - dq1q3).clamp(-1.0, 1.0)) };
+    }
     let pitch = libm::atan2(f64::from(dq0q1 + dq2q3), f64::from(((q0q0 + q3q3) - q1q1) - q2q2));
     let s = f64::from(dq0q2 - dq1q3).clamp(-1.0, 1.0);
     Tilt { pitch_rad: pitch as f32, roll_rad: libm::asin(s) as f32 }

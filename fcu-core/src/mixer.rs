@@ -83,7 +83,10 @@ impl MixerConfig {
 
     /// The reference's `(int16)(slope·gTHR + offset)`, saturating instead of undefined.
     pub fn throttle_counts(&self, throttle: i16) -> i16 {
-        (self.throttle_slope * f32::from(throttle) + self.throttle_offset) as i16
+        // Through i32 (one native conversion) and a saturate to 16 bits, where `as i16` from
+        // f32 costs two float range checks; the result is the same for every input.
+        let v = (self.throttle_slope * f32::from(throttle) + self.throttle_offset) as i32;
+        v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
     }
 
     /// Distribute throttle and commands to the four motors. Returns the motor commands
@@ -101,8 +104,13 @@ impl MixerConfig {
 
     fn mix_attitude_priority(&self, thr: f32, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
         let rel = MIX.map(|row| row[0] * s[0] + row[1] * s[1] + row[2] * s[2]);
-        let lo_rel = rel.iter().fold(f32::INFINITY, |a, &b| a.min(b));
-        let hi_rel = rel.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        // Compare-and-select, not f32::min/max: the M4's FPU has no VMINNM/VMAXNM, so those are
+        // calls to fminf/fmaxf (~12 instructions each). A NaN is caught by `spread` below.
+        let [r0, r1, r2, r3] = rel;
+        let lower = |a: f32, b: f32| if b < a { b } else { a };
+        let upper = |a: f32, b: f32| if b > a { b } else { a };
+        let lo_rel = lower(lower(r0, r1), lower(r2, r3));
+        let hi_rel = upper(upper(r0, r1), upper(r2, r3));
         let range = self.max_compare - self.min_compare;
         let spread = hi_rel - lo_rel;
         let mut sat = [Saturation::default(); 3];
@@ -120,7 +128,8 @@ impl MixerConfig {
             // Shift the throttle (never above what fits) so no motor clips.
             let hi_thr = self.max_compare - hi_rel;
             let lo_thr = self.min_compare - lo_rel;
-            (1.0, thr.min(hi_thr).max(lo_thr))
+            let t = if thr < hi_thr { thr } else { hi_thr };
+            (1.0, if t > lo_thr { t } else { lo_thr })
         };
         (rel.map(|r| base + r * scale), sat)
     }
@@ -135,7 +144,9 @@ impl MixerConfig {
         } else {
             self.min_compare
         };
-        v as u16
+        // `v` is inside the validated range (0 ≤ min < max ≤ 65536): through i32, a single
+        // native conversion, where a direct `as u16` adds two range checks per motor.
+        v as i32 as u16
     }
 }
 

@@ -355,24 +355,30 @@ impl Receiver {
     /// Take in one tick's pulses. `on_stick_update` runs after every single-channel update
     /// with the sticks as they are then (the reference evaluates its gestures there).
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
-        if batch.edge_seen.iter().any(|&e| e) {
-            self.ticks_since_edge = 0;
-        } else {
-            self.ticks_since_edge = self.ticks_since_edge.saturating_add(1);
-        }
-        for ((age, width), channel) in self.channel_age.iter_mut().zip(batch.width_counts).zip(0..) {
-            match width {
-                Some(w) => {
-                    *age = 0;
-                    cfg.apply_width(&mut self.sticks, channel, w);
-                    on_stick_update(&self.sticks);
-                }
-                None => *age = age.saturating_add(1),
+        let [e0, e1, e2, e3] = batch.edge_seen;
+        self.ticks_since_edge = if e0 | e1 | e2 | e3 { 0 } else { self.ticks_since_edge.saturating_add(1) };
+        // Written out per channel (in channel order, as the reference's gestures need): with a
+        // constant channel each width-to-stick folds to one subtraction. A loop over the four
+        // cost the 800 Hz tick a hundred instructions on the Cortex-M4.
+        let [w0, w1, w2, w3] = batch.width_counts;
+        let [a0, a1, a2, a3] = &mut self.channel_age;
+        let sticks = &mut self.sticks;
+        let mut channel = |age: &mut u32, width: Option<u16>, index: usize| match width {
+            Some(w) => {
+                *age = 0;
+                cfg.apply_width(sticks, index, w);
+                on_stick_update(sticks);
             }
-        }
-        let all_valid = self.channel_age.iter().all(|&a| a < cfg.link_timeout_ticks);
+            None => *age = age.saturating_add(1),
+        };
+        channel(a0, w0, AIL);
+        channel(a1, w1, ELE);
+        channel(a2, w2, THR);
+        channel(a3, w3, RUD);
+        let timeout = cfg.link_timeout_ticks;
+        let all_valid = (*a0 < timeout) & (*a1 < timeout) & (*a2 < timeout) & (*a3 < timeout);
         self.link = match cfg.pulses {
-            PulseRules::Reference { .. } => self.ticks_since_edge < cfg.link_timeout_ticks,
+            PulseRules::Reference { .. } => self.ticks_since_edge < timeout,
             PulseRules::Validated { .. } => all_valid,
         };
         RadioState { sticks: self.sticks, link: self.link, all_channels_valid: all_valid }

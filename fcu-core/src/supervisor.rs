@@ -319,7 +319,6 @@ impl Supervisor {
             self.lost_ticks = self.lost_ticks.saturating_add(1);
         }
         let gesture = if i.link { i.gesture } else { None };
-        let blockers = self.blockers(cfg, i);
         let mut request_calibration = false;
 
         let next = match self.state {
@@ -338,14 +337,14 @@ impl Supervisor {
                     request_calibration = true;
                     FlightState::Calibrating
                 }
-                Some(Gesture::Arm) if self.released && without(blockers, Blocker::GestureNotReleased).is_empty() => {
+                Some(Gesture::Arm) if self.released && without(self.blockers(cfg, i), Blocker::GestureNotReleased).is_empty() => {
                     self.hold_ticks = 1;
                     FlightState::Arming
                 }
                 _ => FlightState::Disarmed,
             },
             FlightState::Arming => {
-                let others = without(blockers, Blocker::GestureNotReleased);
+                let others = without(self.blockers(cfg, i), Blocker::GestureNotReleased);
                 if gesture == Some(Gesture::Arm) {
                     self.hold_ticks = self.hold_ticks.saturating_add(1);
                     if others.is_empty() {
@@ -422,7 +421,9 @@ impl Supervisor {
             motors_enabled: next.motors_may_run(),
             failsafe_throttle: (next == FlightState::FailsafeLevel).then_some(self.last_good_throttle),
             request_calibration,
-            blockers: self.blockers(cfg, i),
+            // Blockers say why arming is refused; armed, there is nothing to refuse (and the
+            // check would cost the flying tick ~60 instructions for nothing).
+            blockers: if next == FlightState::Armed { Blockers::default() } else { self.blockers(cfg, i) },
         }
     }
 }

@@ -46,14 +46,21 @@ impl Mount {
         self.sign.iter().all(|&s| s == 1 || s == -1)
     }
 
-    /// Apply to an integer vector (a valid mount never fails; an invalid one reads 0).
-    pub fn apply_i32(&self, v: [i32; 3]) -> [i32; 3] {
-        let mut out = [0i32; 3];
-        for ((o, &src), &sign) in out.iter_mut().zip(&self.source).zip(&self.sign) {
-            let x = v.get(usize::from(src)).copied().unwrap_or(0);
-            *o = if sign < 0 { x.wrapping_neg() } else { x };
-        }
-        out
+    /// The driver's conversion and the mount in one pass: body axis `i` is
+    /// `trunc(raw[source[i]] · k)` with the sign of axis `i`. The sign rides on the sensitivity:
+    /// f32 negation is exact and truncation is odd, so `trunc(x · −k) = −trunc(x · k)`, bit for
+    /// bit what converting first and negating after gives (as the reference does).
+    pub fn convert(&self, raw: [i16; 3], k: f32) -> [i32; 3] {
+        let [r0, r1, r2] = raw;
+        // A fourth slot so `source & 3` always indexes inside: no bounds check, no branch.
+        let w = [r0, r1, r2, 0];
+        let axis = |src: u8, sign: i8| -> i32 {
+            let x = f32::from(w.get(usize::from(src & 3)).copied().unwrap_or(0));
+            (x * if sign < 0 { -k } else { k }) as i32
+        };
+        let [s0, s1, s2] = self.source;
+        let [g0, g1, g2] = self.sign;
+        [axis(s0, g0), axis(s1, g1), axis(s2, g2)]
     }
 
     /// Apply to a float vector.
@@ -94,10 +101,9 @@ impl ImuConfig {
     /// Driver conversion and mount: `trunc(raw·sensitivity)` in f32, then the mount.
     /// A saturating float→int cast keeps any sensitivity from producing undefined values.
     pub fn to_body(&self, raw: RawImu) -> BodyImu {
-        let conv = |w: [i16; 3], k: f32| -> [i32; 3] { w.map(|r| (f32::from(r) * k) as i32) };
         BodyImu {
-            accel_mg: self.mount.apply_i32(conv(raw.accel, self.accel_mg_per_lsb)),
-            gyro_mdps: self.mount.apply_i32(conv(raw.gyro, self.gyro_mdps_per_lsb)),
+            accel_mg: self.mount.convert(raw.accel, self.accel_mg_per_lsb),
+            gyro_mdps: self.mount.convert(raw.gyro, self.gyro_mdps_per_lsb),
         }
     }
 }
@@ -312,8 +318,8 @@ pub struct HealthConfig {
     pub stuck_ticks: u32,
     /// Converted values beyond these magnitudes are out of range (a wrong full scale or a
     /// corrupt read; the LSM6DSL at ±4 g / ±2000 dps cannot produce them).
-    pub accel_limit_mg: f32,
-    pub gyro_limit_mdps: f32,
+    pub accel_limit_mg: u32,
+    pub gyro_limit_mdps: u32,
 }
 
 /// Why the sensor was declared faulty.
@@ -338,17 +344,21 @@ pub struct HealthMonitor {
 }
 
 impl HealthMonitor {
-    pub fn check(&mut self, cfg: &HealthConfig, raw: RawImu, accel_mg: [f32; 3], gyro_mdps: [f32; 3]) -> Option<SensorFault> {
+    /// Check one reading: its raw words (stuck?) and its converted values (possible?). The
+    /// converted values are integers, so they are always finite; a non-finite value can only
+    /// appear later, in the filters, which report it as [`SensorFault::NotFinite`] themselves.
+    pub fn check(&mut self, cfg: &HealthConfig, raw: RawImu, body: &BodyImu) -> Option<SensorFault> {
         if self.last == Some(raw) {
             self.same_count = self.same_count.saturating_add(1);
         } else {
             self.same_count = 0;
             self.last = Some(raw);
         }
-        if !(accel_mg.iter().chain(&gyro_mdps).all(|v| v.is_finite())) {
-            return Some(SensorFault::NotFinite);
-        }
-        if accel_mg.iter().any(|v| v.abs() > cfg.accel_limit_mg) || gyro_mdps.iter().any(|v| v.abs() > cfg.gyro_limit_mdps) {
+        let over = |v: &[i32; 3], limit: u32| {
+            let [x, y, z] = *v;
+            (x.unsigned_abs() > limit) | (y.unsigned_abs() > limit) | (z.unsigned_abs() > limit)
+        };
+        if over(&body.accel_mg, cfg.accel_limit_mg) || over(&body.gyro_mdps, cfg.gyro_limit_mdps) {
             return Some(SensorFault::OutOfRange);
         }
         if self.same_count >= cfg.stuck_ticks {
@@ -374,8 +384,23 @@ mod tests {
     fn mount_mode_3_is_a_rotation_about_z() {
         let m = Mount::STEVAL_FCU001;
         assert!(m.is_valid());
-        assert_eq!(m.apply_i32([1, 2, 3]), [-2, 1, 3]);
+        assert_eq!(m.convert([1, 2, 3], 1.0), [-2, 1, 3]);
         assert_eq!(m.body_to_sensor_f32(m.apply_f32([1.0, 2.0, 3.0])), [1.0, 2.0, 3.0]);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn converting_with_the_sign_on_the_sensitivity_equals_converting_then_negating(
+            raw in proptest::array::uniform3(proptest::num::i16::ANY),
+            gyro in proptest::bool::ANY,
+        ) {
+            // The reference converts each sensor axis, then remaps with X = −Y: the one-pass
+            // conversion must give the same integers for every possible word.
+            let k = if gyro { 70.0f32 } else { 0.122f32 };
+            let conv = raw.map(|r| (f32::from(r) * k) as i32);
+            let reference = [-conv[1], conv[0], conv[2]];
+            proptest::prop_assert_eq!(Mount::STEVAL_FCU001.convert(raw, k), reference);
+        }
     }
 
     #[test]
@@ -433,13 +458,27 @@ mod tests {
 
     #[test]
     fn a_stuck_sensor_is_reported_after_the_configured_ticks() {
-        let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100.0, gyro_limit_mdps: 2.3e6 };
+        let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
         let mut h = HealthMonitor::default();
         let raw = RawImu { accel: [1, 2, 3], gyro: [4, 5, 6] };
+        let body = ImuConfig::REFERENCE.to_body(raw);
         for _ in 0..3 {
-            assert_eq!(h.check(&cfg, raw, [0.0; 3], [0.0; 3]), None);
+            assert_eq!(h.check(&cfg, raw, &body), None);
         }
-        assert_eq!(h.check(&cfg, raw, [0.0; 3], [0.0; 3]), Some(SensorFault::Stuck));
-        assert_eq!(h.check(&cfg, raw, [f32::NAN, 0.0, 0.0], [0.0; 3]), Some(SensorFault::NotFinite));
+        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::Stuck));
+        let other = RawImu { accel: [1, 2, 4], gyro: [4, 5, 6] };
+        assert_eq!(h.check(&cfg, other, &body), None);
+    }
+
+    #[test]
+    fn an_impossible_value_is_out_of_range() {
+        // A ±4 g sensor cannot say 5 g: a wrong full scale or a corrupt read.
+        let cfg = HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
+        let mut h = HealthMonitor::default();
+        let raw = RawImu::default();
+        let body = BodyImu { accel_mg: [0, -5000, 1000], gyro_mdps: [0; 3] };
+        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::OutOfRange));
+        let body = BodyImu { accel_mg: [0, 0, 1000], gyro_mdps: [i32::MIN, 0, 0] };
+        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::OutOfRange));
     }
 }

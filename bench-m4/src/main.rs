@@ -1,0 +1,366 @@
+//! Instructions per control tick and per outer step of the real `fcu_core::FlightController`,
+//! on a Cortex-M4 under QEMU (product.md §8).
+//!
+//! QEMU with `-icount shift=N` advances virtual time by exactly 2^N ns per executed instruction,
+//! and SysTick (core clock) counts virtual time, so a SysTick difference is an instruction count
+//! times a fixed factor. The factor is not assumed: it is calibrated at start-up with a loop of a
+//! known number of instructions, so the bench gives instructions on any machine and shift.
+//!
+//! Both profiles fly the same deterministic recording: level IMU with noise, radio pulses on all
+//! four channels every tick, boot settling and calibration, the arm gesture held then released,
+//! then armed flight with the throttle up and small stick motions. The statistics cover only the
+//! armed flight window; the earlier phases are printed separately for information.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use core::sync::atomic::{compiler_fence, Ordering};
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hprintln};
+use fcu_core::flight::{FlightController, OuterJob, TickOutput};
+use fcu_core::imu::RawImu;
+use fcu_core::rc::PulseBatch;
+use fcu_core::supervisor::FlightState;
+use fcu_core::Config;
+
+/// SysTick is a 24-bit down-counter.
+const SYST_MASK: u32 = 0x00FF_FFFF;
+
+/// The recording, in control ticks (800 per second in the default profile).
+const TICKS: usize = 7000;
+/// Boot settling (800 ticks) and the start-up calibration (800 samples) are over by tick 1601,
+/// and the safe supervisor's boot settling (1600 ticks) too, so the gesture starts after both.
+const ARM_START: usize = 1800;
+/// The arm gesture is held 1000 ticks (the safe supervisor wants 800), then released.
+const ARM_END: usize = 2800;
+/// Throttle up: the motors run from here.
+const FLY_START: usize = 3000;
+/// The statistics start a quarter second after throttle-up, once the rate loop's integrators
+/// and the D low-pass have left the throttle step behind: steady flight is what the budget is for.
+const MEASURE_START: usize = 3200;
+/// Every fifth tick hands out an outer job.
+const OUTER_MAX: usize = TICKS / 5 + 1;
+
+/// Radio widths, TIM2 counts of 0.25 µs (rc.rs: RcConfig::REFERENCE centres).
+const AIL_CENTER: i32 = 5862;
+const ELE_CENTER: i32 = 6151;
+const RUD_CENTER: i32 = 6397;
+/// At or below the throttle bottom (4450) the stick reads 0: "throttle low" and the gestures.
+const THR_LOW: i32 = 4400;
+/// 1550 counts above the bottom: mid throttle, far from both the cut and saturation.
+const THR_FLY: i32 = 6000;
+/// Beyond the gesture threshold (1200) with margin, still a valid pulse (3200..=8800).
+const GESTURE_DEFLECTION: i32 = 1500;
+
+/// Level board at rest: +1 g on sensor Z at 0.122 mg/LSB.
+const ONE_G_LSB: i16 = 8197;
+
+/// A tiny deterministic noise source (Numerical Recipes LCG): the same inputs on every run.
+struct Lcg(u32);
+
+impl Lcg {
+    fn next(&mut self) -> u32 {
+        self.0 = self.0.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        self.0
+    }
+
+    /// Uniform in `-amp..=amp` (from the high bits, the LCG's good ones).
+    fn noise(&mut self, amp: i16) -> i16 {
+        let span = u32::from(amp.unsigned_abs()) * 2 + 1;
+        ((self.next() >> 16) % span) as i16 - amp
+    }
+}
+
+/// The IMU sample of one tick: level and still, a few LSB of noise and a small gyro bias, so the
+/// stuck-sensor check never fires and the filters see realistic, changing values.
+fn imu_sample(lcg: &mut Lcg) -> RawImu {
+    let bias = [3, -2, 1];
+    RawImu {
+        accel: [lcg.noise(20), lcg.noise(20), ONE_G_LSB + lcg.noise(20)],
+        gyro: [bias[0] + lcg.noise(4), bias[1] + lcg.noise(4), bias[2] + lcg.noise(4)],
+    }
+}
+
+/// A triangle wave in `-amp..=amp` with the given period in ticks.
+fn triangle(k: usize, period: usize, amp: i32) -> i32 {
+    let p = period.max(2);
+    let phase = (k % p) as i32;
+    let half = (p / 2) as i32;
+    let up = if phase < half { phase } else { 2 * half - phase };
+    amp * (2 * up - half) / half.max(1)
+}
+
+/// The four widths of tick `k` (AIL, ELE, THR, RUD): centred with the throttle low, then the
+/// arm gesture, then released, then flying with slow stick motions (the yaw one reaching past
+/// the 600-count dead band, so the proportional yaw path runs too).
+fn widths(k: usize) -> [u16; 4] {
+    let w = if k < ARM_START {
+        [AIL_CENTER, ELE_CENTER, THR_LOW, RUD_CENTER]
+    } else if k < ARM_END {
+        [AIL_CENTER - GESTURE_DEFLECTION, ELE_CENTER - GESTURE_DEFLECTION, THR_LOW, RUD_CENTER + GESTURE_DEFLECTION]
+    } else if k < FLY_START {
+        [AIL_CENTER, ELE_CENTER, THR_LOW, RUD_CENTER]
+    } else {
+        [
+            AIL_CENTER + triangle(k, 1200, 150),
+            ELE_CENTER + triangle(k, 1600, 150),
+            THR_FLY + triangle(k, 2000, 100),
+            RUD_CENTER + triangle(k, 2400, 700),
+        ]
+    };
+    // Every width above is inside 3200..=8800 by construction; the clamp only keeps the cast
+    // honest if a constant is ever edited.
+    w.map(|v| v.clamp(3200, 8800) as u16)
+}
+
+/// What a 50 Hz PWM receiver delivers in tick `k`: each channel's pulse once per 20 ms frame
+/// (16 ticks), rising one tick and falling the next, the four channels two ticks apart as a
+/// receiver sends them one after the other. Most ticks therefore carry no pulse at all.
+fn pulses(k: usize) -> PulseBatch {
+    let w = widths(k);
+    let phase = k % 16;
+    let mut b = PulseBatch::default();
+    for (c, ((width, out), seen)) in w.iter().zip(b.width_counts.iter_mut()).zip(b.edge_seen.iter_mut()).enumerate() {
+        let rise = 2 * c;
+        if phase == rise + 1 {
+            *out = Some(*width);
+        }
+        *seen = phase == rise || phase == rise + 1;
+    }
+    b
+}
+
+/// Counts to instructions: the calibrated factor and the harness's own cost.
+#[derive(Clone, Copy)]
+struct Calibration {
+    instr_per_count: f32,
+    /// Instructions the measurement itself adds (CVR reads, an empty indirect call).
+    overhead_instr: f32,
+}
+
+impl Calibration {
+    fn instructions(&self, counts: u32) -> u32 {
+        let i = counts as f32 * self.instr_per_count - self.overhead_instr;
+        if i > 0.0 {
+            (i + 0.5) as u32
+        } else {
+            0
+        }
+    }
+}
+
+/// SysTick counts spent in `f`. The fences keep the compiler from moving memory accesses across
+/// the CVR reads; `f` is always reached through an opaque function pointer, so nothing of the
+/// measured code can be scheduled outside the window either.
+#[inline(always)]
+fn counts<R>(f: impl FnOnce() -> R) -> (R, u32) {
+    compiler_fence(Ordering::SeqCst);
+    let t0 = SYST::get_current();
+    compiler_fence(Ordering::SeqCst);
+    let r = f();
+    compiler_fence(Ordering::SeqCst);
+    let t1 = SYST::get_current();
+    compiler_fence(Ordering::SeqCst);
+    // A down-counter: start minus end, modulo the 24-bit wrap (one wrap is ~100 M instructions
+    // at shift=0, far more than any call here).
+    (r, t0.wrapping_sub(t1) & SYST_MASK)
+}
+
+#[inline(never)]
+fn empty() {}
+
+/// `cortex_m::asm::delay(n)` runs exactly `n + 1` iterations of `subs; bne`: 2(n + 1)
+/// instructions. Two lengths cancel the fixed cost; the difference is 2 (n2 − n1) instructions.
+fn calibrate() -> Option<Calibration> {
+    let delay: fn(u32) = black_box(cortex_m::asm::delay);
+    let (n1, n2) = (100_000u32, 1_100_000u32);
+    let ((), c1) = counts(|| delay(n1));
+    let ((), c2) = counts(|| delay(n2));
+    let dc = c2.checked_sub(c1).filter(|&d| d > 0)?;
+    let instr_per_count = (2 * (n2 - n1)) as f32 / dc as f32;
+
+    // The harness's cost: the same window around an empty indirect call, averaged because one
+    // reading is below the counter's resolution at shift=0.
+    let e: fn() = black_box(empty);
+    let runs = 256u32;
+    let mut total = 0u32;
+    for _ in 0..runs {
+        total = total.saturating_add(counts(e).1);
+    }
+    let overhead_instr = total as f32 / runs as f32 * instr_per_count;
+    Some(Calibration { instr_per_count, overhead_instr })
+}
+
+/// Median and maximum of a slice (sorted in place).
+fn median_max(v: &mut [u32]) -> (u32, u32) {
+    v.sort_unstable();
+    let median = v.get(v.len() / 2).copied().unwrap_or(0);
+    let max = v.last().copied().unwrap_or(0);
+    (median, max)
+}
+
+struct Stats {
+    tick: (u32, u32),
+    outer: (u32, u32),
+    /// Median and maximum per tick of the phases outside the window (for information).
+    boot: (u32, u32),
+    disarmed: (u32, u32),
+    outer_steps: usize,
+    window_ticks: usize,
+}
+
+type TickFn = fn(&mut FlightController, RawImu, &PulseBatch) -> TickOutput;
+type OuterFn = fn(&mut FlightController, &OuterJob);
+
+/// Fly the recording with one profile; `Err` says what went wrong (motors not running, no outer
+/// steps, not armed).
+fn run_profile(cfg: Config, cal: &Calibration, needs_armed_state: bool) -> Result<Stats, &'static str> {
+    let mut fc = FlightController::new(cfg).map_err(|e| e.field())?;
+    // Reached through opaque pointers: the measured code is the real, whole call, never
+    // interleaved by the optimiser with this loop's input generation.
+    let tick: TickFn = black_box(FlightController::tick);
+    let run_outer: OuterFn = black_box(FlightController::run_outer);
+
+    let mut lcg = Lcg(0x2545_F491);
+    let mut tick_instr = [0u32; TICKS];
+    let mut outer_instr = [0u32; OUTER_MAX];
+    let mut n_outer = 0usize;
+    let mut motors_off_in_window = 0usize;
+    let mut not_armed_in_window = 0usize;
+
+    for (k, slot) in tick_instr.iter_mut().enumerate() {
+        let imu = imu_sample(&mut lcg);
+        let pulses = pulses(k);
+        let (out, c) = counts(|| tick(&mut fc, black_box(imu), black_box(&pulses)));
+        *slot = cal.instructions(c);
+
+        if k >= MEASURE_START {
+            if out.compare.contains(&0) {
+                motors_off_in_window += 1;
+            }
+            if needs_armed_state && fc.status().state != FlightState::Armed {
+                not_armed_in_window += 1;
+            }
+        }
+        if let Some(job) = out.outer_job {
+            let ((), c) = counts(|| run_outer(&mut fc, black_box(&job)));
+            if k >= MEASURE_START {
+                if let Some(o) = outer_instr.get_mut(n_outer) {
+                    *o = cal.instructions(c);
+                    n_outer += 1;
+                }
+            }
+        }
+    }
+
+    if motors_off_in_window > 0 {
+        return Err("a motor compare value was 0 in the measured window: the motors did not run");
+    }
+    if not_armed_in_window > 0 {
+        return Err("the supervisor was not armed throughout the measured window");
+    }
+    let window_ticks = TICKS - MEASURE_START;
+    if n_outer < window_ticks / 5 {
+        return Err("fewer outer steps than one per five ticks in the measured window");
+    }
+    let phase = |from: usize, to: usize| -> (u32, u32) {
+        let mut scratch = [0u32; TICKS];
+        let n = to.saturating_sub(from).min(TICKS);
+        match (scratch.get_mut(..n), tick_instr.get(from..to)) {
+            (Some(dst), Some(src)) => {
+                dst.copy_from_slice(src);
+                median_max(dst)
+            }
+            _ => (0, 0),
+        }
+    };
+    Ok(Stats {
+        tick: phase(MEASURE_START, TICKS),
+        outer: median_max(outer_instr.get_mut(..n_outer).unwrap_or(&mut [])),
+        boot: phase(0, ARM_START),
+        disarmed: phase(ARM_START, FLY_START),
+        outer_steps: n_outer,
+        window_ticks,
+    })
+}
+
+#[entry]
+fn main() -> ! {
+    let code = match bench() {
+        Ok(()) => debug::EXIT_SUCCESS,
+        Err(msg) => {
+            hprintln!("bench-m4: error: {}", msg);
+            debug::EXIT_FAILURE
+        }
+    };
+    loop {
+        debug::exit(code);
+    }
+}
+
+fn bench() -> Result<(), &'static str> {
+    let mut p = cortex_m::Peripherals::take().ok_or("core peripherals already taken")?;
+    // Free-running, no interrupt: nothing but the measured code runs between two reads.
+    p.SYST.disable_interrupt();
+    p.SYST.set_clock_source(SystClkSource::Core);
+    p.SYST.set_reload(SYST_MASK);
+    p.SYST.clear_current();
+    p.SYST.enable_counter();
+
+    let cal = calibrate().ok_or("SysTick does not count (is QEMU run with -icount?)")?;
+    hprintln!("bench-m4 built with opt-level {}", env!("BENCH_OPT_LEVEL"));
+    hprintln!(
+        "calibration: {:.4} instructions per SysTick count (delay loop of 2,000,000 instructions); harness overhead {:.1} instructions, subtracted",
+        cal.instr_per_count,
+        cal.overhead_instr
+    );
+
+    let reference = run_profile(Config::reference(), &cal, false)?;
+    let default = run_profile(Config::default(), &cal, true)?;
+
+    hprintln!(
+        "window: ticks {}..{} of {} (armed, throttle up since tick {}): {} ticks, {} outer steps per profile",
+        MEASURE_START,
+        TICKS,
+        TICKS,
+        FLY_START,
+        default.window_ticks,
+        default.outer_steps
+    );
+    hprintln!("profile    tick median  tick max  outer median  outer max");
+    for (name, s) in [("default", &default), ("reference", &reference)] {
+        hprintln!("{:<9} {:>12} {:>9} {:>13} {:>10}", name, s.tick.0, s.tick.1, s.outer.0, s.outer.1);
+    }
+    hprintln!("outside the window (per tick, median / max):");
+    for (name, s) in [("default", &default), ("reference", &reference)] {
+        hprintln!(
+            "{:<9} boot+calibration (ticks 0..{}) {} / {}; disarmed, arming (ticks {}..{}) {} / {}",
+            name,
+            ARM_START,
+            s.boot.0,
+            s.boot.1,
+            ARM_START,
+            FLY_START,
+            s.disarmed.0,
+            s.disarmed.1
+        );
+    }
+    let tick_ok = default.tick.0 < 600;
+    let outer_ok = default.outer.0 < 5000;
+    hprintln!(
+        "budget (default, median): tick < 600 {}, outer step < 5000 {}",
+        if tick_ok { "ok" } else { "OVER" },
+        if outer_ok { "ok" } else { "OVER" }
+    );
+    Ok(())
+}
+
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    // Nothing here panics by design; if something does, fail the run rather than hang QEMU.
+    loop {
+        debug::exit(debug::EXIT_FAILURE);
+    }
+}
