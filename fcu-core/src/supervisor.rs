@@ -377,6 +377,10 @@ impl Supervisor {
                         FlightState::Armed
                     }
                 } else if self.low_throttle_ticks >= cfg.auto_disarm_ticks {
+                    // Like every disarm: a gesture held through it must be let go before it
+                    // can arm again (found by the safety properties: holding the arm gesture
+                    // through the automatic disarm re-armed on release).
+                    self.released = false;
                     FlightState::Disarmed
                 } else {
                     self.hold_ticks = 0;
@@ -694,6 +698,19 @@ mod tests {
         r.arm();
         assert_eq!(r.run(IDLE, CFG.auto_disarm_ticks - 2).state, FlightState::Armed);
         assert_eq!(r.run(IDLE, 2).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn holding_the_arm_gesture_through_the_automatic_disarm_does_not_rearm() {
+        let mut r = Rig::new();
+        r.arm();
+        // The arm gesture has the throttle at 0: the motors stop and the auto disarm comes.
+        assert_eq!(r.run(ARM, CFG.auto_disarm_ticks).state, FlightState::Disarmed);
+        r.run(ARM, CFG.arm_hold_ticks);
+        let d = r.run(IDLE, 1);
+        assert_eq!(d.state, FlightState::Disarmed);
+        // Let go, then the full procedure arms again.
+        r.arm();
     }
 
     #[test]

@@ -180,23 +180,10 @@ fn parse_line(line: &str, line_no: usize) -> Result<Sample, BroadError> {
     })
 }
 
-/// Which estimator profile to score.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Profile {
-    /// The default profile's estimator ([`VqfConfig::at_rate`]).
-    Default,
-    /// The reference's Mahony ([`MahonyConfig::REFERENCE`]) at the recording's period.
-    Reference,
-}
+pub use crate::Profile;
 
+/// What the BROAD scorer needs of a profile.
 impl Profile {
-    pub fn name(self) -> &'static str {
-        match self {
-            Profile::Default => "default",
-            Profile::Reference => "reference",
-        }
-    }
-
     /// What the recording tells the estimator about the motors. A handheld IMU has none, so
     /// for the default estimator "throttle low" (motors off: a still IMU really is at rest, and
     /// its rest-based bias estimation may run) is the truth. The reference Mahony reads the same

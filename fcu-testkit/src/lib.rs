@@ -8,5 +8,9 @@
 pub mod broad;
 pub mod cli;
 pub mod csv;
+pub mod profile;
 pub mod replay;
+pub mod safety;
 pub mod sim;
+
+pub use profile::Profile;

@@ -8,20 +8,11 @@ use std::process::ExitCode;
 use super::CliError;
 use crate::broad::{self, Profile, Recording};
 
-/// Which estimator to run.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EstimateProfile {
-    /// The default profile's VQF.
-    Default,
-    /// The reference's Mahony (kP 0.4 in flight, kI 0.1).
-    Reference,
-}
-
 #[derive(clap::Args, Debug)]
 pub struct EstimateArgs {
     /// Estimator profile.
     #[arg(long, value_enum, default_value = "default")]
-    pub profile: EstimateProfile,
+    pub profile: Profile,
     /// BROAD CSV (`t_s,gyr_x..z [rad/s],acc_x..z [m/s²],ref_qw..qz,movement`), plain or gzip.
     pub input: PathBuf,
     /// Where to write `t_s,qw,qx,qy,qz` (standard output when absent).
@@ -35,10 +26,7 @@ pub fn run(a: &EstimateArgs) -> Result<ExitCode, CliError> {
     let rec = Recording::read(&a.input).map_err(|e| CliError(e.to_string()))?;
     let dt_s =
         rec.sample_period_s().ok_or_else(|| CliError(format!("{}: need at least two samples with increasing t_s", a.input.display())))?;
-    let profile = match a.profile {
-        EstimateProfile::Default => Profile::Default,
-        EstimateProfile::Reference => Profile::Reference,
-    };
+    let profile = a.profile;
     let est = broad::run(&rec, profile.estimator_config(dt_s));
     match &a.out {
         Some(path) => {

@@ -4,32 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use super::CliError;
-use crate::replay;
-
-/// Which configuration a run uses.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Profile {
-    /// The ST reference's numbers (`Config::reference()`).
-    Reference,
-    /// The product (`Config::default()`).
-    Default,
-}
-
-impl Profile {
-    pub fn config(self) -> fcu_core::Config {
-        match self {
-            Profile::Reference => fcu_core::Config::reference(),
-            Profile::Default => fcu_core::Config::default(),
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Profile::Reference => "reference",
-            Profile::Default => "default",
-        }
-    }
-}
+use crate::{replay, Profile};
 
 #[derive(clap::Args, Debug)]
 pub struct ReplayArgs {

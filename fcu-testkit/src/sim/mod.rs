@@ -27,38 +27,7 @@ use plant::{Disturbance, Plant, PlantParams};
 use radio_model::{CaptureEdge, RadioModel, TxFrame};
 use scenario::{Scenario, Throttle};
 
-/// Which `Config` flies.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Profile {
-    /// `Config::default()`: the product, with the safety supervisor.
-    Default,
-    /// `Config::reference()`: the ST reference firmware's numbers and behaviour.
-    Reference,
-}
-
-impl Profile {
-    pub fn name(self) -> &'static str {
-        match self {
-            Profile::Default => "default",
-            Profile::Reference => "reference",
-        }
-    }
-
-    pub fn config(self) -> Config {
-        match self {
-            Profile::Default => Config::default(),
-            Profile::Reference => Config::reference(),
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Profile> {
-        match s {
-            "default" => Some(Profile::Default),
-            "reference" => Some(Profile::Reference),
-            _ => None,
-        }
-    }
-}
+pub use crate::Profile;
 
 /// How to run a scenario.
 #[derive(Clone, Debug)]

@@ -1,0 +1,877 @@
+//! The safety layer, watched from outside: an invariant monitor and deterministic input
+//! generators for the property tests (`tests/safety_props.rs`) and the fuzzers (`fuzz/`).
+//!
+//! - [`SafetyMonitor`] observes a [`FlightController`] tick by tick (what was fed: the raw IMU
+//!   words and the [`PulseBatch`]; what came out: the compare values, the outer job and
+//!   [`Status`]) and checks the rules of product.md §4 that can be seen from outside. It keeps
+//!   its own model of the radio (per-channel validity, sticks, gestures), the calibration, the
+//!   failsafe budget and the arming procedure; it never reads the supervisor's memory. A
+//!   violation names the [`Invariant`] and the tick.
+//! - [`SupervisorMonitor`] does the same for the bare [`Supervisor`] (`Inputs` → `Decision`).
+//! - [`PwmReceiver`] turns a stick timeline into TIM2 capture edges (50 Hz frames, channels one
+//!   after the other, 15-bit 0.25 µs counter), [`LevelImu`] makes level LSM6DSL words with
+//!   ±2 LSB noise, and [`Rig`] wires them to an [`EdgeDecoder`], a controller and a monitor.
+//!
+//! Everything is deterministic (seeded SplitMix64) and nothing here panics.
+
+use core::fmt;
+
+use fcu_core::config::{Config, ConfigError};
+use fcu_core::flight::{FlightController, Status, TickOutput};
+use fcu_core::imu::{CalibrationOutcome, CalibrationPhase, HealthConfig, RawImu};
+use fcu_core::math::Quat;
+use fcu_core::mixer::MixerConfig;
+use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, Sticks, CAPTURE_WRAP, CHANNELS};
+use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, SupervisorConfig};
+
+use crate::sim::rng::Rng;
+
+/// Motors must be off once the link has been gone this long in total (product.md §4).
+pub const LINK_LOSS_OFF_S: f64 = 1.0;
+/// Slack on [`LINK_LOSS_OFF_S`] for tick rounding.
+pub const LINK_LOSS_MARGIN_S: f64 = 0.010;
+/// Slack on the 25° arming tilt limit (the monitor computes the tilt in f64).
+pub const TILT_MARGIN_RAD: f64 = 1e-3;
+
+/// A rule the monitor checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Invariant {
+    /// (1, 4) Armed (or flying) without a full arming procedure just before: the arm gesture
+    /// for `arm_hold_ticks` on a good link with the throttle low, started from a released
+    /// gesture, then released with no blocker holding.
+    ArmedWithoutProcedure,
+    /// (2) A compare value other than the off value in a state where the motors must not run,
+    /// or while the throttle in force is low.
+    MotorsNotOff,
+    /// (3) A compare value outside `[min_compare, max_compare]`.
+    CompareOutOfRange,
+    /// (5) The motors may still run after the link was gone for more than 1.0 s in total.
+    MotorsOnAfterLinkLoss,
+    /// Armed (motors following the sticks) without a good link.
+    ArmedWithoutLink,
+    /// Failsafe stage 1 handed control back before 100 ms of good link.
+    EarlyRecovery,
+    /// Failsafe stage 1 flies with sticks that are not level, or a throttle above the last
+    /// good one.
+    FailsafeSticks,
+    /// A sensor fault did not stop the motors, or was forgotten.
+    FaultNotLatched,
+    /// Identical raw words for longer than the stuck limit without a fault.
+    StuckSensorMissed,
+    /// `status()` disagrees with the accepted pulses (link = every channel had a pulse in the
+    /// last 100 ms; sticks = width minus centre).
+    RadioView,
+    /// A width outside the accepted pulse range reached the controller.
+    PulseOutOfRange,
+    /// A calibration started while the motors could run.
+    CalibrationWhileFlying,
+    /// (Supervisor alone) `motors_enabled` disagrees with the state, a calibration was
+    /// requested outside Disarmed, or `failsafe_throttle` is set outside stage 1.
+    DecisionInconsistent,
+}
+
+impl Invariant {
+    pub fn name(self) -> &'static str {
+        match self {
+            Invariant::ArmedWithoutProcedure => "armed-without-procedure",
+            Invariant::MotorsNotOff => "motors-not-off",
+            Invariant::CompareOutOfRange => "compare-out-of-range",
+            Invariant::MotorsOnAfterLinkLoss => "motors-on-after-link-loss",
+            Invariant::ArmedWithoutLink => "armed-without-link",
+            Invariant::EarlyRecovery => "early-failsafe-recovery",
+            Invariant::FailsafeSticks => "failsafe-sticks",
+            Invariant::FaultNotLatched => "fault-not-latched",
+            Invariant::StuckSensorMissed => "stuck-sensor-missed",
+            Invariant::RadioView => "radio-view",
+            Invariant::PulseOutOfRange => "pulse-out-of-range",
+            Invariant::CalibrationWhileFlying => "calibration-while-flying",
+            Invariant::DecisionInconsistent => "decision-inconsistent",
+        }
+    }
+}
+
+/// A broken rule: which, at which tick (1 = the first tick observed), and what was seen.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Violation {
+    pub tick: u64,
+    pub invariant: Invariant,
+    pub detail: String,
+}
+
+impl fmt::Display for Violation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "tick {}: {}: {}", self.tick, self.invariant.name(), self.detail)
+    }
+}
+
+impl std::error::Error for Violation {}
+
+/// The gestures as product.md §4 and the reference define them, written out again here so
+/// the monitor does not trust `RcConfig::gesture`.
+pub fn classify_gesture(rc: &RcConfig, s: &Sticks) -> Option<Gesture> {
+    let th = i32::from(rc.gesture_threshold);
+    let (ail, ele, thr, rud) = (i32::from(s.ail), i32::from(s.ele), i32::from(s.thr), i32::from(s.rud));
+    if thr == 0 && ele < -th && ail > th && rud < -th {
+        Some(Gesture::Calibrate)
+    } else if thr == 0 && ele < -th && ail < -th && rud > th {
+        Some(Gesture::Arm)
+    } else if thr < i32::from(rc.min_throttle) && rud < -th && ele.abs() <= 300 && ail.abs() <= 300 {
+        Some(Gesture::Disarm)
+    } else {
+        None
+    }
+}
+
+/// Tilt from level of an attitude quaternion (body to earth), rad, in f64; a quaternion that
+/// is not finite or has no length is "infinitely" tilted.
+pub fn tilt_from_level_rad(q: Quat) -> f64 {
+    let (w, x, y, z) = (f64::from(q.w), f64::from(q.x), f64::from(q.y), f64::from(q.z));
+    let n = w * w + x * x + y * y + z * z;
+    if !(n.is_finite() && n > 0.0) {
+        return f64::INFINITY;
+    }
+    // Earth "up" seen in the body frame, z component, of the normalised rotation.
+    ((w * w - x * x - y * y + z * z) / n).clamp(-1.0, 1.0).acos()
+}
+
+/// Bookkeeping shared by both monitors: the arm-gesture run, the release rule and the
+/// failsafe budgets, from what was fed and what state came out.
+#[derive(Clone, Debug)]
+struct ProcedureTracker {
+    /// Consecutive ticks, up to the previous one, of the arm gesture on a good link with the
+    /// throttle low.
+    arm_run: u32,
+    /// Whether the gesture had been released (a good-link tick with no gesture) since the
+    /// last arm/disarm/link loss when the current arm run began.
+    arm_run_released: bool,
+    released: bool,
+    /// Consecutive good-link ticks, including the current one.
+    good_run: u32,
+    /// Ticks without a good link since the motors were last under stick control.
+    lost_ticks: u32,
+    /// The last throttle seen on a good link while armed (the failsafe may hold it, never more).
+    held_thr: i16,
+    prev_state: FlightState,
+}
+
+impl ProcedureTracker {
+    fn new() -> Self {
+        ProcedureTracker {
+            arm_run: 0,
+            arm_run_released: false,
+            released: false,
+            good_run: 0,
+            lost_ticks: 0,
+            held_thr: 0,
+            prev_state: FlightState::Calibrating,
+        }
+    }
+
+    /// Before the checks of a tick: the link run and the failsafe budgets.
+    fn before_checks(&mut self, link: bool, thr: i16, state: FlightState) {
+        self.good_run = if link { self.good_run.saturating_add(1) } else { 0 };
+        if state == FlightState::FailsafeLevel && self.prev_state == FlightState::Armed {
+            self.held_thr = self.held_thr.min(thr);
+        }
+        if state == FlightState::Armed && link {
+            self.held_thr = thr;
+            self.lost_ticks = 0;
+        } else if state.motors_may_run() || self.prev_state.motors_may_run() {
+            if !link {
+                self.lost_ticks = self.lost_ticks.saturating_add(1);
+            }
+        } else {
+            self.lost_ticks = 0;
+        }
+    }
+
+    /// True when this tick starts flying from a state that could not.
+    fn is_arming(&self, state: FlightState) -> bool {
+        state.motors_may_run() && !self.prev_state.motors_may_run()
+    }
+
+    /// After the checks: the release rule and the arm run (this tick becomes "before").
+    fn after_checks(&mut self, link: bool, gesture: Option<Gesture>, throttle_low: bool, state: FlightState) {
+        let arming = self.is_arming(state);
+        let disarming = !state.motors_may_run() && self.prev_state.motors_may_run();
+        if arming || disarming {
+            // A gesture held through an arm or a disarm must be let go before it acts again.
+            self.released = false;
+            self.arm_run = 0;
+        }
+        if !link {
+            self.released = false;
+        }
+        if link && gesture == Some(Gesture::Arm) && throttle_low {
+            if self.arm_run == 0 {
+                self.arm_run_released = self.released;
+            }
+            self.arm_run = self.arm_run.saturating_add(1);
+        } else {
+            self.arm_run = 0;
+            if link && gesture.is_none() {
+                self.released = true;
+            }
+        }
+        self.prev_state = state;
+    }
+}
+
+/// What the monitor checks for a configuration.
+#[derive(Clone, Debug)]
+enum Mode {
+    /// The product's safety layer: every invariant.
+    Safe(SafetyConfig),
+    /// The reference's latch (`Config::reference()`): only the compare range.
+    RangeOnly,
+}
+
+/// One tick as the monitor sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct Observation<'a> {
+    /// The raw sensor words fed this tick (enables the stuck-sensor check).
+    pub imu: Option<RawImu>,
+    /// The pulses fed this tick (enables the radio model; give it every tick from boot or never).
+    pub batch: Option<&'a PulseBatch>,
+    pub out: &'a TickOutput,
+    /// `status()` taken after the tick *and* its outer step (as `FlightController::step`).
+    pub status: &'a Status,
+}
+
+/// Watches a [`FlightController`] from its first tick; see the module documentation.
+#[derive(Clone, Debug)]
+pub struct SafetyMonitor {
+    mode: Mode,
+    rc: RcConfig,
+    mixer: MixerConfig,
+    health: Option<HealthConfig>,
+    link_off_ticks: u64,
+    tick: u64,
+    // The radio model.
+    channel_age: [u32; CHANNELS],
+    sticks: Sticks,
+    // Procedure and failsafe.
+    proc: ProcedureTracker,
+    prev_quat: Quat,
+    prev_phase: CalibrationPhase,
+    calibrated_once: bool,
+    // Sensor.
+    last_imu: Option<RawImu>,
+    same_imu: u32,
+    fault_seen: bool,
+}
+
+impl SafetyMonitor {
+    /// A monitor for a controller built from `cfg`, to be fed from that controller's first tick.
+    pub fn new(cfg: &Config) -> Self {
+        let dt = if cfg.timing.tick_dt_s.is_finite() && cfg.timing.tick_dt_s > 0.0 { cfg.timing.tick_dt_s } else { 1.0 / 800.0 };
+        SafetyMonitor {
+            mode: match cfg.supervisor {
+                SupervisorConfig::Safe(s) => Mode::Safe(s),
+                SupervisorConfig::Reference => Mode::RangeOnly,
+            },
+            rc: cfg.rc,
+            mixer: cfg.mixer,
+            health: cfg.health,
+            link_off_ticks: ((LINK_LOSS_OFF_S + LINK_LOSS_MARGIN_S) / dt).ceil() as u64,
+            tick: 0,
+            channel_age: [u32::MAX; CHANNELS],
+            sticks: Sticks::default(),
+            proc: ProcedureTracker::new(),
+            prev_quat: Quat::IDENTITY,
+            prev_phase: CalibrationPhase::Settling,
+            calibrated_once: false,
+            last_imu: None,
+            same_imu: 0,
+            fault_seen: false,
+        }
+    }
+
+    /// Ticks observed so far.
+    pub fn ticks(&self) -> u64 {
+        self.tick
+    }
+
+    fn fail(&self, invariant: Invariant, detail: String) -> Result<(), Violation> {
+        Err(Violation { tick: self.tick, invariant, detail })
+    }
+
+    /// Check one tick.
+    pub fn observe(&mut self, o: &Observation<'_>) -> Result<(), Violation> {
+        self.tick = self.tick.saturating_add(1);
+        let compare = o.out.compare;
+        let lo = self.mixer.min_compare.floor();
+        let hi = self.mixer.max_compare;
+        if let Some(c) = compare.iter().find(|&&c| !(f32::from(c) >= lo && f32::from(c) <= hi)) {
+            return self.fail(Invariant::CompareOutOfRange, format!("compare {compare:?}: {c} outside [{lo}, {hi}]"));
+        }
+        if compare != o.status.compare {
+            return self.fail(Invariant::CompareOutOfRange, format!("tick output {compare:?} but status says {:?}", o.status.compare));
+        }
+        let Mode::Safe(safety) = self.mode.clone() else {
+            return Ok(());
+        };
+        let st = o.status;
+        let off = self.mixer.off_compare();
+        let motors_off = compare.iter().all(|&c| c == off);
+
+        // The radio, from the accepted pulses alone.
+        if let Some(batch) = o.batch {
+            self.radio(batch)?;
+        }
+        let link = st.link;
+        let sticks = st.sticks;
+        let throttle_low = sticks.thr < self.rc.min_throttle;
+        let gesture = if link { classify_gesture(&self.rc, &sticks) } else { None };
+
+        // Sensor faults: motors off at once, latched.
+        self.sensor(o.imu, st, motors_off)?;
+
+        // Calibration.
+        let averaging = matches!(st.calibration, CalibrationPhase::Averaging { .. });
+        if averaging && !matches!(self.prev_phase, CalibrationPhase::Averaging { .. }) && self.proc.prev_state.motors_may_run() {
+            return self.fail(Invariant::CalibrationWhileFlying, format!("calibration started in {}", self.proc.prev_state.name()));
+        }
+        if st.calibration == (CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) }) {
+            self.calibrated_once = true;
+        }
+
+        self.proc.before_checks(link, sticks.thr, st.state);
+
+        // (1) Arming.
+        if self.proc.is_arming(st.state) {
+            self.check_arming(&safety, st, link, gesture, throttle_low)?;
+        }
+        if st.state == FlightState::Armed
+            && self.proc.prev_state == FlightState::FailsafeLevel
+            && self.proc.good_run < safety.recovery_ticks
+        {
+            return self.fail(
+                Invariant::EarlyRecovery,
+                format!("control handed back after {} good ticks (need {})", self.proc.good_run, safety.recovery_ticks),
+            );
+        }
+        if st.state == FlightState::Armed && !link {
+            return self.fail(Invariant::ArmedWithoutLink, "armed while the link is not good".into());
+        }
+
+        // (2) Motors off where they must be.
+        let thr_in_force = match st.state {
+            FlightState::FailsafeLevel => Some(self.proc.held_thr),
+            FlightState::Armed => Some(sticks.thr),
+            _ => None,
+        };
+        if !motors_off {
+            match thr_in_force {
+                None => return self.fail(Invariant::MotorsNotOff, format!("compare {compare:?} in {}", st.state.name())),
+                Some(t) if t < self.rc.min_throttle => {
+                    return self.fail(Invariant::MotorsNotOff, format!("compare {compare:?} in {} with throttle {t} low", st.state.name()))
+                }
+                Some(_) => {}
+            }
+        }
+        if st.state == FlightState::FailsafeLevel {
+            if let Some(job) = &o.out.outer_job {
+                let s = job.sticks;
+                if s.ail != 0 || s.ele != 0 || s.rud != 0 || s.thr > self.proc.held_thr {
+                    return self.fail(Invariant::FailsafeSticks, format!("stage 1 flies {s:?}; last good throttle {}", self.proc.held_thr));
+                }
+            }
+        }
+
+        // (5) Link loss: 100 ms to declare it, then the rest of the 1.0 s.
+        let gone = u64::from(self.proc.lost_ticks) + u64::from(self.rc.link_timeout_ticks);
+        if self.proc.lost_ticks > 0 && gone > self.link_off_ticks && (st.state.motors_may_run() || !motors_off) {
+            return self.fail(
+                Invariant::MotorsOnAfterLinkLoss,
+                format!("link gone {gone} ticks in total, state {}, compare {compare:?}", st.state.name()),
+            );
+        }
+
+        self.proc.after_checks(link, gesture, throttle_low, st.state);
+        self.prev_quat = st.quat;
+        self.prev_phase = st.calibration;
+        Ok(())
+    }
+
+    fn radio(&mut self, batch: &PulseBatch) -> Result<(), Violation> {
+        let (min, max) = match self.rc.pulses {
+            PulseRules::Validated { min_counts, max_counts } => (min_counts, max_counts),
+            PulseRules::Reference { .. } => (0, u16::MAX),
+        };
+        for ch in 0..CHANNELS {
+            match batch.width_counts.get(ch).copied().flatten() {
+                Some(w) => {
+                    if !(min..=max).contains(&w) {
+                        return self.fail(Invariant::PulseOutOfRange, format!("channel {ch} width {w} counts outside {min}..={max}"));
+                    }
+                    if let Some(a) = self.channel_age.get_mut(ch) {
+                        *a = 0;
+                    }
+                    let w = i32::from(w);
+                    let v = match ch {
+                        0 => w - i32::from(self.rc.ail_center),
+                        1 => w - i32::from(self.rc.ele_center),
+                        2 => (w - i32::from(self.rc.thr_bottom)).max(0),
+                        _ => w - i32::from(self.rc.rud_center),
+                    } as i16;
+                    match ch {
+                        0 => self.sticks.ail = v,
+                        1 => self.sticks.ele = v,
+                        2 => self.sticks.thr = v,
+                        _ => self.sticks.rud = v,
+                    }
+                }
+                None => {
+                    if let Some(a) = self.channel_age.get_mut(ch) {
+                        *a = a.saturating_add(1);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn sensor(&mut self, imu: Option<RawImu>, st: &Status, motors_off: bool) -> Result<(), Violation> {
+        if st.fault.is_some() {
+            self.fault_seen = true;
+        } else if self.fault_seen {
+            return self.fail(Invariant::FaultNotLatched, "a sensor fault was forgotten".into());
+        }
+        if self.fault_seen && (st.state != FlightState::Fault || !motors_off) {
+            return self
+                .fail(Invariant::FaultNotLatched, format!("fault {:?} but state {} compare {:?}", st.fault, st.state.name(), st.compare));
+        }
+        match imu {
+            Some(raw) if self.last_imu == Some(raw) => self.same_imu = self.same_imu.saturating_add(1),
+            _ => self.same_imu = 0,
+        }
+        self.last_imu = imu;
+        if let Some(h) = self.health {
+            if self.same_imu >= h.stuck_ticks && st.fault.is_none() {
+                return self.fail(Invariant::StuckSensorMissed, format!("{} identical samples without a fault", self.same_imu + 1));
+            }
+        }
+        Ok(())
+    }
+
+    fn check_arming(
+        &self,
+        safety: &SafetyConfig,
+        st: &Status,
+        link: bool,
+        gesture: Option<Gesture>,
+        throttle_low: bool,
+    ) -> Result<(), Violation> {
+        let tilt = tilt_from_level_rad(self.prev_quat);
+        let mut why = Vec::new();
+        if st.state != FlightState::Armed {
+            why.push(format!("entered {} from {}", st.state.name(), self.proc.prev_state.name()));
+        }
+        if self.proc.arm_run < safety.arm_hold_ticks {
+            why.push(format!("arm gesture held {} ticks (need {})", self.proc.arm_run, safety.arm_hold_ticks));
+        }
+        if !self.proc.arm_run_released {
+            why.push("arm gesture not released since the last arm/disarm/link loss".into());
+        }
+        if gesture == Some(Gesture::Arm) {
+            why.push("arm gesture still held".into());
+        }
+        if !st.blockers.is_empty() {
+            let names: Vec<&str> = st.blockers.iter().map(|b| b.name()).collect();
+            why.push(format!("blockers {names:?}"));
+        }
+        if !link {
+            why.push("link not good".into());
+        }
+        if !throttle_low {
+            why.push(format!("throttle {} not low", st.sticks.thr));
+        }
+        if !self.calibrated_once || matches!(st.calibration, CalibrationPhase::Averaging { .. } | CalibrationPhase::Settling) {
+            why.push(format!("calibration {:?}", st.calibration));
+        }
+        if self.tick < u64::from(safety.boot_settle_ticks) {
+            why.push(format!("tick {} inside boot settling", self.tick));
+        }
+        if tilt.is_nan() || tilt > f64::from(safety.max_arm_tilt_rad) + TILT_MARGIN_RAD {
+            why.push(format!("tilt {tilt} rad"));
+        }
+        if self.fault_seen {
+            why.push("sensor fault".into());
+        }
+        if why.is_empty() {
+            Ok(())
+        } else {
+            self.fail(Invariant::ArmedWithoutProcedure, why.join("; "))
+        }
+    }
+
+    /// Check that `status()` agrees with the monitor's radio model (call after `observe`).
+    fn radio_view(&self, st: &Status) -> Result<(), Violation> {
+        let link = self.channel_age.iter().all(|&a| a < self.rc.link_timeout_ticks);
+        if st.link != link || st.sticks != self.sticks {
+            return self.fail(
+                Invariant::RadioView,
+                format!("status link {} sticks {:?}; pulses give link {link} sticks {:?}", st.link, st.sticks, self.sticks),
+            );
+        }
+        Ok(())
+    }
+
+    /// [`observe`](Self::observe) and, when a batch was given, the radio-view check.
+    pub fn check(&mut self, o: &Observation<'_>) -> Result<(), Violation> {
+        self.observe(o)?;
+        if o.batch.is_some() && matches!(self.mode, Mode::Safe(_)) {
+            self.radio_view(o.status)?;
+        }
+        Ok(())
+    }
+}
+
+/// Watches a bare [`Supervisor`](fcu_core::supervisor::Supervisor) (`Inputs` → `Decision`)
+/// from its first step.
+#[derive(Clone, Debug)]
+pub struct SupervisorMonitor {
+    cfg: SafetyConfig,
+    tick: u64,
+    proc: ProcedureTracker,
+    fault_seen: bool,
+}
+
+impl SupervisorMonitor {
+    pub fn new(cfg: SafetyConfig) -> Self {
+        SupervisorMonitor { cfg, tick: 0, proc: ProcedureTracker::new(), fault_seen: false }
+    }
+
+    fn fail(&self, invariant: Invariant, detail: String) -> Result<(), Violation> {
+        Err(Violation { tick: self.tick, invariant, detail })
+    }
+
+    /// Check one step: the inputs given and the decision returned.
+    pub fn observe(&mut self, i: &Inputs, d: &Decision) -> Result<(), Violation> {
+        self.tick = self.tick.saturating_add(1);
+        let cfg = self.cfg;
+        let state = d.state;
+        let gesture = if i.link { i.gesture } else { None };
+        if d.motors_enabled != state.motors_may_run() {
+            return self.fail(Invariant::DecisionInconsistent, format!("motors_enabled {} in {}", d.motors_enabled, state.name()));
+        }
+        if d.failsafe_throttle.is_some() != (state == FlightState::FailsafeLevel) {
+            return self.fail(Invariant::DecisionInconsistent, format!("failsafe throttle {:?} in {}", d.failsafe_throttle, state.name()));
+        }
+        if d.request_calibration && !(self.proc.prev_state == FlightState::Disarmed && gesture == Some(Gesture::Calibrate)) {
+            return self.fail(
+                Invariant::CalibrationWhileFlying,
+                format!("calibration requested from {} with gesture {gesture:?}", self.proc.prev_state.name()),
+            );
+        }
+        if i.sensor_fault.is_some() {
+            self.fault_seen = true;
+        }
+        if self.fault_seen && (state != FlightState::Fault || d.motors_enabled) {
+            return self.fail(Invariant::FaultNotLatched, format!("after a fault: {}", state.name()));
+        }
+
+        self.proc.before_checks(i.link, i.sticks.thr, state);
+        if self.proc.is_arming(state) {
+            let mut why = Vec::new();
+            if state != FlightState::Armed {
+                why.push(format!("entered {} from {}", state.name(), self.proc.prev_state.name()));
+            }
+            if self.proc.arm_run < cfg.arm_hold_ticks {
+                why.push(format!("arm gesture held {} ticks (need {})", self.proc.arm_run, cfg.arm_hold_ticks));
+            }
+            if !self.proc.arm_run_released {
+                why.push("arm gesture not released since the last arm/disarm/link loss".into());
+            }
+            if gesture == Some(Gesture::Arm) {
+                why.push("arm gesture still held".into());
+            }
+            if !d.blockers.is_empty() {
+                why.push(format!("blockers {:#x}", d.blockers.0));
+            }
+            if !(i.link && i.throttle_low && i.calibrated && !i.calibrating && !self.fault_seen) {
+                why.push(format!("inputs {i:?}"));
+            }
+            if !(i.tilt_rad.is_finite() && i.tilt_rad <= cfg.max_arm_tilt_rad) {
+                why.push(format!("tilt {}", i.tilt_rad));
+            }
+            if self.tick < u64::from(cfg.boot_settle_ticks) {
+                why.push(format!("tick {} inside boot settling", self.tick));
+            }
+            if !why.is_empty() {
+                return self.fail(Invariant::ArmedWithoutProcedure, why.join("; "));
+            }
+        }
+        if state == FlightState::Armed && self.proc.prev_state == FlightState::FailsafeLevel && self.proc.good_run < cfg.recovery_ticks {
+            return self.fail(Invariant::EarlyRecovery, format!("handed back after {} good ticks", self.proc.good_run));
+        }
+        if state == FlightState::Armed && !i.link {
+            return self.fail(Invariant::ArmedWithoutLink, "armed without a good link".into());
+        }
+        if let Some(t) = d.failsafe_throttle {
+            if t > self.proc.held_thr {
+                return self.fail(Invariant::FailsafeSticks, format!("failsafe throttle {t} above the last good {}", self.proc.held_thr));
+            }
+        }
+        if self.proc.lost_ticks > cfg.failsafe_off_ticks && state.motors_may_run() {
+            return self.fail(
+                Invariant::MotorsOnAfterLinkLoss,
+                format!("link gone {} ticks (limit {}), state {}", self.proc.lost_ticks, cfg.failsafe_off_ticks, state.name()),
+            );
+        }
+        self.proc.after_checks(i.link, gesture, i.throttle_low, state);
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Generators
+// ---------------------------------------------------------------------------------------
+
+/// TIM2 counts per control tick (1.25 ms at 4 MHz).
+pub const COUNTS_PER_TICK: u64 = 5_000;
+/// TIM2 counts per receiver frame (20 ms, 50 Hz).
+pub const COUNTS_PER_FRAME: u64 = 80_000;
+
+/// One capture event as the TIM2 interrupt reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Edge {
+    pub channel: usize,
+    pub counts: u16,
+    pub level_high: bool,
+}
+
+/// What the transmitter sends for a while: a pulse width per channel, TIM2 counts
+/// (0 = that channel stays low), or nothing at all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RadioFrame {
+    pub width_counts: [u16; CHANNELS],
+    pub link: bool,
+}
+
+impl RadioFrame {
+    /// No signal.
+    pub const OFF: RadioFrame = RadioFrame { width_counts: [0; CHANNELS], link: false };
+
+    /// The widths that decode to `s` (throttle 0 is sent at the bottom of the range).
+    pub fn from_sticks(rc: &RcConfig, s: Sticks) -> RadioFrame {
+        let w = |centre: i16, v: i16| (i32::from(centre) + i32::from(v)).clamp(1, i32::from(u16::MAX)) as u16;
+        RadioFrame {
+            width_counts: [w(rc.ail_center, s.ail), w(rc.ele_center, s.ele), w(rc.thr_bottom, s.thr), w(rc.rud_center, s.rud)],
+            link: true,
+        }
+    }
+}
+
+/// Stick positions of the gestures, reference counts.
+pub mod sticks {
+    use fcu_core::rc::Sticks;
+
+    pub const NEUTRAL: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: 0 };
+    pub const ARM: Sticks = Sticks { ail: -1500, ele: -1500, thr: 0, rud: 1500 };
+    pub const DISARM: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: -1500 };
+    pub const CALIBRATE: Sticks = Sticks { ail: 1500, ele: -1500, thr: 0, rud: -1500 };
+    /// Level flight at a mid throttle.
+    pub const FLY: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+}
+
+/// A PWM receiver and the TIM2 capture behind it, in integer counts: every 20 ms frame the
+/// four channels pulse one after the other (each rises when the previous one falls), and
+/// every edge is timestamped on the 15-bit 0.25 µs counter. Optional glitches: spikes of
+/// 2–30 µs on a random channel at a random time of the frame.
+#[derive(Clone, Debug)]
+pub struct PwmReceiver {
+    now: u64,
+    next_frame: u64,
+    /// Scheduled edges (absolute counts), in time order.
+    pending: Vec<(u64, Edge)>,
+    rng: Rng,
+}
+
+impl PwmReceiver {
+    /// `seed` sets the frame phase against the control ticks and the glitches.
+    pub fn new(seed: u64) -> Self {
+        let mut rng = Rng::fork(seed, 0x0050_574D);
+        let next_frame = rng.next_u64() % COUNTS_PER_FRAME;
+        PwmReceiver { now: 0, next_frame, pending: Vec::new(), rng }
+    }
+
+    /// Absolute time, TIM2 counts since the receiver started.
+    pub fn now_counts(&self) -> u64 {
+        self.now
+    }
+
+    /// The edges of the next control tick, appended to `out` oldest first. `frame` is what
+    /// frames starting during this tick carry; `glitches` spikes are added to each of them.
+    pub fn tick(&mut self, frame: &RadioFrame, glitches: u8, out: &mut Vec<Edge>) {
+        let end = self.now + COUNTS_PER_TICK;
+        while self.next_frame < end {
+            let start = self.next_frame;
+            self.next_frame += COUNTS_PER_FRAME;
+            if frame.link {
+                let mut t = start;
+                for (channel, &w) in frame.width_counts.iter().enumerate() {
+                    if w > 0 {
+                        self.pending.push((t, Edge { channel, counts: 0, level_high: true }));
+                        self.pending.push((t + u64::from(w), Edge { channel, counts: 0, level_high: false }));
+                        t += u64::from(w);
+                    }
+                }
+            }
+            for _ in 0..glitches {
+                let channel = (self.rng.next_u64() % CHANNELS as u64) as usize;
+                let at = start + self.rng.next_u64() % COUNTS_PER_FRAME;
+                let len = 8 + self.rng.next_u64() % 113;
+                self.pending.push((at, Edge { channel, counts: 0, level_high: true }));
+                self.pending.push((at + len, Edge { channel, counts: 0, level_high: false }));
+            }
+            self.pending.sort_by_key(|&(t, _)| t);
+        }
+        let due = self.pending.iter().take_while(|&&(t, _)| t < end).count();
+        for (t, e) in self.pending.drain(..due) {
+            out.push(Edge { counts: (t % u64::from(CAPTURE_WRAP)) as u16, ..e });
+        }
+        self.now = end;
+    }
+}
+
+/// A level, still LSM6DSL: raw words in sensor axes, accel z = 8197 LSB (1 g at
+/// 0.122 mg/LSB), ±`noise_lsb` on every word, never two identical samples in a row.
+#[derive(Clone, Debug)]
+pub struct LevelImu {
+    rng: Rng,
+    last: RawImu,
+    pub noise_lsb: i16,
+}
+
+impl LevelImu {
+    pub fn new(seed: u64) -> Self {
+        LevelImu { rng: Rng::fork(seed, 0x0049_4D55), last: RawImu::default(), noise_lsb: 2 }
+    }
+
+    pub fn sample(&mut self) -> RawImu {
+        let span = (2 * i64::from(self.noise_lsb.clamp(0, 100)) + 1) as u64;
+        let mut n = || (self.rng.next_u64() % span) as i16 - self.noise_lsb.clamp(0, 100);
+        let mut s = RawImu { accel: [n(), n(), 8197 + n()], gyro: [n(), n(), n()] };
+        if s == self.last {
+            s.accel[0] = if s.accel[0] > 0 { s.accel[0] - 1 } else { s.accel[0] + 1 };
+        }
+        self.last = s;
+        s
+    }
+}
+
+/// A controller wired to an edge decoder, a receiver, a level IMU and a monitor.
+#[derive(Clone, Debug)]
+pub struct Rig {
+    pub fc: FlightController,
+    pub monitor: SafetyMonitor,
+    pub decoder: EdgeDecoder,
+    pub radio: PwmReceiver,
+    pub imu: LevelImu,
+    edges: Vec<Edge>,
+}
+
+impl Rig {
+    pub fn new(cfg: Config, seed: u64) -> Result<Rig, ConfigError> {
+        let fc = FlightController::new(cfg)?;
+        Ok(Rig {
+            monitor: SafetyMonitor::new(&cfg),
+            decoder: fc.edge_decoder(),
+            fc,
+            radio: PwmReceiver::new(seed),
+            imu: LevelImu::new(seed),
+            edges: Vec::new(),
+        })
+    }
+
+    pub fn state(&self) -> FlightState {
+        self.fc.status().state
+    }
+
+    /// One tick from given edges and sensor words: edges → decoder → tick → outer step →
+    /// monitor.
+    pub fn tick_with(&mut self, imu: RawImu, edges: &[Edge]) -> Result<TickOutput, Violation> {
+        for e in edges {
+            self.decoder.on_edge(e.channel, e.counts, e.level_high);
+        }
+        let batch = self.decoder.take();
+        let out = self.fc.tick(imu, &batch);
+        if let Some(job) = &out.outer_job {
+            self.fc.run_outer(job);
+        }
+        let status = self.fc.status();
+        self.monitor.check(&Observation { imu: Some(imu), batch: Some(&batch), out: &out, status: &status })?;
+        Ok(out)
+    }
+
+    /// One tick of the receiver sending `frame` (plus `glitches` spikes per frame), with
+    /// the given sensor words.
+    pub fn tick_frame_imu(&mut self, frame: &RadioFrame, glitches: u8, imu: RawImu) -> Result<TickOutput, Violation> {
+        let mut edges = core::mem::take(&mut self.edges);
+        edges.clear();
+        self.radio.tick(frame, glitches, &mut edges);
+        let r = self.tick_with(imu, &edges);
+        self.edges = edges;
+        r
+    }
+
+    /// One tick of the receiver sending `frame`, with the level IMU.
+    pub fn tick_frame(&mut self, frame: &RadioFrame, glitches: u8) -> Result<TickOutput, Violation> {
+        let imu = self.imu.sample();
+        self.tick_frame_imu(frame, glitches, imu)
+    }
+
+    /// `ticks` ticks of `frame` with the level IMU.
+    pub fn run(&mut self, frame: &RadioFrame, ticks: u32, glitches: u8) -> Result<(), Violation> {
+        for _ in 0..ticks {
+            self.tick_frame(frame, glitches)?;
+        }
+        Ok(())
+    }
+
+    /// `ticks` ticks of the sticks `s` on a clean link.
+    pub fn sticks(&mut self, s: Sticks, ticks: u32) -> Result<(), Violation> {
+        let frame = RadioFrame::from_sticks(&self.fc.config().rc, s);
+        self.run(&frame, ticks, 0)
+    }
+
+    /// Boot with neutral sticks on a clean link until the start-up calibration has passed
+    /// and the boot settling is over (the default profile is then Disarmed, released).
+    pub fn booted(cfg: Config, seed: u64) -> Result<Rig, String> {
+        let mut rig = Rig::new(cfg, seed).map_err(|e| e.to_string())?;
+        let settle = match cfg.supervisor {
+            SupervisorConfig::Safe(s) => s.boot_settle_ticks,
+            SupervisorConfig::Reference => 0,
+        };
+        let limit = cfg.calibration.settle_ticks + cfg.calibration.samples + settle + 100;
+        for _ in 0..limit {
+            rig.sticks(sticks::NEUTRAL, 1).map_err(|v| v.to_string())?;
+            let st = rig.fc.status();
+            if matches!(st.calibration, CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) })
+                && rig.monitor.ticks() > u64::from(settle) + 1
+                && st.link
+            {
+                return Ok(rig);
+            }
+        }
+        Err(format!("not booted after {limit} ticks: {:?}", rig.fc.status().state))
+    }
+
+    /// Arm with the gesture (hold `arm_hold_ticks` + 16, release to neutral) on a clean link.
+    pub fn arm(&mut self) -> Result<(), String> {
+        let hold = match self.fc.config().supervisor {
+            SupervisorConfig::Safe(s) => s.arm_hold_ticks,
+            SupervisorConfig::Reference => 1,
+        };
+        self.sticks(sticks::ARM, hold + 16).map_err(|v| v.to_string())?;
+        for _ in 0..64 {
+            self.sticks(sticks::NEUTRAL, 1).map_err(|v| v.to_string())?;
+            if self.state() == FlightState::Armed {
+                return Ok(());
+            }
+        }
+        Err(format!("not armed: {:?}", self.fc.status().blockers))
+    }
+}
