@@ -181,6 +181,21 @@ pub struct Inputs {
     pub tilt_rad: f32,
 }
 
+impl Inputs {
+    /// On the bench and ready: a good link, sticks centred with the throttle low, calibrated,
+    /// level, no fault, no gesture.
+    pub const READY: Inputs = Inputs {
+        link: true,
+        sticks: Sticks { ail: 0, ele: 0, thr: 0, rud: 0 },
+        gesture: None,
+        throttle_low: true,
+        calibrated: true,
+        calibrating: false,
+        sensor_fault: None,
+        tilt_rad: 0.0,
+    };
+}
+
 /// What the supervisor decided for this tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Decision {
@@ -457,16 +472,7 @@ mod tests {
 
     impl Rig {
         fn new() -> Rig {
-            let i = Inputs {
-                link: true,
-                sticks: IDLE,
-                gesture: None,
-                throttle_low: true,
-                calibrated: true,
-                calibrating: false,
-                sensor_fault: None,
-                tilt_rad: 0.0,
-            };
+            let i = Inputs::READY;
             let mut r = Rig { s: Supervisor::new(), i, last: Supervisor::new().step_reference(false, None, false) };
             r.run(IDLE, CFG.boot_settle_ticks);
             assert_eq!(r.last.state, FlightState::Disarmed);

@@ -318,16 +318,7 @@ fn run_supervisor(cfg: &SafetyConfig, s: &mut Supervisor, m: &mut SupervisorMoni
 
 /// A supervisor and its monitor after `boot_settle_ticks` of calibrated idle with a good link.
 fn settled_supervisor(cfg: &SafetyConfig) -> (Supervisor, SupervisorMonitor) {
-    let idle = Inputs {
-        link: true,
-        sticks: Sticks::default(),
-        gesture: None,
-        throttle_low: true,
-        calibrated: true,
-        calibrating: false,
-        sensor_fault: None,
-        tilt_rad: 0.0,
-    };
+    let idle = Inputs::READY;
     let mut s = Supervisor::new();
     let mut m = SupervisorMonitor::new(*cfg);
     run_supervisor(cfg, &mut s, &mut m, &[(idle, cfg.boot_settle_ticks + 1)]).unwrap_or_else(|v| panic!("{v}"));
@@ -607,16 +598,7 @@ fn monitor_rejects_motors_after_a_long_link_loss() {
 fn supervisor_monitor_rejects_an_early_arm() {
     let cfg = SafetyConfig::DEFAULT;
     let (_, mut m) = settled_supervisor(&cfg);
-    let i = Inputs {
-        link: true,
-        sticks: Sticks::default(),
-        gesture: None,
-        throttle_low: true,
-        calibrated: true,
-        calibrating: false,
-        sensor_fault: None,
-        tilt_rad: 0.0,
-    };
+    let i = Inputs::READY;
     let arm = Inputs { gesture: Some(Gesture::Arm), ..i };
     let fake = |state| Decision {
         state,
@@ -692,16 +674,7 @@ fn f1_arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
 
     // The bare supervisor, short numbers: the minimal case proptest found.
     let cfg = SafetyConfig { arm_hold_ticks: 1, auto_disarm_ticks: 3, boot_settle_ticks: 0, ..SafetyConfig::DEFAULT };
-    let idle = Inputs {
-        link: true,
-        sticks: Sticks::default(),
-        gesture: None,
-        throttle_low: true,
-        calibrated: true,
-        calibrating: false,
-        sensor_fault: None,
-        tilt_rad: 0.0,
-    };
+    let idle = Inputs::READY;
     let arm = Inputs { gesture: Some(Gesture::Arm), ..idle };
     let mut s = Supervisor::new();
     let mut m = SupervisorMonitor::new(cfg);
