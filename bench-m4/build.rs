@@ -9,6 +9,7 @@ fn main() {
     let memory_x = manifest_dir.join("memory.x");
     fs::copy(&memory_x, out.join("memory.x")).expect("copy memory.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rustc-link-arg-bins=-Tlink.x");
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rerun-if-changed=build.rs");
     let opt = env::var("OPT_LEVEL").unwrap_or_else(|_| "?".into());

@@ -1,5 +1,6 @@
 //! Puts the repository's `memory.x` (the one place the STM32F401CC memory map is written)
-//! on the linker search path, so `-Tlink.x` finds it wherever cargo is run from.
+//! on the linker search path, so `-Tlink.x` finds it wherever cargo is run from, and passes the
+//! firmware's link scripts (cortex-m-rt's link.x, defmt's defmt.x) to its binary only.
 use std::{env, fs, path::PathBuf};
 
 fn main() {
@@ -8,6 +9,9 @@ fn main() {
     let memory_x = manifest_dir.join("..").join("memory.x");
     fs::copy(&memory_x, out.join("memory.x")).expect("copy ../memory.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
+    for arg in ["--nmagic", "-Tlink.x", "-Tdefmt.x"] {
+        println!("cargo:rustc-link-arg-bins={arg}");
+    }
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rerun-if-changed=build.rs");
 }
