@@ -98,3 +98,32 @@ fn cli_replay_reports_a_missing_file() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read /nonexistent/x.csv"));
 }
+
+/// Replay scenario 1 with `cal_request` raised on `ticks`, and return the first tick whose
+/// output row differs from the unmodified replay.
+fn first_difference_with_calibration_request(ticks: std::ops::RangeInclusive<u32>) -> Option<u32> {
+    let input = replay::parse_input(&golden("scenario_1.in.csv")).unwrap();
+    let plain = replay::run(Config::reference(), &input).unwrap();
+    let mut requested = input.clone();
+    for row in requested.iter_mut().filter(|r| ticks.contains(&r.tick)) {
+        row.radio.cal_request = true;
+    }
+    let recal = replay::run(Config::reference(), &requested).unwrap();
+    plain.iter().zip(&recal).find(|(a, b)| a != b).map(|(a, _)| a.tick)
+}
+
+#[test]
+fn a_recalibration_request_takes_effect_on_its_800th_sample() {
+    // golden README §4.4: a request at tick t averages ticks t..t+799; the new offsets are
+    // computed at t+799 and that tick's own sample already uses them (scenario 4: 4541 → 5340).
+    // Flying at that point, the new gyro offsets move the yaw estimate on that very tick.
+    assert_eq!(first_difference_with_calibration_request(4541..=4751), Some(5340));
+}
+
+#[test]
+fn a_calibration_request_during_start_up_runs_from_tick_1600_to_2399() {
+    // golden README §4.4 (scenario 6): a request during the start-up calibration starts its
+    // average at tick 1600, right after the start-up offsets, and completes at 2399; the
+    // outer step that follows tick 2399 already averages a sample with the new offsets.
+    assert_eq!(first_difference_with_calibration_request(1019..=1229), Some(2399));
+}
