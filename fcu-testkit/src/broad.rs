@@ -11,7 +11,7 @@
 //! (motors stopped), is set per profile as [`Profile::throttle_low`] explains.
 
 use std::fmt;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::Path;
 
 use fcu_core::ahrs::{Estimator, EstimatorConfig, MahonyConfig, VqfConfig};
@@ -112,20 +112,8 @@ impl Recording {
     /// Read a file, plain or gzip-compressed.
     pub fn read(path: &Path) -> Result<Recording, BroadError> {
         let file = Some(path.display().to_string());
-        let io_err = |e: std::io::Error| BroadError { file: file.clone(), line: None, column: None, message: e.to_string() };
-        let bytes = std::fs::read(path).map_err(io_err)?;
-        let text = if bytes.starts_with(&[0x1f, 0x8b]) {
-            let mut s = String::new();
-            flate2::read::MultiGzDecoder::new(bytes.as_slice()).read_to_string(&mut s).map_err(io_err)?;
-            s
-        } else {
-            String::from_utf8(bytes).map_err(|e| BroadError {
-                file: file.clone(),
-                line: None,
-                column: None,
-                message: format!("not UTF-8 text: {e}"),
-            })?
-        };
+        let text =
+            crate::csv::read_text(path).map_err(|e| BroadError { file: file.clone(), line: None, column: None, message: e.to_string() })?;
         Recording::parse(&text).map_err(|e| BroadError { file, ..e })
     }
 

@@ -96,6 +96,20 @@ fn short_type_name<T>() -> &'static str {
     n.rsplit("::").next().unwrap_or(n)
 }
 
+/// Read a text file, gunzipping it when it is gzip-compressed (recognised by its magic bytes,
+/// whatever its name).
+pub fn read_text(path: &std::path::Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let bytes = std::fs::read(path)?;
+    if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut s = String::new();
+        flate2::read::MultiGzDecoder::new(bytes.as_slice()).read_to_string(&mut s)?;
+        Ok(s)
+    } else {
+        String::from_utf8(bytes).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {e}")))
+    }
+}
+
 /// Iterate the data lines of a CSV text (skipping the header and blank lines), with their
 /// 1-based line numbers.
 pub fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {

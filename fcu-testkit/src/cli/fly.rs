@@ -72,7 +72,7 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
         }
     }
     if let Some(path) = &a.sticks {
-        let text = std::fs::read_to_string(path).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
+        let text = crate::csv::read_text(path).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
         let tl = Timeline::parse_csv(&text).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
         let last_row_s = tl.rows.last().map_or(0.0, |r| r.t_s);
         let name = format!("{} + sticks from {}", sc.name, path.display());

@@ -23,18 +23,9 @@ pub struct ReplayArgs {
     pub input: PathBuf,
 }
 
-/// Read a text file, gunzipping it when its name ends in `.gz`.
-pub fn read_text(path: &std::path::Path) -> Result<String, CliError> {
-    use std::io::Read;
-    let fail = |e: std::io::Error| CliError(format!("cannot read {}: {e}", path.display()));
-    if path.extension().is_some_and(|e| e == "gz") {
-        let f = std::fs::File::open(path).map_err(fail)?;
-        let mut s = String::new();
-        flate2::read::GzDecoder::new(f).read_to_string(&mut s).map_err(fail)?;
-        Ok(s)
-    } else {
-        std::fs::read_to_string(path).map_err(fail)
-    }
+/// Read an input file (plain or gzip) for the replay, as a message-ready error.
+fn read_text(path: &std::path::Path) -> Result<String, CliError> {
+    crate::csv::read_text(path).map_err(|e| CliError(format!("cannot read {}: {e}", path.display())))
 }
 
 pub fn run(a: &ReplayArgs) -> Result<ExitCode, CliError> {

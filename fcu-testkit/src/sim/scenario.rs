@@ -82,28 +82,21 @@ impl Timeline {
         let Some((hn, header)) = lines.next() else {
             return Err("the file is empty (expected the header t_s,ail_us,ele_us,thr_us,rud_us,link)".into());
         };
-        let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-        if cols != HEADER {
+        let cols = crate::csv::Header::parse(header);
+        if header.split(',').map(str::trim).ne(HEADER) {
             return Err(format!("line {}: header must be `{}`, found `{}`", hn + 1, HEADER.join(","), header.trim()));
         }
         let mut rows = Vec::new();
         let mut last_t = f64::NEG_INFINITY;
         for (n, line) in lines {
-            let line_no = n + 1;
-            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-            if fields.len() != HEADER.len() {
-                return Err(format!("line {line_no}: expected {} fields, found {}", HEADER.len(), fields.len()));
-            }
+            let r = crate::csv::Row::split(n + 1, line, &cols).map_err(|e| e.to_string())?;
+            let line_no = r.line;
             let mut v = [0.0f64; 6];
-            for ((slot, text), name) in v.iter_mut().zip(&fields).zip(HEADER) {
-                *slot = text
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|x| x.is_finite())
-                    .ok_or_else(|| format!("line {line_no}: `{name}` is not a number: `{text}`"))?;
+            for (k, slot) in v.iter_mut().enumerate() {
+                *slot = r.get::<f64>(k).map_err(|e| e.to_string())?;
             }
             let [t, ail, ele, thr, rud, link] = v;
-            if t < 0.0 || t < last_t {
+            if !(t.is_finite() && t >= 0.0 && t >= last_t) {
                 return Err(format!("line {line_no}: t_s {t} must be ≥ 0 and not go back in time"));
             }
             for (name, w) in [("ail_us", ail), ("ele_us", ele), ("thr_us", thr), ("rud_us", rud)] {
