@@ -386,16 +386,11 @@ impl Supervisor {
                 } else if gesture == Some(Gesture::Disarm) {
                     self.hold_ticks = self.hold_ticks.saturating_add(1);
                     if self.hold_ticks >= cfg.disarm_hold_ticks {
-                        self.released = false;
                         FlightState::Disarmed
                     } else {
                         FlightState::Armed
                     }
                 } else if self.low_throttle_ticks >= cfg.auto_disarm_ticks {
-                    // Like every disarm: a gesture held through it must be let go before it
-                    // can arm again (found by the safety properties: holding the arm gesture
-                    // through the automatic disarm re-armed on release).
-                    self.released = false;
                     FlightState::Disarmed
                 } else {
                     self.hold_ticks = 0;
@@ -407,7 +402,6 @@ impl Supervisor {
                     self.low_throttle_ticks = 0;
                     FlightState::Armed
                 } else if self.lost_ticks >= cfg.failsafe_off_ticks {
-                    self.released = false;
                     FlightState::FailsafeOff
                 } else {
                     FlightState::FailsafeLevel
@@ -421,6 +415,13 @@ impl Supervisor {
                 }
             }
         };
+        if self.state.motors_may_run() && !next.motors_may_run() {
+            // Every way out of flight (disarm gesture, automatic disarm, stage 2, fault): a
+            // gesture held through it must be let go before it acts again. One rule here, not
+            // one per branch: the automatic disarm once lacked it, and a gesture held through
+            // it re-armed on release (found by the safety properties).
+            self.released = false;
+        }
         if next != self.state && next != FlightState::Arming {
             self.hold_ticks = 0;
         }
