@@ -4,8 +4,6 @@
 //! Axis order everywhere is `[x, y, z]` = `[pitch, roll, yaw]` (the reference's naming:
 //! pitch is the rotation about body X).
 
-use crate::math::clamp_nan_low;
-
 /// Gains and limits of one axis of the cascade.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AxisGains {
@@ -243,15 +241,6 @@ fn clamp_symmetric(v: f32, lim: f32) -> f32 {
         -lim
     } else {
         v
-    }
-}
-
-/// Clamp that maps NaN to 0, for places where the product wants it gone.
-pub fn clamp_or_zero(v: f32, lim: f32) -> f32 {
-    if v.is_nan() {
-        0.0
-    } else {
-        clamp_nan_low(v, -lim, lim)
     }
 }
 

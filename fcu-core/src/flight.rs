@@ -212,7 +212,7 @@ impl Inner {
                 request_calibration: false,
                 blockers: Blockers::default(),
             },
-            radio: RadioState { sticks: Sticks::default(), link: false, all_channels_valid: false },
+            radio: RadioState { sticks: Sticks::default(), link: false },
             calibrator: Calibrator::new(cfg.calibration),
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
@@ -461,11 +461,6 @@ impl Inner {
             motor_command: self.motor_command,
             compare: self.compare,
         }
-    }
-
-    /// Filtered body rates of the last tick, rad/s.
-    pub fn gyro_rad_s(&self) -> [f32; 3] {
-        self.gyro_rad_s
     }
 }
 

@@ -146,15 +146,6 @@ impl Quat {
         Quat { w: libm::cosf(h), x: axis.x * s, y: axis.y * s, z: axis.z * s }
     }
 
-    /// The rotation vector `ω·dt` as a quaternion (exact exponential map).
-    pub fn from_rotation_vector(r: Vec3) -> Quat {
-        let angle = r.norm();
-        if angle < 1e-9 {
-            return Quat { w: 1.0, x: 0.5 * r.x, y: 0.5 * r.y, z: 0.5 * r.z }.normalized();
-        }
-        Quat::from_axis_angle(r.scale(1.0 / angle), angle)
-    }
-
     /// The earth "up" axis seen in the body frame: third row of the rotation matrix
     /// (the reference's `v` in the Mahony update).
     pub fn up_in_body(self) -> Vec3 {

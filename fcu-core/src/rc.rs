@@ -332,8 +332,6 @@ pub struct RadioState {
     /// The link is good: reference, an edge within the timeout on any channel; validated,
     /// every channel had an accepted pulse within the timeout.
     pub link: bool,
-    /// Every channel had an accepted pulse within the timeout.
-    pub all_channels_valid: bool,
 }
 
 impl Default for Receiver {
@@ -376,12 +374,11 @@ impl Receiver {
         channel(a2, w2, THR);
         channel(a3, w3, RUD);
         let timeout = cfg.link_timeout_ticks;
-        let all_valid = (*a0 < timeout) & (*a1 < timeout) & (*a2 < timeout) & (*a3 < timeout);
         self.link = match cfg.pulses {
             PulseRules::Reference { .. } => self.ticks_since_edge < timeout,
-            PulseRules::Validated { .. } => all_valid,
+            PulseRules::Validated { .. } => (*a0 < timeout) & (*a1 < timeout) & (*a2 < timeout) & (*a3 < timeout),
         };
-        RadioState { sticks: self.sticks, link: self.link, all_channels_valid: all_valid }
+        RadioState { sticks: self.sticks, link: self.link }
     }
 
     /// Set the radio state directly (golden replay): with `link`, the four widths are
@@ -394,7 +391,7 @@ impl Receiver {
             }
         }
         self.link = link;
-        RadioState { sticks: self.sticks, link, all_channels_valid: link }
+        RadioState { sticks: self.sticks, link }
     }
 }
 
