@@ -196,11 +196,6 @@ impl RateLoop {
                 *o = 0.0;
                 continue;
             }
-            let blocked = cfg.anti_windup && ((e > 0.0 && sat.positive) || (e < 0.0 && sat.negative));
-            let integ_before = st.integ;
-            if !blocked {
-                st.integ = clamp_symmetric(st.integ + e * ts, g.inner_i_limit);
-            }
             let raw_d = match cfg.derivative {
                 Derivative::OnError => (e - st.prev_error) * dt_recip,
                 Derivative::OnMeasurement => (st.prev_rate - rate) * dt_recip,
@@ -213,12 +208,13 @@ impl RateLoop {
             } else {
                 raw_d
             };
-            let mut unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
-            if cfg.anti_windup && unclamped.abs() > g.output_limit && (unclamped > 0.0) == (e > 0.0) {
-                // The output clamp already holds it: integrating further only stores error that
-                // will have to be unwound later (conditional integration).
-                st.integ = integ_before;
+            let integ = clamp_symmetric(st.integ + e * ts, g.inner_i_limit);
+            let mut unclamped = g.inner_kp * e + g.inner_ki * integ + g.inner_kd * d;
+            if cfg.anti_windup && winds_up(e, sat, unclamped, g.output_limit) {
+                // Keep the integrator where it was and say what that gives.
                 unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
+            } else {
+                st.integ = integ;
             }
             *o = clamp_symmetric(unclamped, g.output_limit);
         }
@@ -229,6 +225,19 @@ impl RateLoop {
     pub fn integrators(&self) -> [f32; 3] {
         self.axes.map(|a| a.integ)
     }
+}
+
+/// Anti-windup (D6): integrating `e` would push further in a direction that is already
+/// saturated, either in the mixer on the last tick (`sat`) or by this output's own clamp
+/// (conditional integration: what the clamp holds back would only have to be unwound later).
+/// Compared by sign bits, not `e > 0.0`: every float comparison costs the Cortex-M4 a
+/// `vcmp`/`vmrs` pair on the 800 Hz path. With `e = ±0` the integrator cannot move, so which
+/// way a zero counts does not matter.
+#[inline(always)]
+fn winds_up(e: f32, sat: Saturation, unclamped: f32, limit: f32) -> bool {
+    let e_negative = e.is_sign_negative();
+    let mixer_blocks = if e_negative { sat.negative } else { sat.positive };
+    mixer_blocks || (unclamped.abs() > limit && unclamped.is_sign_negative() == e_negative)
 }
 
 /// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`.

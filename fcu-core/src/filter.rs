@@ -61,19 +61,21 @@ impl BiquadCoeffs {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Biquad {
     c: BiquadCoeffs,
+    s: BiquadState,
+}
+
+/// The memory of one direct-form-I channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct BiquadState {
     x1: f32,
     x2: f32,
     y1: f32,
     y2: f32,
 }
 
-impl Biquad {
-    pub const fn new(c: BiquadCoeffs) -> Self {
-        Biquad { c, x1: 0.0, x2: 0.0, y1: 0.0, y2: 0.0 }
-    }
-
-    pub fn update(&mut self, x: f32) -> f32 {
-        let c = &self.c;
+impl BiquadState {
+    #[inline(always)]
+    fn update(&mut self, c: &BiquadCoeffs, x: f32) -> f32 {
         let y = c.b0 * x + c.b1 * self.x1 + c.b2 * self.x2 + c.a1 * self.y1 + c.a2 * self.y2;
         self.x2 = self.x1;
         self.x1 = x;
@@ -82,13 +84,56 @@ impl Biquad {
         y
     }
 
+    fn reset_to(&mut self, c: &BiquadCoeffs, x: f32) {
+        let y = x * c.dc_gain();
+        *self = BiquadState { x1: x, x2: x, y1: y, y2: y };
+    }
+}
+
+impl Biquad {
+    pub const fn new(c: BiquadCoeffs) -> Self {
+        Biquad { c, s: BiquadState { x1: 0.0, x2: 0.0, y1: 0.0, y2: 0.0 } }
+    }
+
+    pub fn update(&mut self, x: f32) -> f32 {
+        self.s.update(&self.c, x)
+    }
+
     /// Start from a steady state at `x` (no start-up transient), used after a reset.
     pub fn reset_to(&mut self, x: f32) {
-        let y = x * self.c.dc_gain();
-        self.x1 = x;
-        self.x2 = x;
-        self.y1 = y;
-        self.y2 = y;
+        self.s.reset_to(&self.c, x);
+    }
+}
+
+/// `N` biquads with the same coefficients (the three gyro axes), each coefficient read once
+/// per update instead of once per channel. Each channel computes exactly what a [`Biquad`]
+/// with these coefficients computes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BiquadBank<const N: usize> {
+    c: BiquadCoeffs,
+    s: [BiquadState; N],
+}
+
+impl<const N: usize> BiquadBank<N> {
+    pub fn new(c: BiquadCoeffs) -> Self {
+        BiquadBank { c, s: [BiquadState::default(); N] }
+    }
+
+    pub fn update(&mut self, x: [f32; N]) -> [f32; N] {
+        let c = self.c;
+        let mut y = [0.0; N];
+        for ((y, s), x) in y.iter_mut().zip(&mut self.s).zip(x) {
+            *y = s.update(&c, x);
+        }
+        y
+    }
+
+    /// Every channel to a steady state at `x`.
+    pub fn reset_to(&mut self, x: f32) {
+        let c = self.c;
+        for s in &mut self.s {
+            s.reset_to(&c, x);
+        }
     }
 }
 
@@ -171,6 +216,23 @@ mod tests {
         for _ in 0..10 {
             assert!((f.update(250.0) - 250.0).abs() < 0.01);
         }
+    }
+
+    #[test]
+    fn a_bank_channel_is_bit_for_bit_a_biquad() {
+        let c = BiquadCoeffs::REFERENCE_GYRO;
+        let mut bank = BiquadBank::<3>::new(c);
+        let mut single = [Biquad::new(c); 3];
+        for k in 0..200u16 {
+            let x = [f32::from(k % 17) * 70.0, -f32::from(k) * 3.5, f32::from(k * 7 % 31) - 15.0];
+            let y = bank.update(x);
+            for ((y, f), x) in y.iter().zip(&mut single).zip(x) {
+                assert_eq!(y.to_bits(), f.update(x).to_bits());
+            }
+        }
+        bank.reset_to(12.5);
+        single[1].reset_to(12.5);
+        assert_eq!(bank.update([1.0; 3])[1].to_bits(), single[1].update(1.0).to_bits());
     }
 
     #[test]

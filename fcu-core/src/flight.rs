@@ -14,8 +14,8 @@
 use crate::ahrs::{Estimator, EstimatorConfig, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
-use crate::filter::{block_average, Biquad, BLOCK};
-use crate::imu::{BodyImu, CalibrationPhase, Calibrator, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
+use crate::filter::{block_average, BiquadBank, BLOCK};
+use crate::imu::{BodyImu, CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
@@ -90,6 +90,7 @@ pub struct Status {
 #[derive(Clone, Debug)]
 pub struct Inner {
     cfg: Config,
+    decoder: Decoder,
     receiver: Receiver,
     supervisor: Supervisor,
     decision: Decision,
@@ -97,11 +98,12 @@ pub struct Inner {
     calibrator: Calibrator,
     cal_pending: bool,
     offsets: Offsets,
-    health: HealthMonitor,
+    /// `None` when the configuration has no health checks (the reference).
+    health: Option<HealthMonitor>,
     fault: Option<SensorFault>,
     last_raw: RawImu,
     missing_samples: u32,
-    gyro_lpf: [Biquad; 3],
+    gyro_lpf: BiquadBank<3>,
     fifo_k: usize,
     accel_fifo: [[f32; 3]; BLOCK],
     gyro_fifo: [[f32; 3]; BLOCK],
@@ -203,6 +205,7 @@ impl Inner {
     fn new(cfg: Config) -> Self {
         Inner {
             cfg,
+            decoder: Decoder::new(&cfg.imu),
             receiver: Receiver::new(),
             supervisor: Supervisor::new(),
             decision: Decision {
@@ -216,11 +219,11 @@ impl Inner {
             calibrator: Calibrator::new(cfg.calibration),
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
-            health: HealthMonitor::default(),
+            health: cfg.health.map(|h| HealthMonitor::new(h, &cfg.imu)),
             fault: None,
             last_raw: RawImu::default(),
             missing_samples: 0,
-            gyro_lpf: [Biquad::new(cfg.gyro_filter); 3],
+            gyro_lpf: BiquadBank::new(cfg.gyro_filter),
             fifo_k: 0,
             accel_fifo: [[0.0; 3]; BLOCK],
             gyro_fifo: [[0.0; 3]; BLOCK],
@@ -290,7 +293,7 @@ impl Inner {
     fn run(&mut self, imu: RawImu, radio: RadioState, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
         // No `let cfg = self.cfg`: copying the whole Config costs ~350 instructions per tick.
         self.radio = radio;
-        let body = self.cfg.imu.to_body(imu);
+        let body = self.decoder.to_body(imu);
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
         self.check_health(imu, &body);
@@ -328,16 +331,11 @@ impl Inner {
         }
         let s = self.offsets.apply(body);
         let slot = self.fifo_k.saturating_sub(1).min(BLOCK - 1);
-        let mut gyro_f = [0.0f32; 3];
-        for ((g, f), raw) in gyro_f.iter_mut().zip(self.gyro_lpf.iter_mut()).zip(s.gyro_mdps) {
-            *g = f.update(raw as f32);
-        }
+        let mut gyro_f = self.gyro_lpf.update(s.gyro_mdps.map(|g| g as f32));
         if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
             // Integer inputs cannot make this happen; if it ever did, restart the filters and
             // (in the product) treat it as the sensor fault it would be.
-            for f in &mut self.gyro_lpf {
-                f.reset_to(0.0);
-            }
+            self.gyro_lpf.reset_to(0.0);
             gyro_f = [0.0; 3];
             if self.cfg.health.is_some() {
                 self.fault.get_or_insert(SensorFault::NotFinite);
@@ -384,7 +382,8 @@ impl Inner {
         }
 
         // 6. Guard, last and unconditional: compare values come from here only.
-        self.compare = self.motor_command.map(|c| self.cfg.mixer.to_compare(c));
+        let range = self.cfg.mixer.compare_range();
+        self.compare = self.motor_command.map(|c| range.to_compare(c));
         if !self.decision.motors_enabled || self.fault.is_some() {
             self.compare = [self.cfg.mixer.off_compare(); 4];
         }
@@ -411,8 +410,8 @@ impl Inner {
     }
 
     fn check_health(&mut self, raw: RawImu, body: &BodyImu) {
-        if let Some(h) = &self.cfg.health {
-            if let Some(f) = self.health.check(h, raw, body) {
+        if let Some(h) = &mut self.health {
+            if let Some(f) = h.check(raw, body) {
                 self.fault.get_or_insert(f);
             }
         }

@@ -137,16 +137,31 @@ impl MixerConfig {
     /// The reference's `set_motor_pwm`: `cmd ≥ max → max`, `cmd ≤ min → min`, otherwise
     /// truncated. NaN, which the C would turn into an undefined compare value, gives `min`.
     pub fn to_compare(&self, cmd: f32) -> u16 {
-        let v = if cmd >= self.max_compare {
-            self.max_compare
-        } else if cmd > self.min_compare {
-            cmd
-        } else {
-            self.min_compare
-        };
-        // `v` is inside the validated range (0 ≤ min < max ≤ 65536): through i32, a single
-        // native conversion, where a direct `as u16` adds two range checks per motor.
-        v as i32 as u16
+        self.compare_range().to_compare(cmd)
+    }
+
+    /// The compare range in counts, for converting several commands.
+    pub fn compare_range(&self) -> CompareRange {
+        // The validated range is 0 ≤ min < max ≤ 65536, so both casts are exact truncations.
+        CompareRange { min_counts: self.min_compare as i32, max_counts: self.max_compare as i32 }
+    }
+}
+
+/// The compare range truncated to whole counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CompareRange {
+    pub min_counts: i32,
+    pub max_counts: i32,
+}
+
+impl CompareRange {
+    /// Truncate, then clamp in integers. Clamping the float first and truncating after (the
+    /// reference's order) gives the same count for every input when `0 ≤ min`: truncation is
+    /// monotonic and maps `min`, `max` to `min_counts`, `max_counts`. NaN truncates to 0 and
+    /// then clamps to `min_counts`, as the float clamp sends it to `min`. One `vcvt` and two
+    /// integer compares instead of two float compares per motor.
+    pub fn to_compare(self, cmd: f32) -> u16 {
+        (cmd as i32).clamp(self.min_counts, self.max_counts) as u16
     }
 }
 
@@ -209,7 +224,41 @@ mod tests {
         assert!(sat[0].positive && sat[1].positive && !sat[2].positive);
     }
 
+    /// The reference's order: clamp in float, then truncate.
+    fn compare_float_first(m: &MixerConfig, cmd: f32) -> u16 {
+        let v = if cmd >= m.max_compare {
+            m.max_compare
+        } else if cmd > m.min_compare {
+            cmd
+        } else {
+            m.min_compare
+        };
+        v as u16
+    }
+
+    #[test]
+    fn compare_truncating_first_equals_the_reference_order_near_the_limits() {
+        let non_integer = MixerConfig { min_compare: 850.5, max_compare: 1699.75, ..MixerConfig::REFERENCE_ESC };
+        for m in [MixerConfig::REFERENCE_DC, MixerConfig::REFERENCE_ESC, non_integer] {
+            for edge in [m.min_compare, m.max_compare, 0.0] {
+                let mut x = edge - 3.0;
+                while x <= edge + 3.0 {
+                    for v in [x, f32::from_bits(x.to_bits() + 1), f32::from_bits(x.to_bits().saturating_sub(1))] {
+                        assert_eq!(m.to_compare(v), compare_float_first(&m, v), "{v} with {m:?}");
+                    }
+                    x += 0.125;
+                }
+            }
+        }
+    }
+
     proptest::proptest! {
+        #[test]
+        fn compare_truncating_first_equals_the_reference_order(cmd in proptest::num::f32::ANY, esc in proptest::bool::ANY) {
+            let m = if esc { MixerConfig::REFERENCE_ESC } else { MixerConfig::REFERENCE_DC };
+            proptest::prop_assert_eq!(m.to_compare(cmd), compare_float_first(&m, cmd));
+        }
+
         #[test]
         fn compare_values_stay_in_range_for_any_input(
             thr in proptest::num::i16::ANY,

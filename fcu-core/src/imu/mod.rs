@@ -47,17 +47,20 @@ impl Mount {
     }
 
     /// The driver's conversion and the mount in one pass: body axis `i` is
-    /// `trunc(raw[source[i]] · k)` with the sign of axis `i`. The sign rides on the sensitivity:
-    /// f32 negation is exact and truncation is odd, so `trunc(x · −k) = −trunc(x · k)`, bit for
-    /// bit what converting first and negating after gives (as the reference does).
+    /// `trunc(raw[source[i]] · k)` with the sign of axis `i`.
     pub fn convert(&self, raw: [i16; 3], k: f32) -> [i32; 3] {
+        self.permute(raw).map(|x| scale_truncate(x, k))
+    }
+
+    /// The signed permutation on raw words: body axis `i` is `sign[i] · raw[source[i]]`,
+    /// widened so that negating −32768 cannot overflow. Converting after the sign is what the
+    /// reference's convert-then-negate gives, bit for bit: f32 negation is exact and truncation
+    /// is odd, so `trunc(−x · k) = −trunc(x · k)`.
+    pub fn permute(&self, raw: [i16; 3]) -> [i32; 3] {
         let [r0, r1, r2] = raw;
         // A fourth slot so `source & 3` always indexes inside: no bounds check, no branch.
         let w = [r0, r1, r2, 0];
-        let axis = |src: u8, sign: i8| -> i32 {
-            let x = f32::from(w.get(usize::from(src & 3)).copied().unwrap_or(0));
-            (x * if sign < 0 { -k } else { k }) as i32
-        };
+        let axis = |src: u8, sign: i8| -> i32 { i32::from(w.get(usize::from(src & 3)).copied().unwrap_or(0)) * i32::from(sign) };
         let [s0, s1, s2] = self.source;
         let [g0, g1, g2] = self.sign;
         [axis(s0, g0), axis(s1, g1), axis(s2, g2)]
@@ -101,9 +104,58 @@ impl ImuConfig {
     /// Driver conversion and mount: `trunc(raw·sensitivity)` in f32, then the mount.
     /// A saturating float→int cast keeps any sensitivity from producing undefined values.
     pub fn to_body(&self, raw: RawImu) -> BodyImu {
-        BodyImu {
-            accel_mg: self.mount.convert(raw.accel, self.accel_mg_per_lsb),
-            gyro_mdps: self.mount.convert(raw.gyro, self.gyro_mdps_per_lsb),
+        Decoder::new(self).to_body(raw)
+    }
+}
+
+/// `trunc(x · k)` in f32, the driver's conversion (saturating, so no sensitivity can make it
+/// undefined).
+fn scale_truncate(x: i32, k: f32) -> i32 {
+    (x as f32 * k) as i32
+}
+
+/// An [`ImuConfig`] prepared once for the 800 Hz path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decoder {
+    mount: Mount,
+    accel_mg_per_lsb: f32,
+    gyro: GyroScale,
+}
+
+/// How gyro words become mdps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum GyroScale {
+    /// A whole number of mdps per LSB small enough that `raw · k` stays below 2^24, where f32
+    /// holds every integer: the f32 product is then exact, its truncation is the integer
+    /// product, and one integer multiply replaces two conversions and a float multiply.
+    /// The board's 70 mdps/LSB (±2000 dps) is such a scale.
+    Integer(i32),
+    Float(f32),
+}
+
+impl Decoder {
+    pub fn new(cfg: &ImuConfig) -> Self {
+        let k = cfg.gyro_mdps_per_lsb;
+        // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
+        let gyro = if k.is_finite() && k >= 1.0 && k <= 512.0 && k == (k as i32) as f32 { GyroScale::Integer(k as i32) } else { GyroScale::Float(k) };
+        Decoder { mount: cfg.mount, accel_mg_per_lsb: cfg.accel_mg_per_lsb, gyro }
+    }
+
+    pub fn to_body(&self, raw: RawImu) -> BodyImu {
+        BodyImu { accel_mg: self.accel_mg(raw.accel), gyro_mdps: self.gyro_mdps(raw.gyro) }
+    }
+
+    /// Accelerometer words (sensor axes) to body mg.
+    pub fn accel_mg(&self, accel: [i16; 3]) -> [i32; 3] {
+        self.mount.convert(accel, self.accel_mg_per_lsb)
+    }
+
+    /// Gyro words (sensor axes) to body mdps.
+    pub fn gyro_mdps(&self, gyro: [i16; 3]) -> [i32; 3] {
+        let g = self.mount.permute(gyro);
+        match self.gyro {
+            GyroScale::Integer(k) => g.map(|x| x * k),
+            GyroScale::Float(k) => g.map(|x| scale_truncate(x, k)),
         }
     }
 }
@@ -337,17 +389,37 @@ pub enum SensorFault {
 pub const MAX_MISSING_SAMPLES: u32 = 3;
 
 /// Watches raw words for a stuck sensor and converted values for impossible ones.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct HealthMonitor {
+    cfg: HealthConfig,
     last: Option<RawImu>,
     same_count: u32,
+    /// Whether any 16-bit word, converted at the configured sensitivities, can exceed the
+    /// limits. At the board's ±4 g / ±2000 dps neither can (4,000 mg < 4,100 and
+    /// 2,293,760 mdps < 2,300,000): the range check is then decided once, here, instead of on
+    /// every tick, where it cost the 800 Hz path about 30 instructions for a verdict that is
+    /// always "in range".
+    range_reachable: bool,
 }
 
 impl HealthMonitor {
+    pub fn new(cfg: HealthConfig, imu: &ImuConfig) -> Self {
+        // The conversion truncates `raw · k` and is monotonic in `raw`, so the largest
+        // magnitudes come from the extreme words.
+        let largest = |k: f32| -> u32 {
+            let lo = (f32::from(i16::MIN) * k) as i32;
+            let hi = (f32::from(i16::MAX) * k) as i32;
+            lo.unsigned_abs().max(hi.unsigned_abs())
+        };
+        let range_reachable = largest(imu.accel_mg_per_lsb) > cfg.accel_limit_mg || largest(imu.gyro_mdps_per_lsb) > cfg.gyro_limit_mdps;
+        HealthMonitor { cfg, last: None, same_count: 0, range_reachable }
+    }
+
     /// Check one reading: its raw words (stuck?) and its converted values (possible?). The
     /// converted values are integers, so they are always finite; a non-finite value can only
     /// appear later, in the filters, which report it as [`SensorFault::NotFinite`] themselves.
-    pub fn check(&mut self, cfg: &HealthConfig, raw: RawImu, body: &BodyImu) -> Option<SensorFault> {
+    pub fn check(&mut self, raw: RawImu, body: &BodyImu) -> Option<SensorFault> {
+        let cfg = &self.cfg;
         if self.last == Some(raw) {
             self.same_count = self.same_count.saturating_add(1);
         } else {
@@ -358,7 +430,7 @@ impl HealthMonitor {
             let [x, y, z] = *v;
             (x.unsigned_abs() > limit) | (y.unsigned_abs() > limit) | (z.unsigned_abs() > limit)
         };
-        if over(&body.accel_mg, cfg.accel_limit_mg) || over(&body.gyro_mdps, cfg.gyro_limit_mdps) {
+        if self.range_reachable && (over(&body.accel_mg, cfg.accel_limit_mg) || over(&body.gyro_mdps, cfg.gyro_limit_mdps)) {
             return Some(SensorFault::OutOfRange);
         }
         if self.same_count >= cfg.stuck_ticks {
@@ -400,6 +472,20 @@ mod tests {
             let conv = raw.map(|r| (f32::from(r) * k) as i32);
             let reference = [-conv[1], conv[0], conv[2]];
             proptest::prop_assert_eq!(Mount::STEVAL_FCU001.convert(raw, k), reference);
+        }
+    }
+
+    #[test]
+    fn integer_gyro_scale_equals_the_drivers_float_conversion_for_every_word() {
+        for k in [70.0f32, 8.75, 17.5, 35.0, 1.0, 512.0] {
+            let cfg = ImuConfig { gyro_mdps_per_lsb: k, ..ImuConfig::REFERENCE };
+            let d = Decoder::new(&cfg);
+            assert_eq!(matches!(d.gyro, GyroScale::Integer(_)), k.fract() == 0.0, "{k}");
+            for w in i16::MIN..=i16::MAX {
+                let words = [w, w.wrapping_add(1), w.wrapping_mul(3)];
+                let float = words.map(|r| (f32::from(r) * k) as i32);
+                assert_eq!(d.gyro_mdps(words), [-float[1], float[0], float[2]], "{k} {w}");
+            }
         }
     }
 
@@ -459,26 +545,49 @@ mod tests {
     #[test]
     fn a_stuck_sensor_is_reported_after_the_configured_ticks() {
         let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
-        let mut h = HealthMonitor::default();
+        let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
         let raw = RawImu { accel: [1, 2, 3], gyro: [4, 5, 6] };
         let body = ImuConfig::REFERENCE.to_body(raw);
         for _ in 0..3 {
-            assert_eq!(h.check(&cfg, raw, &body), None);
+            assert_eq!(h.check(raw, &body), None);
         }
-        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::Stuck));
+        assert_eq!(h.check(raw, &body), Some(SensorFault::Stuck));
         let other = RawImu { accel: [1, 2, 4], gyro: [4, 5, 6] };
-        assert_eq!(h.check(&cfg, other, &body), None);
+        assert_eq!(h.check(other, &body), None);
     }
 
     #[test]
     fn an_impossible_value_is_out_of_range() {
-        // A ±4 g sensor cannot say 5 g: a wrong full scale or a corrupt read.
-        let cfg = HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
-        let mut h = HealthMonitor::default();
+        // A ±4 g sensor cannot say 5 g: a wrong full scale or a corrupt read. With limits a
+        // word can exceed at these sensitivities, the check runs.
+        let cfg = HealthConfig { stuck_ticks: 80, accel_limit_mg: 3000, gyro_limit_mdps: 2_000_000 };
+        let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
         let raw = RawImu::default();
-        let body = BodyImu { accel_mg: [0, -5000, 1000], gyro_mdps: [0; 3] };
-        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::OutOfRange));
+        let body = BodyImu { accel_mg: [0, -3001, 1000], gyro_mdps: [0; 3] };
+        assert_eq!(h.check(raw, &body), Some(SensorFault::OutOfRange));
         let body = BodyImu { accel_mg: [0, 0, 1000], gyro_mdps: [i32::MIN, 0, 0] };
-        assert_eq!(h.check(&cfg, raw, &body), Some(SensorFault::OutOfRange));
+        assert_eq!(h.check(raw, &body), Some(SensorFault::OutOfRange));
+        let body = BodyImu { accel_mg: [0, 0, 3000], gyro_mdps: [0, -2_000_000, 0] };
+        assert_eq!(h.check(raw, &body), None);
+    }
+
+    #[test]
+    fn the_range_check_is_dropped_only_when_no_word_can_fail_it() {
+        // ±4 g gives at most 4,000 mg and ±2000 dps at most 2,293,760 mdps: limits at or above
+        // those cannot be exceeded by any sensor word, limits one below can.
+        let reachable = |accel_limit_mg, gyro_limit_mdps| {
+            HealthMonitor::new(HealthConfig { stuck_ticks: 80, accel_limit_mg, gyro_limit_mdps }, &ImuConfig::REFERENCE).range_reachable
+        };
+        assert!(!reachable(4100, 2_300_000));
+        assert!(!reachable(3997, 2_293_760));
+        assert!(reachable(3996, 2_293_760));
+        assert!(reachable(3997, 2_293_759));
+        // Every word really stays inside the product's limits.
+        let body = |w: i16| ImuConfig::REFERENCE.to_body(RawImu { accel: [w; 3], gyro: [w; 3] });
+        for w in [i16::MIN, i16::MIN + 1, -1, 0, 1, i16::MAX] {
+            let b = body(w);
+            assert!(b.accel_mg.iter().all(|v| v.unsigned_abs() <= 3997), "{w}: {b:?}");
+            assert!(b.gyro_mdps.iter().all(|v| v.unsigned_abs() <= 2_293_760), "{w}: {b:?}");
+        }
     }
 }
