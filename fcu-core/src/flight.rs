@@ -215,7 +215,7 @@ impl Inner {
                 request_calibration: false,
                 blockers: Blockers::default(),
             },
-            radio: RadioState { sticks: Sticks::default(), link: false },
+            radio: RadioState::NONE,
             calibrator: Calibrator::new(cfg.calibration),
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
@@ -426,7 +426,7 @@ impl Inner {
                 let inputs = Inputs {
                     link: self.radio.link,
                     sticks,
-                    gesture: self.cfg.rc.gesture(&sticks),
+                    gesture: self.radio.gesture,
                     throttle_low: self.cfg.rc.throttle_low(&sticks),
                     calibrated: self.calibrator.has_passed(),
                     calibrating,

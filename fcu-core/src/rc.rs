@@ -317,11 +317,22 @@ impl EdgeDecoder {
 }
 
 /// The control side of the radio: link state, per-channel validity and the sticks.
+///
+/// Ages are kept as the tick of the last pulse (and of the last edge) against a tick counter,
+/// not as four counters incremented every tick: on the 800 Hz path, where most ticks carry no
+/// pulse, the link test is then one subtraction against the stalest channel.
 #[derive(Clone, Debug)]
 pub struct Receiver {
     sticks: Sticks,
-    ticks_since_edge: u32,
-    channel_age: [u32; CHANNELS],
+    /// The gesture the sticks make, re-evaluated only when a width changes them.
+    gesture: Option<Gesture>,
+    /// Control ticks, starting at `u32::MAX` so that "never" (tick 0) is already older than
+    /// any timeout; 64 bits never wrap (2^64 ticks at 800 Hz is 730 million years).
+    now: u64,
+    last_edge_at: u64,
+    last_pulse_at: [u64; CHANNELS],
+    /// The oldest of `last_pulse_at`: the link is as old as its stalest channel.
+    stalest_pulse_at: u64,
     link: bool,
 }
 
@@ -332,6 +343,13 @@ pub struct RadioState {
     /// The link is good: reference, an edge within the timeout on any channel; validated,
     /// every channel had an accepted pulse within the timeout.
     pub link: bool,
+    /// The gesture the sticks make (whatever the link; the supervisor decides what counts).
+    pub gesture: Option<Gesture>,
+}
+
+impl RadioState {
+    /// Nothing received yet.
+    pub const NONE: RadioState = RadioState { sticks: Sticks { ail: 0, ele: 0, thr: 0, rud: 0 }, link: false, gesture: None };
 }
 
 impl Default for Receiver {
@@ -343,7 +361,15 @@ impl Default for Receiver {
 impl Receiver {
     pub fn new() -> Self {
         // Disconnected at boot, as the reference's `rc_timeout = 1000`.
-        Receiver { sticks: Sticks::default(), ticks_since_edge: u32::MAX, channel_age: [u32::MAX; CHANNELS], link: false }
+        Receiver {
+            sticks: Sticks::default(),
+            gesture: None,
+            now: u64::from(u32::MAX),
+            last_edge_at: 0,
+            last_pulse_at: [0; CHANNELS],
+            stalest_pulse_at: 0,
+            link: false,
+        }
     }
 
     pub fn sticks(&self) -> Sticks {
@@ -353,32 +379,41 @@ impl Receiver {
     /// Take in one tick's pulses. `on_stick_update` runs after every single-channel update
     /// with the sticks as they are then (the reference evaluates its gestures there).
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
-        let [e0, e1, e2, e3] = batch.edge_seen;
-        self.ticks_since_edge = if e0 | e1 | e2 | e3 { 0 } else { self.ticks_since_edge.saturating_add(1) };
+        self.now += 1;
+        let now = self.now;
         // Written out per channel (in channel order, as the reference's gestures need): with a
         // constant channel each width-to-stick folds to one subtraction. A loop over the four
         // cost the 800 Hz tick a hundred instructions on the Cortex-M4.
         let [w0, w1, w2, w3] = batch.width_counts;
-        let [a0, a1, a2, a3] = &mut self.channel_age;
+        let [t0, t1, t2, t3] = &mut self.last_pulse_at;
         let sticks = &mut self.sticks;
-        let mut channel = |age: &mut u32, width: Option<u16>, index: usize| match width {
-            Some(w) => {
-                *age = 0;
+        let mut channel = |at: &mut u64, width: Option<u16>, index: usize| {
+            if let Some(w) = width {
+                *at = now;
                 cfg.apply_width(sticks, index, w);
                 on_stick_update(sticks);
             }
-            None => *age = age.saturating_add(1),
         };
-        channel(a0, w0, AIL);
-        channel(a1, w1, ELE);
-        channel(a2, w2, THR);
-        channel(a3, w3, RUD);
-        let timeout = cfg.link_timeout_ticks;
+        channel(t0, w0, AIL);
+        channel(t1, w1, ELE);
+        channel(t2, w2, THR);
+        channel(t3, w3, RUD);
+        if w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some() {
+            self.stalest_pulse_at = (*t0).min(*t1).min(*t2).min(*t3);
+            self.gesture = cfg.gesture(&self.sticks);
+        }
+        let timeout = u64::from(cfg.link_timeout_ticks);
         self.link = match cfg.pulses {
-            PulseRules::Reference { .. } => self.ticks_since_edge < timeout,
-            PulseRules::Validated { .. } => (*a0 < timeout) & (*a1 < timeout) & (*a2 < timeout) & (*a3 < timeout),
+            PulseRules::Reference { .. } => {
+                let [e0, e1, e2, e3] = batch.edge_seen;
+                if e0 | e1 | e2 | e3 {
+                    self.last_edge_at = now;
+                }
+                now - self.last_edge_at < timeout
+            }
+            PulseRules::Validated { .. } => now - self.stalest_pulse_at < timeout,
         };
-        RadioState { sticks: self.sticks, link: self.link }
+        RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
     }
 
     /// Set the radio state directly (golden replay): with `link`, the four widths are
@@ -389,9 +424,10 @@ impl Receiver {
             for (channel, w) in widths.into_iter().enumerate() {
                 cfg.apply_width(&mut self.sticks, channel, w);
             }
+            self.gesture = cfg.gesture(&self.sticks);
         }
         self.link = link;
-        RadioState { sticks: self.sticks, link }
+        RadioState { sticks: self.sticks, link, gesture: self.gesture }
     }
 }
 
@@ -492,7 +528,63 @@ mod tests {
         assert!(!r.update(&cfg, &empty, |_| {}).link);
     }
 
+    #[test]
+    fn receiver_link_with_reference_rules_follows_any_edge() {
+        let cfg = RcConfig { link_timeout_ticks: 25, ..REF };
+        let mut r = Receiver::new();
+        let empty = PulseBatch::default();
+        assert!(!r.update(&cfg, &empty, |_| {}).link);
+        let edge = PulseBatch { edge_seen: [false, false, true, false], ..PulseBatch::default() };
+        assert!(r.update(&cfg, &edge, |_| {}).link);
+        for _ in 0..24 {
+            assert!(r.update(&cfg, &empty, |_| {}).link);
+        }
+        assert!(!r.update(&cfg, &empty, |_| {}).link);
+    }
+
+    #[test]
+    fn receiver_reports_the_gesture_of_the_latest_sticks() {
+        let cfg = RcConfig { pulses: VALID, ..REF };
+        let mut r = Receiver::new();
+        // Arm: throttle at the bottom, elevator and aileron low, rudder high.
+        let arm =
+            PulseBatch { width_counts: [Some(5862 - 1500), Some(6151 - 1500), Some(4450), Some(6397 + 1500)], ..PulseBatch::default() };
+        assert_eq!(r.update(&cfg, &arm, |_| {}).gesture, Some(Gesture::Arm));
+        // It holds while no pulse changes the sticks, and goes with the first that does.
+        assert_eq!(r.update(&cfg, &PulseBatch::default(), |_| {}).gesture, Some(Gesture::Arm));
+        let centre_rudder = PulseBatch { width_counts: [None, None, None, Some(6397)], ..PulseBatch::default() };
+        assert_eq!(r.update(&cfg, &centre_rudder, |_| {}).gesture, None);
+    }
+
     proptest::proptest! {
+        #[test]
+        fn receiver_state_equals_per_tick_channel_ages(
+            ticks in proptest::collection::vec((proptest::array::uniform4(proptest::option::weighted(0.2, 3200u16..8800)), proptest::array::uniform4(proptest::bool::weighted(0.3))), 0..400),
+            timeout in 1u32..60,
+            validated in proptest::bool::ANY,
+        ) {
+            // The model: what the receiver promises, counted tick by tick.
+            let pulses = if validated { VALID } else { PulseRules::Reference { reset_after_ticks: 25 } };
+            let cfg = RcConfig { pulses, link_timeout_ticks: timeout, ..REF };
+            let mut r = Receiver::new();
+            let mut ages = [u32::MAX; CHANNELS];
+            let mut since_edge = u32::MAX;
+            let mut sticks = Sticks::default();
+            for (widths, edges) in ticks {
+                let b = PulseBatch { width_counts: widths, edge_seen: edges };
+                let got = r.update(&cfg, &b, |_| {});
+                since_edge = if edges.iter().any(|&e| e) { 0 } else { since_edge.saturating_add(1) };
+                for ((age, w), ch) in ages.iter_mut().zip(widths).zip(0..) {
+                    match w {
+                        Some(w) => { *age = 0; cfg.apply_width(&mut sticks, ch, w); }
+                        None => *age = age.saturating_add(1),
+                    }
+                }
+                let link = if validated { ages.iter().all(|&a| a < timeout) } else { since_edge < timeout };
+                proptest::prop_assert_eq!(got, RadioState { sticks, link, gesture: cfg.gesture(&sticks) });
+            }
+        }
+
         #[test]
         fn width_is_correct_across_the_wrap(rise in 0u32..32768, width in 1u32..32768) {
             let fall = (rise + width) % CAPTURE_WRAP;

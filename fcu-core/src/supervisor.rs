@@ -210,7 +210,7 @@ pub struct Decision {
 }
 
 /// The supervisor's memory.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Supervisor {
     state: FlightState,
     /// Ticks the current gesture (arm or disarm) has been held.
@@ -318,6 +318,44 @@ impl Supervisor {
     /// One tick of the safety layer. The `match` is the state table; every arm has tests
     /// named after its rule in `tests::`.
     pub fn step(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
+        if self.state == FlightState::Armed
+            && i.link
+            && i.gesture.is_none()
+            && !i.throttle_low
+            && i.sensor_fault.is_none()
+            && self.fault.is_none()
+            && cfg.auto_disarm_ticks > 0
+        {
+            return self.step_in_flight(i);
+        }
+        self.step_table(cfg, i)
+    }
+
+    /// [`step_table`](Self::step_table) in the state the 800 Hz path is in almost every tick:
+    /// armed on a good link, throttle up, no gesture, no fault. The table's every line for
+    /// those inputs, and nothing else: the `Armed` arm without its branches (the throttle is
+    /// up, so the auto-disarm count restarts and cannot reach its non-zero limit), no
+    /// transition, the gesture released, the throttle remembered. The test
+    /// `the_flight_shortcut_decides_exactly_as_the_table` compares the two on random input
+    /// sequences.
+    fn step_in_flight(&mut self, i: &Inputs) -> Decision {
+        self.boot_ticks = self.boot_ticks.saturating_add(1);
+        self.good_ticks = self.good_ticks.saturating_add(1);
+        self.low_throttle_ticks = 0;
+        self.hold_ticks = 0;
+        self.last_good_throttle = i.sticks.thr;
+        self.released = true;
+        Decision {
+            state: FlightState::Armed,
+            motors_enabled: true,
+            failsafe_throttle: None,
+            request_calibration: false,
+            blockers: Blockers::default(),
+        }
+    }
+
+    /// The state table, for any state and inputs.
+    fn step_table(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
         self.boot_ticks = self.boot_ticks.saturating_add(1);
         if let Some(f) = i.sensor_fault {
             // Latched until reset: motors off, disarmed.
@@ -889,5 +927,60 @@ mod tests {
         // Link loss stops the motors but keeps "armed": they resume when edges return (B8).
         assert!(!s.step_reference(false, None, false).motors_enabled);
         assert!(s.step_reference(true, None, false).motors_enabled);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+        #[test]
+        fn the_flight_shortcut_decides_exactly_as_the_table(
+            // (sticks pattern, link, throttle up, fault, calibrating, tilted), 1 to 40 ticks each.
+            seq in proptest::collection::vec(((0u8..5, proptest::bool::weighted(0.9), proptest::bool::weighted(0.2), proptest::bool::weighted(0.005), proptest::bool::weighted(0.01), proptest::bool::weighted(0.02)), 1u32..40), 1..60),
+        ) {
+            // Short counts so that random sequences arm, fly, fail over and disarm often.
+            let cfg = SafetyConfig { arm_hold_ticks: 3, disarm_hold_ticks: 4, auto_disarm_ticks: 20, failsafe_off_ticks: 15, recovery_ticks: 5, boot_settle_ticks: 10, ..SafetyConfig::DEFAULT };
+            let mut fast = Supervisor::new();
+            let mut table = Supervisor::new();
+            let mut shortcut_ticks = 0u32;
+            // Every sequence starts by arming and flying (pattern, link, throttle up, fault,
+            // calibrating, tilted), then goes its random way.
+            let script = [((0, true, false, false, false, false), 12), ((1, true, false, false, false, false), 5), ((0, true, false, false, false, false), 1), ((4, true, true, false, false, false), 5)];
+            let seq = script.into_iter().chain(seq);
+            for ((pattern, link, throttle_up, fault, calibrating, tilted), ticks) in seq {
+                let base = [IDLE, ARM, DISARM, CAL, FLY][usize::from(pattern)];
+                let sticks = Sticks { thr: if throttle_up { 1500 } else { base.thr }, ..base };
+                let i = Inputs {
+                    link,
+                    sticks,
+                    gesture: crate::rc::RcConfig::REFERENCE.gesture(&sticks),
+                    throttle_low: sticks.thr < 200,
+                    calibrated: true,
+                    calibrating,
+                    sensor_fault: fault.then_some(SensorFault::Stuck),
+                    tilt_rad: if tilted { 1.0 } else { 0.0 },
+                };
+                for _ in 0..ticks {
+                    let in_flight = fast.state == FlightState::Armed && i.link && i.gesture.is_none() && !i.throttle_low;
+                    shortcut_ticks += u32::from(in_flight);
+                    let a = fast.step(&cfg, &i);
+                    let b = table.step_table(&cfg, &i);
+                    proptest::prop_assert_eq!(a, b);
+                    proptest::prop_assert_eq!(&fast, &table);
+                }
+            }
+            // Not a vacuous comparison: the shortcut ran.
+            proptest::prop_assert!(shortcut_ticks >= 5);
+        }
+    }
+
+    #[test]
+    fn the_flight_shortcut_is_taken_in_steady_flight() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        let before = r.s.clone();
+        let d = r.s.step_in_flight(&r.i);
+        let mut table = before;
+        assert_eq!(d, table.step_table(&CFG, &r.i));
+        assert_eq!(r.s, table);
     }
 }

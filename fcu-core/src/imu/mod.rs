@@ -137,7 +137,11 @@ impl Decoder {
     pub fn new(cfg: &ImuConfig) -> Self {
         let k = cfg.gyro_mdps_per_lsb;
         // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
-        let gyro = if k.is_finite() && k >= 1.0 && k <= 512.0 && k == (k as i32) as f32 { GyroScale::Integer(k as i32) } else { GyroScale::Float(k) };
+        let gyro = if k.is_finite() && k >= 1.0 && k <= 512.0 && k == (k as i32) as f32 {
+            GyroScale::Integer(k as i32)
+        } else {
+            GyroScale::Float(k)
+        };
         Decoder { mount: cfg.mount, accel_mg_per_lsb: cfg.accel_mg_per_lsb, gyro }
     }
 
