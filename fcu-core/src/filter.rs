@@ -167,15 +167,26 @@ pub const BLOCK: usize = 5;
 /// Average of a block of [`BLOCK`] vectors as the reference does it: an f32 sum from 0.0
 /// over slots 0..4, then `× 0.2` either in f64 (reference arithmetic) or in f32.
 pub fn block_average(slots: &[[f32; 3]; BLOCK], reference_arithmetic: bool) -> [f32; 3] {
-    let mut out = [0.0f32; 3];
-    for (axis, o) in out.iter_mut().enumerate() {
-        let mut s = 0.0f32;
-        for slot in slots {
-            s += slot.get(axis).copied().unwrap_or(0.0);
-        }
-        *o = if reference_arithmetic { (f64::from(s) * 0.2) as f32 } else { s * 0.2 };
+    let mut sum = [0.0f32; 3];
+    for slot in slots {
+        accumulate(&mut sum, *slot);
     }
-    out
+    block_mean(sum, reference_arithmetic)
+}
+
+/// Add one sample to a running block sum: slot by slot from 0.0, the order (and so the
+/// rounding) of the reference's loop, so a sum kept tick by tick is bit for bit the one
+/// [`block_average`] forms from the stored slots.
+#[inline(always)]
+pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
+    for (s, x) in sum.iter_mut().zip(x) {
+        *s += x;
+    }
+}
+
+/// The mean of a block from its sum: `sum · 0.2`, in double as the reference when asked.
+pub fn block_mean(sum: [f32; 3], reference_arithmetic: bool) -> [f32; 3] {
+    sum.map(|s| if reference_arithmetic { (f64::from(s) * 0.2) as f32 } else { s * 0.2 })
 }
 
 #[cfg(test)]

@@ -11,11 +11,11 @@
 //! The simulator and the replay run the outer step inline with
 //! [`FlightController::run_outer`], right after the tick that made the job.
 
-use crate::ahrs::{Estimator, EstimatorConfig, MDPS_TO_RAD_S};
+use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
-use crate::filter::{block_average, BiquadBank, BLOCK};
-use crate::imu::{BodyImu, CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
+use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
+use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
@@ -29,13 +29,27 @@ pub struct TickOutput {
     pub outer_job: Option<OuterJob>,
 }
 
-/// A snapshot for the outer step: the five conditioned samples and what the sticks said.
+/// What the outer step needs of the last five ticks: the accelerometer words and the summed
+/// gyro, and what the sticks said.
+///
+/// Only the estimator reads the accelerometer, at the outer rate, so the tick stores the
+/// sensor's words and the outer step converts them (mount, sensitivity, offsets: the same
+/// integer arithmetic the tick would do, five samples at 160 Hz instead of one at 800 Hz).
+/// The estimator takes block means, so the gyro arrives as the sum the mean is made of,
+/// accumulated tick by tick in slot order (bit for bit the reference's sum of five stored
+/// slots). Both keep the job small: building it costs the job's tick a copy of this struct.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OuterJob {
-    /// Offset-corrected accelerometer, mg, body axes.
-    pub accel_mg: [[f32; 3]; BLOCK],
-    /// Low-passed gyro, mdps, body axes.
-    pub gyro_mdps: [[f32; 3]; BLOCK],
+    /// Accelerometer words, sensor axes, of the slots `accel_first_raw..`.
+    pub accel_words: AccelWords,
+    /// The offsets in force for those words.
+    pub accel_offsets: Offsets,
+    /// The slots before `accel_first_raw`, converted and corrected with the offsets they were
+    /// taken under and summed (only a block that spans the end of a calibration has any).
+    pub accel_sum_before_mg: [f32; 3],
+    pub accel_first_raw: u8,
+    /// Low-passed gyro summed over the block, mdps, body axes.
+    pub gyro_sum_mdps: [f32; 3],
     /// The sticks in force (the failsafe's level sticks while it holds).
     pub sticks: Sticks,
     pub throttle_low: bool,
@@ -43,6 +57,24 @@ pub struct OuterJob {
     pub yaw_est_rad: f32,
     /// The throttle was low on some tick since the last job: the yaw target restarts at 0.
     pub yaw_target_reset: bool,
+}
+
+/// The accelerometer words of a block, one per slot. Aligned to 4 bytes so that copying them
+/// into a job is a few word moves: as a plain 2-byte aligned array the copy went through a
+/// byte-wise `memcpy`, a hundred-odd instructions on the job's tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(C, align(4))]
+pub struct AccelWords(pub [[i16; 3]; BLOCK]);
+
+impl OuterJob {
+    /// The block's summed accelerometer, corrected mg, body axes.
+    pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
+        let mut sum = self.accel_sum_before_mg;
+        for words in self.accel_words.0.iter().skip(usize::from(self.accel_first_raw)) {
+            accumulate(&mut sum, self.accel_offsets.accel(decoder.accel_mg(*words)).map(|v| v as f32));
+        }
+        sum
+    }
 }
 
 /// The outer step's result, applied by the inner half.
@@ -104,9 +136,12 @@ pub struct Inner {
     last_raw: RawImu,
     missing_samples: u32,
     gyro_lpf: BiquadBank<3>,
+    /// Samples of the current block written so far.
     fifo_k: usize,
-    accel_fifo: [[f32; 3]; BLOCK],
-    gyro_fifo: [[f32; 3]; BLOCK],
+    accel_words: AccelWords,
+    accel_sum_before_mg: [f32; 3],
+    accel_first_raw: u8,
+    gyro_sum_mdps: [f32; 3],
     gyro_rad_s: [f32; 3],
     yaw_est_rad: f32,
     /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
@@ -125,6 +160,7 @@ pub struct Inner {
 /// The outer-step half.
 #[derive(Clone, Debug)]
 pub struct Outer {
+    decoder: Decoder,
     estimator: Estimator,
     rc: RcConfig,
     control: ControlConfig,
@@ -144,7 +180,7 @@ impl FlightController {
     /// Build from a configuration; an invalid one is refused with the field that is wrong.
     pub fn new(cfg: Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
-        Ok(FlightController { inner: Inner::new(cfg), outer: Outer::new(cfg.estimator, cfg.rc, cfg.control, cfg.reference_arithmetic) })
+        Ok(FlightController { inner: Inner::new(cfg), outer: Outer::new(&cfg) })
     }
 
     pub fn config(&self) -> &Config {
@@ -225,8 +261,10 @@ impl Inner {
             missing_samples: 0,
             gyro_lpf: BiquadBank::new(cfg.gyro_filter),
             fifo_k: 0,
-            accel_fifo: [[0.0; 3]; BLOCK],
-            gyro_fifo: [[0.0; 3]; BLOCK],
+            accel_words: AccelWords::default(),
+            accel_sum_before_mg: [0.0; 3],
+            accel_first_raw: 0,
+            gyro_sum_mdps: [0.0; 3],
             gyro_rad_s: [0.0; 3],
             yaw_est_rad: 0.0,
             tilt_rad: 0.0,
@@ -293,10 +331,9 @@ impl Inner {
     fn run(&mut self, imu: RawImu, radio: RadioState, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
         // No `let cfg = self.cfg`: copying the whole Config costs ~350 instructions per tick.
         self.radio = radio;
-        let body = self.decoder.to_body(imu);
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
-        self.check_health(imu, &body);
+        self.check_health(imu);
         if cal_request {
             self.cal_pending = true;
         }
@@ -312,26 +349,24 @@ impl Inner {
             if self.calibrator.settle() {
                 return self.motors_off();
             }
-            match self.calibrator.feed(body) {
-                Some(o) => self.offsets = o, // and this tick goes on, as the reference's does
+            match self.calibrator.feed(self.decoder.to_body(imu)) {
+                Some(o) => self.set_offsets(o), // and this tick goes on, as the reference's does
                 None => return self.motors_off(),
             }
         }
 
         // 3. Condition the sensors: re-calibration, offsets, FIFO, gyro low-pass.
-        self.fifo_k += 1;
         if self.cal_pending && !self.calibrator.is_averaging() {
             self.calibrator.request();
         }
         self.cal_pending = false;
         if self.calibrator.is_averaging() {
-            if let Some(o) = self.calibrator.feed(body) {
-                self.offsets = o;
+            if let Some(o) = self.calibrator.feed(self.decoder.to_body(imu)) {
+                self.set_offsets(o);
             }
         }
-        let s = self.offsets.apply(body);
-        let slot = self.fifo_k.saturating_sub(1).min(BLOCK - 1);
-        let mut gyro_f = self.gyro_lpf.update(s.gyro_mdps.map(|g| g as f32));
+        let gyro_mdps = self.offsets.gyro(self.decoder.gyro_mdps(imu.gyro));
+        let mut gyro_f = self.gyro_lpf.update(gyro_mdps.map(|g| g as f32));
         if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
             // Integer inputs cannot make this happen; if it ever did, restart the filters and
             // (in the product) treat it as the sensor fault it would be.
@@ -341,14 +376,12 @@ impl Inner {
                 self.fault.get_or_insert(SensorFault::NotFinite);
             }
         }
-        if let (Some(a), Some(g)) = (self.accel_fifo.get_mut(slot), self.gyro_fifo.get_mut(slot)) {
-            *a = s.accel_mg.map(|v| v as f32);
-            *g = gyro_f;
+        if let Some(words) = self.accel_words.0.get_mut(self.fifo_k) {
+            *words = imu.accel;
         }
+        accumulate(&mut self.gyro_sum_mdps, gyro_f);
+        self.fifo_k += 1;
         let job_due = self.fifo_k >= BLOCK;
-        if job_due {
-            self.fifo_k = 0;
-        }
         self.gyro_rad_s =
             gyro_f.map(|g| if self.cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
@@ -392,26 +425,43 @@ impl Inner {
         // (memcpy) on every tick, job or not.
         let yaw_target_reset = self.yaw_target_reset;
         if job_due {
+            let job = OuterJob {
+                accel_words: self.accel_words,
+                accel_offsets: self.offsets,
+                accel_sum_before_mg: self.accel_sum_before_mg,
+                accel_first_raw: self.accel_first_raw,
+                gyro_sum_mdps: self.gyro_sum_mdps,
+                sticks,
+                throttle_low,
+                yaw_est_rad: self.yaw_est_rad,
+                yaw_target_reset,
+            };
+            self.fifo_k = 0;
+            self.accel_sum_before_mg = [0.0; 3];
+            self.accel_first_raw = 0;
+            self.gyro_sum_mdps = [0.0; 3];
             self.yaw_target_reset = false;
-            TickOutput {
-                compare: self.compare,
-                outer_job: Some(OuterJob {
-                    accel_mg: self.accel_fifo,
-                    gyro_mdps: self.gyro_fifo,
-                    sticks,
-                    throttle_low,
-                    yaw_est_rad: self.yaw_est_rad,
-                    yaw_target_reset,
-                }),
-            }
+            TickOutput { compare: self.compare, outer_job: Some(job) }
         } else {
             TickOutput { compare: self.compare, outer_job: None }
         }
     }
 
-    fn check_health(&mut self, raw: RawImu, body: &BodyImu) {
+    /// New offsets from a calibration. The samples of the current block taken before it keep
+    /// the offsets they were taken under: they are converted now and join the sum before.
+    fn set_offsets(&mut self, o: Offsets) {
+        let first = usize::from(self.accel_first_raw);
+        for words in self.accel_words.0.iter().take(self.fifo_k).skip(first) {
+            accumulate(&mut self.accel_sum_before_mg, self.offsets.accel(self.decoder.accel_mg(*words)).map(|v| v as f32));
+        }
+        // `fifo_k` < BLOCK here (a job resets it), so the cast is exact.
+        self.accel_first_raw = self.fifo_k.min(BLOCK) as u8;
+        self.offsets = o;
+    }
+
+    fn check_health(&mut self, raw: RawImu) {
         if let Some(h) = &mut self.health {
-            if let Some(f) = h.check(raw, body) {
+            if let Some(f) = h.check(raw) {
                 self.fault.get_or_insert(f);
             }
         }
@@ -464,12 +514,13 @@ impl Inner {
 }
 
 impl Outer {
-    fn new(estimator: EstimatorConfig, rc: RcConfig, control: ControlConfig, reference_arithmetic: bool) -> Self {
+    fn new(cfg: &Config) -> Self {
         Outer {
-            estimator: Estimator::new(estimator),
-            rc,
-            control,
-            reference_arithmetic,
+            decoder: Decoder::new(&cfg.imu),
+            estimator: Estimator::new(cfg.estimator),
+            rc: cfg.rc,
+            control: cfg.control,
+            reference_arithmetic: cfg.reference_arithmetic,
             angle_loop: AngleLoop::default(),
             yaw_target_rad: 0.0,
         }
@@ -477,8 +528,8 @@ impl Outer {
 
     /// The outer step: block average → estimator → Euler → stick targets → angle loop.
     pub fn step(&mut self, job: &OuterJob) -> OuterResult {
-        let accel = block_average(&job.accel_mg, self.reference_arithmetic);
-        let gyro = block_average(&job.gyro_mdps, self.reference_arithmetic);
+        let accel = block_mean(job.accel_sum_mg(&self.decoder), self.reference_arithmetic);
+        let gyro = block_mean(job.gyro_sum_mdps, self.reference_arithmetic);
         self.estimator.update(accel, gyro, job.throttle_low);
         let quat = self.estimator.quat();
         let tilt = quat_to_tilt_with(quat, self.reference_arithmetic);
@@ -498,5 +549,49 @@ impl Outer {
         let estimate = [tilt.pitch_rad, tilt.roll_rad, job.yaw_est_rad];
         let rate_demand_rad_s = self.angle_loop.step(&self.control, target_rad, estimate, job.throttle_low);
         OuterResult { quat, tilt, target_rad, rate_demand_rad_s }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::imu::ImuConfig;
+
+    /// A reading whose accelerometer words change every tick.
+    fn sample(k: usize) -> RawImu {
+        let w = |m: usize, base: i16| base + (k * m % 211) as i16 - 105;
+        RawImu { accel: [w(37, 0), w(53, 0), w(71, 8197)], gyro: [1, 2, 3] }
+    }
+
+    #[test]
+    fn a_block_spanning_new_offsets_keeps_each_sample_under_its_own_offsets() {
+        // What the reference does tick by tick: convert, correct with the offsets in force,
+        // store, and average the five slots. The job's sum must be that, bit for bit, wherever
+        // in the block the offsets change.
+        let decoder = Decoder::new(&ImuConfig::REFERENCE);
+        let radio = ForcedRadio { width_counts: [6000; 4], link: false, armed: false, cal_request: false };
+        for change_at in 0..BLOCK {
+            let mut fc = FlightController::new(Config::reference()).unwrap();
+            let mut k = 0;
+            // Start-up settling and calibration, up to the first job: a block starts next.
+            while fc.tick_forced(sample(k), &radio).outer_job.is_none() {
+                k += 1;
+            }
+            k += 1;
+            let mut expected = [0.0f32; 3];
+            let mut job = None;
+            for slot in 0..BLOCK {
+                if slot == change_at {
+                    fc.inner.set_offsets(Offsets { accel_mg: [5, -7, 1020], gyro_mdps: [0; 3] });
+                }
+                let offsets = fc.inner.offsets;
+                accumulate(&mut expected, offsets.accel(decoder.accel_mg(sample(k).accel)).map(|v| v as f32));
+                job = fc.tick_forced(sample(k), &radio).outer_job;
+                k += 1;
+            }
+            let job = job.expect("a job every five ticks");
+            assert_eq!(job.accel_first_raw as usize, change_at);
+            assert_eq!(job.accel_sum_mg(&decoder).map(f32::to_bits), expected.map(f32::to_bits), "change at slot {change_at}");
+        }
     }
 }

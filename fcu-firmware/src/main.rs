@@ -14,7 +14,7 @@
 #![no_std]
 #![no_main]
 // RTIC's generated `spawn` hands the message back in `Err` when the task is busy; for the
-// outer step that message is the 136-byte `OuterJob`, by design (it lives in a static slot).
+// outer step that message is the `OuterJob` (under 200 bytes), by design (it lives in a static slot).
 #![allow(clippy::result_large_err)]
 
 mod sensor_bus;

@@ -137,11 +137,7 @@ impl Decoder {
     pub fn new(cfg: &ImuConfig) -> Self {
         let k = cfg.gyro_mdps_per_lsb;
         // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
-        let gyro = if k.is_finite() && k >= 1.0 && k <= 512.0 && k == (k as i32) as f32 {
-            GyroScale::Integer(k as i32)
-        } else {
-            GyroScale::Float(k)
-        };
+        let gyro = if (1.0..=512.0).contains(&k) && k == (k as i32) as f32 { GyroScale::Integer(k as i32) } else { GyroScale::Float(k) };
         Decoder { mount: cfg.mount, accel_mg_per_lsb: cfg.accel_mg_per_lsb, gyro }
     }
 
@@ -182,16 +178,21 @@ impl Offsets {
     /// Offset removal in wrapping int32, as the reference (which cannot overflow for
     /// 16-bit inputs, but must not panic if it did).
     pub fn apply(&self, s: BodyImu) -> BodyImu {
-        let [ax, ay, az] = s.accel_mg;
+        BodyImu { accel_mg: self.accel(s.accel_mg), gyro_mdps: self.gyro(s.gyro_mdps) }
+    }
+
+    /// The accelerometer part of [`apply`](Self::apply).
+    pub fn accel(&self, accel_mg: [i32; 3]) -> [i32; 3] {
+        let [ax, ay, az] = accel_mg;
         let [ox, oy, oz] = self.accel_mg;
-        let mut g = s.gyro_mdps;
-        for (v, o) in g.iter_mut().zip(self.gyro_mdps) {
-            *v = v.wrapping_sub(o);
-        }
-        BodyImu {
-            accel_mg: [ax.wrapping_sub(ox), ay.wrapping_sub(oy), az.wrapping_sub(oz.wrapping_sub(ACCEL_Z_REFERENCE_MG))],
-            gyro_mdps: g,
-        }
+        [ax.wrapping_sub(ox), ay.wrapping_sub(oy), az.wrapping_sub(oz.wrapping_sub(ACCEL_Z_REFERENCE_MG))]
+    }
+
+    /// The gyro part of [`apply`](Self::apply).
+    pub fn gyro(&self, gyro_mdps: [i32; 3]) -> [i32; 3] {
+        let [gx, gy, gz] = gyro_mdps;
+        let [ox, oy, oz] = self.gyro_mdps;
+        [gx.wrapping_sub(ox), gy.wrapping_sub(oy), gz.wrapping_sub(oz)]
     }
 }
 
@@ -398,12 +399,12 @@ pub struct HealthMonitor {
     cfg: HealthConfig,
     last: Option<RawImu>,
     same_count: u32,
-    /// Whether any 16-bit word, converted at the configured sensitivities, can exceed the
-    /// limits. At the board's ±4 g / ±2000 dps neither can (4,000 mg < 4,100 and
-    /// 2,293,760 mdps < 2,300,000): the range check is then decided once, here, instead of on
-    /// every tick, where it cost the 800 Hz path about 30 instructions for a verdict that is
-    /// always "in range".
-    range_reachable: bool,
+    /// The conversion, kept only when some 16-bit word converted at the configured
+    /// sensitivities can exceed the limits. At the board's ±4 g / ±2000 dps none can
+    /// (3,997 mg < 4,100 and 2,293,760 mdps < 2,300,000): the range check is then decided once,
+    /// here, instead of converting and comparing on every tick for a verdict that is always
+    /// "in range".
+    range_check: Option<Decoder>,
 }
 
 impl HealthMonitor {
@@ -415,14 +416,14 @@ impl HealthMonitor {
             let hi = (f32::from(i16::MAX) * k) as i32;
             lo.unsigned_abs().max(hi.unsigned_abs())
         };
-        let range_reachable = largest(imu.accel_mg_per_lsb) > cfg.accel_limit_mg || largest(imu.gyro_mdps_per_lsb) > cfg.gyro_limit_mdps;
-        HealthMonitor { cfg, last: None, same_count: 0, range_reachable }
+        let reachable = largest(imu.accel_mg_per_lsb) > cfg.accel_limit_mg || largest(imu.gyro_mdps_per_lsb) > cfg.gyro_limit_mdps;
+        HealthMonitor { cfg, last: None, same_count: 0, range_check: reachable.then(|| Decoder::new(imu)) }
     }
 
-    /// Check one reading: its raw words (stuck?) and its converted values (possible?). The
+    /// Check one reading: its raw words (stuck?) and, converted, its values (possible?). The
     /// converted values are integers, so they are always finite; a non-finite value can only
     /// appear later, in the filters, which report it as [`SensorFault::NotFinite`] themselves.
-    pub fn check(&mut self, raw: RawImu, body: &BodyImu) -> Option<SensorFault> {
+    pub fn check(&mut self, raw: RawImu) -> Option<SensorFault> {
         let cfg = &self.cfg;
         if self.last == Some(raw) {
             self.same_count = self.same_count.saturating_add(1);
@@ -430,12 +431,12 @@ impl HealthMonitor {
             self.same_count = 0;
             self.last = Some(raw);
         }
-        let over = |v: &[i32; 3], limit: u32| {
-            let [x, y, z] = *v;
-            (x.unsigned_abs() > limit) | (y.unsigned_abs() > limit) | (z.unsigned_abs() > limit)
-        };
-        if self.range_reachable && (over(&body.accel_mg, cfg.accel_limit_mg) || over(&body.gyro_mdps, cfg.gyro_limit_mdps)) {
-            return Some(SensorFault::OutOfRange);
+        if let Some(decoder) = &self.range_check {
+            let body = decoder.to_body(raw);
+            let over = |v: &[i32; 3], limit: u32| v.iter().any(|x| x.unsigned_abs() > limit);
+            if over(&body.accel_mg, cfg.accel_limit_mg) || over(&body.gyro_mdps, cfg.gyro_limit_mdps) {
+                return Some(SensorFault::OutOfRange);
+            }
         }
         if self.same_count >= cfg.stuck_ticks {
             return Some(SensorFault::Stuck);
@@ -551,13 +552,12 @@ mod tests {
         let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
         let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
         let raw = RawImu { accel: [1, 2, 3], gyro: [4, 5, 6] };
-        let body = ImuConfig::REFERENCE.to_body(raw);
         for _ in 0..3 {
-            assert_eq!(h.check(raw, &body), None);
+            assert_eq!(h.check(raw), None);
         }
-        assert_eq!(h.check(raw, &body), Some(SensorFault::Stuck));
+        assert_eq!(h.check(raw), Some(SensorFault::Stuck));
         let other = RawImu { accel: [1, 2, 4], gyro: [4, 5, 6] };
-        assert_eq!(h.check(other, &body), None);
+        assert_eq!(h.check(other), None);
     }
 
     #[test]
@@ -566,13 +566,11 @@ mod tests {
         // word can exceed at these sensitivities, the check runs.
         let cfg = HealthConfig { stuck_ticks: 80, accel_limit_mg: 3000, gyro_limit_mdps: 2_000_000 };
         let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
-        let raw = RawImu::default();
-        let body = BodyImu { accel_mg: [0, -3001, 1000], gyro_mdps: [0; 3] };
-        assert_eq!(h.check(raw, &body), Some(SensorFault::OutOfRange));
-        let body = BodyImu { accel_mg: [0, 0, 1000], gyro_mdps: [i32::MIN, 0, 0] };
-        assert_eq!(h.check(raw, &body), Some(SensorFault::OutOfRange));
-        let body = BodyImu { accel_mg: [0, 0, 3000], gyro_mdps: [0, -2_000_000, 0] };
-        assert_eq!(h.check(raw, &body), None);
+        // Sensor X is body Y: 24,600 LSB is 3,001 mg.
+        assert_eq!(h.check(RawImu { accel: [24_600, 0, 8197], gyro: [0; 3] }), Some(SensorFault::OutOfRange));
+        // 28,572 LSB is 2,000,040 mdps.
+        assert_eq!(h.check(RawImu { accel: [0, 0, 8197], gyro: [0, 0, -28_572] }), Some(SensorFault::OutOfRange));
+        assert_eq!(h.check(RawImu { accel: [24_590, 0, 8197], gyro: [0, 0, -28_571] }), None);
     }
 
     #[test]
@@ -580,7 +578,9 @@ mod tests {
         // ±4 g gives at most 4,000 mg and ±2000 dps at most 2,293,760 mdps: limits at or above
         // those cannot be exceeded by any sensor word, limits one below can.
         let reachable = |accel_limit_mg, gyro_limit_mdps| {
-            HealthMonitor::new(HealthConfig { stuck_ticks: 80, accel_limit_mg, gyro_limit_mdps }, &ImuConfig::REFERENCE).range_reachable
+            HealthMonitor::new(HealthConfig { stuck_ticks: 80, accel_limit_mg, gyro_limit_mdps }, &ImuConfig::REFERENCE)
+                .range_check
+                .is_some()
         };
         assert!(!reachable(4100, 2_300_000));
         assert!(!reachable(3997, 2_293_760));
