@@ -13,6 +13,7 @@
 
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
+use crate::mixer::CompareRange;
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
 use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
@@ -123,10 +124,10 @@ pub struct Status {
 pub struct Inner {
     cfg: Config,
     decoder: Decoder,
+    compare_range: CompareRange,
     receiver: Receiver,
     supervisor: Supervisor,
     decision: Decision,
-    radio: RadioState,
     calibrator: Calibrator,
     cal_pending: bool,
     offsets: Offsets,
@@ -242,6 +243,7 @@ impl Inner {
         Inner {
             cfg,
             decoder: Decoder::new(&cfg.imu),
+            compare_range: cfg.mixer.compare_range(),
             receiver: Receiver::new(),
             supervisor: Supervisor::new(),
             decision: Decision {
@@ -251,7 +253,6 @@ impl Inner {
                 request_calibration: false,
                 blockers: Blockers::default(),
             },
-            radio: RadioState::NONE,
             calibrator: Calibrator::new(cfg.calibration),
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
@@ -300,7 +301,7 @@ impl Inner {
     fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
         let rc = &self.cfg.rc;
         let mut cal_gesture = false;
-        let radio = match self.cfg.supervisor {
+        match self.cfg.supervisor {
             SupervisorConfig::Reference => {
                 let supervisor = &mut self.supervisor;
                 // The reference evaluates its gestures after every single-channel update.
@@ -308,13 +309,13 @@ impl Inner {
             }
             SupervisorConfig::Safe(_) => self.receiver.update(rc, pulses, |_| {}),
         };
-        self.run(imu, radio, None, cal_gesture)
+        self.run(imu, None, cal_gesture)
     }
 
     /// One control tick with the radio state given directly (golden replay).
     pub fn tick_forced(&mut self, imu: RawImu, forced: &ForcedRadio) -> TickOutput {
-        let radio = self.receiver.force(&self.cfg.rc, forced.width_counts, forced.link);
-        self.run(imu, radio, Some(forced.armed), forced.cal_request)
+        self.receiver.force(&self.cfg.rc, forced.width_counts, forced.link);
+        self.run(imu, Some(forced.armed), forced.cal_request)
     }
 
     /// Take in an outer step's result (at the start of the next tick in the firmware).
@@ -328,16 +329,16 @@ impl Inner {
     }
 
     /// The pipeline, top to bottom. Every decision that touches a motor is in this function.
-    fn run(&mut self, imu: RawImu, radio: RadioState, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
+    fn run(&mut self, imu: RawImu, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
         // No `let cfg = self.cfg`: copying the whole Config costs ~350 instructions per tick.
-        self.radio = radio;
+        let radio = self.receiver.state();
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
         self.check_health(imu);
         if cal_request {
             self.cal_pending = true;
         }
-        self.decision = self.supervise(armed_override);
+        self.decision = self.supervise(&radio, armed_override);
         if self.decision.request_calibration {
             self.cal_pending = true;
         }
@@ -415,7 +416,7 @@ impl Inner {
         }
 
         // 6. Guard, last and unconditional: compare values come from here only.
-        let range = self.cfg.mixer.compare_range();
+        let range = self.compare_range;
         self.compare = self.motor_command.map(|c| range.to_compare(c));
         if !self.decision.motors_enabled || self.fault.is_some() {
             self.compare = [self.cfg.mixer.off_compare(); 4];
@@ -467,23 +468,23 @@ impl Inner {
         }
     }
 
-    fn supervise(&mut self, armed_override: Option<bool>) -> Decision {
+    fn supervise(&mut self, radio: &RadioState, armed_override: Option<bool>) -> Decision {
         let calibrating = self.calibrator.in_startup() || self.calibrator.is_averaging();
         match self.cfg.supervisor {
-            SupervisorConfig::Reference => self.supervisor.step_reference(self.radio.link, armed_override, calibrating),
-            SupervisorConfig::Safe(safety) => {
-                let sticks = self.radio.sticks;
+            SupervisorConfig::Reference => self.supervisor.step_reference(radio.link, armed_override, calibrating),
+            SupervisorConfig::Safe(ref safety) => {
+                let sticks = radio.sticks;
                 let inputs = Inputs {
-                    link: self.radio.link,
+                    link: radio.link,
                     sticks,
-                    gesture: self.radio.gesture,
+                    gesture: radio.gesture,
                     throttle_low: self.cfg.rc.throttle_low(&sticks),
                     calibrated: self.calibrator.has_passed(),
                     calibrating,
                     sensor_fault: self.fault,
                     tilt_rad: self.tilt_rad,
                 };
-                self.supervisor.step(&safety, &inputs)
+                self.supervisor.step_with(safety, inputs)
             }
         }
     }
@@ -498,8 +499,8 @@ impl Inner {
         Status {
             state: self.decision.state,
             blockers: self.decision.blockers,
-            link: self.radio.link,
-            sticks: self.radio.sticks,
+            link: self.receiver.state().link,
+            sticks: self.receiver.sticks(),
             calibration: self.calibrator.phase(),
             fault: self.fault,
             quat: self.outer.quat,

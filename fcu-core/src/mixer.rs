@@ -103,14 +103,19 @@ impl MixerConfig {
     }
 
     fn mix_attitude_priority(&self, thr: f32, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
-        let rel = MIX.map(|row| row[0] * s[0] + row[1] * s[1] + row[2] * s[2]);
-        // Compare-and-select, not f32::min/max: the M4's FPU has no VMINNM/VMAXNM, so those are
-        // calls to fminf/fmaxf (~12 instructions each). A NaN is caught by `spread` below.
-        let [r0, r1, r2, r3] = rel;
+        let [x, y, z] = s;
+        // The quad-X rows of MIX: the corrections are z − (x+y), (x−y) − z, (x+y) + z and
+        // −(x−y) − z, so their extremes are z ± |x+y| and ±|x−y| − z, each exactly one of the
+        // four: two comparisons instead of six. (Compare-and-select, not f32::min/max: the M4's
+        // FPU has no VMINNM/VMAXNM, so those are calls to fminf/fmaxf.) A NaN is caught by
+        // `spread` below.
+        let (a, b) = (x + y, x - y);
+        let rel = [z - a, b - z, a + z, -b - z];
+        let (abs_a, abs_b) = (a.abs(), b.abs());
         let lower = |a: f32, b: f32| if b < a { b } else { a };
         let upper = |a: f32, b: f32| if b > a { b } else { a };
-        let lo_rel = lower(lower(r0, r1), lower(r2, r3));
-        let hi_rel = upper(upper(r0, r1), upper(r2, r3));
+        let hi_rel = upper(z + abs_a, abs_b - z);
+        let lo_rel = lower(z - abs_a, -abs_b - z);
         let range = self.max_compare - self.min_compare;
         let spread = hi_rel - lo_rel;
         let mut sat = [Saturation::default(); 3];
@@ -212,6 +217,18 @@ mod tests {
         // Attitude priority: the full 4·300 = 1200 survives, the throttle gives way.
         assert!((torque(ccr) - 1200).abs() <= 2, "{ccr:?}");
         assert_eq!(sat, [Saturation::default(); 3]);
+    }
+
+    #[test]
+    fn attitude_priority_spreads_the_corrections_as_the_mix_matrix() {
+        let m = MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_DC };
+        for s in [[50.0, -20.0, 10.0], [-300.0, 120.5, -40.25], [0.0, 0.0, 700.0], [1.5, 2.5, -3.5]] {
+            let (cmd, _) = m.mix(1000, s);
+            for (c, row) in cmd.iter().zip(MIX) {
+                let want = 1000.0 + row[0] * s[0] + row[1] * s[1] + row[2] * s[2];
+                assert!((c - want).abs() < 1e-3, "{s:?}: {c} vs {want}");
+            }
+        }
     }
 
     #[test]

@@ -376,6 +376,11 @@ impl Receiver {
         self.sticks
     }
 
+    /// The state the last [`update`](Self::update) or [`force`](Self::force) left.
+    pub fn state(&self) -> RadioState {
+        RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
+    }
+
     /// Take in one tick's pulses. `on_stick_update` runs after every single-channel update
     /// with the sticks as they are then (the reference evaluates its gestures there).
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {

@@ -318,6 +318,14 @@ impl Supervisor {
     /// One tick of the safety layer. The `match` is the state table; every arm has tests
     /// named after its rule in `tests::`.
     pub fn step(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
+        self.step_with(cfg, *i)
+    }
+
+    /// [`step`](Self::step) with the inputs by value, for the 800 Hz path: inlined there, the
+    /// steady-flight test reads the few inputs it needs where they are, and the full `Inputs`
+    /// is only assembled in memory when the table has to run.
+    #[inline(always)]
+    pub fn step_with(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
         if self.state == FlightState::Armed
             && i.link
             && i.gesture.is_none()
@@ -326,9 +334,9 @@ impl Supervisor {
             && self.fault.is_none()
             && cfg.auto_disarm_ticks > 0
         {
-            return self.step_in_flight(i);
+            return self.step_in_flight(&i);
         }
-        self.step_table(cfg, i)
+        self.step_table(cfg, &i)
     }
 
     /// [`step_table`](Self::step_table) in the state the 800 Hz path is in almost every tick:
@@ -355,6 +363,7 @@ impl Supervisor {
     }
 
     /// The state table, for any state and inputs.
+    #[inline(never)]
     fn step_table(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
         self.boot_ticks = self.boot_ticks.saturating_add(1);
         if let Some(f) = i.sensor_fault {
