@@ -134,7 +134,8 @@ pub struct Inner {
     /// `None` when the configuration has no health checks (the reference).
     health: Option<HealthMonitor>,
     fault: Option<SensorFault>,
-    last_raw: RawImu,
+    /// The last reading the pipeline ran on (`None` before the first).
+    last_raw: Option<RawImu>,
     missing_samples: u32,
     gyro_lpf: BiquadBank<3>,
     /// Samples of the current block written so far.
@@ -258,7 +259,7 @@ impl Inner {
             offsets: Offsets::UNCALIBRATED,
             health: cfg.health.map(|h| HealthMonitor::new(h, &cfg.imu)),
             fault: None,
-            last_raw: RawImu::default(),
+            last_raw: None,
             missing_samples: 0,
             gyro_lpf: BiquadBank::new(cfg.gyro_filter),
             fifo_k: 0,
@@ -283,7 +284,6 @@ impl Inner {
     /// One control tick: the radio from capture pulses.
     pub fn tick(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
         self.missing_samples = 0;
-        self.last_raw = imu;
         self.tick_with(imu, pulses)
     }
 
@@ -295,7 +295,7 @@ impl Inner {
         if self.missing_samples > MAX_MISSING_SAMPLES {
             self.fault.get_or_insert(SensorFault::NoData);
         }
-        self.tick_with(self.last_raw, pulses)
+        self.tick_with(self.last_raw.unwrap_or_default(), pulses)
     }
 
     fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
@@ -334,7 +334,9 @@ impl Inner {
         let radio = self.receiver.state();
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
-        self.check_health(imu);
+        let repeated = self.last_raw == Some(imu);
+        self.last_raw = Some(imu);
+        self.check_health(imu, repeated);
         if cal_request {
             self.cal_pending = true;
         }
@@ -460,9 +462,9 @@ impl Inner {
         self.offsets = o;
     }
 
-    fn check_health(&mut self, raw: RawImu) {
+    fn check_health(&mut self, raw: RawImu, repeated: bool) {
         if let Some(h) = &mut self.health {
-            if let Some(f) = h.check(raw) {
+            if let Some(f) = h.check(raw, repeated) {
                 self.fault.get_or_insert(f);
             }
         }

@@ -336,7 +336,8 @@ impl Supervisor {
         {
             return self.step_in_flight(&i);
         }
-        self.step_table(cfg, &i)
+        // By value: the caller assembles the inputs at this call, on the table's path only.
+        self.step_table(cfg, i)
     }
 
     /// [`step_table`](Self::step_table) in the state the 800 Hz path is in almost every tick:
@@ -364,7 +365,8 @@ impl Supervisor {
 
     /// The state table, for any state and inputs.
     #[inline(never)]
-    fn step_table(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
+    fn step_table(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
+        let i = &i;
         self.boot_ticks = self.boot_ticks.saturating_add(1);
         if let Some(f) = i.sensor_fault {
             // Latched until reset: motors off, disarmed.
@@ -971,7 +973,7 @@ mod tests {
                     let in_flight = fast.state == FlightState::Armed && i.link && i.gesture.is_none() && !i.throttle_low;
                     shortcut_ticks += u32::from(in_flight);
                     let a = fast.step(&cfg, &i);
-                    let b = table.step_table(&cfg, &i);
+                    let b = table.step_table(&cfg, i);
                     proptest::prop_assert_eq!(a, b);
                     proptest::prop_assert_eq!(&fast, &table);
                 }
@@ -989,7 +991,7 @@ mod tests {
         let before = r.s.clone();
         let d = r.s.step_in_flight(&r.i);
         let mut table = before;
-        assert_eq!(d, table.step_table(&CFG, &r.i));
+        assert_eq!(d, table.step_table(&CFG, r.i));
         assert_eq!(r.s, table);
     }
 }

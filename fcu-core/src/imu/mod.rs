@@ -57,13 +57,19 @@ impl Mount {
     /// reference's convert-then-negate gives, bit for bit: f32 negation is exact and truncation
     /// is odd, so `trunc(−x · k) = −trunc(x · k)`.
     pub fn permute(&self, raw: [i16; 3]) -> [i32; 3] {
+        let [w0, w1, w2] = self.select(raw);
+        let [g0, g1, g2] = self.sign.map(i32::from);
+        [w0 * g0, w1 * g1, w2 * g2]
+    }
+
+    /// The permutation alone: body axis `i` gets sensor word `source[i]`, sign not applied.
+    pub fn select(&self, raw: [i16; 3]) -> [i32; 3] {
         let [r0, r1, r2] = raw;
         // A fourth slot so `source & 3` always indexes inside: no bounds check, no branch.
         let w = [r0, r1, r2, 0];
-        let axis = |src: u8, sign: i8| -> i32 { i32::from(w.get(usize::from(src & 3)).copied().unwrap_or(0)) * i32::from(sign) };
+        let pick = |src: u8| i32::from(w.get(usize::from(src & 3)).copied().unwrap_or(0));
         let [s0, s1, s2] = self.source;
-        let [g0, g1, g2] = self.sign;
-        [axis(s0, g0), axis(s1, g1), axis(s2, g2)]
+        [pick(s0), pick(s1), pick(s2)]
     }
 
     /// Apply to a float vector.
@@ -127,9 +133,10 @@ pub struct Decoder {
 enum GyroScale {
     /// A whole number of mdps per LSB small enough that `raw · k` stays below 2^24, where f32
     /// holds every integer: the f32 product is then exact, its truncation is the integer
-    /// product, and one integer multiply replaces two conversions and a float multiply.
-    /// The board's 70 mdps/LSB (±2000 dps) is such a scale.
-    Integer(i32),
+    /// product, and one integer multiply (by `sign · k`, per body axis) replaces two
+    /// conversions, a float multiply and the sign. The board's 70 mdps/LSB (±2000 dps) is
+    /// such a scale.
+    Integer { signed_k: [i32; 3] },
     Float(f32),
 }
 
@@ -137,7 +144,11 @@ impl Decoder {
     pub fn new(cfg: &ImuConfig) -> Self {
         let k = cfg.gyro_mdps_per_lsb;
         // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
-        let gyro = if (1.0..=512.0).contains(&k) && k == (k as i32) as f32 { GyroScale::Integer(k as i32) } else { GyroScale::Float(k) };
+        let gyro = if (1.0..=512.0).contains(&k) && k == (k as i32) as f32 {
+            GyroScale::Integer { signed_k: cfg.mount.sign.map(|s| i32::from(s) * k as i32) }
+        } else {
+            GyroScale::Float(k)
+        };
         Decoder { mount: cfg.mount, accel_mg_per_lsb: cfg.accel_mg_per_lsb, gyro }
     }
 
@@ -152,10 +163,12 @@ impl Decoder {
 
     /// Gyro words (sensor axes) to body mdps.
     pub fn gyro_mdps(&self, gyro: [i16; 3]) -> [i32; 3] {
-        let g = self.mount.permute(gyro);
         match self.gyro {
-            GyroScale::Integer(k) => g.map(|x| x * k),
-            GyroScale::Float(k) => g.map(|x| scale_truncate(x, k)),
+            GyroScale::Integer { signed_k: [k0, k1, k2] } => {
+                let [w0, w1, w2] = self.mount.select(gyro);
+                [w0 * k0, w1 * k1, w2 * k2]
+            }
+            GyroScale::Float(k) => self.mount.permute(gyro).map(|x| scale_truncate(x, k)),
         }
     }
 }
@@ -397,7 +410,7 @@ pub const MAX_MISSING_SAMPLES: u32 = 3;
 #[derive(Clone, Debug)]
 pub struct HealthMonitor {
     cfg: HealthConfig,
-    last: Option<RawImu>,
+    /// Readings in a row identical to the one before.
     same_count: u32,
     /// The conversion, kept only when some 16-bit word converted at the configured
     /// sensitivities can exceed the limits. At the board's ±4 g / ±2000 dps none can
@@ -417,20 +430,17 @@ impl HealthMonitor {
             lo.unsigned_abs().max(hi.unsigned_abs())
         };
         let reachable = largest(imu.accel_mg_per_lsb) > cfg.accel_limit_mg || largest(imu.gyro_mdps_per_lsb) > cfg.gyro_limit_mdps;
-        HealthMonitor { cfg, last: None, same_count: 0, range_check: reachable.then(|| Decoder::new(imu)) }
+        HealthMonitor { cfg, same_count: 0, range_check: reachable.then(|| Decoder::new(imu)) }
     }
 
-    /// Check one reading: its raw words (stuck?) and, converted, its values (possible?). The
-    /// converted values are integers, so they are always finite; a non-finite value can only
-    /// appear later, in the filters, which report it as [`SensorFault::NotFinite`] themselves.
-    pub fn check(&mut self, raw: RawImu) -> Option<SensorFault> {
+    /// Check one reading: whether its raw words repeat the previous reading's (stuck?) and,
+    /// converted, its values (possible?). The caller keeps the previous reading (the pipeline
+    /// holds it anyway, to bridge a missed sample). The converted values are integers, so they
+    /// are always finite; a non-finite value can only appear later, in the filters, which
+    /// report it as [`SensorFault::NotFinite`] themselves.
+    pub fn check(&mut self, raw: RawImu, repeated: bool) -> Option<SensorFault> {
         let cfg = &self.cfg;
-        if self.last == Some(raw) {
-            self.same_count = self.same_count.saturating_add(1);
-        } else {
-            self.same_count = 0;
-            self.last = Some(raw);
-        }
+        self.same_count = if repeated { self.same_count.saturating_add(1) } else { 0 };
         if let Some(decoder) = &self.range_check {
             let body = decoder.to_body(raw);
             let over = |v: &[i32; 3], limit: u32| v.iter().any(|x| x.unsigned_abs() > limit);
@@ -485,7 +495,7 @@ mod tests {
         for k in [70.0f32, 8.75, 17.5, 35.0, 1.0, 512.0] {
             let cfg = ImuConfig { gyro_mdps_per_lsb: k, ..ImuConfig::REFERENCE };
             let d = Decoder::new(&cfg);
-            assert_eq!(matches!(d.gyro, GyroScale::Integer(_)), k.fract() == 0.0, "{k}");
+            assert_eq!(matches!(d.gyro, GyroScale::Integer { .. }), k.fract() == 0.0, "{k}");
             for w in i16::MIN..=i16::MAX {
                 let words = [w, w.wrapping_add(1), w.wrapping_mul(3)];
                 let float = words.map(|r| (f32::from(r) * k) as i32);
@@ -552,12 +562,13 @@ mod tests {
         let cfg = HealthConfig { stuck_ticks: 3, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 };
         let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
         let raw = RawImu { accel: [1, 2, 3], gyro: [4, 5, 6] };
-        for _ in 0..3 {
-            assert_eq!(h.check(raw), None);
+        assert_eq!(h.check(raw, false), None);
+        for _ in 0..2 {
+            assert_eq!(h.check(raw, true), None);
         }
-        assert_eq!(h.check(raw), Some(SensorFault::Stuck));
+        assert_eq!(h.check(raw, true), Some(SensorFault::Stuck));
         let other = RawImu { accel: [1, 2, 4], gyro: [4, 5, 6] };
-        assert_eq!(h.check(other), None);
+        assert_eq!(h.check(other, false), None);
     }
 
     #[test]
@@ -567,10 +578,10 @@ mod tests {
         let cfg = HealthConfig { stuck_ticks: 80, accel_limit_mg: 3000, gyro_limit_mdps: 2_000_000 };
         let mut h = HealthMonitor::new(cfg, &ImuConfig::REFERENCE);
         // Sensor X is body Y: 24,600 LSB is 3,001 mg.
-        assert_eq!(h.check(RawImu { accel: [24_600, 0, 8197], gyro: [0; 3] }), Some(SensorFault::OutOfRange));
+        assert_eq!(h.check(RawImu { accel: [24_600, 0, 8197], gyro: [0; 3] }, false), Some(SensorFault::OutOfRange));
         // 28,572 LSB is 2,000,040 mdps.
-        assert_eq!(h.check(RawImu { accel: [0, 0, 8197], gyro: [0, 0, -28_572] }), Some(SensorFault::OutOfRange));
-        assert_eq!(h.check(RawImu { accel: [24_590, 0, 8197], gyro: [0, 0, -28_571] }), None);
+        assert_eq!(h.check(RawImu { accel: [0, 0, 8197], gyro: [0, 0, -28_572] }, false), Some(SensorFault::OutOfRange));
+        assert_eq!(h.check(RawImu { accel: [24_590, 0, 8197], gyro: [0, 0, -28_571] }, false), None);
     }
 
     #[test]
