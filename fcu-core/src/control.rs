@@ -162,6 +162,35 @@ struct RateAxis {
     d: f32,
 }
 
+impl RateAxis {
+    /// One axis, one tick, for a finite error `e = demand − rate`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the per-tick values of one axis, kept in registers
+    fn step(&mut self, cfg: &ControlConfig, g: &AxisGains, e: f32, rate: f32, sat: Saturation, ts: f32, dt_recip: f32) -> f32 {
+        let raw_d = match cfg.derivative {
+            Derivative::OnError => (e - self.prev_error) * dt_recip,
+            Derivative::OnMeasurement => (self.prev_rate - rate) * dt_recip,
+        };
+        self.prev_error = e;
+        self.prev_rate = rate;
+        let d = if g.d_lowpass {
+            self.d = self.d + (raw_d - self.d) * cfg.d_filter_k;
+            self.d
+        } else {
+            raw_d
+        };
+        let integ = clamp_symmetric(self.integ + e * ts, g.inner_i_limit);
+        let mut unclamped = g.inner_kp * e + g.inner_ki * integ + g.inner_kd * d;
+        if cfg.anti_windup && winds_up(e, sat, unclamped, g.output_limit) {
+            // Keep the integrator where it was and say what that gives.
+            unclamped = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
+        } else {
+            self.integ = integ;
+        }
+        clamp_symmetric(unclamped, g.output_limit)
+    }
+}
+
 /// The inner (rate) loop: PID per axis on the filtered gyro, every tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RateLoop {
@@ -186,37 +215,25 @@ impl RateLoop {
         }
         let ts = cfg.inner_dt_s;
         let dt_recip = 1.0 / ts;
+        let [d0, d1, d2] = demand_rad_s;
+        let [r0, r1, r2] = rate_rad_s;
+        let errors = [d0 - r0, d1 - r1, d2 - r2];
+        let [e0, e1, e2] = errors;
         let mut out = [0.0f32; 3];
-        let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(demand_rad_s.iter().zip(rate_rad_s)).zip(saturation);
-        for (o, (((st, g), (s1, rate)), sat)) in out.iter_mut().zip(per_axis) {
-            let e = s1 - rate;
-            if !e.is_finite() {
-                // A non-finite demand or rate (either makes `e` so) must not enter the state:
-                // no correction on this axis this tick, the state holds.
-                *o = 0.0;
-                continue;
+        let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(errors.into_iter().zip(rate_rad_s)).zip(saturation);
+        // A non-finite demand or rate makes its error, and so the sum of the three, non-finite:
+        // one test covers the three axes on every ordinary tick. (Three finite errors can only
+        // overflow the sum to infinity, which just sends the tick down the careful loop.)
+        if (e0 + e1 + e2).is_finite() {
+            for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
+                *o = st.step(cfg, g, e, rate, sat, ts, dt_recip);
             }
-            let raw_d = match cfg.derivative {
-                Derivative::OnError => (e - st.prev_error) * dt_recip,
-                Derivative::OnMeasurement => (st.prev_rate - rate) * dt_recip,
-            };
-            st.prev_error = e;
-            st.prev_rate = rate;
-            let d = if g.d_lowpass {
-                st.d = st.d + (raw_d - st.d) * cfg.d_filter_k;
-                st.d
-            } else {
-                raw_d
-            };
-            let integ = clamp_symmetric(st.integ + e * ts, g.inner_i_limit);
-            let mut unclamped = g.inner_kp * e + g.inner_ki * integ + g.inner_kd * d;
-            if cfg.anti_windup && winds_up(e, sat, unclamped, g.output_limit) {
-                // Keep the integrator where it was and say what that gives.
-                unclamped = g.inner_kp * e + g.inner_ki * st.integ + g.inner_kd * d;
-            } else {
-                st.integ = integ;
+        } else {
+            for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
+                // A non-finite error must not enter the state: no correction on this axis this
+                // tick, the state holds.
+                *o = if e.is_finite() { st.step(cfg, g, e, rate, sat, ts, dt_recip) } else { 0.0 };
             }
-            *o = clamp_symmetric(unclamped, g.output_limit);
         }
         out
     }
