@@ -180,14 +180,21 @@ impl RateAxis {
             raw_d
         };
         let integ = clamp_symmetric(self.integ + e * ts, g.inner_i_limit);
-        let mut unclamped = g.inner_kp * e + g.inner_ki * integ + g.inner_kd * d;
-        if cfg.anti_windup && winds_up(e, sat, unclamped, g.output_limit) {
+        let unclamped = g.inner_kp * e + g.inner_ki * integ + g.inner_kd * d;
+        // `over` is the output clamp's own test, shared with the anti-windup: in steady flight
+        // neither the clamp nor the mixer holds anything back, and one comparison says so.
+        let over = unclamped.abs() > g.output_limit;
+        if cfg.anti_windup && (over || sat.positive || sat.negative) && winds_up(e, sat, unclamped, over) {
             // Keep the integrator where it was and say what that gives.
-            unclamped = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
-        } else {
-            self.integ = integ;
+            let held = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
+            return clamp_symmetric(held, g.output_limit);
         }
-        clamp_symmetric(unclamped, g.output_limit)
+        self.integ = integ;
+        if over {
+            clamp_symmetric(unclamped, g.output_limit)
+        } else {
+            unclamped
+        }
     }
 }
 
@@ -246,25 +253,29 @@ impl RateLoop {
 
 /// Anti-windup (D6): integrating `e` would push further in a direction that is already
 /// saturated, either in the mixer on the last tick (`sat`) or by this output's own clamp
-/// (conditional integration: what the clamp holds back would only have to be unwound later).
-/// Compared by sign bits, not `e > 0.0`: every float comparison costs the Cortex-M4 a
-/// `vcmp`/`vmrs` pair on the 800 Hz path. With `e = ±0` the integrator cannot move, so which
-/// way a zero counts does not matter.
+/// (`over`: conditional integration, since what the clamp holds back would only have to be
+/// unwound later). Compared by sign bits, not `e > 0.0`: every float comparison costs the
+/// Cortex-M4 a `vcmp`/`vmrs` pair on the 800 Hz path. With `e = ±0` the integrator cannot
+/// move, so which way a zero counts does not matter.
 #[inline(always)]
-fn winds_up(e: f32, sat: Saturation, unclamped: f32, limit: f32) -> bool {
+fn winds_up(e: f32, sat: Saturation, unclamped: f32, over: bool) -> bool {
     let e_negative = e.is_sign_negative();
     let mixer_blocks = if e_negative { sat.negative } else { sat.positive };
-    mixer_blocks || (unclamped.abs() > limit && unclamped.is_sign_negative() == e_negative)
+    mixer_blocks || (over && unclamped.is_sign_negative() == e_negative)
 }
 
-/// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`.
-/// NaN passes through unchanged, as in C; the mixer's final clamp catches it.
+/// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`, for the
+/// validated `lim ≥ 0`. Written as one magnitude test, which is all an in-range value (the
+/// usual case, every tick) costs: the same result for every `v`, NaN included (it passes
+/// through, as in C; the mixer's final clamp catches it).
 #[inline(always)]
 fn clamp_symmetric(v: f32, lim: f32) -> f32 {
-    if v > lim {
-        lim
-    } else if v < -lim {
-        -lim
+    if v.abs() > lim {
+        if v > 0.0 {
+            lim
+        } else {
+            -lim
+        }
     } else {
         v
     }
@@ -336,6 +347,14 @@ mod tests {
         let mut o = AngleLoop::default();
         let s1 = o.step(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
         assert!((s1[0] - 0.3).abs() < 1e-6 && (s1[1] + 0.6).abs() < 1e-6 && (s1[2] - 0.2).abs() < 1e-6);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_magnitude_clamp_is_the_references_clamp(v in proptest::num::f32::ANY, lim in 0.0f32..1e6) {
+            let reference = if v > lim { lim } else if v < -lim { -lim } else { v };
+            proptest::prop_assert_eq!(clamp_symmetric(v, lim).to_bits(), reference.to_bits());
+        }
     }
 
     #[test]
