@@ -163,14 +163,21 @@ struct RateAxis {
 }
 
 impl RateAxis {
-    /// One axis, one tick, for a finite error `e = demand − rate`.
+    /// One axis, one tick, for a finite error `e = demand − rate`, with the derivative on the
+    /// measurement or on the error and with or without anti-windup.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)] // the per-tick values of one axis, kept in registers
-    fn step(&mut self, cfg: &ControlConfig, g: &AxisGains, e: f32, rate: f32, sat: Saturation, ts: f32, dt_recip: f32) -> f32 {
-        let raw_d = match cfg.derivative {
-            Derivative::OnError => (e - self.prev_error) * dt_recip,
-            Derivative::OnMeasurement => (self.prev_rate - rate) * dt_recip,
-        };
+    fn step<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
+        &mut self,
+        cfg: &ControlConfig,
+        g: &AxisGains,
+        e: f32,
+        rate: f32,
+        sat: Saturation,
+        ts: f32,
+        dt_recip: f32,
+    ) -> f32 {
+        let raw_d = if ON_MEASUREMENT { (self.prev_rate - rate) * dt_recip } else { (e - self.prev_error) * dt_recip };
         self.prev_error = e;
         self.prev_rate = rate;
         let d = if g.d_lowpass {
@@ -184,7 +191,7 @@ impl RateAxis {
         // `over` is the output clamp's own test, shared with the anti-windup: in steady flight
         // neither the clamp nor the mixer holds anything back, and one comparison says so.
         let over = unclamped.abs() > g.output_limit;
-        if cfg.anti_windup && (over || sat.positive || sat.negative) && winds_up(e, sat, unclamped, over) {
+        if ANTI_WINDUP && (over || sat.positive || sat.negative) && winds_up(e, sat, unclamped, over) {
             // Keep the integrator where it was and say what that gives.
             let held = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
             return clamp_symmetric(held, g.output_limit);
@@ -220,11 +227,28 @@ impl RateLoop {
                 a.integ = 0.0;
             }
         }
-        let ts = cfg.inner_dt_s;
-        let dt_recip = 1.0 / ts;
         let [d0, d1, d2] = demand_rad_s;
         let [r0, r1, r2] = rate_rad_s;
         let errors = [d0 - r0, d1 - r1, d2 - r2];
+        // The profile's two switches, decided once per tick rather than on every axis.
+        match (cfg.derivative, cfg.anti_windup) {
+            (Derivative::OnMeasurement, true) => self.step_axes::<true, true>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnMeasurement, false) => self.step_axes::<true, false>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnError, true) => self.step_axes::<false, true>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnError, false) => self.step_axes::<false, false>(cfg, errors, rate_rad_s, saturation),
+        }
+    }
+
+    #[inline(always)]
+    fn step_axes<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
+        &mut self,
+        cfg: &ControlConfig,
+        errors: [f32; 3],
+        rate_rad_s: [f32; 3],
+        saturation: [Saturation; 3],
+    ) -> [f32; 3] {
+        let ts = cfg.inner_dt_s;
+        let dt_recip = 1.0 / ts;
         let [e0, e1, e2] = errors;
         let mut out = [0.0f32; 3];
         let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(errors.into_iter().zip(rate_rad_s)).zip(saturation);
@@ -233,13 +257,13 @@ impl RateLoop {
         // overflow the sum to infinity, which just sends the tick down the careful loop.)
         if (e0 + e1 + e2).is_finite() {
             for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
-                *o = st.step(cfg, g, e, rate, sat, ts, dt_recip);
+                *o = st.step::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip);
             }
         } else {
             for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
                 // A non-finite error must not enter the state: no correction on this axis this
                 // tick, the state holds.
-                *o = if e.is_finite() { st.step(cfg, g, e, rate, sat, ts, dt_recip) } else { 0.0 };
+                *o = if e.is_finite() { st.step::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip) } else { 0.0 };
             }
         }
         out

@@ -13,11 +13,11 @@
 
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
-use crate::mixer::CompareRange;
 use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
 use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
+use crate::mixer::CompareRange;
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
 
@@ -144,7 +144,6 @@ pub struct Inner {
     accel_sum_before_mg: [f32; 3],
     accel_first_raw: u8,
     gyro_sum_mdps: [f32; 3],
-    gyro_rad_s: [f32; 3],
     yaw_est_rad: f32,
     /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
     tilt_rad: f32,
@@ -267,7 +266,6 @@ impl Inner {
             accel_sum_before_mg: [0.0; 3],
             accel_first_raw: 0,
             gyro_sum_mdps: [0.0; 3],
-            gyro_rad_s: [0.0; 3],
             yaw_est_rad: 0.0,
             tilt_rad: 0.0,
             tick_dt_s: cfg.timing.tick_dt_s as f32,
@@ -385,14 +383,14 @@ impl Inner {
         accumulate(&mut self.gyro_sum_mdps, gyro_f);
         self.fifo_k += 1;
         let job_due = self.fifo_k >= BLOCK;
-        self.gyro_rad_s =
+        let gyro_rad_s =
             gyro_f.map(|g| if self.cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
         // 4. Yaw: gyro-integrated heading, reset with the target while the throttle is low.
         self.yaw_est_rad = if self.cfg.reference_arithmetic {
-            (f64::from(self.yaw_est_rad) + f64::from(self.gyro_rad_s[2]) * self.cfg.timing.tick_dt_s) as f32
+            (f64::from(self.yaw_est_rad) + f64::from(gyro_rad_s[2]) * self.cfg.timing.tick_dt_s) as f32
         } else {
-            self.yaw_est_rad + self.gyro_rad_s[2] * self.tick_dt_s
+            self.yaw_est_rad + gyro_rad_s[2] * self.tick_dt_s
         };
         if !self.yaw_est_rad.is_finite() {
             self.yaw_est_rad = 0.0;
@@ -405,7 +403,7 @@ impl Inner {
 
         // 5. Rate loop and mixer, only while the supervisor lets the motors run.
         if self.decision.motors_enabled {
-            let s2 = self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, self.gyro_rad_s, throttle_low, self.saturation);
+            let s2 = self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
             let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), s2);
             self.motor_command = cmd;
             self.saturation = sat;

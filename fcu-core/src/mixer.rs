@@ -118,24 +118,23 @@ impl MixerConfig {
         let lo_rel = lower(z - abs_a, -abs_b - z);
         let range = self.max_compare - self.min_compare;
         let spread = hi_rel - lo_rel;
-        let mut sat = [Saturation::default(); 3];
-        if !(spread.is_finite() && thr.is_finite()) {
-            return ([self.min_compare; 4], sat);
-        }
-        let (scale, base) = if spread > range {
-            // Even the corrections alone do not fit: keep their proportions, centred.
-            for (a, v) in sat.iter_mut().zip(s) {
-                *a = Saturation { positive: v > 0.0, negative: v < 0.0 };
-            }
-            let k = range / spread;
-            (k, self.min_compare - lo_rel * k)
-        } else {
-            // Shift the throttle (never above what fits) so no motor clips.
+        let none = [Saturation::default(); 3];
+        if spread <= range {
+            // The usual case: shift the throttle (never above what fits) so no motor clips.
+            // (`thr` comes from an i16, so it is finite; a NaN spread fails this test.)
             let hi_thr = self.max_compare - hi_rel;
             let lo_thr = self.min_compare - lo_rel;
             let t = if thr < hi_thr { thr } else { hi_thr };
-            (1.0, if t > lo_thr { t } else { lo_thr })
-        };
+            let base = if t > lo_thr { t } else { lo_thr };
+            return (rel.map(|r| base + r), none);
+        }
+        if !spread.is_finite() {
+            return ([self.min_compare; 4], none);
+        }
+        // Even the corrections alone do not fit: keep their proportions, centred.
+        let sat = s.map(|v| Saturation { positive: v > 0.0, negative: v < 0.0 });
+        let scale = range / spread;
+        let base = self.min_compare - lo_rel * scale;
         (rel.map(|r| base + r * scale), sat)
     }
 

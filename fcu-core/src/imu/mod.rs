@@ -136,7 +136,9 @@ enum GyroScale {
     /// product, and one integer multiply (by `sign · k`, per body axis) replaces two
     /// conversions, a float multiply and the sign. The board's 70 mdps/LSB (±2000 dps) is
     /// such a scale.
-    Integer { signed_k: [i32; 3] },
+    Integer {
+        signed_k: [i32; 3],
+    },
     Float(f32),
 }
 
