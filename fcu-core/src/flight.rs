@@ -338,7 +338,12 @@ impl Inner {
         if cal_request {
             self.cal_pending = true;
         }
-        self.decision = self.supervise(&radio, armed_override);
+        // Steady flight with nothing new from the radio or the sensor: the supervisor's inputs
+        // are the last tick's, so is its decision (see `Supervisor::repeat_steady_flight`).
+        let unchanged = !self.receiver.changed() && self.fault.is_none();
+        if !(unchanged && self.supervisor.repeat_steady_flight()) {
+            self.decision = self.supervise(&radio, armed_override);
+        }
         if self.decision.request_calibration {
             self.cal_pending = true;
         }

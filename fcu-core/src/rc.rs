@@ -334,6 +334,8 @@ pub struct Receiver {
     /// The oldest of `last_pulse_at`: the link is as old as its stalest channel.
     stalest_pulse_at: u64,
     link: bool,
+    /// The last update changed the sticks or the link.
+    changed: bool,
 }
 
 /// One tick's view of the radio.
@@ -369,11 +371,19 @@ impl Receiver {
             last_pulse_at: [0; CHANNELS],
             stalest_pulse_at: 0,
             link: false,
+            changed: true,
         }
     }
 
     pub fn sticks(&self) -> Sticks {
         self.sticks
+    }
+
+    /// Whether the last [`update`](Self::update) or [`force`](Self::force) changed the state:
+    /// a width arrived (or was forced) or the link came or went. When it did not, everything
+    /// that depends only on the radio state is what it was a tick ago.
+    pub fn changed(&self) -> bool {
+        self.changed
     }
 
     /// The state the last [`update`](Self::update) or [`force`](Self::force) left.
@@ -403,11 +413,13 @@ impl Receiver {
         channel(t1, w1, ELE);
         channel(t2, w2, THR);
         channel(t3, w3, RUD);
-        if w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some() {
+        let any_width = w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some();
+        if any_width {
             self.stalest_pulse_at = (*t0).min(*t1).min(*t2).min(*t3);
             self.gesture = cfg.gesture(&self.sticks);
         }
         let timeout = u64::from(cfg.link_timeout_ticks);
+        let was = self.link;
         self.link = match cfg.pulses {
             PulseRules::Reference { .. } => {
                 let [e0, e1, e2, e3] = batch.edge_seen;
@@ -418,6 +430,7 @@ impl Receiver {
             }
             PulseRules::Validated { .. } => now - self.stalest_pulse_at < timeout,
         };
+        self.changed = any_width | (self.link != was);
         RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
     }
 
@@ -432,6 +445,7 @@ impl Receiver {
             self.gesture = cfg.gesture(&self.sticks);
         }
         self.link = link;
+        self.changed = true;
         RadioState { sticks: self.sticks, link, gesture: self.gesture }
     }
 }
@@ -575,6 +589,8 @@ mod tests {
             let mut ages = [u32::MAX; CHANNELS];
             let mut since_edge = u32::MAX;
             let mut sticks = Sticks::default();
+            // Before the first update the receiver reports nothing received.
+            let mut last = Some(RadioState::NONE);
             for (widths, edges) in ticks {
                 let b = PulseBatch { width_counts: widths, edge_seen: edges };
                 let got = r.update(&cfg, &b, |_| {});
@@ -586,7 +602,14 @@ mod tests {
                     }
                 }
                 let link = if validated { ages.iter().all(|&a| a < timeout) } else { since_edge < timeout };
-                proptest::prop_assert_eq!(got, RadioState { sticks, link, gesture: cfg.gesture(&sticks) });
+                let want = RadioState { sticks, link, gesture: cfg.gesture(&sticks) };
+                // Unchanged means: no width and the same state as a tick ago.
+                if !r.changed() {
+                    proptest::prop_assert!(widths.iter().all(Option::is_none));
+                    proptest::prop_assert_eq!(Some(want), last);
+                }
+                last = Some(want);
+                proptest::prop_assert_eq!(got, want);
             }
         }
 
