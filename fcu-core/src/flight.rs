@@ -233,6 +233,14 @@ impl FlightController {
     }
 }
 
+/// Whether the calibration let the tick go on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Calibration {
+    TickGoesOn,
+    /// Settling or averaging at start-up: motors off, nothing else this tick.
+    StopsTheTick,
+}
+
 /// The sticks the failsafe flies with: centred (level, no yaw) and the held throttle.
 fn failsafe_sticks(throttle: i16) -> Sticks {
     Sticks { ail: 0, ele: 0, thr: throttle, rud: 0 }
@@ -335,42 +343,23 @@ impl Inner {
         let repeated = self.last_raw == Some(imu);
         self.last_raw = Some(imu);
         self.check_health(imu, repeated);
-        if cal_request {
-            self.cal_pending = true;
-        }
         // Steady flight with nothing new from the radio or the sensor: the supervisor's inputs
         // are the last tick's, so is its decision (see `Supervisor::repeat_steady_flight`).
         let unchanged = !self.receiver.changed() && self.fault.is_none();
         if !(unchanged && self.supervisor.repeat_steady_flight()) {
             self.decision = self.supervise(&radio, armed_override);
         }
-        if self.decision.request_calibration {
-            self.cal_pending = true;
-        }
+        self.cal_pending |= cal_request | self.decision.request_calibration;
         let sticks = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
         let throttle_low = self.cfg.rc.throttle_low(&sticks);
 
-        // 2. Start-up calibration: nothing else runs until the first offsets exist.
-        if self.calibrator.in_startup() {
-            if self.calibrator.settle() {
-                return self.motors_off();
-            }
-            match self.calibrator.feed(self.decoder.to_body(imu)) {
-                Some(o) => self.set_offsets(o), // and this tick goes on, as the reference's does
-                None => return self.motors_off(),
-            }
+        // 2. Calibration: start-up (nothing else runs until the first offsets exist) and
+        // requested. Idle with nothing asked, it has nothing to do.
+        if (self.cal_pending || !self.calibrator.is_idle()) && self.calibrate(imu) == Calibration::StopsTheTick {
+            return self.motors_off();
         }
 
-        // 3. Condition the sensors: re-calibration, offsets, FIFO, gyro low-pass.
-        if self.cal_pending && !self.calibrator.is_averaging() {
-            self.calibrator.request();
-        }
-        self.cal_pending = false;
-        if self.calibrator.is_averaging() {
-            if let Some(o) = self.calibrator.feed(self.decoder.to_body(imu)) {
-                self.set_offsets(o);
-            }
-        }
+        // 3. Condition the sensors: offsets, FIFO, gyro low-pass.
         let gyro_mdps = self.offsets.gyro(self.decoder.gyro_mdps(imu.gyro));
         let mut gyro_f = self.gyro_lpf.update(gyro_mdps.map(|g| g as f32));
         if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
@@ -451,6 +440,32 @@ impl Inner {
         } else {
             TickOutput { compare: self.compare, outer_job: None }
         }
+    }
+
+    /// Steps 2 and 3 of the calibration: the start-up settling and average (the tick stops
+    /// there until the first offsets exist) and a requested average. Out of line: the 800 Hz
+    /// path only reaches it while a calibration is asked for or running.
+    #[inline(never)]
+    fn calibrate(&mut self, imu: RawImu) -> Calibration {
+        if self.calibrator.in_startup() {
+            if self.calibrator.settle() {
+                return Calibration::StopsTheTick;
+            }
+            match self.calibrator.feed(self.decoder.to_body(imu)) {
+                Some(o) => self.set_offsets(o), // and this tick goes on, as the reference's does
+                None => return Calibration::StopsTheTick,
+            }
+        }
+        if self.cal_pending && !self.calibrator.is_averaging() {
+            self.calibrator.request();
+        }
+        self.cal_pending = false;
+        if self.calibrator.is_averaging() {
+            if let Some(o) = self.calibrator.feed(self.decoder.to_body(imu)) {
+                self.set_offsets(o);
+            }
+        }
+        Calibration::TickGoesOn
     }
 
     /// New offsets from a calibration. The samples of the current block taken before it keep

@@ -290,6 +290,11 @@ impl Calibrator {
         self.passed_once
     }
 
+    /// True when neither settling nor averaging.
+    pub fn is_idle(&self) -> bool {
+        matches!(self.phase, CalibrationPhase::Idle { .. })
+    }
+
     /// True while averaging (start-up or requested).
     pub fn is_averaging(&self) -> bool {
         matches!(self.phase, CalibrationPhase::Averaging { .. })
