@@ -147,11 +147,44 @@ impl AngleLoop {
     }
 }
 
-/// Which direction of an axis' output the mixer could not deliver on the last tick.
+/// Which directions of which axes the mixer could not deliver on the last tick: one byte
+/// for the three axes (bit `2·axis` positive, `2·axis + 1` negative), read and written once
+/// per tick, where six flags were six loads and six stores.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Saturation {
-    pub positive: bool,
-    pub negative: bool,
+pub struct Saturation(u8);
+
+impl Saturation {
+    /// Nothing saturated.
+    pub const NONE: Saturation = Saturation(0);
+
+    /// Every axis whose command is non-zero, in the direction of its sign (what the mixer
+    /// reports when it has to scale all corrections down).
+    pub fn of_commands(s: [f32; 3]) -> Saturation {
+        let mut set = Saturation::NONE;
+        for (axis, v) in s.into_iter().enumerate() {
+            set = set.with(axis, v > 0.0, v < 0.0);
+        }
+        set
+    }
+
+    /// This set with `axis` saturated in the given directions as well.
+    pub fn with(self, axis: usize, positive: bool, negative: bool) -> Saturation {
+        let bits = u8::from(positive) | u8::from(negative) << 1;
+        Saturation(self.0 | bits.checked_shl(2 * axis as u32).unwrap_or(0))
+    }
+
+    pub fn positive(self, axis: usize) -> bool {
+        self.axis_bits(axis) & 1 != 0
+    }
+
+    pub fn negative(self, axis: usize) -> bool {
+        self.axis_bits(axis) & 2 != 0
+    }
+
+    /// The two bits of one axis.
+    fn axis_bits(self, axis: usize) -> u8 {
+        self.0.checked_shr(2 * axis as u32).unwrap_or(0) & 3
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -173,7 +206,7 @@ impl RateAxis {
         g: &AxisGains,
         e: f32,
         rate: f32,
-        sat: Saturation,
+        sat_bits: u8,
         ts: f32,
         dt_recip: f32,
     ) -> f32 {
@@ -191,7 +224,7 @@ impl RateAxis {
         // `over` is the output clamp's own test, shared with the anti-windup: in steady flight
         // neither the clamp nor the mixer holds anything back, and one comparison says so.
         let over = unclamped.abs() > g.output_limit;
-        if ANTI_WINDUP && (over || sat.positive || sat.negative) && winds_up(e, sat, unclamped, over) {
+        if ANTI_WINDUP && (over || sat_bits != 0) && winds_up(e, sat_bits, unclamped, over) {
             // Keep the integrator where it was and say what that gives.
             let held = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
             return clamp_symmetric(held, g.output_limit);
@@ -220,7 +253,7 @@ impl RateLoop {
         demand_rad_s: [f32; 3],
         rate_rad_s: [f32; 3],
         throttle_low: bool,
-        saturation: [Saturation; 3],
+        saturation: Saturation,
     ) -> [f32; 3] {
         if throttle_low {
             for a in &mut self.axes {
@@ -245,13 +278,14 @@ impl RateLoop {
         cfg: &ControlConfig,
         errors: [f32; 3],
         rate_rad_s: [f32; 3],
-        saturation: [Saturation; 3],
+        saturation: Saturation,
     ) -> [f32; 3] {
         let ts = cfg.inner_dt_s;
         let dt_recip = 1.0 / ts;
         let [e0, e1, e2] = errors;
         let mut out = [0.0f32; 3];
-        let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(errors.into_iter().zip(rate_rad_s)).zip(saturation);
+        let sat = [0, 1, 2].map(|axis| saturation.axis_bits(axis));
+        let per_axis = self.axes.iter_mut().zip(cfg.axes()).zip(errors.into_iter().zip(rate_rad_s)).zip(sat);
         // A non-finite demand or rate makes its error, and so the sum of the three, non-finite:
         // one test covers the three axes on every ordinary tick. (Three finite errors can only
         // overflow the sum to infinity, which just sends the tick down the careful loop.)
@@ -282,9 +316,9 @@ impl RateLoop {
 /// Cortex-M4 a `vcmp`/`vmrs` pair on the 800 Hz path. With `e = ±0` the integrator cannot
 /// move, so which way a zero counts does not matter.
 #[inline(always)]
-fn winds_up(e: f32, sat: Saturation, unclamped: f32, over: bool) -> bool {
+fn winds_up(e: f32, sat_bits: u8, unclamped: f32, over: bool) -> bool {
     let e_negative = e.is_sign_negative();
-    let mixer_blocks = if e_negative { sat.negative } else { sat.positive };
+    let mixer_blocks = sat_bits & if e_negative { 2 } else { 1 } != 0;
     mixer_blocks || (over && unclamped.is_sign_negative() == e_negative)
 }
 
@@ -314,7 +348,7 @@ mod tests {
         // reference-firmware.md §13.8: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
         let cfg = ControlConfig::REFERENCE;
         let mut r = RateLoop::default();
-        let none = [Saturation::default(); 3];
+        let none = Saturation::NONE;
         let out = r.step(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
         let p = 100.0 * 0.1;
         let i = 100.0 * 0.1 * 0.00125;
@@ -328,7 +362,7 @@ mod tests {
     fn derivative_on_measurement_has_no_kick_on_a_demand_step() {
         let mut cfg = ControlConfig::REFERENCE;
         cfg.derivative = Derivative::OnMeasurement;
-        let none = [Saturation::default(); 3];
+        let none = Saturation::NONE;
         let mut on_meas = RateLoop::default();
         let mut on_err = RateLoop::default();
         let a = on_meas.step(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
@@ -341,7 +375,7 @@ mod tests {
     #[test]
     fn integrator_resets_while_throttle_is_low_and_is_clamped() {
         let cfg = ControlConfig::REFERENCE;
-        let none = [Saturation::default(); 3];
+        let none = Saturation::NONE;
         let mut r = RateLoop::default();
         for _ in 0..100_000 {
             r.step(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
@@ -356,7 +390,7 @@ mod tests {
     fn anti_windup_freezes_the_saturated_direction_only() {
         let mut cfg = ControlConfig::REFERENCE;
         cfg.anti_windup = true;
-        let sat = [Saturation { positive: true, negative: false }, Saturation::default(), Saturation::default()];
+        let sat = Saturation::NONE.with(0, true, false);
         let mut r = RateLoop::default();
         r.step(&cfg, [1.0, 1.0, 0.0], [0.0; 3], false, sat);
         assert_eq!(r.integrators()[0], 0.0);
@@ -373,6 +407,16 @@ mod tests {
         assert!((s1[0] - 0.3).abs() < 1e-6 && (s1[1] + 0.6).abs() < 1e-6 && (s1[2] - 0.2).abs() < 1e-6);
     }
 
+    #[test]
+    fn saturation_keeps_each_axis_and_direction_apart() {
+        let s = Saturation::NONE.with(0, true, false).with(2, false, true);
+        assert!(s.positive(0) && !s.negative(0));
+        assert!(!s.positive(1) && !s.negative(1));
+        assert!(!s.positive(2) && s.negative(2));
+        assert!(!s.positive(7));
+        assert_eq!(Saturation::of_commands([3.0, 0.0, -1.0]), s);
+    }
+
     proptest::proptest! {
         #[test]
         fn the_magnitude_clamp_is_the_references_clamp(v in proptest::num::f32::ANY, lim in 0.0f32..1e6) {
@@ -384,7 +428,7 @@ mod tests {
     #[test]
     fn a_nan_rate_does_not_stay_in_the_state() {
         let cfg = ControlConfig::REFERENCE;
-        let none = [Saturation::default(); 3];
+        let none = Saturation::NONE;
         let mut r = RateLoop::default();
         r.step(&cfg, [0.0; 3], [f32::NAN, 0.0, 0.0], false, none);
         let out = r.step(&cfg, [0.0; 3], [0.0; 3], false, none);

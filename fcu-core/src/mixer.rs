@@ -91,18 +91,18 @@ impl MixerConfig {
 
     /// Distribute throttle and commands to the four motors. Returns the motor commands
     /// (before the compare clamp) and, per axis, the direction the mix could not deliver.
-    pub fn mix(&self, throttle_counts: i16, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
+    pub fn mix(&self, throttle_counts: i16, s: [f32; 3]) -> ([f32; 4], Saturation) {
         let thr = f32::from(throttle_counts);
         let [x, y, z] = s;
         // The reference's exact expressions: ((thr ∓ x) ∓ y) ± z, then "+ MOTOR_OFF" (0).
         let reference = [thr - x - y + z + 0.0, thr + x - y - z + 0.0, thr + x + y + z + 0.0, thr - x + y - z + 0.0];
         match self.saturate {
-            Saturate::Clip => (reference, [Saturation::default(); 3]),
+            Saturate::Clip => (reference, Saturation::NONE),
             Saturate::AttitudePriority => self.mix_attitude_priority(thr, s),
         }
     }
 
-    fn mix_attitude_priority(&self, thr: f32, s: [f32; 3]) -> ([f32; 4], [Saturation; 3]) {
+    fn mix_attitude_priority(&self, thr: f32, s: [f32; 3]) -> ([f32; 4], Saturation) {
         let [x, y, z] = s;
         // The quad-X rows of MIX: the corrections are z − (x+y), (x−y) − z, (x+y) + z and
         // −(x−y) − z, so their extremes are z ± |x+y| and ±|x−y| − z, each exactly one of the
@@ -118,7 +118,7 @@ impl MixerConfig {
         let lo_rel = lower(z - abs_a, -abs_b - z);
         let range = self.max_compare - self.min_compare;
         let spread = hi_rel - lo_rel;
-        let none = [Saturation::default(); 3];
+        let none = Saturation::NONE;
         if spread <= range {
             // The usual case: shift the throttle (never above what fits) so no motor clips.
             // (`thr` comes from an i16, so it is finite; a NaN spread fails this test.)
@@ -132,7 +132,7 @@ impl MixerConfig {
             return ([self.min_compare; 4], none);
         }
         // Even the corrections alone do not fit: keep their proportions, centred.
-        let sat = s.map(|v| Saturation { positive: v > 0.0, negative: v < 0.0 });
+        let sat = Saturation::of_commands(s);
         let scale = range / spread;
         let base = self.min_compare - lo_rel * scale;
         (rel.map(|r| base + r * scale), sat)
@@ -215,7 +215,7 @@ mod tests {
         assert_eq!(torque(clip_ccr), 2 * (1900 - 1500));
         // Attitude priority: the full 4·300 = 1200 survives, the throttle gives way.
         assert!((torque(ccr) - 1200).abs() <= 2, "{ccr:?}");
-        assert_eq!(sat, [Saturation::default(); 3]);
+        assert_eq!(sat, Saturation::NONE);
     }
 
     #[test]
@@ -237,7 +237,7 @@ mod tests {
         for c in cmd {
             assert!((-0.01..=1900.01).contains(&c), "{c}");
         }
-        assert!(sat[0].positive && sat[1].positive && !sat[2].positive);
+        assert!(sat.positive(0) && sat.positive(1) && !sat.positive(2));
     }
 
     /// The reference's order: clamp in float, then truncate.

@@ -12,7 +12,7 @@ use fcu_core::supervisor::FlightState;
 use fcu_core::telemetry::Reporter;
 use fcu_core::{Config, FlightController};
 
-const NO_SAT: [Saturation; 3] = [Saturation { positive: false, negative: false }; 3];
+const NO_SAT: Saturation = Saturation::NONE;
 
 /// Run the whole controller with a level IMU turning about z at `rate_dps`, throttle half up
 /// and the link given directly, for `ticks` ticks after boot; returns the yaw estimate.
