@@ -329,10 +329,10 @@ pub struct Receiver {
     /// Control ticks, starting at `u32::MAX` so that "never" (tick 0) is already older than
     /// any timeout; 64 bits never wrap (2^64 ticks at 800 Hz is 730 million years).
     now: u64,
-    last_edge_at: u64,
     last_pulse_at: [u64; CHANNELS],
-    /// The oldest of `last_pulse_at`: the link is as old as its stalest channel.
-    stalest_pulse_at: u64,
+    /// The link is good while `now` is below this: the last edge (reference) or the stalest
+    /// channel's last pulse (validated) plus the timeout, set when they change.
+    link_until: u64,
     link: bool,
     /// The last update changed the sticks or the link.
     changed: bool,
@@ -367,9 +367,8 @@ impl Receiver {
             sticks: Sticks::default(),
             gesture: None,
             now: u64::from(u32::MAX),
-            last_edge_at: 0,
             last_pulse_at: [0; CHANNELS],
-            stalest_pulse_at: 0,
+            link_until: 0,
             link: false,
             changed: true,
         }
@@ -413,23 +412,22 @@ impl Receiver {
         channel(t1, w1, ELE);
         channel(t2, w2, THR);
         channel(t3, w3, RUD);
+        let timeout = u64::from(cfg.link_timeout_ticks);
         let any_width = w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some();
         if any_width {
-            self.stalest_pulse_at = (*t0).min(*t1).min(*t2).min(*t3);
+            if let PulseRules::Validated { .. } = cfg.pulses {
+                self.link_until = (*t0).min(*t1).min(*t2).min(*t3) + timeout;
+            }
             self.gesture = cfg.gesture(&self.sticks);
         }
-        let timeout = u64::from(cfg.link_timeout_ticks);
-        let was = self.link;
-        self.link = match cfg.pulses {
-            PulseRules::Reference { .. } => {
-                let [e0, e1, e2, e3] = batch.edge_seen;
-                if e0 | e1 | e2 | e3 {
-                    self.last_edge_at = now;
-                }
-                now - self.last_edge_at < timeout
+        if let PulseRules::Reference { .. } = cfg.pulses {
+            let [e0, e1, e2, e3] = batch.edge_seen;
+            if e0 | e1 | e2 | e3 {
+                self.link_until = now + timeout;
             }
-            PulseRules::Validated { .. } => now - self.stalest_pulse_at < timeout,
-        };
+        }
+        let was = self.link;
+        self.link = now < self.link_until;
         self.changed = any_width | (self.link != was);
         RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
     }
