@@ -128,6 +128,10 @@ pub struct Inner {
     receiver: Receiver,
     supervisor: Supervisor,
     decision: Decision,
+    /// The sticks the pipeline flies with (the failsafe's while it holds) and whether their
+    /// throttle is low: set with each decision.
+    sticks_in_force: Sticks,
+    throttle_low: bool,
     calibrator: Calibrator,
     cal_pending: bool,
     offsets: Offsets,
@@ -262,6 +266,8 @@ impl Inner {
                 blockers: Blockers::default(),
             },
             calibrator: Calibrator::new(cfg.calibration),
+            sticks_in_force: Sticks::default(),
+            throttle_low: true,
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
             health: cfg.health.map(|h| HealthMonitor::new(h, &cfg.imu)),
@@ -348,10 +354,13 @@ impl Inner {
         let unchanged = !self.receiver.changed() && self.fault.is_none();
         if !(unchanged && self.supervisor.repeat_steady_flight()) {
             self.decision = self.supervise(&radio, armed_override);
+            self.cal_pending |= self.decision.request_calibration;
+            // What follows from the decision and the sticks, until either changes.
+            self.sticks_in_force = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
+            self.throttle_low = self.cfg.rc.throttle_low(&self.sticks_in_force);
         }
-        self.cal_pending |= cal_request | self.decision.request_calibration;
-        let sticks = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
-        let throttle_low = self.cfg.rc.throttle_low(&sticks);
+        self.cal_pending |= cal_request;
+        let (sticks, throttle_low) = (self.sticks_in_force, self.throttle_low);
 
         // 2. Calibration: start-up (nothing else runs until the first offsets exist) and
         // requested. Idle with nothing asked, it has nothing to do.
