@@ -262,9 +262,49 @@ pub fn clamp_nan_low(v: f32, lo: f32, hi: f32) -> f32 {
 
 pub const DEG_PER_RAD: f32 = 57.295_78;
 
+/// tan(x) for the small angles of filter design (the low-pass designs call it with
+/// π·fc/fs < 0.71), in f32 without `libm::tanf`, whose general argument reduction alone is
+/// 2.8 KiB of the firmware's flash for a function called only while building filters. The
+/// argument is halved (exactly) down to |y| ≤ 1/16, where the Taylor series to y⁹ is exact to
+/// f32 precision, and doubled back with tan 2y = 2t / (1 − t²). Within 2 ulp of `libm::tanf`
+/// below 1/16 and 6 ulp (4e-7 relative) below 0.75, the test sweeps both; the estimator's
+/// BROAD scores are the same to the printed 0.001°.
+pub fn tan_small(x: f32) -> f32 {
+    let mut y = x;
+    let mut halvings = 0;
+    while y.abs() > 0.0625 && halvings < 8 {
+        y *= 0.5;
+        halvings += 1;
+    }
+    let y2 = y * y;
+    let mut t = y * (1.0 + y2 * (1.0 / 3.0 + y2 * (2.0 / 15.0 + y2 * (17.0 / 315.0 + y2 * (62.0 / 2835.0)))));
+    for _ in 0..halvings {
+        t = 2.0 * t / (1.0 - t * t);
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tan_small_is_libms_tanf_to_a_few_ulp() {
+        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).abs();
+        let mut worst_small = 0;
+        let mut worst = 0;
+        for i in -75_000i32..=75_000 {
+            let x = i as f32 * 1e-5;
+            let d = ulps(tan_small(x), libm::tanf(x));
+            if x.abs() <= 0.0625 {
+                worst_small = worst_small.max(d);
+            }
+            worst = worst.max(d);
+        }
+        assert!(worst_small <= 2, "{worst_small} ulp below 1/16");
+        assert!(worst <= 6, "{worst} ulp below 0.75");
+        assert_eq!(tan_small(0.0), 0.0);
+    }
 
     #[test]
     fn fast_inv_sqrt_matches_the_reference_spot_values() {

@@ -38,7 +38,7 @@
 //! polynomial. Result identical to `vqf-rs` to 0.001° on all four trials.
 //!
 //! Cost per update (steady state, both bias paths): roughly 400 multiply/adds, 4 `sqrtf`,
-//! 7 divisions, no other transcendental (`tanf`/`ceilf` only at construction); 7 three-channel
+//! 7 divisions, no other transcendental (a tangent and `ceilf` only at construction); 7 three-channel
 //! low-pass steps. Measured with callgrind on x86-64 (a proxy): ≈ 1,800 instructions per update
 //! (the reference Mahony: ≈ 260 there, but its f64 arithmetic is emulated on the M4). Note that
 //! `libm::sqrtf` is a software routine on thumbv7em (≈ 40–60 instructions), not `VSQRT`.
@@ -155,7 +155,7 @@ impl Svf {
         // VQF: cut-off fc = √2 / (2π τ), the -3 dB point of a Butterworth whose step response
         // settles like a first-order lag of time constant τ.
         let fc_hz = core::f32::consts::SQRT_2 / (2.0 * core::f32::consts::PI * tau_s);
-        let g = libm::tanf(core::f32::consts::PI * fc_hz * dt_s);
+        let g = crate::math::tan_small(core::f32::consts::PI * fc_hz * dt_s);
         let k = core::f32::consts::SQRT_2;
         let a1 = 1.0 / (1.0 + g * (g + k));
         let a2 = g * a1;
