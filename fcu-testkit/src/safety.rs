@@ -190,6 +190,29 @@ impl ProcedureTracker {
         state.motors_may_run() && !self.prev_state.motors_may_run()
     }
 
+    /// What is wrong with the arming procedure behind a tick that starts flying (see
+    /// [`is_arming`](Self::is_arming)): the reasons both monitors share. Empty when the arm
+    /// gesture was held long enough from a released start, is let go, and boot settling is over.
+    fn procedure_faults(&self, state: FlightState, gesture: Option<Gesture>, safety: &SafetyConfig, tick: u64) -> Vec<String> {
+        let mut why = Vec::new();
+        if state != FlightState::Armed {
+            why.push(format!("entered {} from {}", state.name(), self.prev_state.name()));
+        }
+        if self.arm_run < safety.arm_hold_ticks {
+            why.push(format!("arm gesture held {} ticks (need {})", self.arm_run, safety.arm_hold_ticks));
+        }
+        if !self.arm_run_released {
+            why.push("arm gesture not released since the last arm/disarm/link loss".into());
+        }
+        if gesture == Some(Gesture::Arm) {
+            why.push("arm gesture still held".into());
+        }
+        if tick < u64::from(safety.boot_settle_ticks) {
+            why.push(format!("tick {tick} inside boot settling"));
+        }
+        why
+    }
+
     /// After the checks: the release rule and the arm run (this tick becomes "before").
     fn after_checks(&mut self, link: bool, gesture: Option<Gesture>, throttle_low: bool, state: FlightState) {
         let arming = self.is_arming(state);
@@ -464,19 +487,7 @@ impl SafetyMonitor {
         throttle_low: bool,
     ) -> Result<(), Violation> {
         let tilt = tilt_from_level_rad(self.prev_quat);
-        let mut why = Vec::new();
-        if st.state != FlightState::Armed {
-            why.push(format!("entered {} from {}", st.state.name(), self.proc.prev_state.name()));
-        }
-        if self.proc.arm_run < safety.arm_hold_ticks {
-            why.push(format!("arm gesture held {} ticks (need {})", self.proc.arm_run, safety.arm_hold_ticks));
-        }
-        if !self.proc.arm_run_released {
-            why.push("arm gesture not released since the last arm/disarm/link loss".into());
-        }
-        if gesture == Some(Gesture::Arm) {
-            why.push("arm gesture still held".into());
-        }
+        let mut why = self.proc.procedure_faults(st.state, gesture, safety, self.tick);
         if !st.blockers.is_empty() {
             let names: Vec<&str> = st.blockers.iter().map(|b| b.name()).collect();
             why.push(format!("blockers {names:?}"));
@@ -489,9 +500,6 @@ impl SafetyMonitor {
         }
         if !self.calibrated_once || matches!(st.calibration, CalibrationPhase::Averaging { .. } | CalibrationPhase::Settling) {
             why.push(format!("calibration {:?}", st.calibration));
-        }
-        if self.tick < u64::from(safety.boot_settle_ticks) {
-            why.push(format!("tick {} inside boot settling", self.tick));
         }
         if tilt.is_nan() || tilt > f64::from(safety.max_arm_tilt_rad) + TILT_MARGIN_RAD {
             why.push(format!("tilt {tilt} rad"));
@@ -574,19 +582,7 @@ impl SupervisorMonitor {
 
         self.proc.before_checks(i.link, i.sticks.thr, state);
         if self.proc.is_arming(state) {
-            let mut why = Vec::new();
-            if state != FlightState::Armed {
-                why.push(format!("entered {} from {}", state.name(), self.proc.prev_state.name()));
-            }
-            if self.proc.arm_run < cfg.arm_hold_ticks {
-                why.push(format!("arm gesture held {} ticks (need {})", self.proc.arm_run, cfg.arm_hold_ticks));
-            }
-            if !self.proc.arm_run_released {
-                why.push("arm gesture not released since the last arm/disarm/link loss".into());
-            }
-            if gesture == Some(Gesture::Arm) {
-                why.push("arm gesture still held".into());
-            }
+            let mut why = self.proc.procedure_faults(state, gesture, &cfg, self.tick);
             if !d.blockers.is_empty() {
                 why.push(format!("blockers {:#x}", d.blockers.0));
             }
@@ -595,9 +591,6 @@ impl SupervisorMonitor {
             }
             if !(i.tilt_rad.is_finite() && i.tilt_rad <= cfg.max_arm_tilt_rad) {
                 why.push(format!("tilt {}", i.tilt_rad));
-            }
-            if self.tick < u64::from(cfg.boot_settle_ticks) {
-                why.push(format!("tick {} inside boot settling", self.tick));
             }
             if !why.is_empty() {
                 return self.fail(Invariant::ArmedWithoutProcedure, why.join("; "));
