@@ -415,32 +415,29 @@ pub fn euler_of(q: [f64; 4]) -> (f64, f64, f64) {
     (pitch, roll, yaw)
 }
 
+/// `s + h·d` for the integrated parts of the state.
 fn add_scaled(s: &PlantState, d: &Deriv, h: f64) -> PlantState {
     let mut o = s.clone();
-    for k in 0..3 {
-        o.pos_earth_m[k] += h * d.pos[k];
-        o.vel_earth_m_s[k] += h * d.vel[k];
-        o.rate_body_rad_s[k] += h * d.rate[k];
-    }
-    for k in 0..4 {
-        o.quat[k] += h * d.quat[k];
-        o.motor_speed[k] += h * d.motor[k];
-    }
+    axpy_fields([&mut o.pos_earth_m, &mut o.vel_earth_m_s, &mut o.rate_body_rad_s], [&d.pos, &d.vel, &d.rate], h);
+    axpy_fields([&mut o.quat, &mut o.motor_speed], [&d.quat, &d.motor], h);
     o
 }
 
+/// `a + w·b` for derivatives (the RK4 weighted sum).
 fn deriv_axpy(a: &Deriv, b: &Deriv, w: f64) -> Deriv {
     let mut o = *a;
-    for k in 0..3 {
-        o.pos[k] += w * b.pos[k];
-        o.vel[k] += w * b.vel[k];
-        o.rate[k] += w * b.rate[k];
-    }
-    for k in 0..4 {
-        o.quat[k] += w * b.quat[k];
-        o.motor[k] += w * b.motor[k];
-    }
+    axpy_fields([&mut o.pos, &mut o.vel, &mut o.rate], [&b.pos, &b.vel, &b.rate], w);
+    axpy_fields([&mut o.quat, &mut o.motor], [&b.quat, &b.motor], w);
     o
+}
+
+/// `y += h·x`, field by field, element by element.
+fn axpy_fields<const N: usize, const F: usize>(ys: [&mut [f64; N]; F], xs: [&[f64; N]; F], h: f64) {
+    for (y, x) in ys.into_iter().zip(xs) {
+        for (y, x) in y.iter_mut().zip(x) {
+            *y += h * x;
+        }
+    }
 }
 
 pub fn cross(a: V3, b: V3) -> V3 {
