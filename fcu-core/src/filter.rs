@@ -164,19 +164,9 @@ impl Pt1 {
 /// The number of samples in the outer-loop block (the reference's `FIFO_Order`).
 pub const BLOCK: usize = 5;
 
-/// Average of a block of [`BLOCK`] vectors as the reference does it: an f32 sum from 0.0
-/// over slots 0..4, then `× 0.2` either in f64 (reference arithmetic) or in f32.
-pub fn block_average(slots: &[[f32; 3]; BLOCK], reference_arithmetic: bool) -> [f32; 3] {
-    let mut sum = [0.0f32; 3];
-    for slot in slots {
-        accumulate(&mut sum, *slot);
-    }
-    block_mean(sum, reference_arithmetic)
-}
-
-/// Add one sample to a running block sum: slot by slot from 0.0, the order (and so the
-/// rounding) of the reference's loop, so a sum kept tick by tick is bit for bit the one
-/// [`block_average`] forms from the stored slots.
+/// Add one sample to a running block sum. The reference averages a block of [`BLOCK`]
+/// stored vectors as an f32 sum from 0.0 over slots 0..4, then `× 0.2`: a sum kept tick by
+/// tick from 0.0, in slot order, is that sum bit for bit (same order, same roundings).
 #[inline(always)]
 pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
     for (s, x) in sum.iter_mut().zip(x) {
@@ -184,7 +174,8 @@ pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
     }
 }
 
-/// The mean of a block from its sum: `sum · 0.2`, in double as the reference when asked.
+/// The mean of a block from its sum: `sum · 0.2`, in f64 as the reference (reference
+/// arithmetic) or in f32.
 pub fn block_mean(sum: [f32; 3], reference_arithmetic: bool) -> [f32; 3] {
     sum.map(|s| if reference_arithmetic { (f64::from(s) * 0.2) as f32 } else { s * 0.2 })
 }
@@ -255,9 +246,12 @@ mod tests {
 
     #[test]
     fn block_average_of_constant_is_the_constant() {
-        let slots = [[1.5, -2.0, 1000.0]; BLOCK];
-        assert_eq!(block_average(&slots, true), [1.5, -2.0, 1000.0]);
-        assert_eq!(block_average(&slots, false), [1.5, -2.0, 1000.0]);
+        let mut sum = [0.0f32; 3];
+        for _ in 0..BLOCK {
+            accumulate(&mut sum, [1.5, -2.0, 1000.0]);
+        }
+        assert_eq!(block_mean(sum, true), [1.5, -2.0, 1000.0]);
+        assert_eq!(block_mean(sum, false), [1.5, -2.0, 1000.0]);
     }
 
     proptest::proptest! {

@@ -77,10 +77,17 @@ impl OuterJob {
     /// The block's summed accelerometer, corrected mg, body axes.
     pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
         let mut sum = self.accel_sum_before_mg;
-        for words in self.accel_words.0.iter().skip(usize::from(self.accel_first_raw)) {
-            accumulate(&mut sum, self.accel_offsets.accel(decoder.accel_mg(*words)).map(|v| v as f32));
-        }
+        let raw = self.accel_words.0.get(usize::from(self.accel_first_raw)..).unwrap_or(&[]);
+        accumulate_accel_mg(&mut sum, raw, decoder, &self.accel_offsets);
         sum
+    }
+}
+
+/// Add accelerometer words to a block sum, each converted and corrected as the tick would
+/// have done it, in slot order.
+fn accumulate_accel_mg(sum: &mut [f32; 3], words: &[[i16; 3]], decoder: &Decoder, offsets: &Offsets) {
+    for w in words {
+        accumulate(sum, offsets.accel(decoder.accel_mg(*w)).map(|v| v as f32));
     }
 }
 
@@ -431,7 +438,7 @@ impl Inner {
             self.compare = [self.cfg.mixer.off_compare(); 4];
         }
 
-        // Built in place: a 144-byte `Option<OuterJob>` moved into the output was copied
+        // One output per branch: an `Option<OuterJob>` moved into a single output was copied
         // (memcpy) on every tick, job or not.
         let yaw_target_reset = self.yaw_target_reset;
         if job_due {
@@ -486,10 +493,8 @@ impl Inner {
     /// New offsets from a calibration. The samples of the current block taken before it keep
     /// the offsets they were taken under: they are converted now and join the sum before.
     fn set_offsets(&mut self, o: Offsets) {
-        let first = usize::from(self.accel_first_raw);
-        for words in self.accel_words.0.iter().take(self.fifo_k).skip(first) {
-            accumulate(&mut self.accel_sum_before_mg, self.offsets.accel(self.decoder.accel_mg(*words)).map(|v| v as f32));
-        }
+        let taken = self.accel_words.0.get(usize::from(self.accel_first_raw)..self.fifo_k).unwrap_or(&[]);
+        accumulate_accel_mg(&mut self.accel_sum_before_mg, taken, &self.decoder, &self.offsets);
         // `fifo_k` < BLOCK here (a job resets it), so the cast is exact.
         self.accel_first_raw = self.fifo_k.min(BLOCK) as u8;
         self.offsets = o;

@@ -190,20 +190,15 @@ impl Offsets {
     /// The reference's statics before calibration: accel (0, 0, 1000), gyro 0 (a no-op).
     pub const UNCALIBRATED: Offsets = Offsets { accel_mg: [0, 0, ACCEL_Z_REFERENCE_MG], gyro_mdps: [0; 3] };
 
-    /// Offset removal in wrapping int32, as the reference (which cannot overflow for
-    /// 16-bit inputs, but must not panic if it did).
-    pub fn apply(&self, s: BodyImu) -> BodyImu {
-        BodyImu { accel_mg: self.accel(s.accel_mg), gyro_mdps: self.gyro(s.gyro_mdps) }
-    }
-
-    /// The accelerometer part of [`apply`](Self::apply).
+    /// Accelerometer offset removal in wrapping int32, as the reference (which cannot
+    /// overflow for 16-bit inputs, but must not panic if it did).
     pub fn accel(&self, accel_mg: [i32; 3]) -> [i32; 3] {
         let [ax, ay, az] = accel_mg;
         let [ox, oy, oz] = self.accel_mg;
         [ax.wrapping_sub(ox), ay.wrapping_sub(oy), az.wrapping_sub(oz.wrapping_sub(ACCEL_Z_REFERENCE_MG))]
     }
 
-    /// The gyro part of [`apply`](Self::apply).
+    /// Gyro offset removal, likewise.
     pub fn gyro(&self, gyro_mdps: [i32; 3]) -> [i32; 3] {
         let [gx, gy, gz] = gyro_mdps;
         let [ox, oy, oz] = self.gyro_mdps;
@@ -432,9 +427,8 @@ impl HealthMonitor {
         // The conversion truncates `raw · k` and is monotonic in `raw`, so the largest
         // magnitudes come from the extreme words.
         let largest = |k: f32| -> u32 {
-            let lo = (f32::from(i16::MIN) * k) as i32;
-            let hi = (f32::from(i16::MAX) * k) as i32;
-            lo.unsigned_abs().max(hi.unsigned_abs())
+            let [lo, hi] = [i16::MIN, i16::MAX].map(|w| scale_truncate(i32::from(w), k).unsigned_abs());
+            lo.max(hi)
         };
         let reachable = largest(imu.accel_mg_per_lsb) > cfg.accel_limit_mg || largest(imu.gyro_mdps_per_lsb) > cfg.gyro_limit_mdps;
         HealthMonitor { cfg, same_count: 0, range_check: reachable.then(|| Decoder::new(imu)) }
@@ -521,9 +515,8 @@ mod tests {
     #[test]
     fn offsets_keep_one_g_on_z() {
         let o = Offsets { accel_mg: [10, -20, 1030], gyro_mdps: [5, 6, 7] };
-        let s = o.apply(BodyImu { accel_mg: [10, -20, 1030], gyro_mdps: [5, 6, 7] });
-        assert_eq!(s.accel_mg, [0, 0, 1000]);
-        assert_eq!(s.gyro_mdps, [0, 0, 0]);
+        assert_eq!(o.accel([10, -20, 1030]), [0, 0, 1000]);
+        assert_eq!(o.gyro([5, 6, 7]), [0, 0, 0]);
     }
 
     #[test]
@@ -593,7 +586,7 @@ mod tests {
 
     #[test]
     fn the_range_check_is_dropped_only_when_no_word_can_fail_it() {
-        // ±4 g gives at most 4,000 mg and ±2000 dps at most 2,293,760 mdps: limits at or above
+        // ±4 g gives at most 3,997 mg and ±2000 dps at most 2,293,760 mdps: limits at or above
         // those cannot be exceeded by any sensor word, limits one below can.
         let reachable = |accel_limit_mg, gyro_limit_mdps| {
             HealthMonitor::new(HealthConfig { stuck_ticks: 80, accel_limit_mg, gyro_limit_mdps }, &ImuConfig::REFERENCE)
