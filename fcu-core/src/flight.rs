@@ -536,11 +536,12 @@ impl Inner {
     }
 
     pub fn status(&self) -> Status {
+        let radio = self.receiver.state();
         Status {
             state: self.decision.state,
             blockers: self.decision.blockers,
-            link: self.receiver.state().link,
-            sticks: self.receiver.sticks(),
+            link: radio.link,
+            sticks: radio.sticks,
             calibration: self.calibrator.phase(),
             fault: self.fault,
             quat: self.outer.quat,

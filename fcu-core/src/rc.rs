@@ -318,9 +318,10 @@ impl EdgeDecoder {
 
 /// The control side of the radio: link state, per-channel validity and the sticks.
 ///
-/// Ages are kept as the tick of the last pulse (and of the last edge) against a tick counter,
-/// not as four counters incremented every tick: on the 800 Hz path, where most ticks carry no
-/// pulse, the link test is then one subtraction against the stalest channel.
+/// Ages are kept as the tick of each channel's last pulse against a tick counter, not as four
+/// counters incremented every tick, and the link as the tick it expires, set when a pulse (or,
+/// with the reference's rules, an edge) arrives: on the 800 Hz path, where most ticks carry no
+/// pulse, the link test is one comparison.
 #[derive(Clone, Debug)]
 pub struct Receiver {
     sticks: Sticks,
@@ -429,7 +430,7 @@ impl Receiver {
         let was = self.link;
         self.link = now < self.link_until;
         self.changed = any_width | (self.link != was);
-        RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
+        self.state()
     }
 
     /// Set the radio state directly (golden replay): with `link`, the four widths are
@@ -444,7 +445,7 @@ impl Receiver {
         }
         self.link = link;
         self.changed = true;
-        RadioState { sticks: self.sticks, link, gesture: self.gesture }
+        self.state()
     }
 }
 
