@@ -347,15 +347,28 @@ fn bench() -> Result<(), &'static str> {
             s.disarmed.1
         );
     }
-    let tick_ok = default.tick.0 < 600;
-    let outer_ok = default.outer.0 < 5000;
+    // The budgets of product.md §8 (default profile, medians of the armed window). A run over
+    // budget fails: CI runs this binary, and a regression must stop it.
+    let tick_ok = default.tick.0 <= TICK_BUDGET;
+    let outer_ok = default.outer.0 <= OUTER_BUDGET;
     hprintln!(
-        "budget (default, median): tick < 600 {}, outer step < 5000 {}",
+        "budget (default, median): tick <= {} {}, outer step <= {} {}",
+        TICK_BUDGET,
         if tick_ok { "ok" } else { "OVER" },
+        OUTER_BUDGET,
         if outer_ok { "ok" } else { "OVER" }
     );
-    Ok(())
+    if tick_ok && outer_ok {
+        Ok(())
+    } else {
+        Err("over budget")
+    }
 }
+
+/// Median instructions per control tick allowed in the default profile.
+const TICK_BUDGET: u32 = 600;
+/// Median instructions per outer step allowed in the default profile.
+const OUTER_BUDGET: u32 = 5000;
 
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {

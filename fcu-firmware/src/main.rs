@@ -214,12 +214,12 @@ mod app {
         let mut delay_ms = |ms: u32| cortex_m::asm::delay(ms.saturating_mul(SYSCLK_HZ / 1000));
         let boot = init_sensors(&mut bus, &mut delay_ms, &mut uart);
 
-        let capture_pins = [
-            gpioa.pa0.into_pull_down_input().into_alternate::<1>().erase(),
-            gpioa.pa1.into_pull_down_input().into_alternate::<1>().erase(),
-            gpioa.pa2.into_pull_down_input().into_alternate::<1>().erase(),
-            gpioa.pa3.into_pull_down_input().into_alternate::<1>().erase(),
-        ];
+        let capture_pins = (
+            gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
+            gpioa.pa1.into_pull_down_input().into_alternate::<1>(),
+            gpioa.pa2.into_pull_down_input().into_alternate::<1>(),
+            gpioa.pa3.into_pull_down_input().into_alternate::<1>(),
+        );
         let capture = RcCapture::new(dp.TIM2, capture_pins, &mut rcc);
         let mut tick_timer = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
 

@@ -3,7 +3,7 @@
 //! TIM2 captures the radio, TIM4 drives the motors, TIM9 paces the control tick.
 
 use fcu_core::rc::CHANNELS;
-use stm32f4xx_hal::gpio::{Alternate, AnyPin};
+use stm32f4xx_hal::gpio::{Alternate, PA0, PA1, PA2, PA3};
 use stm32f4xx_hal::pac::{TIM2, TIM4, TIM9};
 use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
 
@@ -20,16 +20,26 @@ pub struct Edge {
     pub level_high: bool,
 }
 
+/// PA0..PA3 (AIL, ELE, THR, RUD) in TIM2's alternate function.
+pub type CapturePins = (PA0<Alternate<1>>, PA1<Alternate<1>>, PA2<Alternate<1>>, PA3<Alternate<1>>);
+
 /// TIM2 CH1..CH4 on PA0..PA3 capturing both edges.
+///
+/// Zero-sized on purpose: the pins are typed (their port and number are in the type, not in
+/// RAM). An RTIC resource lives in `.uninit`, which is never loaded at boot, and a resource
+/// that is initialised from constants and never written again can have its one store folded
+/// into a static initializer that then never reaches RAM (it happened to this struct when it
+/// kept the pins as run-time port/pin bytes: every channel read PA0's level, or garbage, and
+/// the radio never decoded). `scripts/check-uninit-constants` guards the firmware's IR.
 pub struct RcCapture {
     tim: TIM2,
-    /// PA0..PA3 in channel order; read at interrupt time to tell a rising from a falling edge,
-    /// as the reference does.
-    pins: [AnyPin<Alternate<1>>; CHANNELS],
+    /// Owned so nothing else reconfigures them; read at interrupt time to tell a rising from
+    /// a falling edge, as the reference does.
+    pins: CapturePins,
 }
 
 impl RcCapture {
-    pub fn new(tim: TIM2, pins: [AnyPin<Alternate<1>>; CHANNELS], rcc: &mut Rcc) -> Self {
+    pub fn new(tim: TIM2, pins: CapturePins, rcc: &mut Rcc) -> Self {
         TIM2::enable(rcc);
         TIM2::reset(rcc);
         tim.psc().write(|w| w.psc().set(RC_CAPTURE_PSC));
@@ -57,11 +67,12 @@ impl RcCapture {
     /// with RC pulses of 0.8 ms or more, and would only lose one width that the core rejects.
     pub fn take_edges(&mut self) -> [Option<Edge>; CHANNELS] {
         let sr = self.tim.sr().read();
+        let levels = [self.pins.0.is_high(), self.pins.1.is_high(), self.pins.2.is_high(), self.pins.3.is_high()];
         let mut edges = [None; CHANNELS];
-        for (channel, (edge, pin)) in edges.iter_mut().zip(self.pins.iter()).enumerate() {
+        for (channel, (edge, level_high)) in edges.iter_mut().zip(levels).enumerate() {
             if sr.ccif(channel as u8).bit_is_set() {
                 let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
-                *edge = Some(Edge { channel, capture_counts, level_high: pin.is_high() });
+                *edge = Some(Edge { channel, capture_counts, level_high });
             }
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race

@@ -3,7 +3,7 @@
 //! Exit codes: 0 the scenario's criteria passed, 1 they did not, 2 bad usage or input
 //! (returned as a [`CliError`] for the dispatcher to print).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use super::CliError;
@@ -53,7 +53,8 @@ fn scenario_named(name: &str) -> Result<Scenario, CliError> {
     scenario::by_name(name).ok_or_else(|| CliError(format!("--scenario: unknown scenario `{name}`; known: {}", scenario::NAMES.join(", "))))
 }
 
-fn check_spread(spread: f64) -> Result<f64, CliError> {
+/// `--spread` checked: a fraction in [0, 0.9]. Shared with `fcu-pil fly`.
+pub fn check_spread(spread: f64) -> Result<f64, CliError> {
     if spread.is_finite() && (0.0..=0.9).contains(&spread) {
         Ok(spread)
     } else {
@@ -61,43 +62,55 @@ fn check_spread(spread: f64) -> Result<f64, CliError> {
     }
 }
 
-pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
-    let mut sc = scenario_named(&a.scenario)?;
-    let profile = Profile::parse(&a.profile)
-        .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
-    let spread = check_spread(a.spread)?;
-    if let Some(d) = a.duration {
+/// The scenario a `fly` command asks for: a named scenario, its stick timeline replaced by
+/// `sticks` when given, its length by `duration_s`. Shared with `fcu-pil fly`.
+pub fn prepare_scenario(name: &str, sticks: Option<&Path>, duration_s: Option<f64>) -> Result<Scenario, CliError> {
+    let mut sc = scenario_named(name)?;
+    if let Some(d) = duration_s {
         if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
             return Err(CliError(format!("--duration: {d} must be a number of seconds in (0, 3600]")));
         }
     }
-    if let Some(path) = &a.sticks {
+    if let Some(path) = sticks {
         let text = crate::csv::read_text(path).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
         let tl = Timeline::parse_csv(&text).map_err(|e| CliError(format!("--sticks {}: {e}", path.display())))?;
         let last_row_s = tl.rows.last().map_or(0.0, |r| r.t_s);
         let name = format!("{} + sticks from {}", sc.name, path.display());
         // A file replaces the pilot; the scenario keeps its world (gusts, weak motor, hand).
         let world = sc.clone();
-        sc = scenario::from_timeline(&name, tl, (last_row_s + 2.0).max(a.duration.unwrap_or(0.0)));
+        sc = scenario::from_timeline(&name, tl, (last_row_s + 2.0).max(duration_s.unwrap_or(0.0)));
         sc.gusts = world.gusts;
         sc.hand = world.hand;
         sc.motor_thrust_scale = world.motor_thrust_scale;
         sc.radio = world.radio;
     }
+    Ok(sc)
+}
+
+pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
+    let profile = Profile::parse(&a.profile)
+        .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
+    let spread = check_spread(a.spread)?;
+    let sc = prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration)?;
     std::fs::create_dir_all(&a.out).map_err(|e| CliError(format!("--out {}: {e}", a.out.display())))?;
 
     let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
     let log = sim::run(&sc, profile, &opts).map_err(|e| CliError(e.to_string()))?;
-    let m = metrics::compute(&log, &sc);
-    let verdicts = metrics::check_all(&log, &sc);
-
-    let csv_path = a.out.join("flight.csv");
-    let svg_path = a.out.join("flight.svg");
-    std::fs::write(&csv_path, log.to_csv()).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))?;
     let title = format!("fcu-sim fly: {} — profile {}, seed {}", sc.name, profile.name(), a.seed);
-    sim::plot::write_svg(&log, &title, &svg_path).map_err(CliError)?;
+    report(&a.out, &title, &sc, &log)
+}
 
-    print_summary(&sc, &log, &m, &verdicts);
+/// Writes `flight.csv` and `flight.svg` into `out`, prints the metrics and the criteria, and
+/// returns exit status 0 if every criterion passed, 1 if not. Shared with `fcu-pil fly`.
+pub fn report(out: &Path, title: &str, sc: &Scenario, log: &FlightLog) -> Result<ExitCode, CliError> {
+    let m = metrics::compute(log, sc);
+    let verdicts = metrics::check_all(log, sc);
+    let csv_path = out.join("flight.csv");
+    let svg_path = out.join("flight.svg");
+    std::fs::write(&csv_path, log.to_csv()).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))?;
+    sim::plot::write_svg(log, title, &svg_path).map_err(CliError)?;
+
+    print_summary(sc, log, &m, &verdicts);
     println!("wrote {} ({} rows at {:.2} Hz) and {}", csv_path.display(), log.rows.len(), log.tick_hz, svg_path.display());
     let passed = verdicts.iter().all(|v| v.passed);
     println!("{}", if passed { "PASS" } else { "FAIL" });

@@ -93,12 +93,14 @@ pub struct FlightLog {
 #[derive(Debug, Clone, PartialEq)]
 pub enum SimError {
     Config(String),
+    /// The flight computer failed (an emulated board's fault, for instance).
+    Computer(String),
 }
 
 impl std::fmt::Display for SimError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            SimError::Config(m) => write!(f, "{m}"),
+            SimError::Config(m) | SimError::Computer(m) => write!(f, "{m}"),
         }
     }
 }
@@ -133,12 +135,140 @@ impl Pilot {
     }
 }
 
-/// Fly `scenario` with `profile`. Deterministic for a given seed.
-pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<FlightLog, SimError> {
-    let cfg = profile.config();
-    let mut fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
-    let mut decoder = fc.edge_decoder();
+/// What a flight computer says about itself after a step: what the log records besides the
+/// plant's truth. The in-process core fills it from its `Status`; an emulated board from what
+/// it reports on its UART (which is why it is a small, textual view).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ComputerView {
+    /// The supervisor's state name (`fcu_core::supervisor::FlightState::name`).
+    pub state: &'static str,
+    pub armed: bool,
+    /// The computer's own link verdict.
+    pub link: bool,
+    pub est_roll_deg: f64,
+    pub est_pitch_deg: f64,
+    pub roll_target_deg: f64,
+    pub pitch_target_deg: f64,
+    pub yaw_target_deg: f64,
+    /// A calibration has passed since power-on.
+    pub calibrated: bool,
+    pub calibrating: bool,
+    pub calibration_restarts: u16,
+}
 
+impl Default for ComputerView {
+    fn default() -> Self {
+        ComputerView {
+            state: fcu_core::supervisor::FlightState::Disarmed.name(),
+            armed: false,
+            link: false,
+            est_roll_deg: 0.0,
+            est_pitch_deg: 0.0,
+            roll_target_deg: 0.0,
+            pitch_target_deg: 0.0,
+            yaw_target_deg: 0.0,
+            calibrated: false,
+            calibrating: false,
+            calibration_restarts: 0,
+        }
+    }
+}
+
+/// The seam between the simulated drone and what flies it: raw sensor words and capture
+/// edges in, TIM4 compare values out. [`InProcess`] is the flight core called directly; the
+/// `fcu-pil` crate implements it with the release firmware running in an emulated STM32F401,
+/// so every scenario, criterion, CSV and plot works for both.
+pub trait FlightComputer {
+    /// Control ticks per second: the simulation advances one tick per [`FlightComputer::step`].
+    fn tick_hz(&self) -> f64;
+    /// One control period ending at `t_end_s` (scenario time): the capture edges the receiver
+    /// produced during it (in time order, with their times), the IMU's raw words at its end
+    /// and the battery voltage. Returns the compare values that drive the motors over the
+    /// next period.
+    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError>;
+    /// What the computer reports about itself now.
+    fn view(&self) -> ComputerView;
+}
+
+/// The flight core in this process: edges into its decoder, one `tick` per step, the outer
+/// step run inline when one is due (as the golden replay does).
+pub struct InProcess {
+    fc: FlightController,
+    decoder: fcu_core::rc::EdgeDecoder,
+    calibrated: bool,
+}
+
+impl InProcess {
+    pub fn new(cfg: Config) -> Result<InProcess, SimError> {
+        let fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
+        let decoder = fc.edge_decoder();
+        Ok(InProcess { fc, decoder, calibrated: false })
+    }
+
+    pub fn controller(&self) -> &FlightController {
+        &self.fc
+    }
+}
+
+impl FlightComputer for InProcess {
+    fn tick_hz(&self) -> f64 {
+        f64::from(self.fc.config().timing.tick_hz())
+    }
+
+    fn step(&mut self, _t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, _battery_v: f64) -> Result<[u16; 4], SimError> {
+        for e in edges {
+            self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
+        }
+        let batch = self.decoder.take();
+        let out = self.fc.tick(imu, &batch);
+        if let Some(job) = out.outer_job {
+            self.fc.run_outer(&job);
+        }
+        if matches!(self.fc.status().calibration, CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) }) {
+            self.calibrated = true;
+        }
+        Ok(out.compare)
+    }
+
+    fn view(&self) -> ComputerView {
+        let st = self.fc.status();
+        let (calibrating, restarts) = match st.calibration {
+            CalibrationPhase::Averaging { restarts } => (true, restarts),
+            _ => (false, 0),
+        };
+        let deg = |r: f32| f64::from(r).to_degrees();
+        ComputerView {
+            state: st.state.name(),
+            armed: st.state.motors_may_run(),
+            link: st.link,
+            est_roll_deg: deg(st.tilt.roll_rad),
+            est_pitch_deg: deg(st.tilt.pitch_rad),
+            // target_rad is (pitch about X, roll about Y, yaw) like the reference's thx/thy/thz.
+            roll_target_deg: deg(st.target_rad[1]),
+            pitch_target_deg: deg(st.target_rad[0]),
+            yaw_target_deg: deg(st.target_rad[2]),
+            calibrated: self.calibrated,
+            calibrating,
+            calibration_restarts: restarts,
+        }
+    }
+}
+
+/// Fly `scenario` with `profile`'s flight core in this process. Deterministic for a given seed.
+pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<FlightLog, SimError> {
+    let mut computer = InProcess::new(profile.config())?;
+    run_with(&mut computer, scenario, profile, opts)
+}
+
+/// Fly `scenario` with any [`FlightComputer`]; `profile` is the configuration it flies (the
+/// simulated pilot's throttle mapping reads it). Deterministic for a given seed and computer.
+pub fn run_with(
+    computer: &mut dyn FlightComputer,
+    scenario: &Scenario,
+    profile: Profile,
+    opts: &RunOptions,
+) -> Result<FlightLog, SimError> {
+    let cfg = profile.config();
     let mut params = if opts.plant_spread > 0.0 { PlantParams::randomized(opts.seed, opts.plant_spread) } else { PlantParams::default() };
     for (s, w) in params.motor_thrust_scale.iter_mut().zip(scenario.motor_thrust_scale) {
         *s *= w;
@@ -149,7 +279,7 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
     let mut air = Air::new(scenario.turbulence, opts.seed);
     let mut pilot = Pilot::default();
 
-    let tick_hz = f64::from(cfg.timing.tick_hz());
+    let tick_hz = computer.tick_hz();
     let tick_s = 1.0 / tick_hz;
     let substeps = opts.substeps.clamp(1, 100);
     let sub_s = tick_s / f64::from(substeps);
@@ -159,7 +289,6 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
 
     let mut rows = Vec::with_capacity(n_ticks as usize);
     let mut edges: Vec<CaptureEdge> = Vec::with_capacity(32);
-    let mut calibrated = false;
     let mut last_thr_us = scenario::THR_LOW_US;
     let started = Instant::now();
     let mut next_progress = Duration::from_secs(2);
@@ -183,9 +312,6 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
             },
             &mut edges,
         );
-        for e in &edges {
-            decoder.on_edge(e.channel, e.capture_counts, e.level_high);
-        }
 
         // 2. Plant and sensor over the tick, motors held.
         for j in 0..substeps {
@@ -214,50 +340,35 @@ pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<F
 
         air.advance(tick_s);
 
-        // 3. The flight controller's tick (and its outer step, inline).
-        let raw = imu.read();
-        let batch = decoder.take();
-        let out = fc.tick(raw, &batch);
-        if let Some(job) = out.outer_job {
-            fc.run_outer(&job);
-        }
-        plant.set_compare(out.compare);
+        // 3. The flight computer's tick: edges and the IMU's words in, compare values out.
+        let compare = computer.step(t1, &edges, imu.read(), plant.state.battery_v)?;
+        plant.set_compare(compare);
 
-        let st = fc.status();
-        let (calibrating, restarts) = match st.calibration {
-            CalibrationPhase::Averaging { restarts } => (true, restarts),
-            CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) } => {
-                calibrated = true;
-                (false, 0)
-            }
-            _ => (false, 0),
-        };
+        let v = computer.view();
         let (pitch, roll, yaw) = plant.euler_rad();
         let row = scenario.timeline.at(t1);
-        let deg = |r: f32| f64::from(r).to_degrees();
         rows.push(LogRow {
             t_s: t1,
-            state: st.state.name(),
-            armed: st.state.motors_may_run(),
+            state: v.state,
+            armed: v.armed,
             link_tx: row.link,
-            link_core: st.link,
+            link_core: v.link,
             roll_deg: roll.to_degrees(),
             pitch_deg: pitch.to_degrees(),
             yaw_deg: yaw.to_degrees(),
             yaw_rate_dps: plant.state.rate_body_rad_s[2].to_degrees(),
-            est_roll_deg: deg(st.tilt.roll_rad),
-            est_pitch_deg: deg(st.tilt.pitch_rad),
-            // target_rad is (pitch about X, roll about Y, yaw) like the reference's thx/thy/thz.
-            roll_target_deg: deg(st.target_rad[1]),
-            pitch_target_deg: deg(st.target_rad[0]),
-            yaw_target_deg: deg(st.target_rad[2]),
-            motors: out.compare,
+            est_roll_deg: v.est_roll_deg,
+            est_pitch_deg: v.est_pitch_deg,
+            roll_target_deg: v.roll_target_deg,
+            pitch_target_deg: v.pitch_target_deg,
+            yaw_target_deg: v.yaw_target_deg,
+            motors: compare,
             alt_m: plant.state.pos_earth_m[2],
             battery_v: plant.state.battery_v,
             thr_us: last_thr_us,
-            calibrated,
-            calibrating,
-            calibration_restarts: restarts,
+            calibrated: v.calibrated,
+            calibrating: v.calibrating,
+            calibration_restarts: v.calibration_restarts,
         });
 
         if opts.progress && started.elapsed() >= next_progress {

@@ -1,0 +1,92 @@
+//! The firmware image: the loadable segments of the ELF at their load (flash) addresses,
+//! exactly what a probe writes to flash, and the symbols the harness needs.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use object::elf::PT_LOAD;
+use object::read::elf::{ElfFile32, FileHeader, ProgramHeader};
+use object::{Endianness, Object, ObjectSection, ObjectSymbol};
+
+/// Bytes to write at a flash address.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    pub address: u32,
+    pub data: Vec<u8>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub path: PathBuf,
+    pub segments: Vec<Segment>,
+    /// Word 0 of the vector table.
+    pub initial_sp: u32,
+    pub symbols: HashMap<String, u32>,
+    /// Flash bytes (vector table + text + rodata + data's load image), as `cargo size` adds them.
+    pub flash_bytes: u32,
+    /// Static RAM (data + bss + uninit).
+    pub ram_bytes: u32,
+}
+
+impl Image {
+    pub fn load(path: &Path) -> Result<Image, String> {
+        let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        Self::parse(&bytes, path)
+    }
+
+    pub fn parse(bytes: &[u8], path: &Path) -> Result<Image, String> {
+        let name = path.display();
+        let elf = ElfFile32::<Endianness>::parse(bytes).map_err(|e| format!("{name}: not a 32-bit ELF: {e}"))?;
+        let endian = elf.endian();
+        let header = elf.elf_header();
+        if header.e_machine(endian) != object::elf::EM_ARM {
+            return Err(format!("{name}: not an ARM ELF"));
+        }
+        let mut segments = Vec::new();
+        for ph in elf.elf_program_headers() {
+            if ph.p_type(endian) != PT_LOAD || ph.p_filesz(endian) == 0 {
+                continue;
+            }
+            let data = ph.data(endian, bytes).map_err(|_| format!("{name}: a segment's data is outside the file"))?;
+            // The load address (LMA): `.data` runs from RAM but is stored in flash.
+            segments.push(Segment { address: ph.p_paddr(endian), data: data.to_vec() });
+        }
+        let vt = segments
+            .iter()
+            .find(|s| s.address == crate::machine::FLASH_BASE)
+            .ok_or_else(|| format!("{name}: no segment at the start of flash (0x08000000): not a firmware image for this board"))?;
+        let initial_sp = vt
+            .data
+            .get(0..4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .ok_or_else(|| format!("{name}: vector table too short"))?;
+        let mut symbols = HashMap::new();
+        for sym in elf.symbols() {
+            if let Ok(n) = sym.name() {
+                if !n.is_empty() {
+                    symbols.insert(n.to_string(), sym.address() as u32);
+                }
+            }
+        }
+        let mut flash_bytes = 0u32;
+        let mut ram_bytes = 0u32;
+        for s in elf.sections() {
+            let n = s.name().unwrap_or("");
+            let size = s.size() as u32;
+            match n {
+                ".vector_table" | ".text" | ".rodata" => flash_bytes += size,
+                ".data" => {
+                    flash_bytes += size;
+                    ram_bytes += size;
+                }
+                ".bss" | ".uninit" => ram_bytes += size,
+                _ => {}
+            }
+        }
+        Ok(Image { path: path.to_path_buf(), segments, initial_sp, symbols, flash_bytes, ram_bytes })
+    }
+
+    pub fn symbol(&self, name: &str) -> Option<u32> {
+        self.symbols.get(name).copied()
+    }
+}

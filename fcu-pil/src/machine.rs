@@ -1,0 +1,882 @@
+//! The emulated Cortex-M4F: Unicorn runs the instructions; this module adds what Unicorn
+//! leaves out of an M-profile core: the instruction-count clock, exception entry and return
+//! (basic and extended FP frames, EXC_RETURN, tail-chaining through the run loop), WFI and the
+//! idle loop, fault detection, and the dispatch of memory-mapped I/O to the models.
+//!
+//! **Time.** Every executed instruction advances the clock by one processor cycle at the
+//! current SYSCLK (CPI = 1: the Cortex-M4 retires most instructions in one cycle; flash wait
+//! states, multi-cycle loads, divides and pipeline refills are not modelled, so the emulated
+//! firmware runs slightly faster than the board, not slower). Exception entry and return cost
+//! 12 and 10 cycles (Cortex-M4 TRM §5.5). The clock advances a whole translation block at a
+//! time (counted at its start): interrupts are taken and timed events seen at block
+//! boundaries, a quantum of a few instructions (a block ends at every branch). A `b .` idle
+//! loop and WFI skip straight to the next event, counting the cycles they would have spun.
+//! The same ELF and the same inputs give the same instruction stream, the same times and the
+//! same outputs, byte for byte.
+
+use std::collections::HashMap;
+
+use unicorn_engine::{Arch, ArmCpuModel, HookType, MemType, Mode, Prot, RegisterARM, Unicorn};
+
+use crate::elf::Image;
+use crate::periph::{Time, Unmodelled};
+use crate::scs::{self, Scs};
+
+/// Flash, its boot alias at 0, SRAM, and the system memory page with the factory values.
+pub const FLASH_BASE: u32 = 0x0800_0000;
+pub const FLASH_SIZE: u32 = 256 * 1024;
+pub const SRAM_BASE: u32 = 0x2000_0000;
+pub const SRAM_SIZE: u32 = 64 * 1024;
+pub const SYSMEM_PAGE: u32 = 0x1FFF_7000;
+
+/// Cycles of exception entry and return on a Cortex-M4 with zero-wait-state memory.
+const ENTRY_CYCLES: u64 = 12;
+const RETURN_CYCLES: u64 = 10;
+/// The `until` address of `emu_start`: never executed.
+const NEVER: u64 = 0xFFFF_FFFE;
+/// Value painted over the stack region at power-on, to find the high-water mark.
+pub const STACK_PAINT: u8 = 0xA5;
+
+/// What the rest of the board looks like to the core: the memory-mapped peripherals outside
+/// the system control space, with their own sense of time.
+pub trait Peripherals {
+    /// A read of `size` bytes (1, 2 or 4) at `addr`.
+    fn read(&mut self, addr: u32, size: u32, now: Time) -> Result<u32, Unmodelled>;
+    /// A write of `size` bytes at `addr`.
+    fn write(&mut self, addr: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled>;
+    /// The next time a model changes by itself (or an external input is scheduled).
+    fn next_event(&self) -> Option<Time>;
+    /// Brings every model up to `now` and reports each interrupt line's level. Returns
+    /// `true` if the independent watchdog expired (the machine then resets).
+    fn advance(&mut self, now: Time, lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled>;
+    /// Time units per processor cycle at the current SYSCLK.
+    fn units_per_cycle(&self) -> Result<u64, Unmodelled>;
+    /// A system reset (watchdog or SYSRESETREQ): every model back to its reset state except
+    /// what survives a reset on the chip (RCC's reset flags).
+    fn system_reset(&mut self, watchdog: bool);
+    /// The bytes of the factory system-memory page at [`SYSMEM_PAGE`] (4 KiB).
+    fn system_memory_page(&self) -> Vec<u8>;
+}
+
+/// Why a run ended early.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// An access to a register or bit the models do not implement.
+    Unmodelled { error: Unmodelled, pc: u32, at: Time },
+    /// An access to unmapped memory (or a write to flash).
+    Memory { kind: &'static str, address: u32, pc: u32, at: Time },
+    /// A HardFault was raised while a HardFault (or NMI) handler ran: the core locks up.
+    Lockup { pc: u32, cause: String, at: Time },
+    /// Stacking or unstacking an exception frame failed (stack overflow).
+    Stacking { address: u32, pc: u32, at: Time },
+    /// An EXC_RETURN the architecture does not allow, or a return from a non-active exception.
+    BadReturn { exc_return: u32, pc: u32, at: Time },
+    /// Something in the emulator itself failed.
+    Emulator(String),
+}
+
+impl std::fmt::Display for Fault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let t = |at: &Time| crate::periph::time_to_s(*at);
+        match self {
+            Fault::Unmodelled { error, pc, at } => write!(f, "unmodelled access at {:.6} s, in the block at PC {pc:#010x}: {error}", t(at)),
+            Fault::Memory { kind, address, pc, at } => write!(f, "{kind} at address {address:#010x}, PC {pc:#010x}, {:.6} s", t(at)),
+            Fault::Lockup { pc, cause, at } => {
+                write!(f, "lockup (fault in the HardFault handler) at PC {pc:#010x}, {:.6} s: {cause}", t(at))
+            }
+            Fault::Stacking { address, pc, at } => {
+                write!(f, "exception frame at {address:#010x} outside RAM (stack overflow?), PC {pc:#010x}, {:.6} s", t(at))
+            }
+            Fault::BadReturn { exc_return, pc, at } => {
+                write!(f, "invalid exception return {exc_return:#010x} at PC {pc:#010x}, {:.6} s", t(at))
+            }
+            Fault::Emulator(m) => write!(f, "emulator: {m}"),
+        }
+    }
+}
+
+impl std::error::Error for Fault {}
+
+/// A HardFault the firmware took (it runs its handler; the caller decides whether that ends
+/// the run).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HardFaultEvent {
+    pub at: Time,
+    pub pc: u32,
+    pub cause: String,
+}
+
+#[derive(Clone, Debug)]
+enum Stop {
+    /// The deadline (an event, or the end of the run) was reached.
+    Deadline,
+    /// A pending exception can preempt.
+    Interrupt,
+    /// The guest branched to an EXC_RETURN value in handler mode.
+    ExceptionReturn,
+    /// An undefined instruction (a panic's `udf`), or another synchronous fault.
+    SyncFault(String),
+    Unmodelled(Unmodelled),
+    Memory {
+        kind: &'static str,
+        address: u32,
+    },
+}
+
+/// Instruction counts of translation blocks, from the flash image.
+struct Code {
+    flash: Vec<u8>,
+    /// Per flash halfword: the block starting there, packed as size << 16 | count << 2 | kind
+    /// (0 = not seen yet). A direct table: the block hook runs millions of times a second.
+    blocks: Vec<u32>,
+}
+
+/// What the block hook does with a block besides counting it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BlockKind {
+    Plain,
+    /// `b .`: an idle spin.
+    IdleSpin,
+    /// `subs rN, #1; bne .-2` (cortex-m's `asm::delay`): a countdown of rN laps.
+    Countdown(u8),
+}
+
+impl Code {
+    fn new(flash: Vec<u8>) -> Code {
+        let n = flash.len() / 2;
+        Code { flash, blocks: vec![0; n] }
+    }
+
+    fn halfword(&self, addr: u32) -> Option<u16> {
+        let off = addr.checked_sub(FLASH_BASE)? as usize;
+        let b = self.flash.get(off..off + 2)?;
+        Some(u16::from_le_bytes([b[0], b[1]]))
+    }
+
+    /// (instructions, kind) of the block at `addr` of `size` bytes. Thumb-2: a halfword whose
+    /// top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit instruction.
+    fn block(&mut self, addr: u32, size: u32) -> (u64, BlockKind) {
+        let slot = addr.checked_sub(FLASH_BASE).map(|o| (o / 2) as usize);
+        if let Some(&packed) = slot.and_then(|i| self.blocks.get(i)) {
+            if packed != 0 && packed >> 16 == size {
+                let kind = match packed & 3 {
+                    1 => BlockKind::IdleSpin,
+                    2 => BlockKind::Countdown(((packed >> 10) & 0xF) as u8),
+                    _ => BlockKind::Plain,
+                };
+                return (u64::from((packed >> 2) & 0xFF), kind);
+            }
+        }
+        let mut n = 0u64;
+        let mut a = addr;
+        while a < addr.wrapping_add(size) {
+            let hw = self.halfword(a).unwrap_or(0);
+            a = a.wrapping_add(if hw >> 11 >= 0b11101 { 4 } else { 2 });
+            n += 1;
+        }
+        let n = n.clamp(1, 255);
+        let first = self.halfword(addr);
+        let kind = if size == 2 && first == Some(0xE7FE) {
+            BlockKind::IdleSpin
+        } else if size == 4 && first.is_some_and(|h| h & 0xF8FF == 0x3801) && self.halfword(addr + 2) == Some(0xD1FD) {
+            // SUBS Rdn, #1 (T2 encoding 0b00111 Rdn 00000001) then BNE back to it.
+            BlockKind::Countdown(((first.unwrap_or(0) >> 8) & 7) as u8)
+        } else {
+            BlockKind::Plain
+        };
+        if let Some(entry) = slot.and_then(|i| self.blocks.get_mut(i)) {
+            let k = match kind {
+                BlockKind::Plain => 0,
+                BlockKind::IdleSpin => 1,
+                BlockKind::Countdown(r) => 2 | (u32::from(r) << 10),
+            };
+            *entry = (size << 16) | ((n as u32) << 2) | k;
+        }
+        (n, kind)
+    }
+
+    fn is_wfi_before(&self, pc: u32) -> bool {
+        self.halfword(pc.wrapping_sub(2)) == Some(0xBF30)
+    }
+}
+
+/// Per-exception accounting, for the measurements on the image.
+#[derive(Clone, Debug, Default)]
+pub struct ExceptionStats {
+    /// Entries taken.
+    pub entries: u64,
+    /// Instructions executed in each completed activation, nested handlers excluded.
+    pub instructions: Vec<u64>,
+    /// Entry time of each completed activation and its return time.
+    pub spans: Vec<(Time, Time)>,
+}
+
+/// The state the hooks see.
+pub struct State<P: Peripherals> {
+    pub board: P,
+    pub scs: Scs,
+    pub now: Time,
+    deadline: Time,
+    units_per_cycle: u64,
+    pub instructions: u64,
+    /// Time spent in WFI or in the `b .` idle loop.
+    pub idle_time: Time,
+    stop: Option<Stop>,
+    code: Code,
+    /// Start of the block being executed (for error reports).
+    block_pc: u32,
+    /// The exception being served (0 = thread mode), tracked at entry and return.
+    current_exception: usize,
+    /// Instructions attributed to each active exception (preempted ones keep their count).
+    exc_instructions: Vec<u64>,
+    exc_entered_at: Vec<Time>,
+    /// Stack of exceptions (nesting) for attribution.
+    exc_stack: Vec<usize>,
+    pub exception_stats: HashMap<usize, ExceptionStats>,
+    /// Whether the core sleeps (WFI, or SLEEPONEXIT on return to thread mode).
+    sleeping: bool,
+    pub hard_faults: Vec<HardFaultEvent>,
+    pub resets: Vec<(Time, &'static str)>,
+}
+
+impl<P: Peripherals> State<P> {
+    fn attribute(&mut self, n: u64) {
+        if let Some(c) = self.exc_instructions.get_mut(self.current_exception) {
+            *c += n;
+        }
+    }
+}
+
+/// The emulated STM32F401 core with its peripherals.
+pub struct Machine<P: Peripherals + 'static> {
+    uc: Unicorn<'static, State<P>>,
+    image: Image,
+    /// The lowest address of the stack region (flip-link puts the stack at the bottom of
+    /// RAM) and the initial stack pointer.
+    pub stack_bottom: u32,
+    pub stack_top: u32,
+}
+
+fn emu(e: unicorn_engine::uc_error) -> Fault {
+    Fault::Emulator(format!("{e:?}"))
+}
+
+impl<P: Peripherals + 'static> Machine<P> {
+    /// Powers on the board with `image` in flash.
+    pub fn new(image: Image, board: P) -> Result<Self, Fault> {
+        let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
+        for seg in &image.segments {
+            let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
+            match off.and_then(|o| flash.get_mut(o..o + seg.data.len())) {
+                Some(dst) => dst.copy_from_slice(&seg.data),
+                None => {
+                    return Err(Fault::Emulator(format!("ELF segment at {:#010x} ({} bytes) is not in flash", seg.address, seg.data.len())))
+                }
+            }
+        }
+        let sysmem = board.system_memory_page();
+        let scs = Scs::new(board.units_per_cycle().map_err(|e| Fault::Unmodelled { error: e, pc: 0, at: 0 })?);
+        let upc = board.units_per_cycle().unwrap_or(21);
+        let state = State {
+            board,
+            scs,
+            now: 0,
+            deadline: 0,
+            units_per_cycle: upc,
+            instructions: 0,
+            idle_time: 0,
+            stop: None,
+            code: Code::new(flash.clone()),
+            block_pc: 0,
+            current_exception: 0,
+            exc_instructions: vec![0; scs::EXCEPTIONS],
+            exc_entered_at: vec![0; scs::EXCEPTIONS],
+            exc_stack: Vec::new(),
+            exception_stats: HashMap::new(),
+            sleeping: false,
+            hard_faults: Vec::new(),
+            resets: Vec::new(),
+        };
+        let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
+        uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
+
+        // Flash, read-only and executable, and its alias at 0 (BOOT0 low: boot from flash).
+        uc.mem_map(u64::from(FLASH_BASE), u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+        uc.mem_write(u64::from(FLASH_BASE), &flash).map_err(emu)?;
+        uc.mem_map(0, u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+        uc.mem_write(0, &flash).map_err(emu)?;
+        uc.mem_map(u64::from(SRAM_BASE), u64::from(SRAM_SIZE), Prot::READ | Prot::WRITE).map_err(emu)?;
+        uc.mem_map(u64::from(SYSMEM_PAGE), 0x1000, Prot::READ).map_err(emu)?;
+        uc.mem_write(u64::from(SYSMEM_PAGE), &sysmem).map_err(emu)?;
+
+        // Peripherals: APB1, APB2, AHB1 (GPIO, RCC, FLASH), the peripheral bit-band alias and
+        // the private peripheral bus. Everything else stays unmapped: an access faults.
+        for (base, size) in [
+            (0x4000_0000u64, 0x8000u64),
+            (0x4001_0000, 0x8000),
+            (0x4002_0000, 0x8000),
+            (0x4200_0000, 0x0200_0000),
+            (0xE000_0000, 0x0010_0000),
+        ] {
+            uc.mmio_map(
+                base,
+                size,
+                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize| mmio_read(uc, (base + offset) as u32, size as u32)),
+                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize, value: u64| {
+                    mmio_write(uc, (base + offset) as u32, size as u32, value as u32)
+                }),
+            )
+            .map_err(emu)?;
+        }
+
+        uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
+        uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
+            let st = uc.get_data_mut();
+            // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
+            st.stop =
+                Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(format!("CPU exception {intno} (QEMU EXCP number)")) });
+            let _ = uc.emu_stop();
+        })
+        .map_err(emu)?;
+        uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
+            let st = uc.get_data_mut();
+            st.stop = Some(Stop::SyncFault("undefined instruction (UsageFault UNDEFINSTR)".into()));
+            let _ = uc.emu_stop();
+            true
+        })
+        .map_err(emu)?;
+        uc.add_mem_hook(
+            HookType::MEM_UNMAPPED | HookType::MEM_PROT,
+            1,
+            0,
+            |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64| {
+                let kind = match kind {
+                    MemType::READ_UNMAPPED => "read of unmapped memory",
+                    MemType::WRITE_UNMAPPED => "write to unmapped memory",
+                    MemType::FETCH_UNMAPPED => "instruction fetch from unmapped memory",
+                    MemType::WRITE_PROT => "write to read-only memory (flash)",
+                    MemType::FETCH_PROT => "instruction fetch from non-executable memory",
+                    _ => "memory access fault",
+                };
+                let st = uc.get_data_mut();
+                if st.stop.is_none() {
+                    st.stop = Some(Stop::Memory { kind, address: addr as u32 });
+                }
+                false
+            },
+        )
+        .map_err(emu)?;
+
+        let stack_top = image.initial_sp;
+        let mut m = Machine { uc, image, stack_bottom: SRAM_BASE, stack_top };
+        // Paint the stack region so its high-water mark can be read later.
+        let paint = vec![STACK_PAINT; stack_top.saturating_sub(SRAM_BASE) as usize];
+        m.uc.mem_write(u64::from(SRAM_BASE), &paint).map_err(emu)?;
+        m.reset_core()?;
+        Ok(m)
+    }
+
+    pub fn state(&self) -> &State<P> {
+        self.uc.get_data()
+    }
+
+    pub fn state_mut(&mut self) -> &mut State<P> {
+        self.uc.get_data_mut()
+    }
+
+    pub fn board(&self) -> &P {
+        &self.uc.get_data().board
+    }
+
+    pub fn board_mut(&mut self) -> &mut P {
+        &mut self.uc.get_data_mut().board
+    }
+
+    pub fn now(&self) -> Time {
+        self.uc.get_data().now
+    }
+
+    pub fn image(&self) -> &Image {
+        &self.image
+    }
+
+    fn reg(&self, r: RegisterARM) -> Result<u32, Fault> {
+        self.uc.reg_read(r).map(|v| v as u32).map_err(emu)
+    }
+
+    fn set_reg(&mut self, r: RegisterARM, v: u32) -> Result<(), Fault> {
+        self.uc.reg_write(r, u64::from(v)).map_err(emu)
+    }
+
+    pub fn pc(&self) -> u32 {
+        self.reg(RegisterARM::PC).unwrap_or(0)
+    }
+
+    /// Reads guest memory (RAM or flash).
+    pub fn read_memory(&self, addr: u32, len: usize) -> Result<Vec<u8>, Fault> {
+        self.uc.mem_read_as_vec(u64::from(addr), len).map_err(emu)
+    }
+
+    /// The core's reset: SP and PC from the vector table at 0, thread mode, everything
+    /// unmasked, no FP context (ARMv7-M B1.5.5).
+    fn reset_core(&mut self) -> Result<(), Fault> {
+        let vt = self.read_memory(0, 8)?;
+        let sp = u32::from_le_bytes([vt[0], vt[1], vt[2], vt[3]]);
+        let pc = u32::from_le_bytes([vt[4], vt[5], vt[6], vt[7]]);
+        self.set_reg(RegisterARM::CONTROL, 0)?;
+        self.set_reg(RegisterARM::PRIMASK, 0)?;
+        self.set_reg(RegisterARM::BASEPRI, 0)?;
+        self.set_reg(RegisterARM::FAULTMASK, 0)?;
+        self.set_reg(RegisterARM::XPSR_NZCVQG, 1 << 24)?;
+        self.rebuild_flags()?;
+        self.set_reg(RegisterARM::SP, sp & !3)?;
+        self.set_reg(RegisterARM::LR, 0xFFFF_FFFF)?;
+        self.set_reg(RegisterARM::PC, pc | 1)?;
+        let st = self.uc.get_data_mut();
+        st.scs = Scs::new(st.units_per_cycle);
+        st.current_exception = 0;
+        st.exc_stack.clear();
+        st.sleeping = false;
+        Ok(())
+    }
+
+    /// QEMU caches the handler-mode flag: a write that moves the CPU between thread and
+    /// handler mode from outside the emulation is followed by an APSR write, which rebuilds
+    /// the cache.
+    fn rebuild_flags(&mut self) -> Result<(), Fault> {
+        let apsr = self.reg(RegisterARM::APSR_NZCV)?;
+        self.set_reg(RegisterARM::APSR_NZCV, apsr)
+    }
+
+    fn add_cycles(&mut self, cycles: u64) {
+        let st = self.uc.get_data_mut();
+        st.now += cycles * st.units_per_cycle;
+    }
+
+    /// Exception entry (ARMv7-M B1.5.6): push the frame (extended when an FP context is
+    /// active, with the FP registers saved at once rather than lazily: the same values), set
+    /// LR to EXC_RETURN, IPSR to the exception, and branch to its vector.
+    fn enter_exception(&mut self, exc: usize, return_pc: u32) -> Result<(), Fault> {
+        let now = self.now();
+        let control = self.reg(RegisterARM::CONTROL)?;
+        if control & 2 != 0 {
+            return Err(Fault::Unmodelled {
+                error: Unmodelled::new("CONTROL.SPSEL", "the process stack (PSP) is not modelled"),
+                pc: return_pc,
+                at: now,
+            });
+        }
+        let fp_active = control & 4 != 0;
+        let mut regs = [0u32; 8];
+        for (slot, r) in
+            regs.iter_mut().zip([RegisterARM::R0, RegisterARM::R1, RegisterARM::R2, RegisterARM::R3, RegisterARM::R12, RegisterARM::LR])
+        {
+            *slot = self.reg(r)?;
+        }
+        regs[6] = return_pc & !1;
+        let xpsr = self.reg(RegisterARM::XPSR)?;
+        let sp = self.reg(RegisterARM::SP)?;
+        let frame_bytes: u32 = if fp_active { 0x68 } else { 0x20 };
+        let mut frame_sp = sp.wrapping_sub(frame_bytes);
+        let mut stacked_xpsr = xpsr;
+        if frame_sp & 4 != 0 {
+            // STKALIGN: the frame is 8-byte aligned and xPSR bit 9 remembers the padding.
+            frame_sp = frame_sp.wrapping_sub(4);
+            stacked_xpsr |= 1 << 9;
+        } else {
+            stacked_xpsr &= !(1 << 9);
+        }
+        regs[7] = stacked_xpsr;
+        let mut words: Vec<u32> = regs.to_vec();
+        if fp_active {
+            for i in 0..16 {
+                words.push(self.uc.reg_read(RegisterARM::S0 as i32 + i).map_err(emu)? as u32);
+            }
+            words.push(self.reg(RegisterARM::FPSCR)?);
+            words.push(0);
+        }
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        if frame_sp < SRAM_BASE || frame_sp.wrapping_add(bytes.len() as u32) > SRAM_BASE + SRAM_SIZE {
+            return Err(Fault::Stacking { address: frame_sp, pc: return_pc, at: now });
+        }
+        self.uc.mem_write(u64::from(frame_sp), &bytes).map_err(emu)?;
+        self.set_reg(RegisterARM::SP, frame_sp)?;
+
+        let in_handler = xpsr & 0x1FF != 0;
+        let mut exc_return: u32 = if in_handler { 0xFFFF_FFF1 } else { 0xFFFF_FFF9 };
+        if fp_active {
+            exc_return &= !0x10;
+        }
+        self.set_reg(RegisterARM::LR, exc_return)?;
+        self.set_reg(RegisterARM::CONTROL, control & !4)?;
+        // IPSR = exception, EPSR: T set, IT cleared; flags kept.
+        self.set_reg(RegisterARM::XPSR_NZCVQG, (xpsr & 0xF80F_0000) | (1 << 24) | exc as u32)?;
+        self.rebuild_flags()?;
+        let vtor = self.uc.get_data().scs.vtor;
+        let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
+        let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
+        self.set_reg(RegisterARM::PC, vector | 1)?;
+        self.add_cycles(ENTRY_CYCLES);
+
+        let st = self.uc.get_data_mut();
+        st.scs.activate(exc);
+        st.exc_stack.push(exc);
+        st.current_exception = exc;
+        if let Some(c) = st.exc_instructions.get_mut(exc) {
+            *c = 0;
+        }
+        if let Some(t) = st.exc_entered_at.get_mut(exc) {
+            *t = now;
+        }
+        st.exception_stats.entry(exc).or_default().entries += 1;
+        st.sleeping = false;
+        Ok(())
+    }
+
+    /// Exception return (ARMv7-M B1.5.8).
+    fn return_from_exception(&mut self) -> Result<(), Fault> {
+        let now = self.now();
+        let pc = self.reg(RegisterARM::PC)?;
+        let exc_return = pc | 1;
+        let bad = |m: &Self| Fault::BadReturn { exc_return, pc: m.uc.get_data().block_pc, at: now };
+        if !matches!(exc_return, 0xFFFF_FFF1 | 0xFFFF_FFF9 | 0xFFFF_FFE1 | 0xFFFF_FFE9) {
+            if exc_return & 4 != 0 {
+                return Err(Fault::Unmodelled {
+                    error: Unmodelled::new("EXC_RETURN", "return to the process stack (PSP) is not modelled"),
+                    pc,
+                    at: now,
+                });
+            }
+            return Err(bad(self));
+        }
+        let xpsr = self.reg(RegisterARM::XPSR)?;
+        let exc = (xpsr & 0x1FF) as usize;
+        {
+            let st = self.uc.get_data_mut();
+            if !st.scs.deactivate(exc) {
+                return Err(bad(self));
+            }
+            let instructions = st.exc_instructions.get(exc).copied().unwrap_or(0);
+            let entered = st.exc_entered_at.get(exc).copied().unwrap_or(0);
+            let stats = st.exception_stats.entry(exc).or_default();
+            // Keep the last 100 000 activations: enough for every statistic over a flight.
+            if stats.instructions.len() < 100_000 {
+                stats.instructions.push(instructions);
+                stats.spans.push((entered, now));
+            }
+            st.exc_stack.pop();
+            st.current_exception = st.exc_stack.last().copied().unwrap_or(0);
+        }
+        let fp_frame = exc_return & 0x10 == 0;
+        let sp = self.reg(RegisterARM::SP)?;
+        let frame_bytes: u32 = if fp_frame { 0x68 } else { 0x20 };
+        if sp < SRAM_BASE || sp.wrapping_add(frame_bytes) > SRAM_BASE + SRAM_SIZE {
+            return Err(Fault::Stacking { address: sp, pc, at: now });
+        }
+        let raw = self.read_memory(sp, frame_bytes as usize)?;
+        let word = |i: usize| u32::from_le_bytes([raw[4 * i], raw[4 * i + 1], raw[4 * i + 2], raw[4 * i + 3]]);
+        for (i, r) in
+            [RegisterARM::R0, RegisterARM::R1, RegisterARM::R2, RegisterARM::R3, RegisterARM::R12, RegisterARM::LR].into_iter().enumerate()
+        {
+            self.set_reg(r, word(i))?;
+        }
+        let ret_pc = word(6);
+        let stacked_xpsr = word(7);
+        if fp_frame {
+            for i in 0..16 {
+                self.uc.reg_write(RegisterARM::S0 as i32 + i, u64::from(word(8 + i as usize))).map_err(emu)?;
+            }
+            self.set_reg(RegisterARM::FPSCR, word(24))?;
+        }
+        let mut new_sp = sp + frame_bytes;
+        if stacked_xpsr & (1 << 9) != 0 {
+            new_sp += 4;
+        }
+        self.set_reg(RegisterARM::SP, new_sp)?;
+        let to_thread = exc_return & 8 != 0;
+        let stacked_exc = stacked_xpsr & 0x1FF;
+        if to_thread != (stacked_exc == 0) {
+            return Err(bad(self));
+        }
+        let control = self.reg(RegisterARM::CONTROL)?;
+        self.set_reg(RegisterARM::CONTROL, if fp_frame { control | 4 } else { control & !4 })?;
+        self.set_reg(RegisterARM::XPSR_NZCVQG, stacked_xpsr & !(1 << 9))?;
+        self.rebuild_flags()?;
+        let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
+        self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
+        self.add_cycles(RETURN_CYCLES);
+        let st = self.uc.get_data_mut();
+        if to_thread && st.scs.sleep_on_exit() {
+            st.sleeping = true;
+        }
+        Ok(())
+    }
+
+    /// A synchronous fault in the guest (undefined instruction, bad state): escalated to
+    /// HardFault, since the configurable faults are not enabled by the firmware. A fault in
+    /// the HardFault handler itself is a lockup and ends the run.
+    fn raise_hard_fault(&mut self, pc: u32, cause: String, cfsr_bits: u32) -> Result<(), Fault> {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        if st.scs.is_active(scs::HARD_FAULT) || st.scs.is_active(2) {
+            return Err(Fault::Lockup { pc, cause, at: now });
+        }
+        st.scs.record_forced_fault(cfsr_bits);
+        st.hard_faults.push(HardFaultEvent { at: now, pc, cause });
+        st.scs.set_pending(scs::HARD_FAULT);
+        self.enter_exception(scs::HARD_FAULT, pc)?;
+        Ok(())
+    }
+
+    /// Injects an imprecise BusFault (as a failed buffered write would give), escalated to
+    /// HardFault: the way to exercise the firmware's fault path on the real image.
+    pub fn inject_bus_fault(&mut self) -> Result<(), Fault> {
+        let pc = self.pc();
+        // CFSR.IMPRECISERR (bit 10).
+        self.raise_hard_fault(pc, "injected imprecise BusFault".into(), 1 << 10)
+    }
+
+    /// Makes the running code call `function` (a symbol of the image) as if the code at the
+    /// current PC had called it: the way to run the firmware's panic handler on the image.
+    pub fn inject_call(&mut self, function: u32, arg0: u32) -> Result<(), Fault> {
+        let pc = self.pc();
+        self.set_reg(RegisterARM::LR, pc | 1)?;
+        self.set_reg(RegisterARM::R0, arg0)?;
+        self.set_reg(RegisterARM::PC, function | 1)
+    }
+
+    /// Brings the peripherals and SysTick up to now, samples the interrupt lines, and handles
+    /// a watchdog or software reset.
+    fn service(&mut self) -> Result<(), Fault> {
+        let now = self.now();
+        let pc = self.uc.get_data().block_pc;
+        let st = self.uc.get_data_mut();
+        st.scs.advance(now);
+        let mut lines = Vec::new();
+        let watchdog =
+            st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
+        for (irq, level) in lines {
+            st.scs.sample_line(irq, level);
+        }
+        match st.board.units_per_cycle() {
+            Ok(u) if u != st.units_per_cycle => {
+                st.units_per_cycle = u;
+                st.scs.set_units_per_cycle(now, u);
+            }
+            Ok(_) => {}
+            Err(error) => return Err(Fault::Unmodelled { error, pc, at: now }),
+        }
+        let software = std::mem::take(&mut st.scs.reset_requested);
+        if watchdog || software {
+            st.resets.push((now, if watchdog { "watchdog" } else { "software (SYSRESETREQ)" }));
+            st.board.system_reset(watchdog);
+            let u = st.board.units_per_cycle().unwrap_or(21);
+            st.units_per_cycle = u;
+            self.reset_core()?;
+        }
+        Ok(())
+    }
+
+    /// Runs the board until `target` (or a fault).
+    pub fn run_until(&mut self, target: Time) -> Result<(), Fault> {
+        loop {
+            self.service()?;
+            let now = self.now();
+            if now >= target {
+                return Ok(());
+            }
+            let basepri = self.reg(RegisterARM::BASEPRI)?;
+            let primask = self.reg(RegisterARM::PRIMASK)? & 1 != 0;
+            let st = self.uc.get_data_mut();
+            if st.sleeping && st.scs.would_wake(basepri) {
+                st.sleeping = false;
+            }
+            if let Some(exc) = st.scs.takeable(basepri, primask) {
+                let pc = self.pc();
+                self.enter_exception(exc, pc)?;
+                continue;
+            }
+            let st = self.uc.get_data_mut();
+            let next = [st.board.next_event(), st.scs.next_event(now)].into_iter().flatten().filter(|&t| t > now).min();
+            let deadline = next.map_or(target, |t| t.min(target));
+            if st.sleeping {
+                // WFI: nothing to do until the next event.
+                let upc = st.units_per_cycle;
+                let skip = (deadline - now).div_ceil(upc) * upc;
+                st.now += skip;
+                st.idle_time += skip;
+                continue;
+            }
+            st.deadline = deadline;
+            st.stop = None;
+            let pc = self.pc();
+            let result = self.uc.emu_start(u64::from(pc | 1), NEVER, 0, 0);
+            let now = self.now();
+            let stop = self.uc.get_data_mut().stop.take();
+            let block_pc = self.uc.get_data().block_pc;
+            match (result, stop) {
+                (_, Some(Stop::Unmodelled(error))) => return Err(Fault::Unmodelled { error, pc: block_pc, at: now }),
+                (_, Some(Stop::Memory { kind, address })) => return Err(Fault::Memory { kind, address, pc: self.pc(), at: now }),
+                (_, Some(Stop::ExceptionReturn)) => self.return_from_exception()?,
+                (_, Some(Stop::SyncFault(cause))) => {
+                    let pc = self.pc();
+                    // CFSR.UNDEFINSTR (bit 16) for an undefined instruction, INVSTATE otherwise.
+                    let bits = if cause.starts_with("undefined") { 1 << 16 } else { 1 << 17 };
+                    self.raise_hard_fault(pc, cause, bits)?;
+                }
+                (Ok(()), Some(Stop::Deadline | Stop::Interrupt)) => {}
+                (Ok(()), None) => {
+                    // Unicorn returns on its own only for WFI (the CPU halted).
+                    let pc = self.pc();
+                    if self.uc.get_data().code.is_wfi_before(pc) {
+                        self.uc.get_data_mut().sleeping = true;
+                    } else {
+                        return Err(Fault::Emulator(format!("emulation stopped without a reason at PC {pc:#010x}")));
+                    }
+                }
+                (Err(e), _) => return Err(Fault::Emulator(format!("{e:?} at PC {:#010x} (block {block_pc:#010x})", self.pc()))),
+            }
+        }
+    }
+
+    /// Lowest stack address written since power-on (the paint is gone), if any.
+    pub fn stack_high_water(&self) -> Option<u32> {
+        let len = self.stack_top.saturating_sub(self.stack_bottom) as usize;
+        let ram = self.read_memory(self.stack_bottom, len).ok()?;
+        ram.iter().position(|&b| b != STACK_PAINT).map(|i| self.stack_bottom + i as u32)
+    }
+}
+
+fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
+    let st = uc.get_data_mut();
+    let (n, kind) = st.code.block(address as u32, size);
+    st.block_pc = address as u32;
+    st.instructions += n;
+    st.now += n * st.units_per_cycle;
+    st.attribute(n);
+    match kind {
+        BlockKind::Plain => {}
+        BlockKind::IdleSpin => {
+            // `b .`: spin until the deadline without translating every lap.
+            if st.deadline > st.now {
+                let upc = st.units_per_cycle;
+                let laps = (st.deadline - st.now).div_ceil(upc);
+                st.now += laps * upc;
+                st.idle_time += laps * upc;
+                st.instructions += laps;
+            }
+            st.stop = Some(Stop::Deadline);
+            let _ = uc.emu_stop();
+            return;
+        }
+        BlockKind::Countdown(reg) => {
+            // `subs rN, #1; bne`: rN laps of two instructions. Run all but the last at once
+            // (no further than the deadline), exactly as executing them would: the register
+            // ends one above zero and the block's own execution finishes the countdown.
+            let r = RegisterARM::R0 as i32 + i32::from(reg);
+            let laps_left = uc.reg_read(r).unwrap_or(0);
+            let st = uc.get_data_mut();
+            let upc = st.units_per_cycle;
+            let affordable = st.deadline.saturating_sub(st.now) / (2 * upc);
+            let skip = laps_left.saturating_sub(1).min(affordable);
+            if skip > 0 {
+                st.now += skip * 2 * upc;
+                st.instructions += skip * 2;
+                st.attribute(skip * 2);
+                let _ = uc.reg_write(r, laps_left - skip);
+            }
+        }
+    }
+    let st = uc.get_data_mut();
+    if st.now >= st.deadline {
+        st.stop = Some(Stop::Deadline);
+        let _ = uc.emu_stop();
+        return;
+    }
+    if st.scs.any_pending() {
+        let basepri = uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u32;
+        let primask = uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) & 1 != 0;
+        let st = uc.get_data_mut();
+        if st.scs.takeable(basepri, primask).is_some() {
+            st.stop = Some(Stop::Interrupt);
+            let _ = uc.emu_stop();
+        }
+    }
+}
+
+fn fail<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, e: Unmodelled) {
+    let st = uc.get_data_mut();
+    if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+        st.stop = Some(Stop::Unmodelled(e));
+    }
+    let _ = uc.emu_stop();
+}
+
+/// Peripheral bit-band alias (0x4200_0000 + 32·offset + 4·bit ↔ bit of 0x4000_0000 + offset).
+fn bit_band(addr: u32) -> Option<(u32, u32)> {
+    (0x4200_0000..0x4400_0000).contains(&addr).then(|| {
+        let off = addr - 0x4200_0000;
+        ((0x4000_0000 + off / 32) & !3, ((off / 32) & 3) * 8 + (off % 32) / 4)
+    })
+}
+
+fn mmio_read<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32) -> u64 {
+    let st = uc.get_data_mut();
+    let now = st.now;
+    let lane = 8 * (addr & 3);
+    let mask = if size >= 4 { u32::MAX } else { (1u32 << (8 * size)) - 1 };
+    let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
+        let ce = st.current_exception;
+        st.scs.read(addr & !3 & 0xFFF, now, ce).map(|w| (w >> lane) & mask)
+    } else if (scs::DWT_BASE..scs::DWT_BASE + 0x1000).contains(&addr) {
+        st.scs.dwt_read(addr & !3 & 0xFFF, now).map(|w| (w >> lane) & mask)
+    } else if let Some((word, bit)) = bit_band(addr) {
+        st.board.read(word, 4, now).map(|w| (w >> bit) & 1)
+    } else {
+        st.board.read(addr, size, now)
+    };
+    match result {
+        Ok(v) => u64::from(v),
+        Err(e) => {
+            fail(uc, e);
+            0
+        }
+    }
+}
+
+fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32, value: u32) {
+    let st = uc.get_data_mut();
+    let now = st.now;
+    let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
+        match size {
+            4 => st.scs.write(addr & 0xFFF, value, now),
+            1 => st.scs.write_byte(addr & 0xFFF, value as u8, now),
+            _ => Err(Unmodelled::new(format!("SCS+{:#05x}", addr & 0xFFF), format!("{size}-byte write"))),
+        }
+    } else if (scs::DWT_BASE..scs::DWT_BASE + 0x1000).contains(&addr) {
+        st.scs.dwt_write(addr & 0xFFF, value, now)
+    } else if let Some((word, bit)) = bit_band(addr) {
+        st.board.read(word, 4, now).and_then(|w| {
+            let w = if value & 1 != 0 { w | (1 << bit) } else { w & !(1 << bit) };
+            st.board.write(word, 4, w, now)
+        })
+    } else {
+        st.board.write(addr, size, value, now)
+    };
+    match result {
+        Ok(()) => {
+            // A write may raise an interrupt line (an enable bit set while its flag is up):
+            // sample the lines now; the next block hook takes the interrupt if it can.
+            let mut lines = Vec::new();
+            match st.board.advance(now, &mut |irq, level| lines.push((irq, level))) {
+                Ok(_) => {
+                    for (irq, level) in lines {
+                        st.scs.sample_line(irq, level);
+                    }
+                }
+                Err(e) => fail(uc, e),
+            }
+        }
+        Err(e) => fail(uc, e),
+    }
+}

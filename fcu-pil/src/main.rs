@@ -1,0 +1,112 @@
+//! `fcu-pil`: the release firmware ELF in an emulated STM32F401, flown against the simulated
+//! drone of fcu-testkit (`cargo pil fly --scenario hover --out out/pil-hover`), and measured
+//! on the image (`cargo pil measure`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use fcu_pil::{firmware, measure, rig};
+
+#[derive(Parser, Debug)]
+#[command(name = "fcu-pil", version, about = "Fly and measure the release firmware ELF in an emulated STM32F401")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Fly a scenario with the firmware image in the loop; writes flight.csv, flight.svg and
+    /// uart.log, prints the metrics and criteria of `fcu-sim fly`.
+    Fly(FlyArgs),
+    /// Fly a scenario and print what the image costs: instructions per control interrupt,
+    /// latencies, CPU load, stack, and the harness's own speed.
+    Measure(MeasureArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct FlyArgs {
+    /// Scenario name (hover, steps, sweeps, yaw, link-short, link-long, gust, weak-motor,
+    /// calibration-motion).
+    #[arg(long)]
+    scenario: String,
+    /// Seed for sensor noise, radio jitter and (with --spread) the airframe.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Stick timeline CSV (`t_s,ail_us,ele_us,thr_us,rud_us,link`) replacing the scenario's.
+    #[arg(long)]
+    sticks: Option<PathBuf>,
+    /// Simulated duration in seconds (default: the scenario's own).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Randomise every airframe parameter by ±this fraction from the seed.
+    #[arg(long, default_value_t = 0.0)]
+    spread: f64,
+    /// The firmware ELF (default: build the release firmware, as `cargo fw` does).
+    #[arg(long)]
+    elf: Option<PathBuf>,
+    /// Output directory for flight.csv, flight.svg and uart.log (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+struct MeasureArgs {
+    #[arg(long, default_value = "hover")]
+    scenario: String,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[arg(long)]
+    duration: Option<f64>,
+    #[arg(long)]
+    elf: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Fly(a) => fly(&a),
+        Command::Measure(a) => measure_cmd(&a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("fcu-pil: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
+    use fcu_testkit::cli::fly as host;
+    let spread = host::check_spread(a.spread).map_err(|e| e.0)?;
+    let sc = host::prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration).map_err(|e| e.0)?;
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    std::fs::create_dir_all(&a.out).map_err(|e| format!("--out {}: {e}", a.out.display()))?;
+    let opts =
+        fcu_testkit::sim::RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..Default::default() };
+    let flight = rig::fly(&elf, &sc, &opts)?;
+    let uart_path = a.out.join("uart.log");
+    std::fs::write(&uart_path, &flight.uart_log).map_err(|e| format!("writing {}: {e}", uart_path.display()))?;
+    let title = format!("fcu-pil fly: {} — firmware image {}, seed {}", sc.name, elf.display(), a.seed);
+    let code = host::report(&a.out, &title, &sc, &flight.log).map_err(|e| e.0)?;
+    println!("wrote {}", uart_path.display());
+    println!(
+        "emulated {:.1} s of the board in {:.1} s ({:.1}× real time), {} instructions",
+        flight.emulated_s,
+        flight.wall_s,
+        flight.emulated_s / flight.wall_s.max(1e-9),
+        flight.instructions
+    );
+    Ok(code)
+}
+
+fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    let sc = fcu_testkit::cli::fly::prepare_scenario(&a.scenario, None, a.duration).map_err(|e| e.0)?;
+    let opts = fcu_testkit::sim::RunOptions { seed: a.seed, duration_s: a.duration, progress: true, ..Default::default() };
+    let report = measure::measure(&elf, &sc, &opts)?;
+    print!("{report}");
+    Ok(ExitCode::SUCCESS)
+}

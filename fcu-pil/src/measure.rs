@@ -1,0 +1,160 @@
+//! What the image costs, measured on the image: instructions per control interrupt (with its
+//! SPI read), the time from the TIM9 update to the last motor write, CPU load, stack use, the
+//! radio capture's worst latency while the control task runs, and the harness's own speed.
+//! Numbers in instructions are exact for the emulated core (CPI = 1, see [`crate::machine`]);
+//! times are those instructions at 84 MHz.
+
+use std::fmt;
+
+use crate::machine::SRAM_BASE;
+use crate::periph::{self, time_to_s, Time};
+use crate::rig;
+
+/// TIM1_BRK_TIM9 is external interrupt 24: exception 40.
+const CONTROL_EXCEPTION: usize = 16 + periph::irq::TIM1_BRK_TIM9 as usize;
+
+#[derive(Clone, Debug)]
+pub struct Report {
+    pub scenario: String,
+    pub emulated_s: f64,
+    pub wall_s: f64,
+    pub control_interrupts: usize,
+    pub control_instructions_median: u64,
+    pub control_instructions_max: u64,
+    pub tick_to_last_ccr_us_median: f64,
+    pub tick_to_last_ccr_us_max: f64,
+    pub cpu_load_pct: f64,
+    pub stack_used_bytes: u32,
+    pub stack_size_bytes: u32,
+    pub capture_latency_us_median: f64,
+    pub capture_latency_us_max: f64,
+    pub capture_latency_during_control_us_max: f64,
+    pub flash_bytes: u32,
+    pub ram_bytes: u32,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn us(t: Time) -> f64 {
+    time_to_s(t) * 1e6
+}
+
+/// Flies `scenario` with the image and measures it over the flight (boot excluded).
+pub fn measure(
+    elf: &std::path::Path,
+    scenario: &fcu_testkit::sim::scenario::Scenario,
+    opts: &fcu_testkit::sim::RunOptions,
+) -> Result<Report, String> {
+    let flight = rig::fly(elf, scenario, opts)?;
+    let m = &flight.board.machine;
+    let st = m.state();
+    let board = m.board();
+    let t0 = board.records.tick_timer_starts.first().copied().unwrap_or(0);
+
+    let control = st.exception_stats.get(&CONTROL_EXCEPTION).cloned().unwrap_or_default();
+    let mut instr: Vec<u64> = control.instructions.clone();
+    instr.sort_unstable();
+    let control_instructions_median = instr.get(instr.len() / 2).copied().unwrap_or(0);
+    let control_instructions_max = instr.last().copied().unwrap_or(0);
+
+    // The TIM9 update that started each control interrupt: the last update at or before its
+    // entry (updates come every 1.25 ms from the timer's start).
+    let period = periph::time_from_s(1.0 / rig::TICK_HZ);
+    let mut latencies = Vec::new();
+    let writes = &board.records.ccr_writes;
+    let mut w = 0;
+    for &(entered, returned) in &control.spans {
+        let update = t0 + (entered.saturating_sub(t0) / period) * period;
+        while w < writes.len() && writes[w].0 < entered {
+            w += 1;
+        }
+        let mut last = None;
+        while w < writes.len() && writes[w].0 <= returned {
+            last = Some(writes[w].0);
+            w += 1;
+        }
+        if let Some(last) = last {
+            latencies.push(us(last - update));
+        }
+    }
+    let tick_to_last_ccr_us_max = latencies.iter().copied().fold(0.0, f64::max);
+    let tick_to_last_ccr_us_median = median(&mut latencies);
+
+    let flown = m.now().saturating_sub(t0);
+    // Idle time after boot: the boot's busy waits count as busy.
+    let cpu_load_pct = 100.0 * (1.0 - time_to_s(st.idle_time.min(flown)) / time_to_s(flown).max(1e-9));
+
+    let stack_size_bytes = m.stack_top - SRAM_BASE;
+    let stack_used_bytes = m.stack_high_water().map_or(0, |low| m.stack_top - low);
+
+    let mut lat: Vec<f64> = board.records.capture_reads.iter().map(|&(c, r)| us(r - c)).collect();
+    let capture_latency_us_max = lat.iter().copied().fold(0.0, f64::max);
+    let capture_latency_us_median = median(&mut lat);
+    let during: f64 = board
+        .records
+        .capture_reads
+        .iter()
+        .filter(|&&(c, _)| {
+            // Spans are in time order: the last one starting at or before the capture.
+            let i = control.spans.partition_point(|&(a, _)| a <= c);
+            i > 0 && c <= control.spans[i - 1].1
+        })
+        .map(|&(c, r)| us(r - c))
+        .fold(0.0, f64::max);
+
+    Ok(Report {
+        scenario: scenario.name.clone(),
+        emulated_s: flight.emulated_s,
+        wall_s: flight.wall_s,
+        control_interrupts: control.instructions.len(),
+        control_instructions_median,
+        control_instructions_max,
+        tick_to_last_ccr_us_median,
+        tick_to_last_ccr_us_max,
+        cpu_load_pct,
+        stack_used_bytes,
+        stack_size_bytes,
+        capture_latency_us_median,
+        capture_latency_us_max,
+        capture_latency_during_control_us_max: during,
+        flash_bytes: m.image().flash_bytes,
+        ram_bytes: m.image().ram_bytes,
+    })
+}
+
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "firmware image measured over `{}` ({:.1} s emulated, boot included)", self.scenario, self.emulated_s)?;
+        writeln!(
+            f,
+            "  control interrupt (TIM9, SPI read included), instructions: median {} max {} over {} ticks",
+            self.control_instructions_median, self.control_instructions_max, self.control_interrupts
+        )?;
+        writeln!(
+            f,
+            "  TIM9 update to the last TIM4 compare write: median {:.1} µs, max {:.1} µs",
+            self.tick_to_last_ccr_us_median, self.tick_to_last_ccr_us_max
+        )?;
+        writeln!(f, "  CPU load after boot: {:.1} %", self.cpu_load_pct)?;
+        writeln!(f, "  stack: {} of {} bytes used (high-water mark of the painted stack)", self.stack_used_bytes, self.stack_size_bytes)?;
+        writeln!(
+            f,
+            "  TIM2 capture to its read: median {:.1} µs, max {:.1} µs; max {:.1} µs while the control task runs",
+            self.capture_latency_us_median, self.capture_latency_us_max, self.capture_latency_during_control_us_max
+        )?;
+        writeln!(f, "  image: flash {} B, static RAM {} B", self.flash_bytes, self.ram_bytes)?;
+        writeln!(
+            f,
+            "  harness: {:.1} s emulated in {:.1} s of wall time ({:.1}× real time)",
+            self.emulated_s,
+            self.wall_s,
+            self.emulated_s / self.wall_s.max(1e-9)
+        )
+    }
+}

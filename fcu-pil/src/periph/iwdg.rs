@@ -1,0 +1,359 @@
+//! IWDG, independent watchdog (RM0368 §15), at 0x4000_3000.
+//!
+//! Behaviour (RM0368 §15, IWDG functional description and registers):
+//! - KR = 0xCCCC starts the watchdog; "the counter starts counting down from the reset value of
+//!   0xFFF" (not from RLR). Once started it cannot be stopped: only a reset does that.
+//! - KR = 0xAAAA reloads the counter from RLR (and write-protects PR/RLR again).
+//! - KR = 0x5555 unlocks PR and RLR; any other key value protects them again. A write to PR or
+//!   RLR while protected is ignored (counted in [`Iwdg::ignored_writes`]).
+//! - A PR (RLR) write sets SR.PVU (RVU) while the value crosses into the VDD domain, which
+//!   "takes up to 5 RC 40 kHz cycles" (RM text, i.e. 5 LSI cycles); until then reads return and
+//!   the counter uses the previous value. RM: "PVU must be reset in order to be able to change
+//!   the prescaler divider" (RVU likewise): a write while busy is an [`Unmodelled`] error.
+//! - The counter decrements at LSI / (4·2^PR) (PR 6 and 7 both /256); the reset happens when it
+//!   would go below 0, i.e. (value + 1) prescaled ticks after the reload (RM0368's min/max
+//!   timeout table: RL = 0 gives the minimum timeout of one tick, 0.125 ms at /4).
+//!
+//! Assumptions: LSI at its nominal 32 kHz (the datasheet allows 17–47 kHz); the option byte
+//! WDG_SW selects the software watchdog (the counter only runs after 0xCCCC); no debugger, so
+//! DBG_IWDG_STOP has no effect. When a PR update completes while the counter runs, the counter
+//! continues from its current value with the new prescaler from that instant (the partial tick is
+//! dropped: the prescaler's phase is not documented).
+//!
+//! Layout and reset values from the `stm32f4` 0.16 PAC (`stm32f401/iwdg/*.rs`).
+
+use super::{Time, Unmodelled, TIME_HZ};
+
+/// Base address of the IWDG (RM0368 memory map).
+pub const BASE: u32 = 0x4000_3000;
+/// Peripheral name used in error messages.
+pub const NAME: &str = "IWDG";
+
+/// Nominal LSI frequency.
+pub const LSI_HZ: u64 = 32_000;
+/// One LSI cycle in [`Time`] units (10 500).
+pub const LSI_CYCLE: Time = TIME_HZ / LSI_HZ;
+/// PR/RLR update time into the VDD domain: 5 LSI cycles (RM0368 IWDG_SR description).
+pub const UPDATE_TIME: Time = 5 * LSI_CYCLE;
+
+const KR: u32 = 0x00;
+const PR: u32 = 0x04;
+const RLR: u32 = 0x08;
+const SR: u32 = 0x0C;
+
+const KEY_UNLOCK: u32 = 0x5555;
+const KEY_RELOAD: u32 = 0xAAAA;
+const KEY_START: u32 = 0xCCCC;
+
+const RLR_RESET: u32 = 0x0FFF;
+/// The counter's value at start (RM0368 §15 functional description: "the counter starts counting down from the reset value of 0xFFF").
+const COUNTER_START: u32 = 0x0FFF;
+
+/// Prescaler divider for PR (RM0368 IWDG_PR description: 4, 8, …, 256; 0b111 is also /256).
+fn divider(pr: u32) -> u64 {
+    4u64 << (pr & 0b111).min(6)
+}
+
+/// One counter tick in [`Time`] units.
+fn tick(pr: u32) -> Time {
+    divider(pr) * LSI_CYCLE
+}
+
+/// The IWDG model.
+#[derive(Clone, Debug)]
+pub struct Iwdg {
+    unlocked: bool,
+    /// PR and RLR as effective in the VDD domain.
+    pr: u32,
+    rlr: u32,
+    /// A PR / RLR write on its way: (value, completion time).
+    pr_pending: Option<(u32, Time)>,
+    rlr_pending: Option<(u32, Time)>,
+    started: bool,
+    /// Counter value at `reference`, the time of the last reload (or rebase).
+    counter: u32,
+    reference: Time,
+    ignored_writes: u32,
+}
+
+impl Default for Iwdg {
+    fn default() -> Self {
+        Iwdg::new()
+    }
+}
+
+impl Iwdg {
+    /// Reset state: stopped, PR = 0, RLR = 0xFFF, registers protected.
+    pub fn new() -> Self {
+        Iwdg {
+            unlocked: false,
+            pr: 0,
+            rlr: RLR_RESET,
+            pr_pending: None,
+            rlr_pending: None,
+            started: false,
+            counter: COUNTER_START,
+            reference: 0,
+            ignored_writes: 0,
+        }
+    }
+
+    /// Whether the watchdog has been started (KR = 0xCCCC).
+    pub fn is_started(&self) -> bool {
+        self.started
+    }
+
+    /// Writes to PR/RLR ignored because the registers were write-protected.
+    pub fn ignored_writes(&self) -> u32 {
+        self.ignored_writes
+    }
+
+    /// When the watchdog resets the chip unless reloaded before; `None` when not started.
+    pub fn next_event(&self) -> Option<Time> {
+        self.expiry()
+    }
+
+    /// Whether the counter has run out at `now` (the machine then resets the chip).
+    pub fn expired(&self, now: Time) -> bool {
+        self.expiry().is_some_and(|t| now >= t)
+    }
+
+    /// Timeout after a reload with the configured PR and RLR (pending writes included), in
+    /// seconds at the nominal LSI; `None` when not started.
+    pub fn timeout_s(&self) -> Option<f64> {
+        if !self.started {
+            return None;
+        }
+        let pr = self.pr_pending.map_or(self.pr, |(v, _)| v);
+        let rlr = self.rlr_pending.map_or(self.rlr, |(v, _)| v);
+        Some((f64::from(rlr) + 1.0) * divider(pr) as f64 / LSI_HZ as f64)
+    }
+
+    /// Completes PR/RLR updates due by `now`.
+    pub fn advance(&mut self, now: Time) {
+        if let Some((value, done)) = self.rlr_pending {
+            if done <= now {
+                self.rlr = value;
+                self.rlr_pending = None;
+            }
+        }
+        if let Some((value, done)) = self.pr_pending {
+            if done <= now {
+                if self.started && done > self.reference {
+                    let elapsed = (done - self.reference) / tick(self.pr);
+                    self.counter = self.counter.saturating_sub(u32::try_from(elapsed).unwrap_or(u32::MAX));
+                    self.reference = done;
+                }
+                self.pr = value;
+                self.pr_pending = None;
+            }
+        }
+    }
+
+    fn expiry(&self) -> Option<Time> {
+        if !self.started {
+            return None;
+        }
+        let mut counter = u64::from(self.counter);
+        let mut reference = self.reference;
+        let mut pr = self.pr;
+        if let Some((new_pr, done)) = self.pr_pending {
+            let old = reference + (counter + 1) * tick(pr);
+            if old <= done {
+                return Some(old);
+            }
+            if done > reference {
+                counter -= (done - reference) / tick(pr);
+                reference = done;
+            }
+            pr = new_pr;
+        }
+        Some(reference + (counter + 1) * tick(pr))
+    }
+
+    pub fn read(&mut self, offset: u32, now: Time) -> Result<u32, Unmodelled> {
+        self.advance(now);
+        match offset {
+            // KR is write-only (RM0368 IWDG_KR description).
+            KR => Ok(0),
+            PR => Ok(self.pr),
+            RLR => Ok(self.rlr),
+            SR => Ok(u32::from(self.pr_pending.is_some()) | (u32::from(self.rlr_pending.is_some()) << 1)),
+            _ => Err(Unmodelled::offset(NAME, offset, false)),
+        }
+    }
+
+    pub fn write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        self.advance(now);
+        match offset {
+            KR => {
+                Unmodelled::check_bits("IWDG.KR", value, 0xFFFF)?;
+                self.unlocked = value == KEY_UNLOCK;
+                match value {
+                    KEY_RELOAD if self.started => {
+                        self.counter = self.rlr;
+                        self.reference = now;
+                    }
+                    KEY_START if !self.started => {
+                        self.started = true;
+                        self.counter = COUNTER_START;
+                        self.reference = now;
+                    }
+                    _ => {}
+                }
+                Ok(())
+            }
+            PR => {
+                Unmodelled::check_bits("IWDG.PR", value, 0b111)?;
+                if !self.unlocked {
+                    self.ignored_writes = self.ignored_writes.saturating_add(1);
+                } else if self.pr_pending.is_some() {
+                    return Err(Unmodelled::new("IWDG.PR", "write while SR.PVU = 1 (RM0368: PVU must be reset to change the prescaler)"));
+                } else {
+                    self.pr_pending = Some((value, now + UPDATE_TIME));
+                }
+                Ok(())
+            }
+            RLR => {
+                Unmodelled::check_bits("IWDG.RLR", value, 0xFFF)?;
+                if !self.unlocked {
+                    self.ignored_writes = self.ignored_writes.saturating_add(1);
+                } else if self.rlr_pending.is_some() {
+                    return Err(Unmodelled::new(
+                        "IWDG.RLR",
+                        "write while SR.RVU = 1 (RM0368: RVU must be reset to change the reload value)",
+                    ));
+                } else {
+                    self.rlr_pending = Some((value, now + UPDATE_TIME));
+                }
+                Ok(())
+            }
+            SR => Err(Unmodelled::new("IWDG.SR", format!("write of {value:#010x} to a read-only register"))),
+            _ => Err(Unmodelled::offset(NAME, offset, true)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The HAL's `IndependentWatchdog::start(50 ms)` sequence: unlock, PR = 6, RLR = 6, reload,
+    /// start.
+    fn start_like_the_hal(w: &mut Iwdg, t: Time) {
+        w.write(KR, KEY_UNLOCK, t).unwrap();
+        w.write(PR, 6, t).unwrap();
+        w.write(RLR, 6, t).unwrap();
+        w.write(KR, KEY_RELOAD, t).unwrap();
+        w.write(KR, KEY_START, t).unwrap();
+    }
+
+    #[test]
+    fn reset_values_match_the_svd() {
+        let mut w = Iwdg::new();
+        assert_eq!(w.read(PR, 0), Ok(0));
+        assert_eq!(w.read(RLR, 0), Ok(0xFFF));
+        assert_eq!(w.read(SR, 0), Ok(0));
+        assert_eq!(w.next_event(), None);
+        assert_eq!(w.timeout_s(), None);
+    }
+
+    #[test]
+    fn lsi_cycle_is_10500_units() {
+        assert_eq!(LSI_CYCLE, 10_500);
+    }
+
+    #[test]
+    fn writes_without_unlock_are_ignored() {
+        let mut w = Iwdg::new();
+        w.write(PR, 3, 0).unwrap();
+        w.write(RLR, 10, 0).unwrap();
+        assert_eq!(w.ignored_writes(), 2);
+        assert_eq!(w.read(SR, 0), Ok(0));
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(KR, 0x1234, 0).unwrap();
+        w.write(PR, 3, 0).unwrap();
+        assert_eq!(w.ignored_writes(), 3, "any other key protects again");
+    }
+
+    #[test]
+    fn pvu_and_rvu_are_busy_for_five_lsi_cycles() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(PR, 4, 0).unwrap();
+        w.write(RLR, 100, 0).unwrap();
+        assert_eq!(w.read(SR, UPDATE_TIME - 1), Ok(0b11));
+        assert_eq!(w.read(PR, UPDATE_TIME - 1), Ok(0), "old value until the update completes");
+        assert!(w.write(PR, 5, 1).is_err(), "write while PVU is set");
+        assert_eq!(w.read(SR, UPDATE_TIME), Ok(0));
+        assert_eq!(w.read(PR, UPDATE_TIME), Ok(4));
+        assert_eq!(w.read(RLR, UPDATE_TIME), Ok(100));
+    }
+
+    #[test]
+    fn first_period_after_start_counts_from_0xfff() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(PR, 0, 0).unwrap();
+        w.write(RLR, 9, 0).unwrap();
+        w.write(KR, KEY_START, UPDATE_TIME).unwrap();
+        // 4096 ticks of /4 at 32 kHz: 512 ms (RM0368 timeout table, maximum at /4).
+        assert_eq!(w.next_event(), Some(UPDATE_TIME + 4096 * 4 * LSI_CYCLE));
+        assert!(!w.expired(UPDATE_TIME + 4096 * 4 * LSI_CYCLE - 1));
+        assert!(w.expired(UPDATE_TIME + 4096 * 4 * LSI_CYCLE));
+        // After a reload: RLR + 1 = 10 ticks.
+        w.write(KR, KEY_RELOAD, 1_000_000).unwrap();
+        assert_eq!(w.next_event(), Some(1_000_000 + 10 * 4 * LSI_CYCLE));
+        assert!((w.timeout_s().unwrap() - 10.0 * 4.0 / 32_000.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn minimum_timeout_is_one_tick() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(RLR, 0, 0).unwrap();
+        w.write(KR, KEY_START, UPDATE_TIME).unwrap();
+        w.write(KR, KEY_RELOAD, UPDATE_TIME).unwrap();
+        // 0.125 ms = 4 LSI cycles.
+        assert_eq!(w.next_event(), Some(UPDATE_TIME + 4 * LSI_CYCLE));
+    }
+
+    #[test]
+    fn hal_50ms_setup_gives_56ms_after_the_first_feed() {
+        let mut w = Iwdg::new();
+        start_like_the_hal(&mut w, 0);
+        // Until the prescaler update lands the counter runs at /4, then at /256 from 0xFFF - 1.
+        let first = w.next_event().unwrap();
+        let expected = UPDATE_TIME + (0xFFE + 1) * 256 * LSI_CYCLE;
+        assert_eq!(first, expected);
+        assert!((w.timeout_s().unwrap() - 0.056).abs() < 1e-9, "(6 + 1) x 256 / 32 kHz");
+        let feed = 1_000_000;
+        w.write(KR, KEY_RELOAD, feed).unwrap();
+        assert_eq!(w.next_event(), Some(feed + 7 * 256 * LSI_CYCLE));
+    }
+
+    #[test]
+    fn the_watchdog_cannot_be_stopped() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_START, 0).unwrap();
+        for key in [KEY_UNLOCK, 0, KEY_START, 0xFFFF] {
+            w.write(KR, key, 10).unwrap();
+            assert!(w.is_started());
+        }
+        assert!(w.write(KR, 0x1_0000, 10).is_err(), "reserved bits");
+        assert!(w.write(SR, 0, 10).is_err());
+    }
+
+    #[test]
+    fn advance_applies_a_prescaler_change_to_the_running_counter() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_START, 0).unwrap();
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(PR, 1, 0).unwrap();
+        let predicted = w.next_event().unwrap();
+        w.advance(UPDATE_TIME);
+        assert_eq!(w.next_event(), Some(predicted), "prediction and lazy update agree");
+        // 5 LSI cycles at /4 is one whole tick: 0xFFE left, then /8.
+        assert_eq!(predicted, UPDATE_TIME + 0xFFF * 8 * LSI_CYCLE);
+    }
+}

@@ -1,0 +1,276 @@
+//! The emulated board as a [`FlightComputer`]: the seam fcu-testkit's simulated drone flies
+//! through. Boot runs on its own (the drone sits level and still, the receiver is silent)
+//! until the firmware starts its control timer: that instant is scenario time 0, so the
+//! firmware's tick `k` falls on the simulation's tick `k`, as the in-process core's does.
+//!
+//! Each step then: the IMU model's words for the end of the period go into the LSM6DSL model,
+//! the battery voltage onto PB1's divider, the period's capture edges onto PA0..PA3 at their
+//! own times, and the machine runs to the period's end; TIM4's compare values in force then
+//! drive the plant over the next period. So the firmware reads sensor words up to one tick
+//! newer than the instant it reads them, and its motor writes reach the plant up to one tick
+//! later than they happen (plus TIM4's own preload, up to a PWM period): together the same
+//! loop delay as the in-process core, bounded by a tick either way.
+
+use fcu_core::imu::RawImu;
+use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
+
+use crate::board::Board;
+use crate::elf::Image;
+use crate::machine::{Fault, Machine};
+use crate::periph::{time_from_s, time_to_s, Time};
+use crate::telemetry::{self, Line, LineSplitter, StatusLine};
+
+/// The control tick the firmware runs (TIM9 at exactly 800 Hz, `Config::default()`).
+pub const TICK_HZ: f64 = 800.0;
+
+/// What to do to the board before or during the flight (fault injection).
+#[derive(Clone, Debug, Default)]
+pub struct BoardSetup {
+    /// WHO_AM_I answers replaced, per sensor (LSM6DSL, LIS2MDL, LPS22HB).
+    pub who_am_i_override: [Option<u8>; 3],
+    /// Boot waits at most this long for the control timer (default 5 s).
+    pub boot_timeout_s: Option<f64>,
+    /// The drone's battery voltage during boot.
+    pub boot_battery_v: f64,
+}
+
+/// A parsed UART line with the time its last byte left the UART.
+#[derive(Clone, Debug)]
+pub struct TimedLine {
+    pub at: Time,
+    pub text: String,
+    pub line: Line,
+}
+
+/// The release firmware in the emulated STM32F401.
+pub struct EmulatedBoard {
+    pub machine: Machine<Board>,
+    /// Emulated time of scenario time 0 (the control timer's start), if it started.
+    t0: Option<Time>,
+    splitter: LineSplitter,
+    uart_read: usize,
+    pub lines: Vec<TimedLine>,
+    /// Every STATUS line, in order.
+    pub statuses: Vec<(Time, StatusLine)>,
+    view: ComputerView,
+    /// First problem with a UART line (format errors are failures of the image).
+    pub line_errors: Vec<String>,
+}
+
+impl EmulatedBoard {
+    /// Powers the board on with `image` and runs its boot until the control timer starts (or
+    /// the timeout passes: a board that never starts it can still be inspected).
+    pub fn boot(image: Image, setup: &BoardSetup, imu_at_rest: RawImu) -> Result<EmulatedBoard, Fault> {
+        let mut board = Board::new();
+        for (i, o) in setup.who_am_i_override.iter().enumerate() {
+            board.spi2.sensors_mut().set_who_am_i_override(i, *o);
+        }
+        board.spi2.sensors_mut().lsm6dsl.set_output(imu_at_rest.gyro, imu_at_rest.accel);
+        board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
+        let machine = Machine::new(image, board)?;
+        let mut b = EmulatedBoard {
+            machine,
+            t0: None,
+            splitter: LineSplitter::default(),
+            uart_read: 0,
+            lines: Vec::new(),
+            statuses: Vec::new(),
+            view: ComputerView::default(),
+            line_errors: Vec::new(),
+        };
+        let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
+        let slice = time_from_s(0.001);
+        while b.machine.now() < timeout {
+            let next = b.machine.now() + slice;
+            b.machine.run_until(next)?;
+            b.drain_uart();
+            if let Some(&t) = b.machine.board().records.tick_timer_starts.first() {
+                b.t0 = Some(t);
+                break;
+            }
+        }
+        Ok(b)
+    }
+
+    /// Whether the firmware started its control timer at boot.
+    pub fn flying(&self) -> bool {
+        self.t0.is_some()
+    }
+
+    /// Emulated time of a scenario time.
+    pub fn time_of(&self, t_s: f64) -> Time {
+        self.t0.unwrap_or(0) + time_from_s(t_s)
+    }
+
+    /// Scenario time of an emulated time.
+    pub fn scenario_s(&self, t: Time) -> f64 {
+        time_to_s(t) - time_to_s(self.t0.unwrap_or(0))
+    }
+
+    /// Runs until scenario time `t_s` with nothing new from the outside.
+    pub fn run_to(&mut self, t_s: f64) -> Result<(), Fault> {
+        let target = self.time_of(t_s);
+        self.machine.run_until(target)?;
+        self.drain_uart();
+        Ok(())
+    }
+
+    /// Everything the UART sent so far, as text.
+    pub fn uart_text(&self) -> String {
+        let bytes: Vec<u8> = self.machine.board().records.uart.iter().map(|&(_, b)| b).collect();
+        String::from_utf8_lossy(&bytes).into_owned()
+    }
+
+    fn drain_uart(&mut self) {
+        let uart = &self.machine.board().records.uart;
+        let new: Vec<(Time, u8)> = uart.get(self.uart_read..).map(<[_]>::to_vec).unwrap_or_default();
+        self.uart_read = uart.len();
+        for (at, byte) in new {
+            if let Some(text) = self.splitter.push(byte) {
+                match telemetry::parse(&text) {
+                    Ok(line) => {
+                        self.apply(at, &line);
+                        self.lines.push(TimedLine { at, text, line });
+                    }
+                    Err(e) => self.line_errors.push(e),
+                }
+            }
+        }
+    }
+
+    fn apply(&mut self, at: Time, line: &Line) {
+        match line {
+            Line::Status(s) => {
+                self.view.state = s.state;
+                self.view.armed = s.armed;
+                self.view.link = !s.blockers.iter().any(|b| b == "link-not-good") && s.failsafe == "none";
+                self.view.calibrating = s.cal == "running" || s.cal == "settling";
+                if s.cal == "passed" {
+                    self.view.calibrated = true;
+                }
+                self.statuses.push((at, s.clone()));
+            }
+            Line::Debug(d) => {
+                self.view.est_pitch_deg = d.pitch_deg * DEG_PER_PRINTED_DEG;
+                self.view.est_roll_deg = d.roll_deg * DEG_PER_PRINTED_DEG;
+                self.view.pitch_target_deg = d.pitch_target_deg * DEG_PER_PRINTED_DEG;
+                self.view.roll_target_deg = d.roll_target_deg * DEG_PER_PRINTED_DEG;
+            }
+            Line::Fatal(_) | Line::Other(_) => {}
+        }
+    }
+}
+
+/// The debug line prints angles as the reference does, radians × 57.3; true degrees are
+/// radians × 180/π.
+const DEG_PER_PRINTED_DEG: f64 = 180.0 / std::f64::consts::PI / 57.3;
+
+impl FlightComputer for EmulatedBoard {
+    fn tick_hz(&self) -> f64 {
+        TICK_HZ
+    }
+
+    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        let t0 = self.t0.ok_or_else(|| SimError::Computer("the firmware never started its control timer (see uart.log)".into()))?;
+        {
+            let board = self.machine.board_mut();
+            board.spi2.sensors_mut().lsm6dsl.set_output(imu.gyro, imu.accel);
+            board.set_battery_volts(battery_v);
+            for e in edges {
+                board.schedule_edge(t0 + time_from_s(e.t_s), e.channel, e.level_high);
+            }
+        }
+        let target = t0 + time_from_s(t_end_s);
+        self.machine.run_until(target).map_err(|f| SimError::Computer(format!("firmware image: {f}")))?;
+        if let Some(hf) = self.machine.state().hard_faults.first() {
+            return Err(SimError::Computer(format!(
+                "firmware image: HardFault at PC {:#010x}, {:.6} s: {}",
+                hf.pc,
+                self.scenario_s(hf.at),
+                hf.cause
+            )));
+        }
+        self.drain_uart();
+        if let Some(e) = self.line_errors.first() {
+            return Err(SimError::Computer(format!("firmware image: malformed UART line: {e}")));
+        }
+        let now = self.machine.now();
+        Ok(self.machine.board_mut().motor_compares(now))
+    }
+
+    fn view(&self) -> ComputerView {
+        self.view.clone()
+    }
+}
+
+/// Re-dates the log's state columns from the STATUS lines' tick stamps: the line leaves the
+/// UART some milliseconds after the change, but says at which control tick it was taken.
+pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, StatusLine)]) {
+    let tick_s = 1.0 / log.tick_hz;
+    let mut changes: Vec<(f64, &StatusLine)> = statuses.iter().filter_map(|(_, s)| s.tick.map(|k| (k as f64 * tick_s, s))).collect();
+    changes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if changes.is_empty() {
+        return;
+    }
+    let mut i = 0;
+    let mut current: Option<&StatusLine> = None;
+    let mut calibrated = false;
+    for row in &mut log.rows {
+        while i < changes.len() && changes[i].0 <= row.t_s + 1e-9 {
+            current = Some(changes[i].1);
+            i += 1;
+        }
+        if let Some(s) = current {
+            row.state = s.state;
+            row.armed = s.armed;
+            row.calibrating = s.cal == "running" || s.cal == "settling";
+            calibrated |= s.cal == "passed";
+            row.calibrated = calibrated;
+        }
+    }
+}
+
+/// A flight of the image, with what the harness saw.
+pub struct Flight {
+    pub log: fcu_testkit::sim::FlightLog,
+    /// Every byte the UART sent, boot included.
+    pub uart_log: Vec<u8>,
+    pub board: EmulatedBoard,
+    /// Emulated seconds since power-on, and the host's wall-clock seconds for them.
+    pub emulated_s: f64,
+    pub wall_s: f64,
+    pub instructions: u64,
+}
+
+/// The IMU's words with the drone level and still on the ground (what it reads during boot).
+pub fn imu_at_rest(seed: u64) -> RawImu {
+    use fcu_testkit::sim::imu_model::{ImuModel, ImuModelParams, Vibration};
+    use fcu_testkit::sim::plant::{Plant, PlantParams};
+    let plant = Plant::new(PlantParams::default());
+    let mut imu = ImuModel::new(ImuModelParams::default(), seed);
+    for _ in 0..20 {
+        imu.step(0.00025, &plant.kinematics(), Vibration::NONE);
+    }
+    imu.read()
+}
+
+/// Boots the image and flies `scenario` with it through the simulation's seam.
+pub fn fly(
+    elf: &std::path::Path,
+    scenario: &fcu_testkit::sim::scenario::Scenario,
+    opts: &fcu_testkit::sim::RunOptions,
+) -> Result<Flight, String> {
+    let started = std::time::Instant::now();
+    let image = Image::load(elf)?;
+    let mut board = EmulatedBoard::boot(image, &BoardSetup::default(), imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
+    if !board.flying() {
+        return Err(format!("the firmware did not start its control timer within the boot timeout; its UART said:\n{}", board.uart_text()));
+    }
+    let mut log = fcu_testkit::sim::run_with(&mut board, scenario, fcu_testkit::Profile::Default, opts).map_err(|e| e.to_string())?;
+    retime_states(&mut log, &board.statuses);
+    let uart_log: Vec<u8> = board.machine.board().records.uart.iter().map(|&(_, b)| b).collect();
+    let emulated_s = time_to_s(board.machine.now());
+    let instructions = board.machine.state().instructions;
+    Ok(Flight { log, uart_log, board, emulated_s, wall_s: started.elapsed().as_secs_f64(), instructions })
+}

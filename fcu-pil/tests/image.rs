@@ -1,0 +1,265 @@
+//! The release firmware image in the emulated STM32F401, against the simulated drone: what
+//! the image must show before it is flashed. The ELF is `FCU_PIL_ELF` if set (CI sets it to
+//! the file `cargo fw` built), else the release firmware built now.
+
+use std::sync::OnceLock;
+
+use fcu_core::imu::RawImu;
+use fcu_pil::elf::Image;
+use fcu_pil::firmware;
+use fcu_pil::periph::time_from_s;
+use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
+use fcu_pil::telemetry::Line;
+use fcu_testkit::sim::metrics;
+use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_testkit::sim::scenario::{self, Scenario};
+use fcu_testkit::sim::{self, ComputerView, FlightComputer, InProcess, RunOptions, SimError};
+use fcu_testkit::Profile;
+
+fn elf() -> &'static std::path::Path {
+    static ELF: OnceLock<std::path::PathBuf> = OnceLock::new();
+    ELF.get_or_init(|| firmware::resolve_elf(None).unwrap_or_else(|e| panic!("{e}")))
+}
+
+fn image() -> Image {
+    Image::load(elf()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn scenario(name: &str) -> Scenario {
+    scenario::by_name(name).unwrap_or_else(|| panic!("no scenario {name}"))
+}
+
+fn boot(setup: &BoardSetup) -> EmulatedBoard {
+    EmulatedBoard::boot(image(), setup, rig::imu_at_rest(1)).unwrap_or_else(|e| panic!("boot: {e}"))
+}
+
+/// A flight computer that does something to the emulated board at a scenario time.
+struct Injecting<F: FnMut(&mut EmulatedBoard)> {
+    board: EmulatedBoard,
+    at_s: f64,
+    action: Option<F>,
+}
+
+impl<F: FnMut(&mut EmulatedBoard)> FlightComputer for Injecting<F> {
+    fn tick_hz(&self) -> f64 {
+        self.board.tick_hz()
+    }
+    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        if t_end_s >= self.at_s {
+            if let Some(mut f) = self.action.take() {
+                f(&mut self.board);
+            }
+        }
+        self.board.step(t_end_s, edges, imu, battery_v)
+    }
+    fn view(&self) -> ComputerView {
+        self.board.view()
+    }
+}
+
+fn first_armed_s(log: &sim::FlightLog) -> Option<f64> {
+    log.rows.iter().find(|r| r.armed).map(|r| r.t_s)
+}
+
+/// The radio capture defect of 40ebf1d (the capture pins folded into a `.uninit` constant, so
+/// every channel read PA0's level): each channel must decode its own pulses on the image.
+#[test]
+fn every_radio_channel_decodes_its_own_pulses_on_the_image() {
+    // Distinct widths per channel, held from the start.
+    let mut tl = scenario::Timeline::default();
+    tl.rows.push(scenario::StickRow {
+        t_s: 0.0,
+        ail_us: 1600.0,
+        ele_us: 1400.0,
+        thr: scenario::Throttle::Us(1150.0),
+        rud_us: 1700.0,
+        link: true,
+    });
+    let sc = scenario::from_timeline("distinct sticks", tl, 1.5);
+    let opts = RunOptions { seed: 3, ..RunOptions::default() };
+    let flight = rig::fly(elf(), &sc, &opts).unwrap_or_else(|e| panic!("{e}"));
+    let mut host = InProcess::new(Profile::Default.config()).unwrap();
+    let _ = sim::run_with(&mut host, &sc, Profile::Default, &opts).unwrap();
+    let want = host.controller().status().sticks;
+    let got = flight
+        .board
+        .lines
+        .iter()
+        .rev()
+        .find_map(|l| match &l.line {
+            Line::Debug(d) => Some(*d),
+            _ => None,
+        })
+        .expect("the image printed no debug line");
+    for (name, g, w) in [("ELE", got.ele, want.ele), ("AIL", got.ail, want.ail), ("RUD", got.rud, want.rud), ("THR", got.thr, want.thr)] {
+        assert!((g - i32::from(w)).abs() <= 8, "{name}: the image decoded {g} counts, the core in-process {w}");
+    }
+    let status = flight.board.statuses.last().map(|(_, s)| s.clone()).expect("no STATUS line");
+    assert!(!status.blockers.iter().any(|b| b == "link-not-good"), "the image never saw a good link: {status:?}");
+}
+
+/// Every scenario the host passes passes on the image too, with the same metrics within
+/// stated tolerances: hover RMS within 0.1°, the first armed tick within 5 ms.
+fn same_as_in_process(name: &str) {
+    let sc = scenario(name);
+    let opts = RunOptions { seed: 1, ..RunOptions::default() };
+    let host = sim::run(&sc, Profile::Default, &opts).unwrap();
+    let flight = rig::fly(elf(), &sc, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let pil = &flight.log;
+    for v in metrics::check_all(pil, &sc) {
+        assert!(v.passed, "{name} on the image: {} — {}", v.criterion, v.detail);
+    }
+    let (hm, pm) = (metrics::compute(&host, &sc), metrics::compute(pil, &sc));
+    if let (Some(h), Some(p)) = (hm.hover_rms_deg, pm.hover_rms_deg) {
+        assert!((h - p).abs() <= 0.1, "{name}: hover RMS {p:.3}° on the image, {h:.3}° in-process");
+    }
+    match (first_armed_s(&host), first_armed_s(pil)) {
+        (Some(h), Some(p)) => assert!((h - p).abs() <= 0.005, "{name}: armed at {p:.4} s on the image, {h:.4} s in-process"),
+        (None, None) => {}
+        (h, p) => panic!("{name}: armed at {p:?} on the image, {h:?} in-process"),
+    }
+    assert!(flight.board.line_errors.is_empty(), "{name}: malformed UART lines: {:?}", flight.board.line_errors);
+}
+
+#[test]
+fn hover_flies_the_same_on_the_image() {
+    same_as_in_process("hover");
+}
+
+#[test]
+fn steps_fly_the_same_on_the_image() {
+    same_as_in_process("steps");
+}
+
+#[test]
+fn link_short_flies_the_same_on_the_image() {
+    same_as_in_process("link-short");
+}
+
+#[test]
+fn link_long_flies_the_same_on_the_image() {
+    same_as_in_process("link-long");
+}
+
+#[test]
+fn calibration_motion_flies_the_same_on_the_image() {
+    same_as_in_process("calibration-motion");
+}
+
+/// Boot with a sensor that answers a wrong WHO_AM_I: no flight, the FATAL line repeats, the
+/// LED code names the sensor, the control timer never starts, the motors stay at 0.
+#[test]
+fn a_wrong_who_am_i_keeps_the_drone_on_the_ground() {
+    let setup = BoardSetup { who_am_i_override: [None, Some(0x00), None], boot_timeout_s: Some(7.0), ..BoardSetup::default() };
+    let mut b = boot(&setup);
+    assert!(!b.flying(), "the control timer started with a sensor missing");
+    b.run_to(0.0).unwrap();
+    let fatal: Vec<_> = b.lines.iter().filter(|l| matches!(l.line, Line::Fatal(_))).collect();
+    assert!(fatal.len() >= 2, "the FATAL line should repeat; UART:\n{}", b.uart_text());
+    assert!(fatal[0].text.contains("LIS2MDL"), "{}", fatal[0].text);
+    let now = b.machine.now();
+    assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4]);
+    // The LED code: both lit, LED1 going dark twice (LIS2MDL is sensor 2) every cycle.
+    let leds = &b.machine.board().records.leds;
+    assert!(leds.iter().any(|&(_, l1, l2)| l1 && l2), "both LEDs never lit together: {leds:?}");
+    let dark_blinks = leds.windows(2).filter(|w| w[0].1 && !w[1].1).count();
+    assert!(dark_blinks >= 2, "LED1 never blinked the sensor's count: {leds:?}");
+}
+
+fn fly_and_inject(
+    name: &str,
+    at_s: f64,
+    duration_s: f64,
+    action: impl FnMut(&mut EmulatedBoard),
+) -> (sim::FlightLog, Injecting<impl FnMut(&mut EmulatedBoard)>) {
+    let sc = scenario(name);
+    let opts = RunOptions { seed: 1, duration_s: Some(duration_s), ..RunOptions::default() };
+    let board = EmulatedBoard::boot(image(), &BoardSetup::default(), rig::imu_at_rest(1)).unwrap();
+    let mut c = Injecting { board, at_s, action: Some(action) };
+    let log = sim::run_with(&mut c, &sc, Profile::Default, &opts).unwrap_or_else(|e| panic!("{e}"));
+    (log, c)
+}
+
+/// A sensor that stops answering in flight: sensor fault, motors off, disarmed, latched.
+#[test]
+fn a_sensor_that_stops_answering_in_flight_stops_the_motors_and_latches() {
+    let (log, c) = fly_and_inject("hover", 8.0, 11.0, |b| b.machine.board_mut().spi2.sensors_mut().lsm6dsl.set_silent(true));
+    assert!(log.rows.iter().any(|r| r.t_s < 8.0 && r.motors.iter().all(|&m| m > 0)), "the drone was not flying before the fault");
+    let after: Vec<_> = log.rows.iter().filter(|r| r.t_s > 8.2).collect();
+    assert!(after.iter().all(|r| r.motors == [0; 4]), "motors ran after the sensor went silent");
+    let last = c.board.statuses.last().map(|(_, s)| s.clone()).unwrap();
+    assert_eq!(last.state, "fault", "{last:?}");
+    assert!(!last.armed);
+}
+
+/// A control task that stalls (here: an interrupt storm on a radio pin starves it) is reset
+/// by the watchdog, and the board comes back with the motors off.
+#[test]
+fn a_stalled_control_task_is_reset_by_the_watchdog_with_the_motors_off() {
+    let (log, c) = fly_and_inject("hover", 8.0, 10.0, |b| {
+        let start = b.time_of(8.0);
+        // PA0 toggling every 0.5 µs for 200 ms: the capture interrupt never lets go.
+        let half_period = time_from_s(0.5e-6);
+        let board = b.machine.board_mut();
+        for k in 0..400_000u64 {
+            board.schedule_edge(start + k * half_period, 0, k % 2 == 0);
+        }
+    });
+    let resets = &c.board.machine.state().resets;
+    assert!(resets.iter().any(|(_, why)| *why == "watchdog"), "no watchdog reset: {resets:?}");
+    let reset_at = c.board.scenario_s(resets[0].0);
+    assert!(reset_at > 8.0 && reset_at < 8.2, "watchdog reset at {reset_at:.3} s");
+    assert!(log.rows.iter().filter(|r| r.t_s > reset_at + 0.001).all(|r| r.motors == [0; 4]), "motors ran after the reset");
+    assert!(c.board.uart_text().matches("STEVAL-FCU001V1").count() >= 2, "the firmware did not boot again");
+}
+
+/// A HardFault (an injected bus fault) and a panic: the motors go off at once.
+#[test]
+fn a_hard_fault_stops_the_motors_at_once() {
+    for (what, at_s) in [("bus fault", 8.0), ("panic", 8.0)] {
+        let sc = scenario("hover");
+        let opts = RunOptions { seed: 1, duration_s: Some(at_s), ..RunOptions::default() };
+        let mut b = EmulatedBoard::boot(image(), &BoardSetup::default(), rig::imu_at_rest(1)).unwrap();
+        let _ = sim::run_with(&mut b, &sc, Profile::Default, &opts).unwrap();
+        let now = b.machine.now();
+        assert!(b.machine.board_mut().motor_compares(now).iter().all(|&m| m > 0), "not flying at {at_s} s");
+        match what {
+            "bus fault" => b.machine.inject_bus_fault().unwrap(),
+            _ => {
+                let handler = b.machine.image().symbol("rust_begin_unwind").expect("no panic handler symbol in the image");
+                b.machine.inject_call(handler, fcu_pil::machine::SRAM_BASE).unwrap();
+            }
+        }
+        let t_fault = b.machine.now();
+        // Within 50 µs the compare registers are at 0 and in force.
+        b.machine.run_until(t_fault + time_from_s(50e-6)).unwrap_or_else(|e| panic!("{what}: {e}"));
+        let now = b.machine.now();
+        assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4], "{what}: motors still running 50 µs after the fault");
+    }
+}
+
+/// The STATUS and TAB lines parse, and the states they report are the core's: the image goes
+/// through the same sequence of flight states as the core in-process.
+#[test]
+fn status_lines_report_the_cores_states() {
+    let sc = scenario("hover");
+    let opts = RunOptions { seed: 2, ..RunOptions::default() };
+    let host = sim::run(&sc, Profile::Default, &opts).unwrap();
+    let flight = rig::fly(elf(), &sc, &opts).unwrap();
+    assert!(flight.board.line_errors.is_empty(), "{:?}", flight.board.line_errors);
+    let seq = |states: &mut dyn Iterator<Item = &'static str>| {
+        let mut v: Vec<&'static str> = Vec::new();
+        for s in states {
+            if v.last() != Some(&s) {
+                v.push(s);
+            }
+        }
+        v
+    };
+    let host_seq = seq(&mut host.rows.iter().map(|r| r.state));
+    let pil_seq = seq(&mut flight.board.statuses.iter().map(|(_, s)| s.state));
+    assert_eq!(pil_seq, host_seq, "state sequence on the image vs in-process");
+    let debug_lines = flight.board.lines.iter().filter(|l| matches!(l.line, Line::Debug(_))).count();
+    let expected = (flight.log.rows.len() as f64 / 800.0 * 25.0) as usize;
+    assert!(debug_lines + 25 >= expected, "{debug_lines} debug lines, about {expected} expected at 25 Hz");
+}
