@@ -7,7 +7,7 @@
 //! known number of instructions, so the bench gives instructions on any machine and shift.
 //!
 //! Both profiles fly the same deterministic recording: level IMU with noise, radio pulses on all
-//! four channels every tick, boot settling and calibration, the arm gesture held then released,
+//! four channels once per 20 ms frame (as a receiver sends them), boot settling and calibration, the arm gesture held then released,
 //! then armed flight with the throttle up and small stick motions. The statistics cover only the
 //! armed flight window; the earlier phases are printed separately for information.
 #![no_std]

@@ -74,6 +74,8 @@ impl MixerConfig {
             && self.min_compare >= 0.0
             && self.min_compare < self.max_compare
             && self.max_compare <= f32::from(self.timer_arr) + 1.0
+            // CCRx is 16 bits: ARR + 1 = 65 536 (full duty at ARR 65 535) would be written as 0.
+            && self.max_compare <= f32::from(u16::MAX)
     }
 
     /// The compare value written when the motors must not run: 0 (DC) or the ESC idle pulse.
@@ -146,7 +148,7 @@ impl MixerConfig {
 
     /// The compare range in counts, for converting several commands.
     pub fn compare_range(&self) -> CompareRange {
-        // The validated range is 0 ≤ min < max ≤ 65536, so both casts are exact truncations.
+        // The validated range is 0 ≤ min < max ≤ 65535, so both casts are exact truncations.
         CompareRange { min_counts: self.min_compare as i32, max_counts: self.max_compare as i32 }
     }
 }
@@ -172,6 +174,14 @@ impl CompareRange {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_full_scale_compare_that_would_wrap_to_zero_is_refused() {
+        let wraps = MixerConfig { timer_arr: u16::MAX, max_compare: 65_536.0, ..MixerConfig::REFERENCE_DC };
+        assert!(!wraps.is_valid(), "compare 65536 is written to a 16-bit CCR as 0: full throttle would stop the motors");
+        let fits = MixerConfig { timer_arr: u16::MAX, max_compare: 65_535.0, ..MixerConfig::REFERENCE_DC };
+        assert!(fits.is_valid());
+    }
 
     #[test]
     fn reference_throttle_map_spot_values() {

@@ -237,6 +237,8 @@ pub struct State<P: Peripherals> {
     sleeping: bool,
     pub hard_faults: Vec<HardFaultEvent>,
     pub resets: Vec<(Time, &'static str)>,
+    /// Exception entries that stacked the extended (FP) frame.
+    pub fp_frames: u64,
 }
 
 impl<P: Peripherals> State<P> {
@@ -296,6 +298,7 @@ impl<P: Peripherals + 'static> Machine<P> {
             sleeping: false,
             hard_faults: Vec::new(),
             resets: Vec::new(),
+            fp_frames: 0,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
@@ -529,6 +532,7 @@ impl<P: Peripherals + 'static> Machine<P> {
             *t = now;
         }
         st.exception_stats.entry(exc).or_default().entries += 1;
+        st.fp_frames += u64::from(fp_active);
         st.sleeping = false;
         Ok(())
     }

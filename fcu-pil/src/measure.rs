@@ -31,6 +31,9 @@ pub struct Report {
     pub capture_latency_during_control_us_max: f64,
     pub flash_bytes: u32,
     pub ram_bytes: u32,
+    /// Exception entries, and how many stacked the extended (FP) frame.
+    pub exception_entries: u64,
+    pub fp_frames: u64,
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -125,6 +128,8 @@ pub fn measure(
         capture_latency_during_control_us_max: during,
         flash_bytes: m.image().flash_bytes,
         ram_bytes: m.image().ram_bytes,
+        exception_entries: st.exception_stats.values().map(|e| e.entries).sum(),
+        fp_frames: st.fp_frames,
     })
 }
 
@@ -149,6 +154,7 @@ impl fmt::Display for Report {
             self.capture_latency_us_median, self.capture_latency_us_max, self.capture_latency_during_control_us_max
         )?;
         writeln!(f, "  image: flash {} B, static RAM {} B", self.flash_bytes, self.ram_bytes)?;
+        writeln!(f, "  exceptions taken: {} ({} with the extended FP frame)", self.exception_entries, self.fp_frames)?;
         writeln!(
             f,
             "  harness: {:.1} s emulated in {:.1} s of wall time ({:.1}× real time)",
