@@ -292,3 +292,15 @@ fn the_watchdog_times_out_after_50_ms() {
     let t = b.machine.board().iwdg.timeout_s().expect("the watchdog was not started at boot");
     assert!((t - 0.050).abs() <= 0.001, "watchdog timeout {:.1} ms", t * 1e3);
 }
+
+/// Deterministic: the same image and inputs give byte-identical flight logs and UART output.
+#[test]
+fn the_same_flight_twice_is_byte_identical() {
+    let sc = scenario("hover");
+    let opts = RunOptions { seed: 5, duration_s: Some(5.0), ..RunOptions::default() };
+    let a = rig::fly(elf(), &sc, &opts).unwrap();
+    let b = rig::fly(elf(), &sc, &opts).unwrap();
+    assert_eq!(a.log.to_csv(), b.log.to_csv());
+    assert_eq!(a.uart_log, b.uart_log);
+    assert_eq!(a.instructions, b.instructions);
+}
