@@ -22,6 +22,7 @@
 )]
 
 pub mod ahrs;
+pub mod boot;
 pub mod config;
 pub mod control;
 pub mod filter;

@@ -225,9 +225,17 @@ pub struct StatusFields<'a> {
     pub fault: &'a str,
     pub battery_mv: u32,
     pub outer_overruns: u32,
+    /// Sensor reads that failed on the bus (the tick ran without a sample).
+    pub bus_errors: u32,
+    /// Telemetry bytes dropped because the UART queue was full.
+    pub uart_dropped_bytes: u32,
+    /// Control ticks completed since boot when the snapshot was taken: dates the line to the
+    /// tick, however long it waited in the UART queue.
+    pub tick: u32,
 }
 
-/// `STATUS state=… armed=0|1 blockers=a,b|none cal=… failsafe=… fault=… vbat=3.912V overruns=N`.
+/// `STATUS state=… armed=0|1 blockers=a,b|none cal=… failsafe=… fault=… vbat=3.912V overruns=N
+/// bus_errors=N uart_dropped=N tick=N`.
 pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<'_>) {
     out.clear();
     out.push_str("STATUS state=");
@@ -263,6 +271,12 @@ pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<
     out.push_uint(mv);
     out.push_str("V overruns=");
     out.push_uint(f.outer_overruns);
+    out.push_str(" bus_errors=");
+    out.push_uint(f.bus_errors);
+    out.push_str(" uart_dropped=");
+    out.push_uint(f.uart_dropped_bytes);
+    out.push_str(" tick=");
+    out.push_uint(f.tick);
     out.finish_line();
 }
 
@@ -420,6 +434,12 @@ pub struct FirmwareCounters {
     pub battery_mv: u32,
     /// Outer steps that could not start because the previous one was still running.
     pub outer_overruns: u32,
+    /// Sensor reads that failed on the bus.
+    pub bus_errors: u32,
+    /// Telemetry bytes dropped because the UART queue was full.
+    pub uart_dropped_bytes: u32,
+    /// Control ticks completed since boot.
+    pub tick: u32,
 }
 
 /// Formats the status line for `status` (blocker names in [`Blocker::ALL`] order).
@@ -439,6 +459,9 @@ pub fn write_status<const N: usize>(out: &mut LineBuf<N>, status: &Status, count
         fault: words::fault(status.fault),
         battery_mv: counters.battery_mv,
         outer_overruns: counters.outer_overruns,
+        bus_errors: counters.bus_errors,
+        uart_dropped_bytes: counters.uart_dropped_bytes,
+        tick: counters.tick,
     };
     write_status_line(out, &fields);
 }
@@ -578,11 +601,15 @@ mod tests {
             fault: "none",
             battery_mv: 4005,
             outer_overruns: 2,
+            bus_errors: 3,
+            uart_dropped_bytes: 4,
+            tick: 1234,
         };
         write_status_line(&mut b, &f);
         assert_eq!(
             line(&b),
-            "STATUS state=disarmed armed=0 blockers=not_calibrated,link_not_good cal=running failsafe=none fault=none vbat=4.005V overruns=2\n"
+            "STATUS state=disarmed armed=0 blockers=not_calibrated,link_not_good cal=running failsafe=none fault=none vbat=4.005V overruns=2 \
+             bus_errors=3 uart_dropped=4 tick=1234\n"
         );
     }
 
@@ -598,9 +625,12 @@ mod tests {
             fault: "none",
             battery_mv: 3700,
             outer_overruns: 0,
+            bus_errors: 0,
+            uart_dropped_bytes: 0,
+            tick: 0,
         };
         write_status_line(&mut b, &f);
-        assert_eq!(line(&b), "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0\n");
+        assert_eq!(line(&b), "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0 bus_errors=0 uart_dropped=0 tick=0\n");
     }
 
     #[test]
@@ -697,10 +727,14 @@ mod tests {
     fn status_line_from_the_core_at_boot() {
         let st = boot_status();
         let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        write_status(&mut b, &st, FirmwareCounters { battery_mv: 3950, outer_overruns: 1 });
+        write_status(
+            &mut b,
+            &st,
+            FirmwareCounters { battery_mv: 3950, outer_overruns: 1, bus_errors: 2, uart_dropped_bytes: 3, tick: u32::MAX },
+        );
         let text = b.as_str();
         assert!(text.starts_with("STATUS state="), "{text}");
-        assert!(text.ends_with(" vbat=3.950V overruns=1\n"), "{text}");
+        assert!(text.ends_with(" vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 tick=4294967295\n"), "{text}");
         assert!(!b.is_truncated());
     }
 
@@ -711,8 +745,15 @@ mod tests {
             st.blockers.insert(blocker);
         }
         let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        write_status(&mut b, &st, FirmwareCounters::default());
-        assert!(!b.is_truncated());
+        let most = FirmwareCounters {
+            battery_mv: 99_999,
+            outer_overruns: u32::MAX,
+            bus_errors: u32::MAX,
+            uart_dropped_bytes: u32::MAX,
+            tick: u32::MAX,
+        };
+        write_status(&mut b, &st, most);
+        assert!(!b.is_truncated(), "{}", b.as_str());
         assert!(b.as_str().contains(
             "not-calibrated,calibrating,link-not-good,throttle-not-low,not-level,failsafe,sensor-fault,boot-settling,gesture-not-released"
         ));

@@ -19,9 +19,10 @@
 
 mod sensor_bus;
 mod timers;
+mod watchdog;
 
 use defmt_rtt as _;
-use panic_probe as _;
+use fcu_core::mixer::MixerConfig;
 
 rtic_monotonics::systick_monotonic!(Mono, 1000);
 
@@ -38,11 +39,54 @@ fn flight_config() -> fcu_core::Config {
     }
 }
 
+/// TIM4's compare for "motors off" in this build: 0 on the on-board MOSFETs, the idle pulse
+/// for ESCs. A constant because the fault paths below cannot reach the configuration; `init`
+/// checks that the flight configuration agrees.
+const MOTORS_OFF_COMPARE: u16 =
+    if cfg!(feature = "esc") { MixerConfig::REFERENCE_ESC.min_compare as u16 } else { MixerConfig::REFERENCE_DC.min_compare as u16 };
+
+/// Puts TIM4 at the off compare at once, from any context (a fault or a panic): every CCR,
+/// then an update event so the preloaded value takes effect now, not at the end of the PWM
+/// period.
+fn motors_off_now() {
+    // SAFETY: only register writes to TIM4, which the motors alone use. This runs when the
+    // program can no longer be trusted (HardFault, panic); whatever the interrupted code was
+    // doing with TIM4, stopping the motors is what must happen, and these writes cannot make
+    // anything worse than a running motor.
+    let tim4 = unsafe { &*stm32f4xx_hal::pac::TIM4::ptr() };
+    for n in 0..4 {
+        tim4.ccr(n).write(|w| w.ccr().set(MOTORS_OFF_COMPARE));
+    }
+    tim4.egr().write(|w| w.ug().set_bit());
+}
+
+/// A fault (bus error, undefined instruction, a panic's `udf`): motors off first, then wait
+/// for the watchdog to reset the board (at most its 50 ms timeout).
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    motors_off_now();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// No code path panics by design; if one ever does, the motors stop before anything else,
+/// and the `udf` hands over to the HardFault handler (no message formatting: it would cost
+/// flash, and nobody reads it in flight).
+#[panic_handler]
+fn panic(_info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    motors_off_now();
+    cortex_m::asm::udf()
+}
+
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use crate::sensor_bus::SensorBus;
     use crate::timers::{Motors, RcCapture, TickTimer};
+    use crate::watchdog::Watchdog;
     use crate::Mono;
+    use fcu_core::boot::BootVerdict;
     use fcu_core::flight::{Inner, Outer, OuterJob, OuterResult, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::EdgeDecoder;
@@ -53,7 +97,6 @@ mod app {
     use stm32f4xx_hal::gpio::{Analog, Output, PB1, PB4, PB5};
     use stm32f4xx_hal::pac::{ADC1, USART1};
     use stm32f4xx_hal::serial::{Tx, TxListen};
-    use stm32f4xx_hal::watchdog::IndependentWatchdog;
 
     /// Bytes of telemetry waiting for the UART: about 90 ms of output at 115200 baud, enough
     /// for a status line and a debug line together.
@@ -68,9 +111,6 @@ mod app {
     const HOUSEKEEPING_PERIOD_MS: u32 = 10;
     /// Housekeeping periods between battery conversions (10 Hz).
     const BATTERY_EVERY_PERIODS: u32 = 10;
-    /// Independent watchdog timeout: 40 missed control ticks at 800 Hz. Fed only at the end of
-    /// a completed control tick.
-    const WATCHDOG_TIMEOUT_MS: u32 = 50;
     /// How often a fatal boot fault is repeated on the UART.
     const FAULT_REPEAT_MS: u32 = 2000;
     /// SPI2 clock: 42 MHz / 16, the reference's 2.625 MHz.
@@ -84,6 +124,9 @@ mod app {
     pub struct Snapshot {
         status: Status,
         outer_overruns: u32,
+        bus_errors: u32,
+        /// Control ticks completed since boot.
+        tick: u32,
     }
 
     /// The debug UART's transmit side and the bytes waiting for it.
@@ -147,7 +190,7 @@ mod app {
         inner: Inner,
         outer: Outer,
         motors: Motors,
-        watchdog: Option<IndependentWatchdog>,
+        watchdog: Option<Watchdog>,
         leds: Leds,
         adc: Adc<ADC1>,
         battery_pin: PB1<Analog>,
@@ -162,13 +205,17 @@ mod app {
         use stm32f4xx_hal::{rcc, serial, spi};
 
         let dp = cx.device;
+        let mut core = cx.core;
+        // The cycle counter times the boot waits in real units (`delay_ms`).
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
         // HSE 16 MHz → 84 MHz SYSCLK/HCLK/PCLK2, 42 MHz PCLK1; the HAL sets 2 flash wait
         // states. It picks M 8, N 168, P 4, Q 7: the reference's VCO (336 MHz) and outputs
         // with a 2 MHz PLL input instead of 1 MHz.
         let mut rcc = dp.RCC.freeze(
             rcc::Config::hse(HSE_HZ.Hz()).sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()),
         );
-        Mono::start(cx.core.SYST, SYSCLK_HZ);
+        Mono::start(core.SYST, SYSCLK_HZ);
 
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
@@ -183,7 +230,7 @@ mod app {
             gpiob.pb8.into_alternate::<2>(),
             gpiob.pb9.into_alternate::<2>(),
         );
-        let motors = Motors::new(dp.TIM4, cfg.mixer.timer_psc, cfg.mixer.timer_arr, &mut rcc);
+        let motors = Motors::new(dp.TIM4, cfg.mixer.timer_psc, cfg.mixer.timer_arr, cfg.mixer.off_compare(), &mut rcc);
 
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
@@ -192,6 +239,9 @@ mod app {
             .unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
         let mut uart = UartOut { tx, queue: Deque::new(), dropped_bytes: 0 };
         uart.send(tlm::BOOT_BANNER.as_bytes());
+        if cfg.mixer.off_compare() != crate::MOTORS_OFF_COMPARE {
+            halt(&mut leds, Some(&mut uart.tx), "the build's motor-off compare disagrees with its flight configuration");
+        }
 
         // Sensor bus: all chip selects high before the bus is clocked.
         let cs = [
@@ -210,9 +260,7 @@ mod app {
         );
         let (spi2, _sensor_pins) = spi2.release();
         let mut bus = SensorBus::new(spi2, cs);
-        // Boot-time waits only (the LPS22HB's 1 s reset); cycle counting is enough.
-        let mut delay_ms = |ms: u32| cortex_m::asm::delay(ms.saturating_mul(SYSCLK_HZ / 1000));
-        let boot = init_sensors(&mut bus, &mut delay_ms, &mut uart);
+        let boot = init_sensors(&mut bus, &mut uart);
 
         let capture_pins = (
             gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
@@ -223,7 +271,9 @@ mod app {
         let capture = RcCapture::new(dp.TIM2, capture_pins, &mut rcc);
         let mut tick_timer = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
 
-        let adc = Adc::new(dp.ADC1, true, AdcConfig::default(), &mut rcc);
+        // PCLK2 / 4 = 21 MHz: the F401's ADC clock must stay at or under 36 MHz (datasheet),
+        // and ST's code uses the same divider.
+        let adc = Adc::new(dp.ADC1, true, AdcConfig::default().clock(stm32f4xx_hal::adc::config::Clock::Pclk2_div_4), &mut rcc);
         let battery_pin = gpiob.pb1.into_analog();
 
         let fc = match fcu_core::FlightController::new(cfg) {
@@ -233,26 +283,20 @@ mod app {
         let decoder = fc.edge_decoder();
         let (inner, outer) = fc.into_parts();
 
-        let (led_pattern, watchdog) = match boot {
-            Ok(()) => {
-                // Armed only once the sensors answered: from here a control tick that does
-                // not complete within the timeout resets the board (motors off at reset).
-                let mut iwdg = IndependentWatchdog::new(dp.IWDG);
-                // A core halted by the debugger does not reset under the probe.
-                iwdg.stop_on_debug(&dp.DBGMCU, true);
-                iwdg.start(_fugit_ExtU32::millis(WATCHDOG_TIMEOUT_MS));
-                tick_timer.start();
-                (LedPattern::Off, Some(iwdg))
+        let (led_pattern, watchdog) = if boot.may_fly() {
+            // Armed only once the sensors answered: from here a control tick that does not
+            // complete within the timeout resets the board (motors off at reset).
+            let watchdog = Watchdog::start(dp.IWDG, &dp.DBGMCU);
+            tick_timer.start();
+            (boot.led_pattern(), Some(watchdog))
+        } else {
+            // No flight without every sensor (the core's verdict): TIM9 stays stopped, so
+            // `control` never runs and the motors stay off. The watchdog is not armed, so the
+            // LED code and the UART message stay visible instead of a silent reset loop.
+            if fault_report::spawn(boot).is_err() {
+                defmt::error!("fault report already running");
             }
-            Err(missing) => {
-                // No flight without every sensor: TIM9 stays stopped, so `control` never runs
-                // and the motors stay at compare 0. The watchdog is not armed, so the LED code
-                // and the UART message stay visible instead of a silent reset loop.
-                if fault_report::spawn(missing).is_err() {
-                    defmt::error!("fault report already running");
-                }
-                (LedPattern::SensorFault { blinks: missing.sensor.blink_count() }, None)
-            }
+            (boot.led_pattern(), None)
         };
 
         if housekeeping::spawn().is_err() {
@@ -293,39 +337,58 @@ mod app {
         }
     }
 
-    /// A sensor whose `WHO_AM_I` was wrong (or unreadable).
-    #[derive(Clone, Copy)]
-    pub struct MissingSensor {
-        sensor: Sensor,
-        who_am_i: u8,
+    /// Waits `ms` milliseconds on the cycle counter (boot only: the control tick is not running).
+    fn delay_ms(ms: u32) {
+        let cycles = ms.saturating_mul(SYSCLK_HZ / 1000);
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < cycles {}
     }
 
-    /// Plays each sensor's boot table from `fcu_core::imu::registers`, checking `WHO_AM_I`.
-    fn init_sensors(bus: &mut SensorBus, delay_ms: &mut dyn FnMut(u32), uart: &mut UartOut) -> Result<(), MissingSensor> {
-        for sensor in Sensor::ALL {
-            init_sensor(bus, sensor, delay_ms).map_err(|who_am_i| MissingSensor { sensor, who_am_i })?;
-            let mut line = LineBuf::<64>::new();
-            line.push_str(sensor.name());
-            line.push_str(" initialized and enabled");
-            line.finish_line();
-            uart.send(line.as_bytes());
+    /// Plays each sensor's boot table from `fcu_core::imu::registers` and collects the
+    /// `WHO_AM_I` answers; the core decides what they mean.
+    fn init_sensors(bus: &mut SensorBus, uart: &mut UartOut) -> BootVerdict {
+        // The sensors boot after power-up and drop what they hear meanwhile.
+        delay_ms(registers::POWER_UP_MS);
+        let mut answers = [0u8; 3];
+        for (sensor, answer) in Sensor::ALL.into_iter().zip(answers.iter_mut()) {
+            *answer = init_sensor(bus, sensor);
+            if sensor.identifies(*answer) {
+                let mut line = LineBuf::<64>::new();
+                line.push_str(sensor.name());
+                line.push_str(" initialized and enabled");
+                line.finish_line();
+                uart.send(line.as_bytes());
+            }
         }
-        Ok(())
+        BootVerdict::from_answers(answers)
     }
 
-    /// One sensor's boot sequence. The error is the `WHO_AM_I` answer seen (0x00, which no
-    /// sensor answers, when the bus itself failed).
-    fn init_sensor(bus: &mut SensorBus, sensor: Sensor, delay_ms: &mut dyn FnMut(u32)) -> Result<(), u8> {
+    /// One sensor's boot sequence, tried a few times; returns the last `WHO_AM_I` answer
+    /// (0x00, which no sensor answers, when the bus itself failed).
+    fn init_sensor(bus: &mut SensorBus, sensor: Sensor) -> u8 {
         const BUS_FAILED: u8 = 0x00;
         let play = |bus: &mut SensorBus, writes: &[registers::RegWrite]| writes.iter().try_for_each(|w| bus.write(sensor, w.addr, w.value));
-        play(bus, sensor.interface_writes()).map_err(|_| BUS_FAILED)?;
-        delay_ms(sensor.settle_ms());
-        play(bus, sensor.after_settle_writes()).map_err(|_| BUS_FAILED)?;
-        let who_am_i = bus.read_u8(sensor, sensor.who_am_i_addr()).unwrap_or(BUS_FAILED);
-        if !sensor.identifies(who_am_i) {
-            return Err(who_am_i);
+        let mut who_am_i = BUS_FAILED;
+        for attempt in 0..registers::WHO_AM_I_ATTEMPTS {
+            if attempt > 0 {
+                delay_ms(registers::WHO_AM_I_RETRY_MS);
+            }
+            if play(bus, sensor.interface_writes()).is_err() {
+                continue;
+            }
+            delay_ms(sensor.settle_ms());
+            if play(bus, sensor.after_settle_writes()).is_err() {
+                continue;
+            }
+            who_am_i = bus.read_u8(sensor, sensor.who_am_i_addr()).unwrap_or(BUS_FAILED);
+            if sensor.identifies(who_am_i) {
+                return match play(bus, sensor.config_writes()) {
+                    Ok(()) => who_am_i,
+                    Err(_) => BUS_FAILED,
+                };
+            }
         }
-        play(bus, sensor.config_writes()).map_err(|_| who_am_i)
+        who_am_i
     }
 
     /// Radio capture: timestamps and pin levels into the core's decoder, nothing else.
@@ -344,7 +407,7 @@ mod app {
         binds = TIM1_BRK_TIM9,
         priority = 3,
         shared = [decoder, outer_result],
-        local = [tick_timer, bus, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, snapshot_countdown: u16 = 0]
+        local = [tick_timer, bus, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
     )]
     fn control(mut cx: control::Context) {
         cx.local.tick_timer.clear_update();
@@ -375,10 +438,16 @@ mod app {
             }
         }
 
+        *cx.local.ticks = cx.local.ticks.wrapping_add(1);
         *cx.local.snapshot_countdown = cx.local.snapshot_countdown.saturating_sub(1);
         if *cx.local.snapshot_countdown == 0 {
             *cx.local.snapshot_countdown = SNAPSHOT_EVERY_TICKS;
-            let snapshot = Snapshot { status: inner.status(), outer_overruns: *cx.local.outer_overruns };
+            let snapshot = Snapshot {
+                status: inner.status(),
+                outer_overruns: *cx.local.outer_overruns,
+                bus_errors: *cx.local.bus_errors,
+                tick: *cx.local.ticks,
+            };
             // A busy telemetry task means the UART side is behind: skipping a snapshot only
             // delays the next line by 5 ms.
             let _skipped = report::spawn(snapshot);
@@ -406,10 +475,19 @@ mod app {
 
         let emit = cx.local.reporter.observe(status.state);
         if emit.status_line {
-            let counters = FirmwareCounters { battery_mv: cx.shared.battery_mv.lock(|mv| *mv), outer_overruns: snapshot.outer_overruns };
-            let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();
-            tlm::write_status(&mut line, status, counters);
-            cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+            let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
+            cx.shared.uart.lock(|uart| {
+                let counters = FirmwareCounters {
+                    battery_mv,
+                    outer_overruns: snapshot.outer_overruns,
+                    bus_errors: snapshot.bus_errors,
+                    uart_dropped_bytes: uart.dropped_bytes,
+                    tick: snapshot.tick,
+                };
+                let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();
+                tlm::write_status(&mut line, status, counters);
+                uart.send(line.as_bytes());
+            });
         }
         if emit.debug_line {
             let mut line = LineBuf::<{ tlm::DEBUG_LINE_MAX }>::new();
@@ -446,11 +524,11 @@ mod app {
     /// A fatal boot fault, repeated on the UART until reset (product.md §4: never a silent
     /// hang).
     #[task(priority = 1, shared = [uart])]
-    async fn fault_report(mut cx: fault_report::Context, missing: MissingSensor) {
+    async fn fault_report(mut cx: fault_report::Context, verdict: BootVerdict) {
         let mut line = LineBuf::<96>::new();
-        tlm::write_sensor_missing_line(&mut line, missing.sensor.name(), missing.who_am_i, missing.sensor.who_am_i_value());
+        let _grounded = verdict.write_fatal_line(&mut line);
         loop {
-            defmt::error!("sensor {} missing (WHO_AM_I {=u8:#x})", missing.sensor.name(), missing.who_am_i);
+            defmt::error!("{=str}", line.as_str());
             cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
             Mono::delay(FAULT_REPEAT_MS.millis()).await;
         }

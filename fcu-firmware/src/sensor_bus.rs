@@ -17,7 +17,9 @@ use stm32f4xx_hal::pac::SPI2;
 const FLAG_WAIT_POLLS: u32 = 2_000;
 
 /// CPU cycles in a bit and a half of SPI clock (84 MHz / 2.625 MHz = 32 per bit): the wait
-/// between starting the clock for a single-byte read and stopping it again.
+/// between starting the clock for a single-byte read and stopping it again, timed on the
+/// cycle counter (`asm::delay` loops take about three cycles per count here, with the flash
+/// wait states).
 const HALF_BYTE_START_CYCLES: u32 = 48;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
@@ -97,8 +99,11 @@ impl SensorBus {
             // deferred capture interrupt loses nothing.
             cortex_m::interrupt::free(|_| self.receive(buf))
         });
+        // Chip select up first, so the sensor lets go of the data line, and only then the
+        // line back to MCU output (ST's order): never both driving it.
         self.select(sensor, false);
-        result
+        let turned = self.back_to_tx();
+        result.and(turned)
     }
 
     fn receive(&mut self, buf: &mut [u8]) -> Result<(), BusError> {
@@ -113,7 +118,7 @@ impl SensorBus {
 
         let (last, head) = match buf.split_last_mut() {
             Some(parts) => parts,
-            None => return self.back_to_tx(),
+            None => return Ok(()),
         };
         let mut result = Ok(());
         for byte in head.iter_mut() {
@@ -125,7 +130,8 @@ impl SensorBus {
         }
         if head.is_empty() {
             // Single byte: let its first bit start before stopping the clock.
-            cortex_m::asm::delay(HALF_BYTE_START_CYCLES);
+            let start = cortex_m::peripheral::DWT::cycle_count();
+            while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < HALF_BYTE_START_CYCLES {}
         }
         // Clearing SPE now stops the clock at the end of the byte in flight: the last one.
         cortex_m::asm::dsb();
@@ -134,7 +140,7 @@ impl SensorBus {
             result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
             *last = self.spi.dr().read().dr().bits() as u8;
         }
-        self.back_to_tx().and(result)
+        result
     }
 
     fn back_to_tx(&mut self) -> Result<(), BusError> {

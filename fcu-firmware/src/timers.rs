@@ -55,8 +55,15 @@ impl RcCapture {
             w
         });
         tim.egr().write(|w| w.ug().set_bit());
-        // Writing 0 clears every flag (they are rc_w0); nothing is pending at boot anyway.
-        tim.sr().write(|w| w);
+        // The flags are rc_w0: clear each explicitly (a plain `write(|w| w)` writes 1s, which
+        // leaves them as they are). Nothing is pending at boot anyway.
+        tim.sr().write(|w| {
+            w.uif().clear();
+            for n in 0..4 {
+                w.ccif(n).clear().ccof(n).clear();
+            }
+            w
+        });
         tim.dier().write(|w| w.cc1ie().set_bit().cc2ie().set_bit().cc3ie().set_bit().cc4ie().set_bit());
         tim.cr1().write(|w| w.cen().set_bit());
         RcCapture { tim, pins }
@@ -81,19 +88,20 @@ impl RcCapture {
     }
 }
 
-/// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, compare 0 (motors off) from reset.
+/// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, at the off compare (0 on the DC
+/// board, the idle pulse for ESCs) from the first period on.
 pub struct Motors {
     tim: TIM4,
 }
 
 impl Motors {
-    pub fn new(tim: TIM4, psc: u16, arr: u16, rcc: &mut Rcc) -> Self {
+    pub fn new(tim: TIM4, psc: u16, arr: u16, off_compare: u16, rcc: &mut Rcc) -> Self {
         TIM4::enable(rcc);
         TIM4::reset(rcc);
         tim.psc().write(|w| w.psc().set(psc));
         tim.arr().write(|w| w.arr().set(arr));
         for n in 0..4 {
-            tim.ccr(n).write(|w| w.ccr().set(0));
+            tim.ccr(n).write(|w| w.ccr().set(off_compare));
         }
         // Preload on: a compare written mid-period takes effect at the next period, so a
         // pulse is never cut or stretched by a write.

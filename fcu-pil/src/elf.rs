@@ -89,4 +89,12 @@ impl Image {
     pub fn symbol(&self, name: &str) -> Option<u32> {
         self.symbols.get(name).copied()
     }
+
+    /// The address of the one symbol whose (mangled) name contains `part`, e.g.
+    /// `rust_begin_unwind` for the panic handler (`__rustc::rust_begin_unwind` in v0 mangling).
+    pub fn symbol_containing(&self, part: &str) -> Option<u32> {
+        let mut found = self.symbols.iter().filter(|(n, _)| n.contains(part)).map(|(_, &a)| a);
+        let first = found.next()?;
+        found.all(|a| a == first).then_some(first)
+    }
 }

@@ -120,6 +120,17 @@ impl Sensor {
     }
 }
 
+/// Milliseconds from power-up before the sensors listen: the LSM6DSL's boot (15 ms), the
+/// LIS2MDL's turn-on (up to 20 ms) and the LPS22HB's boot (4.5 ms), from their datasheets'
+/// timing tables, with margin. A write in that window is dropped, and a dropped 3-wire select
+/// makes the sensor answer `WHO_AM_I` on a pin this board does not wire.
+pub const POWER_UP_MS: u32 = 25;
+
+/// Attempts at a sensor's interface writes and `WHO_AM_I` before it is declared missing, and
+/// the wait between two attempts.
+pub const WHO_AM_I_ATTEMPTS: u32 = 3;
+pub const WHO_AM_I_RETRY_MS: u32 = 10;
+
 /// The first sensor whose `WHO_AM_I` answer was wrong, in bus order. The product flies only
 /// with all three answering (product.md §4: "WHO_AM_I wrong at boot: no flight").
 pub fn first_missing(answers: [u8; 3]) -> Option<Sensor> {
@@ -188,15 +199,17 @@ pub mod lis2mdl {
     pub const CFG_REG_B: u8 = 0x61;
     pub const CFG_REG_C: u8 = 0x62;
 
-    /// CFG_REG_C: BDU. 4WSPI stays 0: 3-wire SPI is this sensor's power-up default, so no
-    /// interface bit is needed (unlike the LSM6DSL and LPS22HB).
-    pub const CFG_REG_C_BDU: u8 = 0x10;
+    /// CFG_REG_C: BDU | I2C_DIS. 4WSPI stays 0: 3-wire SPI is this sensor's power-up default,
+    /// so no interface bit is needed (unlike the LSM6DSL and LPS22HB). I2C_DIS (bit 5): with
+    /// its chip select high the sensor would otherwise watch the shared SCK/SDA lines as an
+    /// I2C bus (the reference leaves it on; the LSM6DSL's CTRL4_C gets the same bit).
+    pub const CFG_REG_C_BDU_I2C_DIS: u8 = 0x30;
     /// CFG_REG_A: temperature compensation, ODR 100 Hz, continuous mode.
     pub const CFG_REG_A_VALUE: u8 = 0x8C;
     /// CFG_REG_B: offset cancellation.
     pub const CFG_REG_B_VALUE: u8 = 0x02;
 
-    pub const INTERFACE: [RegWrite; 1] = [w(CFG_REG_C, CFG_REG_C_BDU)];
+    pub const INTERFACE: [RegWrite; 1] = [w(CFG_REG_C, CFG_REG_C_BDU_I2C_DIS)];
 
     pub const CONFIG: [RegWrite; 2] = [w(CFG_REG_A, CFG_REG_A_VALUE), w(CFG_REG_B, CFG_REG_B_VALUE)];
 }
@@ -216,6 +229,9 @@ pub mod lps22hb {
     pub const CTRL_REG2_RESET_BOOT: u8 = 0x94;
     /// CTRL_REG1 after the driver init: ODR 25 Hz, BDU, 3-wire SPI.
     pub const CTRL_REG1_FINAL: u8 = 0x33;
+    /// CTRL_REG2 after init: IF_ADD_INC | I2C_DIS (bit 3), so the deselected sensor does not
+    /// take SPI traffic on the shared lines for I2C (ST's application code sets it).
+    pub const CTRL_REG2_I2C_DIS: u8 = 0x18;
     /// The reference's blocking wait after the software reset and boot.
     pub const BOOT_DELAY_MS: u32 = 1000;
 
@@ -223,7 +239,7 @@ pub mod lps22hb {
     /// back before anything is read.
     pub const INTERFACE: [RegWrite; 2] = [w(CTRL_REG1, CTRL_REG1_3WIRE), w(CTRL_REG2, CTRL_REG2_RESET_BOOT)];
 
-    pub const CONFIG: [RegWrite; 1] = [w(CTRL_REG1, CTRL_REG1_FINAL)];
+    pub const CONFIG: [RegWrite; 2] = [w(CTRL_REG1, CTRL_REG1_FINAL), w(CTRL_REG2, CTRL_REG2_I2C_DIS)];
 
     /// Written after the boot delay and before `WHO_AM_I`, exactly as the reference does.
     pub const AFTER_BOOT: [RegWrite; 1] = [w(CTRL_REG1, CTRL_REG1_3WIRE)];
@@ -268,6 +284,8 @@ mod tests {
     #[test]
     fn lis2mdl_and_lps22hb_boot_tables_are_the_reference() {
         assert_eq!(lis2mdl::CONFIG.map(|r| (r.addr, r.value)), [(0x60, 0x8C), (0x61, 0x02)]);
+        assert_eq!(lis2mdl::INTERFACE.map(|r| (r.addr, r.value)), [(0x62, 0x30)], "BDU and I2C_DIS");
+        assert_eq!(lps22hb::CONFIG[1], RegWrite { addr: 0x11, value: 0x18 }, "IF_ADD_INC and I2C_DIS");
         assert_eq!(lps22hb::INTERFACE[0], RegWrite { addr: 0x10, value: 0x01 });
         assert_eq!(lps22hb::AFTER_BOOT[0], RegWrite { addr: 0x10, value: 0x01 });
         assert_eq!(lps22hb::CONFIG[0].value & lps22hb::CTRL_REG1_3WIRE, lps22hb::CTRL_REG1_3WIRE);
