@@ -126,9 +126,16 @@ enum Stop {
 /// Instruction counts of translation blocks, from the flash image.
 struct Code {
     flash: Vec<u8>,
-    /// Per flash halfword: the block starting there, packed as size << 16 | count << 2 | kind
-    /// (0 = not seen yet). A direct table: the block hook runs millions of times a second.
-    blocks: Vec<u32>,
+    /// Per flash halfword: the block starting there (`None` = not seen yet). A direct table:
+    /// the block hook runs millions of times a second.
+    blocks: Vec<Option<BlockInfo>>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct BlockInfo {
+    size: u32,
+    instructions: u64,
+    kind: BlockKind,
 }
 
 /// What the block hook does with a block besides counting it.
@@ -139,12 +146,19 @@ enum BlockKind {
     IdleSpin,
     /// `subs rN, #1; bne .-2` (cortex-m's `asm::delay`): a countdown of rN laps.
     Countdown(u8),
+    /// `ldr rT, [rA]; subs rD, rT, rS; cmp rD, rL; blo .-6` with rA = DWT_CYCCNT: a wait until
+    /// `CYCCNT - rS >= rL`, unsigned (a cycle-counter delay). Fields: rA, rS, rL.
+    CycleCountWait {
+        addr: u8,
+        start: u8,
+        limit: u8,
+    },
 }
 
 impl Code {
     fn new(flash: Vec<u8>) -> Code {
         let n = flash.len() / 2;
-        Code { flash, blocks: vec![0; n] }
+        Code { flash, blocks: vec![None; n] }
     }
 
     fn halfword(&self, addr: u32) -> Option<u16> {
@@ -157,14 +171,9 @@ impl Code {
     /// top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit instruction.
     fn block(&mut self, addr: u32, size: u32) -> (u64, BlockKind) {
         let slot = addr.checked_sub(FLASH_BASE).map(|o| (o / 2) as usize);
-        if let Some(&packed) = slot.and_then(|i| self.blocks.get(i)) {
-            if packed != 0 && packed >> 16 == size {
-                let kind = match packed & 3 {
-                    1 => BlockKind::IdleSpin,
-                    2 => BlockKind::Countdown(((packed >> 10) & 0xF) as u8),
-                    _ => BlockKind::Plain,
-                };
-                return (u64::from((packed >> 2) & 0xFF), kind);
+        if let Some(Some(info)) = slot.and_then(|i| self.blocks.get(i)) {
+            if info.size == size {
+                return (info.instructions, info.kind);
             }
         }
         let mut n = 0u64;
@@ -174,25 +183,41 @@ impl Code {
             a = a.wrapping_add(if hw >> 11 >= 0b11101 { 4 } else { 2 });
             n += 1;
         }
-        let n = n.clamp(1, 255);
-        let first = self.halfword(addr);
-        let kind = if size == 2 && first == Some(0xE7FE) {
-            BlockKind::IdleSpin
-        } else if size == 4 && first.is_some_and(|h| h & 0xF8FF == 0x3801) && self.halfword(addr + 2) == Some(0xD1FD) {
-            // SUBS Rdn, #1 (T2 encoding 0b00111 Rdn 00000001) then BNE back to it.
-            BlockKind::Countdown(((first.unwrap_or(0) >> 8) & 7) as u8)
-        } else {
-            BlockKind::Plain
-        };
+        let info = BlockInfo { size, instructions: n.max(1), kind: self.classify(addr, size) };
         if let Some(entry) = slot.and_then(|i| self.blocks.get_mut(i)) {
-            let k = match kind {
-                BlockKind::Plain => 0,
-                BlockKind::IdleSpin => 1,
-                BlockKind::Countdown(r) => 2 | (u32::from(r) << 10),
-            };
-            *entry = (size << 16) | ((n as u32) << 2) | k;
+            *entry = Some(info);
         }
-        (n, kind)
+        (info.instructions, info.kind)
+    }
+
+    fn classify(&self, addr: u32, size: u32) -> BlockKind {
+        let hw = |i: u32| self.halfword(addr + 2 * i).unwrap_or(0);
+        if size == 2 && hw(0) == 0xE7FE {
+            return BlockKind::IdleSpin;
+        }
+        // SUBS Rdn, #1 (T2: 0b00111 Rdn 00000001) then BNE back to it (0xD1FD).
+        if size == 4 && hw(0) & 0xF8FF == 0x3801 && hw(1) == 0xD1FD {
+            return BlockKind::Countdown(((hw(0) >> 8) & 7) as u8);
+        }
+        if size == 8 {
+            let (ldr, subs, cmp, b) = (hw(0), hw(1), hw(2), hw(3));
+            // LDR Rt, [Rn, #0] (T1), SUBS Rd, Rn', Rm (T1), CMP Rn'', Rm' (T1), BCC -6 (T1).
+            let is_ldr = ldr >> 6 == 0b01101_00000;
+            let is_subs = subs >> 9 == 0b0001101;
+            let is_cmp = cmp >> 6 == 0b0100001010;
+            let is_blo_back = b == 0xD3FB;
+            if is_ldr && is_subs && is_cmp && is_blo_back {
+                let (rt, ra) = ((ldr & 7) as u8, ((ldr >> 3) & 7) as u8);
+                let (rd, rn, rs) = ((subs & 7) as u8, ((subs >> 3) & 7) as u8, ((subs >> 6) & 7) as u8);
+                let (cn, rl) = ((cmp & 7) as u8, ((cmp >> 3) & 7) as u8);
+                // The loop reads only rA, rS, rL, which it must not write.
+                let written = [rt, rd];
+                if rn == rt && cn == rd && ![ra, rs, rl].iter().any(|r| written.contains(r)) {
+                    return BlockKind::CycleCountWait { addr: ra, start: rs, limit: rl };
+                }
+            }
+        }
+        BlockKind::Plain
     }
 
     fn is_wfi_before(&self, pc: u32) -> bool {
@@ -773,6 +798,26 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
             let _ = uc.emu_stop();
             return;
         }
+        BlockKind::CycleCountWait { addr, start, limit } => {
+            // The lap that exits is the first whose CYCCNT read (at the end of its block, in
+            // this clock) satisfies the test; every lap before it only re-reads the counter.
+            // Skip to that lap (no further than the deadline); the block then runs it.
+            let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
+            let (a, s0, l) = (reg(uc, addr), reg(uc, start), reg(uc, limit));
+            let st = uc.get_data_mut();
+            if a == scs::DWT_BASE + 4 && st.scs.cyccnt_running() {
+                let elapsed = st.scs.cyccnt(st.now).wrapping_sub(s0);
+                if elapsed < l {
+                    let upc = st.units_per_cycle;
+                    let laps = u64::from(l - elapsed).div_ceil(n);
+                    let affordable = st.deadline.saturating_sub(st.now) / (n * upc);
+                    let skip = laps.min(affordable);
+                    st.now += skip * n * upc;
+                    st.instructions += skip * n;
+                    st.attribute(skip * n);
+                }
+            }
+        }
         BlockKind::Countdown(reg) => {
             // `subs rN, #1; bne`: rN laps of two instructions. Run all but the last at once
             // (no further than the deadline), exactly as executing them would: the register
@@ -882,5 +927,33 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
             }
         }
         Err(e) => fail(uc, e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn code(halfwords: &[u16]) -> Code {
+        Code::new(halfwords.iter().flat_map(|h| h.to_le_bytes()).collect())
+    }
+
+    #[test]
+    fn a_32_bit_instruction_counts_once() {
+        // push {r7, lr}; bl (32-bit); udf
+        let mut c = code(&[0xB580, 0xF000, 0xF800, 0xDE00]);
+        assert_eq!(c.block(FLASH_BASE, 8).0, 3);
+    }
+
+    #[test]
+    fn the_idle_spin_and_the_delay_loops_are_recognised_exactly() {
+        assert_eq!(code(&[0xE7FE]).block(FLASH_BASE, 2).1, BlockKind::IdleSpin);
+        assert_eq!(code(&[0x3801, 0xD1FD]).block(FLASH_BASE, 4).1, BlockKind::Countdown(0));
+        // ldr r3, [r1]; subs r3, r3, r2; cmp r3, r0; blo .-6 (the firmware's delay_ms)
+        let wait = code(&[0x680B, 0x1A9B, 0x4283, 0xD3FB]).block(FLASH_BASE, 8).1;
+        assert_eq!(wait, BlockKind::CycleCountWait { addr: 1, start: 2, limit: 0 });
+        // The same loop writing its start register is not a pure wait.
+        let writes_start = code(&[0x680A, 0x1A92, 0x4282, 0xD3FB]).block(FLASH_BASE, 8).1;
+        assert_eq!(writes_start, BlockKind::Plain);
     }
 }

@@ -344,6 +344,11 @@ impl Scs {
 
     // ---- DWT -----------------------------------------------------------------------------
 
+    /// Whether CYCCNT counts (TRCENA and CYCCNTENA set).
+    pub fn cyccnt_running(&self) -> bool {
+        self.cyccnt_counting()
+    }
+
     fn cyccnt_counting(&self) -> bool {
         self.demcr & (1 << 24) != 0 && self.dwt_ctrl & 1 != 0
     }
