@@ -268,7 +268,11 @@ pub fn fly(
         return Err(format!("the firmware did not start its control timer within the boot timeout; its UART said:\n{}", board.uart_text()));
     }
     let mut log = fcu_testkit::sim::run_with(&mut board, scenario, fcu_testkit::Profile::Default, opts).map_err(|e| e.to_string())?;
-    retime_states(&mut log, &board.statuses);
+    // Tick stamps count from the firmware's boot: after a reset they start again, so only the
+    // lines of the first boot are re-dated.
+    let first_reset = board.machine.state().resets.first().map_or(Time::MAX, |&(t, _)| t);
+    let first_boot: Vec<(Time, StatusLine)> = board.statuses.iter().filter(|(at, _)| *at < first_reset).cloned().collect();
+    retime_states(&mut log, &first_boot);
     let uart_log: Vec<u8> = board.machine.board().records.uart.iter().map(|&(_, b)| b).collect();
     let emulated_s = time_to_s(board.machine.now());
     let instructions = board.machine.state().instructions;
