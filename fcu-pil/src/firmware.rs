@@ -16,20 +16,34 @@ pub fn default_elf_path() -> PathBuf {
 
 /// Builds the release firmware exactly as `cargo fw` does and returns the ELF's path.
 pub fn build_release_elf() -> Result<PathBuf, String> {
+    build(&[], None)
+}
+
+/// Builds the release firmware with `--features esc` (TIM4 at 400 Hz, idle pulse 850) into its
+/// own target directory, and returns the ELF's path.
+pub fn build_esc_elf() -> Result<PathBuf, String> {
+    build(&["--features", "esc"], Some(repo_root().join("fcu-firmware/target/esc")))
+}
+
+fn build(extra: &[&str], target_dir: Option<PathBuf>) -> Result<PathBuf, String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let manifest = repo_root().join("fcu-firmware/Cargo.toml");
-    eprintln!("fcu-pil: building the release firmware ({})", manifest.display());
-    let status = Command::new(cargo)
-        .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "--manifest-path"])
-        .arg(&manifest)
-        .status()
-        .map_err(|e| format!("could not run cargo to build the firmware: {e}"))?;
+    eprintln!("fcu-pil: building the release firmware ({} {})", manifest.display(), extra.join(" "));
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "--release", "--target", "thumbv7em-none-eabihf", "--manifest-path"]).arg(&manifest).args(extra);
+    if let Some(dir) = &target_dir {
+        cmd.arg("--target-dir").arg(dir);
+    }
+    let status = cmd.status().map_err(|e| format!("could not run cargo to build the firmware: {e}"))?;
     if !status.success() {
         return Err(format!(
             "building the firmware failed ({status}); `rustup target add thumbv7em-none-eabihf` and `cargo install flip-link` are needed"
         ));
     }
-    let elf = default_elf_path();
+    let elf = match target_dir {
+        Some(dir) => dir.join("thumbv7em-none-eabihf/release/fcu-firmware"),
+        None => default_elf_path(),
+    };
     if elf.is_file() {
         Ok(elf)
     } else {

@@ -313,3 +313,21 @@ fn the_same_flight_twice_is_byte_identical() {
     assert_eq!(a.uart_log, b.uart_log);
     assert_eq!(a.instructions, b.instructions);
 }
+
+/// The ESC build sends the idle pulse from the first PWM period after reset, not only once
+/// calibration ends (reference quirk B28): ESCs see a valid "motors off" signal all through
+/// boot. `FCU_PIL_ESC_ELF` if set, else the ESC build made now.
+#[test]
+fn the_esc_build_sends_the_idle_pulse_from_boot() {
+    let path = match std::env::var_os("FCU_PIL_ESC_ELF") {
+        Some(p) => std::path::PathBuf::from(p),
+        None => firmware::build_esc_elf().unwrap_or_else(|e| panic!("{e}")),
+    };
+    let image = Image::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let setup = BoardSetup { boot_timeout_s: Some(0.02), ..BoardSetup::default() };
+    let mut b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap();
+    assert!(!b.flying(), "20 ms after reset the sensors are still being set up");
+    let now = b.machine.now();
+    assert_eq!(b.machine.board_mut().motor_compares(now), [850; 4], "idle pulse during boot");
+    assert_eq!(b.machine.board().tim4.period_counts(), 2076, "TIM4 at 400 Hz (ARR 2075)");
+}
