@@ -490,6 +490,14 @@ pub struct Emit {
     pub debug_line: bool,
 }
 
+/// Control ticks between status snapshots to the telemetry task (800 Hz / 4 = 200 Hz), so a
+/// flight-state change reaches the UART within 5 ms of the tick (the STATUS line carries the
+/// tick it was taken at).
+pub const SNAPSHOT_EVERY_TICKS: u16 = 4;
+/// Snapshots per debug line: 200 Hz / 8 = 25 lines a second (~80 bytes each, 2 kB/s of the
+/// UART's 11.5 kB/s).
+pub const DEBUG_LINE_EVERY_SNAPSHOTS: u16 = 8;
+
 /// Decides which lines a stream of status snapshots produces: the status line on every change
 /// of flight state, the debug line at a bounded rate.
 #[derive(Clone, Debug)]
@@ -500,6 +508,11 @@ pub struct Reporter {
 }
 
 impl Reporter {
+    /// The firmware's reporter: a debug line every [`DEBUG_LINE_EVERY_SNAPSHOTS`] snapshots.
+    pub const fn firmware() -> Self {
+        Reporter::new(DEBUG_LINE_EVERY_SNAPSHOTS)
+    }
+
     /// `debug_every`: snapshots per debug line (0 is taken as 1).
     pub const fn new(debug_every: u16) -> Self {
         Reporter { last_state: None, debug_every: if debug_every == 0 { 1 } else { debug_every }, since_debug: 0 }

@@ -184,12 +184,14 @@ fn d8_yaw_rate_is_proportional_to_the_stick() {
 
 #[test]
 fn d12_the_debug_line_is_rate_limited_and_status_lines_follow_state_changes() {
-    // The reference prints (blocking, ~6 ms) on every main-loop pass. The firmware asks the
-    // reporter 200 times a second; with a divider of 8 it sends 25 debug lines a second.
-    let mut r = Reporter::new(8);
+    // The reference prints (blocking, ~6 ms) on every main-loop pass. The firmware asks its
+    // reporter once every SNAPSHOT_EVERY_TICKS ticks: over one second of ticks it sends 25
+    // debug lines.
+    let mut r = Reporter::firmware();
+    let snapshots_per_s = 800 / u32::from(fcu_core::telemetry::SNAPSHOT_EVERY_TICKS);
     let (mut debug, mut status) = (0, 0);
-    for n in 0..200 {
-        let state = if n < 100 { FlightState::Disarmed } else { FlightState::Armed };
+    for n in 0..snapshots_per_s {
+        let state = if n < snapshots_per_s / 2 { FlightState::Disarmed } else { FlightState::Armed };
         let e = r.observe(state);
         debug += u32::from(e.debug_line);
         status += u32::from(e.status_line);

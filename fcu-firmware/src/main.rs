@@ -101,12 +101,6 @@ mod app {
     /// Bytes of telemetry waiting for the UART: about 90 ms of output at 115200 baud, enough
     /// for a status line and a debug line together.
     const UART_QUEUE_BYTES: usize = 1024;
-    /// Control ticks between status snapshots to the telemetry task (800 Hz / 4 = 200 Hz), so
-    /// a flight-state change is seen within 5 ms.
-    const SNAPSHOT_EVERY_TICKS: u16 = 4;
-    /// Snapshots per debug line: 200 Hz / 8 = 25 lines per second (~80 bytes each, 2 kB/s of
-    /// the UART's 11.5 kB/s).
-    const DEBUG_LINE_EVERY_SNAPSHOTS: u16 = 8;
     /// LED refresh period; the fastest LED code toggles every 50 ms.
     const HOUSEKEEPING_PERIOD_MS: u32 = 10;
     /// Housekeeping periods between battery conversions (10 Hz).
@@ -305,19 +299,7 @@ mod app {
 
         (
             Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0 },
-            Local {
-                capture,
-                tick_timer,
-                bus,
-                inner,
-                outer,
-                motors,
-                watchdog,
-                leds,
-                adc,
-                battery_pin,
-                reporter: Reporter::new(DEBUG_LINE_EVERY_SNAPSHOTS),
-            },
+            Local { capture, tick_timer, bus, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
         )
     }
 
@@ -441,7 +423,7 @@ mod app {
         *cx.local.ticks = cx.local.ticks.wrapping_add(1);
         *cx.local.snapshot_countdown = cx.local.snapshot_countdown.saturating_sub(1);
         if *cx.local.snapshot_countdown == 0 {
-            *cx.local.snapshot_countdown = SNAPSHOT_EVERY_TICKS;
+            *cx.local.snapshot_countdown = tlm::SNAPSHOT_EVERY_TICKS;
             let snapshot = Snapshot {
                 status: inner.status(),
                 outer_overruns: *cx.local.outer_overruns,
