@@ -49,8 +49,8 @@
 
 use crate::math::{clamp_nan_low, Quat, Vec3};
 
-/// mdps → rad/s in f32 (π / 180 000).
-const MDPS_TO_RAD_S: f32 = core::f32::consts::PI / 180_000.0;
+/// mdps → rad/s: the one conversion of the crate (`ahrs::MDPS_TO_RAD_S`, the reference's constant), in f32.
+const MDPS_TO_RAD_S: f32 = super::MDPS_TO_RAD_S as f32;
 const DEG_TO_RAD: f32 = core::f32::consts::PI / 180.0;
 
 /// VQF parameters. Times in seconds, rates in °/s, accelerations in mg.
