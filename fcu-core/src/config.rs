@@ -199,8 +199,10 @@ impl Default for Config {
             // in a quasi-inertial frame, rest detection, gyro bias estimation); see `ahrs::vqf`.
             estimator: EstimatorConfig::Vqf(VqfConfig::DEFAULT),
             rc: RcConfig {
-                // D9: 800..2200 µs pulses from both edges of one pulse; 100 ms channel timeout.
-                pulses: PulseRules::Validated { min_counts: 3200, max_counts: 8800 },
+                // D9: 800..2200 µs pulses from both edges of one pulse, the edges at most 3 ticks
+                // apart (a 2.2 ms pulse spans 2 at 800 Hz; a pulse past the 8.192 ms capture
+                // wrap at least 6), so no width aliases; 100 ms channel timeout.
+                pulses: PulseRules::Validated { min_counts: 3200, max_counts: 8800, max_pulse_ticks: 3 },
                 link_timeout_ticks: 80,
                 // D8: yaw rate proportional to the stick beyond the dead band.
                 yaw_stick: YawStick::Proportional,

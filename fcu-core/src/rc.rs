@@ -33,9 +33,11 @@ pub enum PulseRules {
     /// of the same pulse was seen (B10), no range check (B11); the edge state is cleared
     /// when no edge arrived on any channel for `reset_after_ticks`.
     Reference { reset_after_ticks: u32 },
-    /// A width counts only from a rising and the next falling edge of the same channel and
-    /// only inside `[min_counts, max_counts]`.
-    Validated { min_counts: u16, max_counts: u16 },
+    /// A width counts only from a rising and the next falling edge of the same channel, only
+    /// inside `[min_counts, max_counts]`, and only if the two edges arrived at most
+    /// `max_pulse_ticks` control ticks apart: the 15-bit capture clock wraps every 8.192 ms,
+    /// so a pulse of 9.3 ms would otherwise read as 1.1 ms; the tick count cannot alias.
+    Validated { min_counts: u16, max_counts: u16, max_pulse_ticks: u16 },
 }
 
 /// Yaw stick behaviour (difference D8).
@@ -95,7 +97,9 @@ impl RcConfig {
     pub fn is_valid(&self) -> bool {
         let pulses_ok = match self.pulses {
             PulseRules::Reference { .. } => true,
-            PulseRules::Validated { min_counts, max_counts } => min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP,
+            PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } => {
+                min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
+            }
         };
         self.full_scale > 0
             && self.gesture_threshold > 0
@@ -197,11 +201,27 @@ impl RcConfig {
         }
         // Ours (the reference has no disarm): throttle low, rudder hard over the other way,
         // elevator and aileron near centre.
-        let centred = |v: i16| i32::from(v).abs() <= 300;
         if self.throttle_low(s) && s.rud < -th && centred(s.ele) && centred(s.ail) {
             return Some(Gesture::Disarm);
         }
         None
+    }
+}
+
+/// A stick this close to its centre (counts) counts as centred: for the disarm gesture, and
+/// for the release that must follow the arm gesture before the motors may run.
+pub const CENTRED_COUNTS: i16 = 300;
+
+/// Whether a stick value is within [`CENTRED_COUNTS`] of centre.
+pub fn centred(v: i16) -> bool {
+    i32::from(v).abs() <= i32::from(CENTRED_COUNTS)
+}
+
+impl Sticks {
+    /// Aileron, elevator and rudder all centred: the attitude the drone would take off with is
+    /// level and not turning.
+    pub fn attitude_sticks_centred(&self) -> bool {
+        centred(self.ail) && centred(self.ele) && centred(self.rud)
     }
 }
 
@@ -229,6 +249,8 @@ pub struct PulseBatch {
 struct EdgeState {
     rise: u16,
     rise_pending: bool,
+    /// The decoder's tick count when the rising edge came.
+    rise_tick: u32,
     width: u16,
     edges: u8,
 }
@@ -241,6 +263,8 @@ pub struct EdgeDecoder {
     ch: [EdgeState; CHANNELS],
     batch: PulseBatch,
     idle_ticks: u32,
+    /// Calls of `take`: the control ticks, for the pulse-duration check.
+    ticks: u32,
 }
 
 /// Width between two capture timestamps on the 15-bit counter (`fall == rise` is a full
@@ -256,7 +280,7 @@ pub fn pulse_width(rise_counts: u16, fall_counts: u16) -> u32 {
 
 impl EdgeDecoder {
     pub fn new(rules: PulseRules) -> Self {
-        EdgeDecoder { rules, ch: [EdgeState::default(); CHANNELS], batch: PulseBatch::default(), idle_ticks: 0 }
+        EdgeDecoder { rules, ch: [EdgeState::default(); CHANNELS], batch: PulseBatch::default(), idle_ticks: 0, ticks: 0 }
     }
 
     /// One capture event: the channel, the captured counter value and the pin level read in
@@ -282,14 +306,16 @@ impl EdgeDecoder {
                     *out = Some(st.width);
                 }
             }
-            PulseRules::Validated { min_counts, max_counts } => {
+            PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } => {
                 if level_high {
                     st.rise = t;
                     st.rise_pending = true;
+                    st.rise_tick = self.ticks;
                 } else if st.rise_pending {
                     st.rise_pending = false;
                     let w = pulse_width(st.rise, t);
-                    if (u32::from(min_counts)..=u32::from(max_counts)).contains(&w) {
+                    let short_enough = self.ticks.wrapping_sub(st.rise_tick) <= u32::from(max_pulse_ticks);
+                    if short_enough && (u32::from(min_counts)..=u32::from(max_counts)).contains(&w) {
                         *out = Some(w as u16);
                     }
                 }
@@ -301,6 +327,7 @@ impl EdgeDecoder {
     pub fn take(&mut self) -> PulseBatch {
         let b = self.batch;
         self.batch = PulseBatch::default();
+        self.ticks = self.ticks.wrapping_add(1);
         if b.edge_seen.iter().any(|&e| e) {
             self.idle_ticks = 0;
         } else {
@@ -454,7 +481,7 @@ mod tests {
     use super::*;
 
     const REF: RcConfig = RcConfig::REFERENCE;
-    const VALID: PulseRules = PulseRules::Validated { min_counts: 3200, max_counts: 8800 };
+    const VALID: PulseRules = PulseRules::Validated { min_counts: 3200, max_counts: 8800, max_pulse_ticks: 3 };
 
     #[test]
     fn centred_widths_give_the_reference_sticks() {
@@ -529,6 +556,30 @@ mod tests {
         let b = d.take();
         assert_eq!(b.width_counts, [None; CHANNELS]);
         assert!(b.edge_seen[THR] && b.edge_seen[ELE]);
+    }
+
+    #[test]
+    fn a_pulse_longer_than_the_capture_wrap_does_not_alias_into_a_valid_width() {
+        // 9.5 ms high: the 15-bit clock wraps at 8.192 ms, so the edges' counts are 1.308 ms
+        // apart, a valid-looking width. The rise came 7 control ticks before the fall.
+        let mut d = EdgeDecoder::new(VALID);
+        d.on_edge(AIL, 1000, true);
+        for _ in 0..7 {
+            assert_eq!(d.take().width_counts[AIL], None);
+        }
+        d.on_edge(AIL, (1000 + 38_000 - 32_768) as u16, false);
+        assert_eq!(d.take().width_counts[AIL], None, "a 9.5 ms pulse must not read as 1.3 ms");
+    }
+
+    #[test]
+    fn pulses_across_a_capture_wrap_and_a_tick_boundary_still_count() {
+        // A 2.2 ms pulse straddling the wrap, its falling edge two ticks after its rising one.
+        let mut d = EdgeDecoder::new(VALID);
+        d.on_edge(THR, 30_000, true);
+        d.take();
+        d.take();
+        d.on_edge(THR, (30_000 + 8800 - 32_768) as u16, false);
+        assert_eq!(d.take().width_counts[THR], Some(8800));
     }
 
     #[test]

@@ -439,9 +439,16 @@ impl Supervisor {
                         FlightState::Disarmed
                     }
                 } else if self.hold_ticks >= cfg.arm_hold_ticks && others.is_empty() {
-                    // Released after a full hold, nothing against it: armed.
-                    self.low_throttle_ticks = 0;
-                    FlightState::Armed
+                    // Let go after a full hold, nothing against it: armed once every stick is
+                    // back in a safe place (the throttle low is a blocker already). Until then
+                    // keep waiting: arming with the sticks still deflected would take off
+                    // rolled and yawing (a nudge of the throttle used to count as the release).
+                    if i.sticks.attitude_sticks_centred() {
+                        self.low_throttle_ticks = 0;
+                        FlightState::Armed
+                    } else {
+                        FlightState::Arming
+                    }
                 } else {
                     FlightState::Disarmed
                 }
@@ -621,6 +628,23 @@ mod tests {
         let d = r.run(ARM, 5 * CFG.arm_hold_ticks);
         assert_eq!(d.state, FlightState::Arming);
         assert!(!d.motors_enabled);
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Armed);
+    }
+
+    #[test]
+    fn arming_completes_only_once_every_stick_is_back_in_a_safe_place() {
+        // After a full hold, the throttle nudged off zero (still low) but aileron, elevator and
+        // rudder still at the gesture's deflection: not armed yet, motors off.
+        let mut r = Rig::new();
+        r.run(ARM, CFG.arm_hold_ticks);
+        let nudged = Sticks { thr: 50, ..ARM };
+        let d = r.run(nudged, 100);
+        assert_eq!(d.state, FlightState::Arming);
+        assert!(!d.motors_enabled);
+        // Rudder still over: still waiting.
+        let d = r.run(Sticks { rud: 1300, ..IDLE }, 10);
+        assert_eq!(d.state, FlightState::Arming);
+        // Every stick centred, throttle low: armed.
         assert_eq!(r.run(IDLE, 1).state, FlightState::Armed);
     }
 

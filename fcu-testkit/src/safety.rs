@@ -144,6 +144,11 @@ struct ProcedureTracker {
     /// Whether the gesture had been released (a good-link tick with no gesture) since the
     /// last arm/disarm/link loss when the current arm run began.
     arm_run_released: bool,
+    /// The last completed arm run (and its released flag), kept after the gesture is let go
+    /// while the sticks come back to centre: arming happens then, not at the first tick
+    /// without the gesture. Dropped on a link loss, a throttle rise, an arm or a disarm.
+    pending_run: u32,
+    pending_released: bool,
     released: bool,
     /// Consecutive good-link ticks, including the current one.
     good_run: u32,
@@ -159,6 +164,8 @@ impl ProcedureTracker {
         ProcedureTracker {
             arm_run: 0,
             arm_run_released: false,
+            pending_run: 0,
+            pending_released: false,
             released: false,
             good_run: 0,
             lost_ticks: 0,
@@ -193,19 +200,31 @@ impl ProcedureTracker {
     /// What is wrong with the arming procedure behind a tick that starts flying (see
     /// [`is_arming`](Self::is_arming)): the reasons both monitors share. Empty when the arm
     /// gesture was held long enough from a released start, is let go, and boot settling is over.
-    fn procedure_faults(&self, state: FlightState, gesture: Option<Gesture>, safety: &SafetyConfig, tick: u64) -> Vec<String> {
+    fn procedure_faults(
+        &self,
+        state: FlightState,
+        gesture: Option<Gesture>,
+        sticks: &Sticks,
+        safety: &SafetyConfig,
+        tick: u64,
+    ) -> Vec<String> {
         let mut why = Vec::new();
         if state != FlightState::Armed {
             why.push(format!("entered {} from {}", state.name(), self.prev_state.name()));
         }
-        if self.arm_run < safety.arm_hold_ticks {
-            why.push(format!("arm gesture held {} ticks (need {})", self.arm_run, safety.arm_hold_ticks));
+        let (run, released) =
+            if self.arm_run > 0 { (self.arm_run, self.arm_run_released) } else { (self.pending_run, self.pending_released) };
+        if run < safety.arm_hold_ticks {
+            why.push(format!("arm gesture held {run} ticks (need {})", safety.arm_hold_ticks));
         }
-        if !self.arm_run_released {
+        if !released {
             why.push("arm gesture not released since the last arm/disarm/link loss".into());
         }
         if gesture == Some(Gesture::Arm) {
             why.push("arm gesture still held".into());
+        }
+        if !sticks.attitude_sticks_centred() {
+            why.push(format!("armed with the sticks deflected {sticks:?}"));
         }
         if tick < u64::from(safety.boot_settle_ticks) {
             why.push(format!("tick {tick} inside boot settling"));
@@ -221,9 +240,11 @@ impl ProcedureTracker {
             // A gesture held through an arm or a disarm must be let go before it acts again.
             self.released = false;
             self.arm_run = 0;
+            self.pending_run = 0;
         }
         if !link {
             self.released = false;
+            self.pending_run = 0;
         }
         if link && gesture == Some(Gesture::Arm) && throttle_low {
             if self.arm_run == 0 {
@@ -231,6 +252,15 @@ impl ProcedureTracker {
             }
             self.arm_run = self.arm_run.saturating_add(1);
         } else {
+            // A later, shorter run (the gesture taken up again while waiting) does not undo a
+            // completed hold: the supervisor keeps counting from it.
+            if self.arm_run > 0 && self.arm_run >= self.pending_run {
+                self.pending_run = self.arm_run;
+                self.pending_released = self.arm_run_released;
+            }
+            if !throttle_low {
+                self.pending_run = 0;
+            }
             self.arm_run = 0;
             if link && gesture.is_none() {
                 self.released = true;
@@ -419,7 +449,7 @@ impl SafetyMonitor {
 
     fn radio(&mut self, batch: &PulseBatch) -> Result<(), Violation> {
         let (min, max) = match self.rc.pulses {
-            PulseRules::Validated { min_counts, max_counts } => (min_counts, max_counts),
+            PulseRules::Validated { min_counts, max_counts, .. } => (min_counts, max_counts),
             PulseRules::Reference { .. } => (0, u16::MAX),
         };
         for ch in 0..CHANNELS {
@@ -487,7 +517,7 @@ impl SafetyMonitor {
         throttle_low: bool,
     ) -> Result<(), Violation> {
         let tilt = tilt_from_level_rad(self.prev_quat);
-        let mut why = self.proc.procedure_faults(st.state, gesture, safety, self.tick);
+        let mut why = self.proc.procedure_faults(st.state, gesture, &st.sticks, safety, self.tick);
         if !st.blockers.is_empty() {
             let names: Vec<&str> = st.blockers.iter().map(|b| b.name()).collect();
             why.push(format!("blockers {names:?}"));
@@ -582,7 +612,7 @@ impl SupervisorMonitor {
 
         self.proc.before_checks(i.link, i.sticks.thr, state);
         if self.proc.is_arming(state) {
-            let mut why = self.proc.procedure_faults(state, gesture, &cfg, self.tick);
+            let mut why = self.proc.procedure_faults(state, gesture, &i.sticks, &cfg, self.tick);
             if !d.blockers.is_empty() {
                 why.push(format!("blockers {:#x}", d.blockers.0));
             }
