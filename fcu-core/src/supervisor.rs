@@ -20,12 +20,17 @@ pub struct SafetyConfig {
     pub disarm_hold_ticks: u32,
     /// Armed with the throttle low this long disarms (5 s).
     pub auto_disarm_ticks: u32,
-    /// Ticks of link loss (counted from when the link stops being good, which is itself
-    /// 100 ms after the last pulse) until stage 2: motors off and disarmed (0.9 s, so
-    /// stage 2 comes 1.0 s after the last pulse).
+    /// Ticks without a good link, accumulated over the flight, until stage 2: motors off and
+    /// disarmed (0.9 s). The link stops being good 100 ms after the first channel's last
+    /// pulse, so after a single loss stage 2 comes 1.0 s after that pulse.
     pub failsafe_off_ticks: u32,
-    /// A good link must last this long before stage 1 hands control back (100 ms).
+    /// A good link must last this long before stage 1 hands control back (1.0 s): a link
+    /// that delivers a couple of frames now and then never hands it back.
     pub recovery_ticks: u32,
+    /// Lost time is forgotten slowly, never reset by a recovery: one lost tick for every this
+    /// many ticks flown on a good link after control was handed back (4: one second of loss
+    /// takes four seconds of good link to forget).
+    pub loss_forget_ticks: u32,
     /// Arming is refused beyond this tilt from level, rad (25°).
     pub max_arm_tilt_rad: f32,
     /// Arming is refused during the first ticks after boot (2 s).
@@ -38,7 +43,8 @@ impl SafetyConfig {
         disarm_hold_ticks: 800,
         auto_disarm_ticks: 4000,
         failsafe_off_ticks: 720,
-        recovery_ticks: 80,
+        recovery_ticks: 800,
+        loss_forget_ticks: 4,
         max_arm_tilt_rad: 0.436_332_3,
         boot_settle_ticks: 1600,
     };
@@ -48,6 +54,7 @@ impl SafetyConfig {
             && self.disarm_hold_ticks > 0
             && self.auto_disarm_ticks > 0
             && self.failsafe_off_ticks > 0
+            && self.loss_forget_ticks > 0
             && self.max_arm_tilt_rad.is_finite()
             && self.max_arm_tilt_rad > 0.0
     }
@@ -218,7 +225,11 @@ pub struct Supervisor {
     /// The arm/disarm/calibrate gestures were let go since the last one acted (and since the
     /// link came up): a gesture held through a reconnect or an arm must not act again.
     released: bool,
+    /// Lost ticks accumulated over the flight (see [`SafetyConfig::loss_forget_ticks`]), as of
+    /// `forgetting_since`.
     lost_ticks: u32,
+    /// Boot tick from which the lost time is being forgotten (control handed back).
+    forgetting_since: u32,
     good_ticks: u32,
     low_throttle_ticks: u32,
     boot_ticks: u32,
@@ -243,6 +254,7 @@ impl Supervisor {
             hold_ticks: 0,
             released: false,
             lost_ticks: 0,
+            forgetting_since: 0,
             good_ticks: 0,
             low_throttle_ticks: 0,
             boot_ticks: 0,
@@ -397,8 +409,9 @@ impl Supervisor {
         } else {
             self.good_ticks = 0;
         }
-        // Loss time counts every tick of stage 1 without a good link and only restarts once
-        // control is handed back: a flickering link cannot stretch stage 1 for ever.
+        // Lost time counts every tick of stage 1 without a good link, adds up over the flight
+        // and is forgotten only slowly once control is back: a flapping link cannot keep the
+        // motors running.
         if self.state == FlightState::FailsafeLevel && !i.link {
             self.lost_ticks = self.lost_ticks.saturating_add(1);
         }
@@ -445,6 +458,9 @@ impl Supervisor {
                     // rolled and yawing (a nudge of the throttle used to count as the release).
                     if i.sticks.attitude_sticks_centred() {
                         self.low_throttle_ticks = 0;
+                        // A new flight starts with no lost time.
+                        self.lost_ticks = 0;
+                        self.forgetting_since = self.boot_ticks;
                         FlightState::Armed
                     } else {
                         FlightState::Arming
@@ -457,8 +473,16 @@ impl Supervisor {
                 self.low_throttle_ticks = if i.throttle_low { self.low_throttle_ticks.saturating_add(1) } else { 0 };
                 if !i.link {
                     self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
-                    self.lost_ticks = 1;
-                    FlightState::FailsafeLevel
+                    // What is left of earlier losses, plus this tick. (Forgetting is counted
+                    // here, from the ticks flown since the hand-back, not on every flying tick.)
+                    let flown = self.boot_ticks.wrapping_sub(self.forgetting_since);
+                    let forgotten = flown / cfg.loss_forget_ticks.max(1);
+                    self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(1);
+                    if self.lost_ticks >= cfg.failsafe_off_ticks {
+                        FlightState::FailsafeOff
+                    } else {
+                        FlightState::FailsafeLevel
+                    }
                 } else if gesture == Some(Gesture::Disarm) {
                     self.hold_ticks = self.hold_ticks.saturating_add(1);
                     if self.hold_ticks >= cfg.disarm_hold_ticks {
@@ -476,6 +500,7 @@ impl Supervisor {
             FlightState::FailsafeLevel => {
                 if i.link && self.good_ticks >= cfg.recovery_ticks {
                     self.low_throttle_ticks = 0;
+                    self.forgetting_since = self.boot_ticks;
                     FlightState::Armed
                 } else if self.lost_ticks >= cfg.failsafe_off_ticks {
                     FlightState::FailsafeOff
@@ -846,7 +871,73 @@ mod tests {
     }
 
     #[test]
-    fn link_back_within_stage_1_returns_control_after_100ms() {
+    fn a_flapping_link_cannot_keep_the_motors_running() {
+        // Off 900 ms / on 40 ms (link good about 140 ms of it, the channels' 100 ms validity
+        // included): control is never handed back, and lost time adds up to stage 2.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        let mut t = 0;
+        let stage2_at = loop {
+            let d = r.lose_link(640);
+            t += 640;
+            if d.state == FlightState::FailsafeOff {
+                break t;
+            }
+            r.restore_link(112);
+            t += 112;
+            assert_ne!(r.last.state, FlightState::Armed, "control handed back to a flapping link");
+        };
+        assert!(stage2_at <= 3 * 800, "stage 2 after {stage2_at} ticks");
+    }
+
+    #[test]
+    fn brief_recoveries_do_not_restart_the_stage_2_clock() {
+        // Off 150 ms / on 40 ms: about 21 % of the frames. The link is good for the 140 ms
+        // after each burst, so the loss per cycle is short; but it never resets.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        let mut t = 0;
+        let stage2_at = loop {
+            let d = r.lose_link(40);
+            t += 40;
+            if d.state == FlightState::FailsafeOff {
+                break t;
+            }
+            r.restore_link(112);
+            t += 112;
+        };
+        // Lost: 40 of every 152 ticks, so the 720-tick budget is spent in 18 cycles, 3.3 s.
+        assert!(stage2_at <= 2 * 1400, "stage 2 after {stage2_at} ticks (3.5 s is 2800)");
+    }
+
+    #[test]
+    fn lost_time_is_forgotten_slowly_after_control_is_back() {
+        // 0.5 s lost, control back after the recovery time, then 0.5 s more lost right away:
+        // together past the 0.9 s budget, stage 2.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(400);
+        assert_eq!(r.restore_link(CFG.recovery_ticks).state, FlightState::Armed);
+        assert_eq!(
+            r.lose_link(CFG.failsafe_off_ticks - 400 + 1).state,
+            FlightState::FailsafeOff,
+            "the earlier loss was forgotten too fast"
+        );
+        // After long enough on a good link, the same second loss only levels.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(400);
+        r.restore_link(CFG.recovery_ticks);
+        r.run(FLY, 400 * CFG.loss_forget_ticks);
+        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - 1).state, FlightState::FailsafeLevel);
+    }
+
+    #[test]
+    fn link_back_within_stage_1_returns_control_after_the_recovery_time() {
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);

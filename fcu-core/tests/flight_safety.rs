@@ -296,7 +296,8 @@ fn a_short_link_loss_hands_control_back_to_the_sticks() {
     b.run(FLY, 300);
     assert_eq!(b.state(), FlightState::FailsafeLevel);
     b.sending = true;
-    b.run(FLY, 200);
+    // Control returns once the link has been good for the recovery time (1.0 s).
+    b.run(FLY, 900);
     assert_eq!(b.state(), FlightState::Armed);
     assert!(!motors_off(b.last.as_ref().unwrap()));
 }

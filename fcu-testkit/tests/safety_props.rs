@@ -342,6 +342,7 @@ fn safety_config_strategy() -> impl Strategy<Value = SafetyConfig> {
                 auto_disarm_ticks,
                 failsafe_off_ticks,
                 recovery_ticks,
+                loss_forget_ticks: 1 + recovery_ticks % 7,
                 max_arm_tilt_rad,
                 boot_settle_ticks,
             }

@@ -442,7 +442,9 @@ pub fn by_name(name: &str) -> Option<Scenario> {
             s.criteria.extend([
                 Criterion::StateSeen { from_s: 8.0, to_s: 8.6, state: "failsafe1" },
                 Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
-                Criterion::StateHolds { from_s: 9.0, to_s: 15.5, state: "armed" },
+                // Control comes back once the link has been good for the recovery time
+                // (1.0 s after it returns at 8.5 s).
+                Criterion::StateHolds { from_s: 9.6, to_s: 15.5, state: "armed" },
                 Criterion::AltitudeAbove { from_s: 6.0, to_s: 15.5, min_m: 0.3 },
             ]);
             s
