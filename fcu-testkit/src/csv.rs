@@ -76,8 +76,22 @@ impl<'a> Row<'a> {
     /// Parse a column as `T`, or an error naming the line, the column and the text.
     pub fn get<T: std::str::FromStr>(&self, idx: usize) -> Result<T, CsvError> {
         let (name, v) = self.raw(idx)?;
-        v.parse::<T>()
-            .map_err(|_| CsvError { line: self.line, message: format!("column `{name}`: `{v}` is not a valid {}", short_type_name::<T>()) })
+        v.parse::<T>().map_err(|_| CsvError {
+            line: self.line,
+            message: format!("column `{}`: `{}` is not a valid {}", echo(name), echo(v), short_type_name::<T>()),
+        })
+    }
+
+    /// A finite f32: `inf`, `nan` and numbers beyond f32's range (which parse as infinity)
+    /// are refused, since a comparison against them could not fail.
+    pub fn finite_f32(&self, idx: usize) -> Result<f32, CsvError> {
+        let v: f32 = self.get(idx)?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            let (name, text) = self.raw(idx)?;
+            Err(CsvError { line: self.line, message: format!("column `{}`: `{}` is not a finite f32", echo(name), echo(text)) })
+        }
     }
 
     /// Parse a 0/1 flag column.
@@ -91,6 +105,21 @@ impl<'a> Row<'a> {
     }
 }
 
+/// A field as it may appear in a message: invisible and control characters escaped, and
+/// no more than 40 characters of it.
+pub fn echo(field: &str) -> String {
+    const MAX: usize = 40;
+    let escaped: String = field.chars().flat_map(char::escape_debug).collect();
+    if escaped.chars().count() > MAX {
+        escaped.chars().take(MAX - 1).chain(std::iter::once('…')).collect()
+    } else {
+        escaped
+    }
+}
+
+/// Decompressed text larger than this is refused (the largest real input is a few MB).
+pub const MAX_TEXT_BYTES: u64 = 256 * 1024 * 1024;
+
 fn short_type_name<T>() -> &'static str {
     let n = std::any::type_name::<T>();
     n.rsplit("::").next().unwrap_or(n)
@@ -101,13 +130,30 @@ fn short_type_name<T>() -> &'static str {
 pub fn read_text(path: &std::path::Path) -> std::io::Result<String> {
     use std::io::Read;
     let bytes = std::fs::read(path)?;
-    if bytes.starts_with(&[0x1f, 0x8b]) {
-        let mut s = String::new();
-        flate2::read::MultiGzDecoder::new(bytes.as_slice()).read_to_string(&mut s)?;
-        Ok(s)
+    let bytes = if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut out = Vec::new();
+        // One byte past the cap tells an oversized stream (a few MB of zeros can expand to GB).
+        flate2::read::MultiGzDecoder::new(bytes.as_slice()).take(MAX_TEXT_BYTES + 1).read_to_end(&mut out)?;
+        if out.len() as u64 > MAX_TEXT_BYTES {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("decompresses to more than {} MiB: not an input of this program", MAX_TEXT_BYTES >> 20),
+            ));
+        }
+        out
     } else {
-        String::from_utf8(bytes).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {e}")))
-    }
+        bytes
+    };
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = e.as_bytes().get(..at).map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count()) + 1;
+        std::io::Error::new(std::io::ErrorKind::InvalidData, format!("line {line}: not UTF-8 text"))
+    })?;
+    // A UTF-8 byte-order mark is not part of the first header.
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
 }
 
 /// Iterate the data lines of a CSV text (skipping the header and blank lines), with their
@@ -175,5 +221,18 @@ mod tests {
         let e = Row::split(8, "1", &h).err().unwrap();
         assert_eq!(e.to_string(), "line 8: expected 2 columns, found 1");
         assert!(h.indices(["c"]).is_err());
+    }
+
+    #[test]
+    fn messages_escape_invisible_characters_and_cut_long_fields() {
+        assert_eq!(echo("a\u{0}b"), "a\\0b");
+        assert_eq!(echo("\u{feff}t_s"), "\\u{feff}t_s");
+        let long = "9".repeat(3_000_000);
+        assert!(echo(&long).chars().count() <= 40);
+        let h = Header::parse("x");
+        let r = Row::split(2, "inf", &h).unwrap();
+        assert!(r.finite_f32(0).is_err());
+        let r = Row::split(2, "-1e39", &h).unwrap();
+        assert!(r.finite_f32(0).unwrap_err().to_string().contains("not a finite f32"));
     }
 }

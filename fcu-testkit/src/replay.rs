@@ -147,7 +147,9 @@ pub fn parse_output(text: &str) -> Result<Vec<OutputRow>, CsvError> {
     let mut rows = Vec::new();
     for (line, l) in data_lines(text) {
         let r = Row::split(line, l, &header)?;
-        let f = |k: usize| -> Result<f32, CsvError> { r.get(ix[k]) };
+        // Expected values must be finite: against inf (or an f32 overflow such as -1e39),
+        // every comparison would pass.
+        let f = |k: usize| -> Result<f32, CsvError> { r.finite_f32(ix[k]) };
         rows.push(OutputRow {
             tick: r.get(ix[0])?,
             ccr: [r.get(ix[1])?, r.get(ix[2])?, r.get(ix[3])?, r.get(ix[4])?],

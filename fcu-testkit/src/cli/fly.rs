@@ -62,13 +62,19 @@ pub fn check_spread(spread: f64) -> Result<f64, CliError> {
     }
 }
 
+/// The shortest flight: one control tick at 800 Hz.
+pub const MIN_DURATION_S: f64 = 0.00125;
+
 /// The scenario a `fly` command asks for: a named scenario, its stick timeline replaced by
 /// `sticks` when given, its length by `duration_s`. Shared with `fcu-pil fly`.
 pub fn prepare_scenario(name: &str, sticks: Option<&Path>, duration_s: Option<f64>) -> Result<Scenario, CliError> {
     let mut sc = scenario_named(name)?;
     if let Some(d) = duration_s {
-        if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
-            return Err(CliError(format!("--duration: {d} must be a number of seconds in (0, 3600]")));
+        // At least one control tick (1.25 ms at 800 Hz), at most an hour.
+        if !(d.is_finite() && (MIN_DURATION_S..=3600.0).contains(&d)) {
+            return Err(CliError(format!(
+                "--duration: {d:.3e} must be a number of seconds between {MIN_DURATION_S} (one control tick) and 3600"
+            )));
         }
     }
     if let Some(path) = sticks {

@@ -77,6 +77,8 @@ impl Timeline {
     /// Parse the `--sticks` CSV: header `t_s,ail_us,ele_us,thr_us,rud_us,link`; times must
     /// not decrease; `link` is 0 or 1. Errors name the line.
     pub fn parse_csv(text: &str) -> Result<Timeline, String> {
+        // A UTF-8 byte-order mark (some editors write one) is not part of the header.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         const HEADER: [&str; 6] = ["t_s", "ail_us", "ele_us", "thr_us", "rud_us", "link"];
         let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
         let Some((hn, header)) = lines.next() else {
@@ -84,7 +86,7 @@ impl Timeline {
         };
         let cols = crate::csv::Header::parse(header);
         if header.split(',').map(str::trim).ne(HEADER) {
-            return Err(format!("line {}: header must be `{}`, found `{}`", hn + 1, HEADER.join(","), header.trim()));
+            return Err(format!("line {}: header must be `{}`, found `{}`", hn + 1, HEADER.join(","), crate::csv::echo(header.trim())));
         }
         let mut rows = Vec::new();
         let mut last_t = f64::NEG_INFINITY;
@@ -96,8 +98,17 @@ impl Timeline {
                 *slot = r.get::<f64>(k).map_err(|e| e.to_string())?;
             }
             let [t, ail, ele, thr, rud, link] = v;
-            if !(t.is_finite() && t >= 0.0 && t >= last_t) {
-                return Err(format!("line {line_no}: t_s {t} must be ≥ 0 and not go back in time"));
+            if !(t.is_finite() && (0.0..=MAX_STICK_TIME_S).contains(&t)) {
+                return Err(format!(
+                    "line {line_no}: t_s {t:.3e} must be between 0 and {MAX_STICK_TIME_S} s (the longest flight `fly` runs)"
+                ));
+            }
+            if t < last_t {
+                return Err(format!("line {line_no}: t_s {t} goes back in time (the row before is at {last_t})"));
+            }
+            if t == last_t {
+                // Two rows at one instant: only the last would ever take effect.
+                return Err(format!("line {line_no}: t_s {t} repeats the row before; give each row its own time"));
             }
             for (name, w) in [("ail_us", ail), ("ele_us", ele), ("thr_us", thr), ("rud_us", rud)] {
                 if !(0.0..=19_000.0).contains(&w) {
@@ -134,6 +145,9 @@ impl Timeline {
         s
     }
 }
+
+/// The latest time a stick file may name, s: `fly --duration`'s own cap.
+pub const MAX_STICK_TIME_S: f64 = 3600.0;
 
 /// Aileron pulse for a roll target (right side down positive), reference §6.6.
 pub fn ail_us_for_roll_deg(deg: f64) -> f64 {
@@ -605,5 +619,22 @@ mod tests {
         assert!(e.is_some_and(|e| e.contains("line 3")));
         let e = Timeline::parse_csv("t_s,ail_us,ele_us,thr_us,rud_us,link\n1,1,2,3,4,2\n").err();
         assert!(e.is_some_and(|e| e.contains("link")));
+    }
+
+    #[test]
+    fn a_stick_time_past_the_one_hour_cap_is_refused_with_its_line() {
+        for t in ["1e308", "5000", "inf"] {
+            let text = format!("t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1,2,3,4,1\n{t},1,2,3,4,1\n");
+            let e = Timeline::parse_csv(&text).err().unwrap_or_else(|| panic!("t_s = {t} accepted"));
+            assert!(e.contains("line 3") && e.len() < 120, "{e}");
+        }
+    }
+
+    #[test]
+    fn duplicate_times_are_refused_and_a_byte_order_mark_is_accepted() {
+        let e = Timeline::parse_csv("t_s,ail_us,ele_us,thr_us,rud_us,link\n1,1,2,3,4,1\n1,1,2,3,4,0\n").err();
+        assert!(e.is_some_and(|e| e.contains("line 3") && e.contains("repeats")));
+        let t = Timeline::parse_csv("\u{feff}t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1,2,3,4,1\n");
+        assert!(t.is_ok(), "{t:?}");
     }
 }

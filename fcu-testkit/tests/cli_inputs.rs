@@ -1,0 +1,80 @@
+//! Bad input files and options for `fcu-sim`: each gets a short, printable error naming it and
+//! exit status 2 (findings of an adversarial pass).
+
+use std::process::Command;
+
+fn fcu_sim(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_fcu-sim")).args(args).output().unwrap_or_else(|e| panic!("{e}"));
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+fn dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("fcu-sim-inputs-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn a_stick_time_of_1e308_is_an_error_not_a_crash() {
+    let d = dir("huge-t");
+    let sticks = d.join("s.csv");
+    std::fs::write(&sticks, "t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1500,1500,1000,1500,1\n1e308,1500,1500,1000,1500,1\n").unwrap();
+    let (code, _, err) =
+        fcu_sim(&["fly", "--scenario", "hover", "--sticks", sticks.to_str().unwrap(), "--out", d.join("out").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("line 3") && err.len() < 300, "{err}");
+}
+
+#[test]
+fn a_duration_shorter_than_one_tick_is_refused() {
+    let d = dir("short");
+    let (code, _, err) = fcu_sim(&["fly", "--scenario", "hover", "--duration", "0.0001", "--out", d.join("out").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--duration"), "{err}");
+}
+
+#[test]
+fn an_expected_value_that_cannot_fail_is_refused() {
+    let d = dir("inf");
+    let input = concat!(env!("CARGO_MANIFEST_DIR"), "/data/golden/replay/scenario_1.in.csv.gz");
+    let expect = concat!(env!("CARGO_MANIFEST_DIR"), "/data/golden/replay/scenario_1.out.csv.gz");
+    let text = fcu_testkit::csv::read_text(std::path::Path::new(expect)).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut f: Vec<String> = lines[1].split(',').map(str::to_string).collect();
+    f[5] = "inf".into();
+    lines[1] = f.join(",");
+    let bad = d.join("expect.csv");
+    std::fs::write(&bad, lines.join("\n") + "\n").unwrap();
+    let (code, _, err) = fcu_sim(&[
+        "replay",
+        "--profile",
+        "reference",
+        input,
+        "--expect",
+        bad.to_str().unwrap(),
+        "--out",
+        d.join("o.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("line 2") && err.contains("not a finite f32"), "{err}");
+}
+
+#[test]
+fn a_byte_order_mark_is_accepted() {
+    let d = dir("bom");
+    let sticks = d.join("s.csv");
+    std::fs::write(&sticks, "\u{feff}t_s,ail_us,ele_us,thr_us,rud_us,link\n0,1500,1500,1000,1500,1\n").unwrap();
+    let (code, out, err) = fcu_sim(&[
+        "fly",
+        "--scenario",
+        "hover",
+        "--sticks",
+        sticks.to_str().unwrap(),
+        "--duration",
+        "0.5",
+        "--out",
+        d.join("out").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+}
