@@ -95,16 +95,28 @@ impl Recording {
         let mut lines = text.lines().enumerate();
         let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
         if header != HEADER {
-            return Err(err_at(1, None, format!("expected the header `{HEADER}`, found `{header}`")));
+            return Err(err_at(1, None, format!("expected the header `{HEADER}`, found `{}`", crate::csv::echo(header))));
         }
-        let mut samples = Vec::new();
+        let mut samples: Vec<Sample> = Vec::new();
         for (i, raw) in lines {
             let line_no = i + 1;
             let line = raw.trim();
             if line.is_empty() {
                 continue;
             }
-            samples.push(parse_line(line, line_no)?);
+            let sample = parse_line(line, line_no)?;
+            // The estimator runs at the mean step: a time that stands still or goes back is a
+            // broken file, not a sample.
+            if let Some(prev) = samples.last() {
+                if sample.t_s <= prev.t_s {
+                    return Err(err_at(
+                        line_no,
+                        Some("t_s"),
+                        format!("{} does not come after the previous sample's {}", sample.t_s, prev.t_s),
+                    ));
+                }
+            }
+            samples.push(sample);
         }
         Ok(Recording { samples })
     }
@@ -159,6 +171,11 @@ fn parse_line(line: &str, line_no: usize) -> Result<Sample, BroadError> {
         return Err(err_at(line_no, Some("movement"), format!("`{mv}` is neither 0 nor 1")));
     };
     let ref_q = [qw, qx, qy, qz];
+    let norm = ref_q.iter().map(|c| c * c).sum::<f64>().sqrt();
+    if norm.is_finite() && !(0.5..=1.5).contains(&norm) {
+        // A ground truth of norm 0 (or far from 1) cannot be a rotation: the error would be NaN.
+        return Err(err_at(line_no, Some("ref_qw"), format!("the ground-truth quaternion has norm {norm:.3}, not a rotation")));
+    }
     Ok(Sample {
         t_s,
         gyr_rad_s: [gx, gy, gz],

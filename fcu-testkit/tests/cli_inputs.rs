@@ -78,3 +78,47 @@ fn a_byte_order_mark_is_accepted() {
     ]);
     assert_eq!(code, 0, "{out}\n{err}");
 }
+
+#[test]
+fn an_unwritable_out_is_named_before_the_flight_and_nothing_is_left_behind() {
+    let d = dir("unwritable");
+    // A file where the directory should be.
+    let blocker = d.join("file");
+    std::fs::write(&blocker, b"x").unwrap();
+    let (code, out, err) = fcu_sim(&["fly", "--scenario", "hover", "--out", blocker.join("out").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out"), "{err}");
+    assert!(!out.contains("simulated"), "the flight ran before the output was checked: {out}");
+}
+
+#[test]
+fn replay_to_a_full_disk_is_an_error() {
+    if !std::path::Path::new("/dev/full").exists() {
+        return;
+    }
+    let input = concat!(env!("CARGO_MANIFEST_DIR"), "/data/golden/replay/scenario_1.in.csv.gz");
+    let out = Command::new(env!("CARGO_BIN_EXE_fcu-sim"))
+        .args(["replay", "--profile", "reference", input])
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("standard output"));
+}
+
+#[test]
+fn a_recording_whose_time_goes_back_or_whose_truth_is_zero_is_refused() {
+    let d = dir("broad");
+    let header = fcu_testkit::broad::HEADER;
+    for (name, rows) in [
+        ("back", "0.01,0,0,0,0,0,9.81,1,0,0,0,1\n0.005,0,0,0,0,0,9.81,1,0,0,0,1\n"),
+        ("zero", "0.01,0,0,0,0,0,9.81,0,0,0,0,1\n0.02,0,0,0,0,0,9.81,1,0,0,0,1\n"),
+    ] {
+        let f = d.join(format!("{name}.csv"));
+        std::fs::write(&f, format!("{header}\n{rows}")).unwrap();
+        let (code, _, err) = fcu_sim(&["estimate", f.to_str().unwrap(), "--out", d.join("est.csv").to_str().unwrap()]);
+        assert_eq!(code, 2, "{name}: {err}");
+        assert!(err.contains("line 2") || err.contains("line 3"), "{name}: {err}");
+        assert!(!d.join("est.csv").exists(), "{name}: output left behind");
+    }
+}

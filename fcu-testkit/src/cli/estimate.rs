@@ -1,6 +1,5 @@
 //! `fcu-sim estimate`: run an attitude estimator over a BROAD-format IMU recording.
 
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -28,13 +27,9 @@ pub fn run(a: &EstimateArgs) -> Result<ExitCode, CliError> {
         rec.sample_period_s().ok_or_else(|| CliError(format!("{}: need at least two samples with increasing t_s", a.input.display())))?;
     let profile = a.profile;
     let est = broad::run(&rec, profile.estimator_config(dt_s));
-    match &a.out {
-        Some(path) => {
-            let f = File::create(path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
-            broad::write_estimates(BufWriter::new(f), &rec, &est)?;
-        }
-        None => broad::write_estimates(BufWriter::new(std::io::stdout().lock()), &rec, &est)?,
-    }
+    let mut bytes = Vec::new();
+    broad::write_estimates(BufWriter::new(&mut bytes), &rec, &est)?;
+    super::write_output(a.out.as_deref(), &bytes)?;
     if let Some(rmse) = broad::inclination_rmse_deg(&rec, &est) {
         eprintln!(
             "{}: {} profile, {} samples at {:.1} Hz, inclination RMSE {rmse:.3}°",

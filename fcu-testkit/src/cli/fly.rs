@@ -98,12 +98,41 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
         .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
     let spread = check_spread(a.spread)?;
     let sc = prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration)?;
-    std::fs::create_dir_all(&a.out).map_err(|e| CliError(format!("--out {}: {e}", a.out.display())))?;
+    let out = OutputDir::prepare(&a.out)?;
 
     let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
-    let log = sim::run(&sc, profile, &opts).map_err(|e| CliError(e.to_string()))?;
+    let log = sim::run(&sc, profile, &opts).map_err(|e| out.abandon(CliError(e.to_string())))?;
     let title = format!("fcu-sim fly: {} — profile {}, seed {}", sc.name, profile.name(), a.seed);
-    report(&a.out, &title, &sc, &log)
+    report(&a.out, &title, &sc, &log).map_err(|e| out.abandon(e))
+}
+
+/// The `--out` directory of a flight: checked writable before the flight starts (not after
+/// it), and removed again if this run created it and then failed.
+pub struct OutputDir {
+    path: PathBuf,
+    created: bool,
+}
+
+impl OutputDir {
+    pub fn prepare(path: &Path) -> Result<OutputDir, CliError> {
+        let created = !path.exists();
+        std::fs::create_dir_all(path).map_err(|e| CliError(format!("--out {}: {e}", path.display())))?;
+        let probe = path.join(".fcu-write-check");
+        let writable = std::fs::write(&probe, b"").and_then(|()| std::fs::remove_file(&probe));
+        let dir = OutputDir { path: path.to_path_buf(), created };
+        match writable {
+            Ok(()) => Ok(dir),
+            Err(e) => Err(dir.abandon(CliError(format!("--out {}: cannot write there: {e}", path.display())))),
+        }
+    }
+
+    /// The run failed: remove the directory if this run made it, and hand the error on.
+    pub fn abandon(&self, e: CliError) -> CliError {
+        if self.created {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+        e
+    }
 }
 
 /// Writes `flight.csv` and `flight.svg` into `out`, prints the metrics and the criteria, and
@@ -113,8 +142,19 @@ pub fn report(out: &Path, title: &str, sc: &Scenario, log: &FlightLog) -> Result
     let verdicts = metrics::check_all(log, sc);
     let csv_path = out.join("flight.csv");
     let svg_path = out.join("flight.svg");
-    std::fs::write(&csv_path, log.to_csv()).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))?;
-    sim::plot::write_svg(log, title, &svg_path).map_err(CliError)?;
+    // Both under temporary names first, renamed once both are complete: never a CSV without
+    // its plot.
+    let (csv_tmp, svg_tmp) = (out.join(".flight.csv.partial"), out.join(".flight.svg.partial"));
+    let written = std::fs::write(&csv_tmp, log.to_csv())
+        .map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))
+        .and_then(|()| sim::plot::write_svg(log, title, &svg_tmp).map_err(CliError))
+        .and_then(|()| std::fs::rename(&csv_tmp, &csv_path).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display()))))
+        .and_then(|()| std::fs::rename(&svg_tmp, &svg_path).map_err(|e| CliError(format!("writing {}: {e}", svg_path.display()))));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&csv_tmp);
+        let _ = std::fs::remove_file(&svg_tmp);
+        return Err(e);
+    }
 
     print_summary(sc, log, &m, &verdicts);
     println!("wrote {} ({} rows at {:.2} Hz) and {}", csv_path.display(), log.rows.len(), log.tick_hz, svg_path.display());

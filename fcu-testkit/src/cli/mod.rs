@@ -46,6 +46,32 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// Writes a command's output: to `path` through a temporary file in the same directory,
+/// renamed when complete (a failure leaves nothing half-written), or to standard output, where
+/// a closed pipe (`| head`) is the reader's choice, not an error.
+pub fn write_output(path: Option<&std::path::Path>, bytes: &[u8]) -> Result<(), CliError> {
+    use std::io::Write;
+    match path {
+        Some(p) => {
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+            let tmp = p.with_file_name(format!(".{name}.partial"));
+            let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, p));
+            written.map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                CliError(format!("cannot write {}: {e}", p.display()))
+            })
+        }
+        None => {
+            let mut out = std::io::stdout().lock();
+            match out.write_all(bytes).and_then(|()| out.flush()) {
+                Ok(()) => Ok(()),
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+                Err(e) => Err(CliError(format!("cannot write to standard output: {e}"))),
+            }
+        }
+    }
+}
+
 /// A CLI error: a message meant for the person at the terminal.
 #[derive(Debug)]
 pub struct CliError(pub String);

@@ -32,19 +32,14 @@ pub fn run(a: &ReplayArgs) -> Result<ExitCode, CliError> {
     let text = read_text(&a.input)?;
     let rows = replay::parse_input(&text).map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
     let out = replay::run(a.profile.config(), &rows).map_err(|e| CliError(e.to_string()))?;
+    // The expected file is read first: a broken one stops the run before anything is written.
+    let want = match &a.expect {
+        Some(p) => Some(replay::parse_output(&read_text(p)?).map_err(|e| CliError(format!("{}: {e}", p.display())))?),
+        None => None,
+    };
     let csv = replay::format_output(&out);
-    match &a.out {
-        Some(p) => std::fs::write(p, &csv).map_err(|e| CliError(format!("cannot write {}: {e}", p.display())))?,
-        None => {
-            use std::io::Write;
-            let mut stdout = std::io::stdout().lock();
-            // A closed pipe (`| head`) is not an error worth a message.
-            let _ = stdout.write_all(csv.as_bytes());
-        }
-    }
-    if let Some(p) = &a.expect {
-        let text = read_text(p)?;
-        let want = replay::parse_output(&text).map_err(|e| CliError(format!("{}: {e}", p.display())))?;
+    super::write_output(a.out.as_deref(), csv.as_bytes())?;
+    if let Some(want) = want {
         let c = replay::compare(&out, &want);
         eprintln!(
             "{} rows: {} compare values and {} floats not bit-identical, {} outside tolerance",
