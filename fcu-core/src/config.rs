@@ -34,7 +34,8 @@ pub const TIMER_CLOCK_HZ: u32 = 84_000_000;
 impl Timing {
     /// The tick rate the timer really produces, Hz.
     pub fn tick_hz(&self) -> f32 {
-        let div = (u32::from(self.tick_timer_psc) + 1) * (u32::from(self.tick_timer_arr) + 1);
+        // In u64: (PSC + 1)·(ARR + 1) reaches 2^32 at PSC = ARR = 65 535.
+        let div = (u64::from(self.tick_timer_psc) + 1) * (u64::from(self.tick_timer_arr) + 1);
         TIMER_CLOCK_HZ as f32 / div as f32
     }
 }
@@ -289,5 +290,12 @@ mod tests {
         let mut c = Config::default();
         c.gyro_filter.b0 = f32::NAN;
         assert_eq!(c.validate(), Err(ConfigError::GyroFilter));
+    }
+
+    #[test]
+    fn the_tick_rate_of_the_largest_timer_settings_does_not_overflow() {
+        let t = Timing { tick_timer_psc: u16::MAX, tick_timer_arr: u16::MAX, tick_dt_s: 1.0 };
+        let hz = t.tick_hz();
+        assert!(hz.is_finite() && hz > 0.0 && hz < 0.02, "{hz}");
     }
 }

@@ -431,7 +431,8 @@ impl Inner {
             self.motor_command = [0.0; 4];
         }
 
-        // 6. Guard, last and unconditional: compare values come from here only.
+        // 6. Guard, last and unconditional. The one other writer of compare values is
+        // `motors_off`, for a tick that a calibration in progress ends early: off values too.
         let range = self.compare_range;
         self.compare = self.motor_command.map(|c| range.to_compare(c));
         if !self.decision.motors_enabled || self.fault.is_some() {

@@ -130,7 +130,9 @@ impl RcConfig {
             }
             _ => w - i32::from(self.rud_center),
         };
-        v as i16
+        // Saturated, not wrapped: a width far past the centre stays a full deflection. (The
+        // decoder's widths, below 32 768 counts, never reach either bound.)
+        v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
     }
 
     /// Store a width into the sticks (one channel), as `update_rc_data`.
@@ -556,6 +558,13 @@ mod tests {
         let b = d.take();
         assert_eq!(b.width_counts, [None; CHANNELS]);
         assert!(b.edge_seen[THR] && b.edge_seen[ELE]);
+    }
+
+    #[test]
+    fn a_width_far_past_centre_saturates_instead_of_wrapping() {
+        let mut s = Sticks::default();
+        REF.apply_width(&mut s, AIL, u16::MAX);
+        assert_eq!(s.ail, i16::MAX);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //!   gesture latches "armed" for ever, motors run while armed and any edge arrived in the
 //!   last 31 ms, no failsafe, calibration on the gesture at any time.
 //! - [`SupervisorConfig::Safe`]: the product's safety layer (product.md §4), a state machine
-//!   whose table is [`Supervisor::step`]. Every number is a field of [`SafetyConfig`], in
+//!   whose table is `Supervisor::step_table` (entered through [`Supervisor::step`]). Every number is a field of [`SafetyConfig`], in
 //!   control ticks.
 
 use crate::imu::SensorFault;

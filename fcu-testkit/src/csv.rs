@@ -117,6 +117,17 @@ pub fn echo(field: &str) -> String {
     }
 }
 
+/// A number as it may appear in a message: plain when it is of a readable size, else in
+/// scientific notation (1e308 would otherwise print as 309 digits).
+pub fn short_number(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e7).contains(&v.abs()) {
+        let s = format!("{v:.6}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// Decompressed text larger than this is refused (the largest real input is a few MB).
 pub const MAX_TEXT_BYTES: u64 = 256 * 1024 * 1024;
 
@@ -221,6 +232,13 @@ mod tests {
         let e = Row::split(8, "1", &h).err().unwrap();
         assert_eq!(e.to_string(), "line 8: expected 2 columns, found 1");
         assert!(h.indices(["c"]).is_err());
+    }
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(short_number(1e308), "1.000e308");
+        assert_eq!(short_number(2.5), "2.5");
+        assert_eq!(short_number(0.0035), "0.0035");
     }
 
     #[test]

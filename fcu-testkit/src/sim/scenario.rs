@@ -103,16 +103,17 @@ impl Timeline {
                     "line {line_no}: t_s {t:.3e} must be between 0 and {MAX_STICK_TIME_S} s (the longest flight `fly` runs)"
                 ));
             }
+            let n = crate::csv::short_number;
             if t < last_t {
-                return Err(format!("line {line_no}: t_s {t} goes back in time (the row before is at {last_t})"));
+                return Err(format!("line {line_no}: t_s {} goes back in time (the row before is at {})", n(t), n(last_t)));
             }
             if t == last_t {
                 // Two rows at one instant: only the last would ever take effect.
-                return Err(format!("line {line_no}: t_s {t} repeats the row before; give each row its own time"));
+                return Err(format!("line {line_no}: t_s {} repeats the row before; give each row its own time", n(t)));
             }
             for (name, w) in [("ail_us", ail), ("ele_us", ele), ("thr_us", thr), ("rud_us", rud)] {
                 if !(0.0..=19_000.0).contains(&w) {
-                    return Err(format!("line {line_no}: `{name}` {w} µs is outside 0..19000 (a 20 ms frame)"));
+                    return Err(format!("line {line_no}: `{name}` {} µs is outside 0..19000 (a 20 ms frame)", crate::csv::short_number(w)));
                 }
             }
             let link = if link == 0.0 {
@@ -120,7 +121,7 @@ impl Timeline {
             } else if link == 1.0 {
                 true
             } else {
-                return Err(format!("line {line_no}: `link` must be 0 or 1, found {link}"));
+                return Err(format!("line {line_no}: `link` must be 0 or 1, found {}", crate::csv::short_number(link)));
             };
             last_t = t;
             rows.push(StickRow { t_s: t, ail_us: ail, ele_us: ele, thr: Throttle::Us(thr), rud_us: rud, link });
