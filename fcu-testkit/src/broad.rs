@@ -112,7 +112,11 @@ impl Recording {
                     return Err(err_at(
                         line_no,
                         Some("t_s"),
-                        format!("{} does not come after the previous sample's {}", sample.t_s, prev.t_s),
+                        format!(
+                            "{} does not come after the previous sample's {}",
+                            crate::csv::short_number(sample.t_s),
+                            crate::csv::short_number(prev.t_s)
+                        ),
                     ));
                 }
             }
