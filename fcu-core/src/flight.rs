@@ -121,6 +121,8 @@ pub struct Status {
     /// Sticks as received.
     pub sticks: Sticks,
     pub calibration: CalibrationPhase,
+    /// A calibration has passed since power-on (arming needs one).
+    pub calibrated: bool,
     pub fault: Option<SensorFault>,
     pub quat: Quat,
     pub tilt: Tilt,
@@ -544,6 +546,7 @@ impl Inner {
             link: radio.link,
             sticks: radio.sticks,
             calibration: self.calibrator.phase(),
+            calibrated: self.calibrator.has_passed(),
             fault: self.fault,
             quat: self.outer.quat,
             tilt: self.outer.tilt,

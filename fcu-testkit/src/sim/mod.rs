@@ -19,7 +19,7 @@ pub mod scenario;
 
 use std::time::{Duration, Instant};
 
-use fcu_core::imu::{CalibrationOutcome, CalibrationPhase};
+use fcu_core::imu::CalibrationPhase;
 use fcu_core::{Config, FlightController};
 
 use imu_model::{ImuModel, ImuModelParams, Vibration};
@@ -195,14 +195,13 @@ pub trait FlightComputer {
 pub struct InProcess {
     fc: FlightController,
     decoder: fcu_core::rc::EdgeDecoder,
-    calibrated: bool,
 }
 
 impl InProcess {
     pub fn new(cfg: Config) -> Result<InProcess, SimError> {
         let fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
         let decoder = fc.edge_decoder();
-        Ok(InProcess { fc, decoder, calibrated: false })
+        Ok(InProcess { fc, decoder })
     }
 
     pub fn controller(&self) -> &FlightController {
@@ -224,9 +223,6 @@ impl FlightComputer for InProcess {
         if let Some(job) = out.outer_job {
             self.fc.run_outer(&job);
         }
-        if matches!(self.fc.status().calibration, CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) }) {
-            self.calibrated = true;
-        }
         Ok(out.compare)
     }
 
@@ -247,7 +243,7 @@ impl FlightComputer for InProcess {
             roll_target_deg: deg(st.target_rad[1]),
             pitch_target_deg: deg(st.target_rad[0]),
             yaw_target_deg: deg(st.target_rad[2]),
-            calibrated: self.calibrated,
+            calibrated: st.calibrated,
             calibrating,
             calibration_restarts: restarts,
         }
