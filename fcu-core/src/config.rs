@@ -15,7 +15,7 @@ use crate::control::{ControlConfig, Derivative};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
-use crate::rc::{PulseRules, RcConfig, YawStick};
+use crate::rc::{PulseRules, RcConfig, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
 
 /// The control tick.
@@ -161,7 +161,7 @@ impl Config {
         if !self.estimator.is_valid() {
             return Err(ConfigError::Estimator);
         }
-        if !self.rc.is_valid() {
+        if !self.rc.is_valid() || !self.pulse_window_cannot_alias() {
             return Err(ConfigError::Rc);
         }
         if !self.control.is_valid() {
@@ -171,11 +171,37 @@ impl Config {
             return Err(ConfigError::Mixer);
         }
         if let SupervisorConfig::Safe(s) = self.supervisor {
-            if !s.is_valid() {
+            // One frame keeps the link good for the channel timeout: a recovery time no longer
+            // than that would hand control back to a link that delivers a single frame, and a
+            // stage-2 budget no longer than that would skip stage 1.
+            let timeout = self.rc.link_timeout_ticks;
+            if !s.is_valid() || s.recovery_ticks <= timeout || s.failsafe_off_ticks <= timeout {
                 return Err(ConfigError::Supervisor);
             }
         }
         Ok(())
+    }
+
+    /// With validated pulses, the edges of a pulse may be at most `max_pulse_ticks` control
+    /// ticks apart. That must let every valid width through, delivered up to one tick late
+    /// (the capture interrupt can be held off past a tick's `take`), and must stop any pulse
+    /// longer than the 15-bit capture wrap, whose counts would alias into a valid width: its
+    /// edges are at least (wrap + shortest width) / tick − 1 ticks apart, one less if the rise
+    /// came late.
+    fn pulse_window_cannot_alias(&self) -> bool {
+        let PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } = self.rc.pulses else {
+            return true;
+        };
+        // Ticks spanned by `counts`: counts × timer clock / (capture clock × tick divider).
+        let t = &self.timing;
+        let divider = (u64::from(t.tick_timer_psc) + 1) * (u64::from(t.tick_timer_arr) + 1);
+        let per = u64::from(COUNTS_PER_US) * 1_000_000 * divider;
+        let ticks_ceil = |counts: u64| (counts * u64::from(TIMER_CLOCK_HZ)).div_ceil(per);
+        let ticks_floor = |counts: u64| counts * u64::from(TIMER_CLOCK_HZ) / per;
+        let longest_valid = ticks_ceil(u64::from(max_counts)) + 1;
+        let shortest_alias = ticks_floor(u64::from(CAPTURE_WRAP) + u64::from(min_counts)).saturating_sub(2);
+        let window = u64::from(max_pulse_ticks);
+        longest_valid <= window && window <= shortest_alias
     }
 }
 
@@ -201,8 +227,9 @@ impl Default for Config {
             estimator: EstimatorConfig::Vqf(VqfConfig::DEFAULT),
             rc: RcConfig {
                 // D9: 800..2200 µs pulses from both edges of one pulse, the edges at most 3 ticks
-                // apart (a 2.2 ms pulse spans 2 at 800 Hz; a pulse past the 8.192 ms capture
-                // wrap at least 6), so no width aliases; 100 ms channel timeout.
+                // apart (a 2.2 ms pulse spans 2 at 800 Hz, 3 if an edge comes a tick late; a
+                // pulse past the 8.192 ms capture wrap at least 6), so no width aliases
+                // (`Config::validate` checks the window); 100 ms channel timeout.
                 pulses: PulseRules::Validated { min_counts: 3200, max_counts: 8800, max_pulse_ticks: 3 },
                 link_timeout_ticks: 80,
                 // D8: yaw rate proportional to the stick beyond the dead band.
@@ -260,6 +287,37 @@ mod tests {
         assert_eq!(r.mixer.throttle_offset.to_bits(), 0x441e_5550);
         assert_eq!(r.gyro_filter.a1.to_bits(), 0x3f71_5bef);
         assert_eq!(r.gyro_filter.b1.to_bits(), 0x3e47_f2cd);
+    }
+
+    #[test]
+    fn a_pulse_window_that_lets_a_pulse_past_the_capture_wrap_through_is_an_error() {
+        let with_window = |max_pulse_ticks| {
+            let mut c = Config::default();
+            c.rc.pulses = PulseRules::Validated { min_counts: 3200, max_counts: 8800, max_pulse_ticks };
+            c.validate()
+        };
+        // 2.2 ms spans 2 ticks (3 with a late edge); 8.992 ms (wrap + 0.8 ms) at least 7 (5 with
+        // a late rise and rounding): 3..=5 both accept every valid pulse and stop every alias.
+        assert_eq!(with_window(2), Err(ConfigError::Rc));
+        for ok in 3..=5 {
+            assert_eq!(with_window(ok), Ok(()), "{ok}");
+        }
+        assert_eq!(with_window(6), Err(ConfigError::Rc));
+    }
+
+    #[test]
+    fn a_recovery_time_a_single_frame_could_satisfy_is_an_error() {
+        // One frame keeps the link good for the 100 ms channel timeout.
+        let with = |f: &dyn Fn(&mut SafetyConfig)| {
+            let mut s = SafetyConfig::DEFAULT;
+            f(&mut s);
+            Config { supervisor: SupervisorConfig::Safe(s), ..Config::default() }.validate()
+        };
+        assert_eq!(with(&|s| s.recovery_ticks = 80), Err(ConfigError::Supervisor));
+        assert_eq!(with(&|s| s.recovery_ticks = 81), Ok(()));
+        assert_eq!(with(&|s| s.recovery_ticks = 0), Err(ConfigError::Supervisor));
+        assert_eq!(with(&|s| s.failsafe_off_ticks = 80), Err(ConfigError::Supervisor));
+        assert_eq!(with(&|s| s.loss_forget_ticks = 0), Err(ConfigError::Supervisor));
     }
 
     #[test]

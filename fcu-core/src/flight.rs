@@ -519,6 +519,8 @@ impl Inner {
                 let sticks = radio.sticks;
                 let inputs = Inputs {
                     link: radio.link,
+                    // Only read without a good link.
+                    silence_ticks: if radio.link { 0 } else { self.receiver.silence_ticks(&self.cfg.rc) },
                     sticks,
                     gesture: radio.gesture,
                     throttle_low: self.cfg.rc.throttle_low(&sticks),

@@ -415,6 +415,18 @@ impl Receiver {
         self.changed
     }
 
+    /// Ticks since the link's anchor: with validated pulses, the last accepted pulse of the
+    /// channel heard from longest ago; with the reference's rules, the last edge (`u32::MAX`
+    /// if there never was one). The link is good while this is below the timeout; the
+    /// supervisor counts lost time from it.
+    #[inline(never)] // Needed only without a good link: kept off the 800 Hz path.
+    pub fn silence_ticks(&self, cfg: &RcConfig) -> u32 {
+        // `link_until` is at most `now` + timeout (an anchor is never in the future), and `now`
+        // never comes near `u64::MAX`: no wrap.
+        let since_anchor = self.now + u64::from(cfg.link_timeout_ticks) - self.link_until;
+        since_anchor.min(u64::from(u32::MAX)) as u32
+    }
+
     /// The state the last [`update`](Self::update) or [`force`](Self::force) left.
     pub fn state(&self) -> RadioState {
         RadioState { sticks: self.sticks, link: self.link, gesture: self.gesture }
@@ -591,6 +603,24 @@ mod tests {
         assert_eq!(d.take().width_counts[THR], Some(8800));
     }
 
+    /// One pulse on THR, rising at absolute capture count `rise_at` and `length` counts long,
+    /// fed to the default decoder tick by tick (5000 counts per tick): the width it reports.
+    fn decode_one_pulse(rise_at: u64, length: u64) -> Option<u16> {
+        const TICK: u64 = 5000;
+        let mut d = EdgeDecoder::new(VALID);
+        let fall_at = rise_at + length;
+        let mut width = None;
+        for tick in rise_at / TICK..=fall_at / TICK {
+            for (at, high) in [(rise_at, true), (fall_at, false)] {
+                if at / TICK == tick {
+                    d.on_edge(THR, (at % u64::from(CAPTURE_WRAP)) as u16, high);
+                }
+            }
+            width = width.or(d.take().width_counts[THR]);
+        }
+        width
+    }
+
     #[test]
     fn receiver_link_needs_every_channel_with_validated_pulses() {
         let cfg = RcConfig { pulses: VALID, link_timeout_ticks: 80, ..REF };
@@ -669,6 +699,9 @@ mod tests {
                 }
                 last = Some(want);
                 proptest::prop_assert_eq!(got, want);
+                // Lost time counts from the stalest channel's last pulse (or the last edge).
+                let silence = if validated { ages.iter().copied().max().unwrap_or(u32::MAX) } else { since_edge };
+                proptest::prop_assert_eq!(r.silence_ticks(&cfg), silence);
             }
         }
 
@@ -688,6 +721,24 @@ mod tests {
             proptest::prop_assert!(p.abs() <= full.1 && r.abs() <= full.1);
             if ele >= 1800 { proptest::prop_assert_eq!(p, full.0); }
             if ail <= -1800 { proptest::prop_assert_eq!(r, full.1); }
+        }
+
+        #[test]
+        fn every_valid_width_is_accepted_wherever_it_falls_against_the_wrap_and_the_ticks(
+            rise_at in 0u64..10_000_000,
+            width in 3200u64..=8800,
+        ) {
+            // Fed as the firmware feeds it: each edge before the `take` of the tick it came in,
+            // the counter wrapping every 32768 counts, 5000 counts per 800 Hz tick.
+            proptest::prop_assert_eq!(decode_one_pulse(rise_at, width), Some(width as u16));
+        }
+
+        #[test]
+        fn no_pulse_longer_than_the_capture_wrap_is_accepted(
+            rise_at in 0u64..10_000_000,
+            length in u64::from(CAPTURE_WRAP)..20 * u64::from(CAPTURE_WRAP),
+        ) {
+            proptest::prop_assert_eq!(decode_one_pulse(rise_at, length), None);
         }
 
         #[test]

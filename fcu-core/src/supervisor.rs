@@ -20,16 +20,19 @@ pub struct SafetyConfig {
     pub disarm_hold_ticks: u32,
     /// Armed with the throttle low this long disarms (5 s).
     pub auto_disarm_ticks: u32,
-    /// Ticks without a good link, accumulated over the flight, until stage 2: motors off and
-    /// disarmed (0.9 s). The link stops being good 100 ms after the first channel's last
-    /// pulse, so after a single loss stage 2 comes 1.0 s after that pulse.
+    /// Lost time, added up over the flight, at which stage 2 turns the motors off and disarms
+    /// (1.0 s). Each loss counts from the last pulse of the channel that fell silent first
+    /// ([`Inputs::silence_ticks`]), so a single loss reaches stage 2 exactly this long after
+    /// that pulse; the link is declared lost (stage 1) after the radio's channel timeout.
     pub failsafe_off_ticks: u32,
     /// A good link must last this long before stage 1 hands control back (1.0 s): a link
-    /// that delivers a couple of frames now and then never hands it back.
+    /// that delivers a couple of frames now and then never hands it back. A configuration
+    /// must make it longer than the radio's channel timeout (`Config::validate`): one frame
+    /// keeps the link good for that long.
     pub recovery_ticks: u32,
     /// Lost time is forgotten slowly, never reset by a recovery: one lost tick for every this
-    /// many ticks flown on a good link after control was handed back (4: one second of loss
-    /// takes four seconds of good link to forget).
+    /// many ticks flown under stick control after control was handed back (4: one second of
+    /// loss takes four seconds of good flight to forget).
     pub loss_forget_ticks: u32,
     /// Arming is refused beyond this tilt from level, rad (25°).
     pub max_arm_tilt_rad: f32,
@@ -42,18 +45,21 @@ impl SafetyConfig {
         arm_hold_ticks: 800,
         disarm_hold_ticks: 800,
         auto_disarm_ticks: 4000,
-        failsafe_off_ticks: 720,
+        failsafe_off_ticks: 800,
         recovery_ticks: 800,
         loss_forget_ticks: 4,
         max_arm_tilt_rad: 0.436_332_3,
         boot_settle_ticks: 1600,
     };
 
+    /// Every number can work on its own; `Config::validate` adds the checks against the
+    /// radio's channel timeout.
     pub fn is_valid(&self) -> bool {
         self.arm_hold_ticks > 0
             && self.disarm_hold_ticks > 0
             && self.auto_disarm_ticks > 0
             && self.failsafe_off_ticks > 0
+            && self.recovery_ticks > 0
             && self.loss_forget_ticks > 0
             && self.max_arm_tilt_rad.is_finite()
             && self.max_arm_tilt_rad > 0.0
@@ -78,8 +84,8 @@ pub enum FlightState {
     Armed,
     /// Link lost while armed: level, yaw rate 0, throttle held but never raised.
     FailsafeLevel,
-    /// Link lost for 1 s: motors off, disarmed; the link must return and a full arming
-    /// procedure follow.
+    /// Link lost for 1 s in total: motors off, disarmed; the link must return and a full
+    /// arming procedure follow.
     FailsafeOff,
     /// Averaging sensor offsets; motors off.
     Calibrating,
@@ -186,6 +192,10 @@ pub struct Inputs {
     pub sensor_fault: Option<SensorFault>,
     /// Tilt from level of the latest estimate, rad.
     pub tilt_rad: f32,
+    /// Ticks since the last accepted pulse of the channel heard from longest ago (the link is
+    /// good while it is below the channel timeout). Read only while the link is not good: lost
+    /// time counts from that pulse.
+    pub silence_ticks: u32,
 }
 
 impl Inputs {
@@ -193,6 +203,7 @@ impl Inputs {
     /// level, no fault, no gesture.
     pub const READY: Inputs = Inputs {
         link: true,
+        silence_ticks: 0,
         sticks: Sticks { ail: 0, ele: 0, thr: 0, rud: 0 },
         gesture: None,
         throttle_low: true,
@@ -225,11 +236,12 @@ pub struct Supervisor {
     /// The arm/disarm/calibrate gestures were let go since the last one acted (and since the
     /// link came up): a gesture held through a reconnect or an arm must not act again.
     released: bool,
-    /// Lost ticks accumulated over the flight (see [`SafetyConfig::loss_forget_ticks`]), as of
-    /// `forgetting_since`.
+    /// Lost time accumulated since the arming (see [`SafetyConfig::failsafe_off_ticks`] and
+    /// [`loss_forget_ticks`](SafetyConfig::loss_forget_ticks)), as of `forgetting_since`.
     lost_ticks: u32,
-    /// Boot tick from which the lost time is being forgotten (control handed back).
+    /// Boot tick from which the lost time is being forgotten (the arming or the last hand-back).
     forgetting_since: u32,
+    /// Consecutive ticks with a good link, up to this one.
     good_ticks: u32,
     low_throttle_ticks: u32,
     boot_ticks: u32,
@@ -404,16 +416,21 @@ impl Supervisor {
             // Latched until reset: motors off, disarmed.
             self.fault.get_or_insert(f);
         }
+        // Lost time: a loss counts from the last pulse of the channel that fell silent first,
+        // and every tick of that silence counts once. A tick without a good link adds the
+        // silence up to it, except what an earlier tick without a good link already counted:
+        // the first tick of a loss adds the channel timeout (or the good ticks since the last
+        // loss, if fewer), each further tick one. It adds up over the flight and is forgotten
+        // only slowly once control is back: a flapping link cannot keep the motors running.
+        let mut lost_now = 0;
         if i.link {
             self.good_ticks = self.good_ticks.saturating_add(1);
         } else {
+            lost_now = i.silence_ticks.min(self.good_ticks.saturating_add(1)).max(1);
             self.good_ticks = 0;
-        }
-        // Lost time counts every tick of stage 1 without a good link, adds up over the flight
-        // and is forgotten only slowly once control is back: a flapping link cannot keep the
-        // motors running.
-        if self.state == FlightState::FailsafeLevel && !i.link {
-            self.lost_ticks = self.lost_ticks.saturating_add(1);
+            if self.state == FlightState::FailsafeLevel {
+                self.lost_ticks = self.lost_ticks.saturating_add(lost_now);
+            }
         }
         let gesture = if i.link { i.gesture } else { None };
         let mut request_calibration = false;
@@ -473,11 +490,12 @@ impl Supervisor {
                 self.low_throttle_ticks = if i.throttle_low { self.low_throttle_ticks.saturating_add(1) } else { 0 };
                 if !i.link {
                     self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
-                    // What is left of earlier losses, plus this tick. (Forgetting is counted
-                    // here, from the ticks flown since the hand-back, not on every flying tick.)
+                    // What is left of earlier losses, plus this one so far. (Forgetting is
+                    // counted here, from the ticks flown since the hand-back, not on every
+                    // flying tick.)
                     let flown = self.boot_ticks.wrapping_sub(self.forgetting_since);
                     let forgotten = flown / cfg.loss_forget_ticks.max(1);
-                    self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(1);
+                    self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(lost_now);
                     if self.lost_ticks >= cfg.failsafe_off_ticks {
                         FlightState::FailsafeOff
                     } else {
@@ -564,6 +582,9 @@ mod tests {
     const CAL: Sticks = Sticks { ail: 1500, ele: -1500, thr: 0, rud: -1500 };
     const IDLE: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: 0 };
     const FLY: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+    /// The radio's channel timeout (100 ms): the first tick without a good link comes this
+    /// long after the last pulse of the channel that fell silent.
+    const TIMEOUT: u32 = 80;
 
     /// A supervisor driven tick by tick, with a good link, calibrated, level, no fault.
     struct Rig {
@@ -601,9 +622,12 @@ mod tests {
             assert_eq!(d.state, FlightState::Armed, "blockers {:?}", d.blockers);
         }
 
+        /// `ticks` ticks without a good link, as a radio reports them: the link is declared lost
+        /// [`TIMEOUT`] ticks after a channel's last pulse, so the silence starts there.
         fn lose_link(&mut self, ticks: u32) -> Decision {
-            self.i.link = false;
             for _ in 0..ticks {
+                self.i.silence_ticks = if self.i.link { TIMEOUT } else { self.i.silence_ticks + 1 };
+                self.i.link = false;
                 self.last = self.s.step(&CFG, &self.i);
             }
             self.last
@@ -611,6 +635,7 @@ mod tests {
 
         fn restore_link(&mut self, ticks: u32) -> Decision {
             self.i.link = true;
+            self.i.silence_ticks = 0;
             for _ in 0..ticks {
                 self.last = self.s.step(&CFG, &self.i);
             }
@@ -623,6 +648,7 @@ mod tests {
         let mut s = Supervisor::new();
         let i = Inputs {
             link: true,
+            silence_ticks: 0,
             sticks: IDLE,
             gesture: None,
             throttle_low: true,
@@ -872,8 +898,9 @@ mod tests {
 
     #[test]
     fn a_flapping_link_cannot_keep_the_motors_running() {
-        // Off 900 ms / on 40 ms (link good about 140 ms of it, the channels' 100 ms validity
-        // included): control is never handed back, and lost time adds up to stage 2.
+        // Off 900 ms / on 40 ms: silent 720 ticks from the last pulse of each burst (640 of them
+        // without a good link), then two frames keep the link good for 112 ticks. Control is
+        // never handed back, and lost time adds up to stage 2 in the second loss.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
@@ -888,52 +915,91 @@ mod tests {
             t += 112;
             assert_ne!(r.last.state, FlightState::Armed, "control handed back to a flapping link");
         };
-        assert!(stage2_at <= 3 * 800, "stage 2 after {stage2_at} ticks");
+        assert!(stage2_at <= 2 * (640 + 112), "stage 2 after {stage2_at} ticks");
     }
 
     #[test]
     fn brief_recoveries_do_not_restart_the_stage_2_clock() {
-        // Off 150 ms / on 40 ms: about 21 % of the frames. The link is good for the 140 ms
-        // after each burst, so the loss per cycle is short; but it never resets.
+        // Off 150 ms / on 40 ms: about 21 % of the frames. Each silence is 120 ticks from the
+        // last pulse, only 40 of them without a good link; the good 112 ticks after each burst
+        // neither hand control back nor forget any of it. 800 / 120: stage 2 in the 7th loss.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
-        let mut t = 0;
-        let stage2_at = loop {
-            let d = r.lose_link(40);
-            t += 40;
-            if d.state == FlightState::FailsafeOff {
-                break t;
+        let mut losses = 0;
+        loop {
+            losses += 1;
+            if r.lose_link(40).state == FlightState::FailsafeOff {
+                break;
             }
-            r.restore_link(112);
-            t += 112;
-        };
-        // Lost: 40 of every 152 ticks, so the 720-tick budget is spent in 18 cycles, 3.3 s.
-        assert!(stage2_at <= 2 * 1400, "stage 2 after {stage2_at} ticks (3.5 s is 2800)");
+            assert_eq!(r.restore_link(112).state, FlightState::FailsafeLevel);
+        }
+        assert_eq!(losses, CFG.failsafe_off_ticks.div_ceil(TIMEOUT + 40 - 1));
+    }
+
+    #[test]
+    fn lost_time_counts_from_the_last_pulse_not_from_the_link_timeout() {
+        // Losses just past the channel timeout: 10 ticks without a good link each, 90 ticks of
+        // silence. Counting only the ticks after the timeout, stage 2 would take 80 of them;
+        // counted from the last pulse it takes 9.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        for loss in 1..=9 {
+            let d = r.lose_link(10);
+            if loss < 9 {
+                assert_eq!(d.state, FlightState::FailsafeLevel, "loss {loss}");
+                r.restore_link(TIMEOUT + 20);
+            } else {
+                assert_eq!(d.state, FlightState::FailsafeOff, "loss {loss}");
+            }
+        }
+    }
+
+    #[test]
+    fn silence_already_counted_is_not_counted_twice() {
+        // Back for 5 ticks only (one channel's pulse made the link good; another goes silent
+        // again): the new loss adds the 6 ticks since the last one, not the channel timeout.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.lose_link(100); // 80 + 99 = 179 lost
+        r.restore_link(5);
+        r.i.link = false;
+        r.i.silence_ticks = TIMEOUT + 200;
+        let mut d = r.s.step(&CFG, &r.i); // + 6 = 185
+        assert_eq!(d.state, FlightState::FailsafeLevel);
+        for _ in 0..CFG.failsafe_off_ticks - 185 - 1 {
+            r.i.silence_ticks += 1;
+            d = r.s.step(&CFG, &r.i);
+            assert_eq!(d.state, FlightState::FailsafeLevel);
+        }
+        r.i.silence_ticks += 1;
+        assert_eq!(r.s.step(&CFG, &r.i).state, FlightState::FailsafeOff);
     }
 
     #[test]
     fn lost_time_is_forgotten_slowly_after_control_is_back() {
-        // 0.5 s lost, control back after the recovery time, then 0.5 s more lost right away:
-        // together past the 0.9 s budget, stage 2.
+        // 0.6 s lost (80 + 399 ticks), control back after the recovery time, then a second loss
+        // right away: together they reach the 1.0 s budget, stage 2.
+        let first = TIMEOUT + 399;
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
         r.lose_link(400);
         assert_eq!(r.restore_link(CFG.recovery_ticks).state, FlightState::Armed);
-        assert_eq!(
-            r.lose_link(CFG.failsafe_off_ticks - 400 + 1).state,
-            FlightState::FailsafeOff,
-            "the earlier loss was forgotten too fast"
-        );
-        // After long enough on a good link, the same second loss only levels.
+        let rest = CFG.failsafe_off_ticks - first - TIMEOUT;
+        assert_eq!(r.lose_link(rest).state, FlightState::FailsafeLevel);
+        assert_eq!(r.lose_link(1).state, FlightState::FailsafeOff, "the earlier loss was forgotten too fast");
+        // After flying four times as long as the loss on a good link, the same second loss
+        // only levels: a second of loss at most.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
         r.lose_link(400);
         r.restore_link(CFG.recovery_ticks);
-        r.run(FLY, 400 * CFG.loss_forget_ticks);
-        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - 1).state, FlightState::FailsafeLevel);
+        r.run(FLY, first * CFG.loss_forget_ticks);
+        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - TIMEOUT).state, FlightState::FailsafeLevel);
     }
 
     #[test]
@@ -948,10 +1014,12 @@ mod tests {
 
     #[test]
     fn link_lost_for_one_second_turns_the_motors_off_and_disarms() {
+        // One second from the last pulse: the link was declared lost after TIMEOUT of it.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
-        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - 1).state, FlightState::FailsafeLevel);
+        assert_eq!(r.lose_link(CFG.failsafe_off_ticks - TIMEOUT).state, FlightState::FailsafeLevel);
+        assert_eq!(r.i.silence_ticks, CFG.failsafe_off_ticks - 1);
         let d = r.lose_link(1);
         assert_eq!(d.state, FlightState::FailsafeOff);
         assert!(!d.motors_enabled);
@@ -959,19 +1027,21 @@ mod tests {
 
     #[test]
     fn a_flickering_link_cannot_stretch_stage_1() {
+        // Losses of 20 ticks (100 silent each), back for half the recovery time: stage 2 the
+        // moment the silences add up to the budget.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
-        let mut lost = 0;
+        let mut silent = 0;
         loop {
-            lost += 20;
+            silent += TIMEOUT + 20 - 1;
             if r.lose_link(20).state == FlightState::FailsafeOff {
                 break;
             }
+            assert!(silent < CFG.failsafe_off_ticks, "stage 1 outlasted its loss budget");
             assert_eq!(r.restore_link(CFG.recovery_ticks / 2).state, FlightState::FailsafeLevel);
-            assert!(lost <= CFG.failsafe_off_ticks, "stage 1 outlasted its loss budget");
         }
-        assert!(lost >= CFG.failsafe_off_ticks);
+        assert!((CFG.failsafe_off_ticks..CFG.failsafe_off_ticks + TIMEOUT + 20).contains(&silent));
     }
 
     #[test]
@@ -1101,6 +1171,8 @@ mod tests {
                 let sticks = Sticks { thr: if throttle_up { 1500 } else { base.thr }, ..base };
                 let i = Inputs {
                     link,
+                    // Any silence: the table and the shortcut must agree whatever the radio says.
+                    silence_ticks: if link { 0 } else { ticks * 7 },
                     sticks,
                     gesture: crate::rc::RcConfig::REFERENCE.gesture(&sticks),
                     throttle_low: sticks.thr < 200,

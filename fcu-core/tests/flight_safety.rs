@@ -32,6 +32,9 @@ struct Bench {
     stuck_imu: bool,
     noise: u32,
     last: Option<TickOutput>,
+    /// Control ticks run, and the tick each channel's last falling edge was fed in.
+    ticks: u32,
+    last_fall_tick: [u32; 4],
 }
 
 impl Bench {
@@ -49,6 +52,8 @@ impl Bench {
             stuck_imu: false,
             noise: 12345,
             last: None,
+            ticks: 0,
+            last_fall_tick: [0; 4],
         }
     }
 
@@ -86,8 +91,12 @@ impl Bench {
     }
 
     fn tick(&mut self) -> TickOutput {
+        self.ticks += 1;
         for (t, ch, level) in self.radio_edges() {
             self.decoder.on_edge(ch, (t % u64::from(CAPTURE_WRAP)) as u16, level);
+            if !level {
+                self.last_fall_tick[ch] = self.ticks;
+            }
         }
         self.extra_edges.clear();
         self.now_counts += TICK_COUNTS;
@@ -260,7 +269,7 @@ fn a_receiver_that_stops_sending_always_ends_with_the_motors_off() {
     assert!(stage1, "stage 1 (level, hold throttle) came first");
     let off_at = off_at.expect("motors never stopped");
     // 1.0 s after the last pulse: the last pulse is up to one 20 ms frame before the cut.
-    assert!((TICKS_PER_S - 20..=TICKS_PER_S + 2).contains(&off_at), "stopped after {off_at} ticks");
+    assert!((TICKS_PER_S - 16..=TICKS_PER_S).contains(&off_at), "stopped after {off_at} ticks");
     assert_eq!(b.state(), FlightState::FailsafeOff);
     // The link coming back with the throttle up does not restart anything.
     b.sending = true;
@@ -374,4 +383,202 @@ fn motors_stay_off_until_the_boot_calibration_passed() {
         assert!(motors_off(&out));
         assert_ne!(b.state(), FlightState::Armed);
     }
+}
+
+/// Runs `ticks` ticks and returns the first tick (counted from 1) in `state`, if any.
+fn first_tick_in(b: &mut Bench, ticks: u32, state: FlightState) -> Option<u32> {
+    let mut at = None;
+    for t in 1..=ticks {
+        b.tick();
+        if at.is_none() && b.state() == state {
+            at = Some(t);
+        }
+    }
+    at
+}
+
+#[test]
+fn stage_2_comes_one_second_after_the_last_pulse_of_the_first_channel_to_fall_silent() {
+    // The channels pulse 2.5 ms apart in each frame, so the aileron's is the stalest pulse when
+    // the receiver stops: stage 1 exactly 100 ms after it, stage 2 exactly 1.0 s after it.
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.sending = false;
+    let stopped_at = b.ticks;
+    let stage1 = first_tick_in(&mut b, 200, FlightState::FailsafeLevel).expect("stage 1");
+    let stage2 = first_tick_in(&mut b, 1000, FlightState::FailsafeOff).expect("stage 2") + stopped_at + 200;
+    let pulse = b.last_fall_tick[0];
+    assert!(b.last_fall_tick[1..].iter().all(|&t| t >= pulse));
+    assert_eq!(stopped_at + stage1 - pulse, TICKS_PER_S / 10, "stage 1");
+    assert_eq!(stage2 - pulse, TICKS_PER_S, "stage 2");
+}
+
+/// Armed and flying at `thr_us`, then the receiver sends for `on_ms` and stops for `off_ms`,
+/// over and over (the first gap first), for `seconds`. Returns the log of (tick, state,
+/// compare) from the first gap on, and whether control was ever handed back after stage 1.
+fn flap(off_ms: u32, on_ms: u32, thr_us: f64, seconds: u32) -> (Vec<(u32, FlightState, [u16; 4])>, bool) {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    let fly = [NEUTRAL[0], NEUTRAL[1], thr_us, NEUTRAL[3]];
+    b.run(fly, 400);
+    let (off, on) = (off_ms * TICKS_PER_S / 1000, on_ms * TICKS_PER_S / 1000);
+    let mut log = Vec::new();
+    for t in 0..seconds * TICKS_PER_S {
+        b.sending = t % (off + on) >= off;
+        let out = b.tick();
+        log.push((t, b.state(), out.compare));
+    }
+    let stage1 = log.iter().position(|&(_, s, _)| s == FlightState::FailsafeLevel).unwrap_or(log.len());
+    let handed_back = log[stage1..].iter().any(|&(_, s, _)| s == FlightState::Armed);
+    (log, handed_back)
+}
+
+#[test]
+fn a_flapping_link_cannot_keep_the_motors_running() {
+    // The adversarial review's link: off 900 ms, on 40 ms (two frames). It used to hand control
+    // back 21 times in 20 s with the motors running throughout.
+    let (log, handed_back) = flap(900, 40, 1600.0, 20);
+    assert!(!handed_back, "control handed back to a flapping link");
+    let stage2 = log.iter().position(|&(_, s, _)| s == FlightState::FailsafeOff).expect("never reached stage 2");
+    assert!(stage2 <= 3 * TICKS_PER_S as usize, "stage 2 after {stage2} ticks");
+    assert!(log[stage2..].iter().all(|&(_, s, c)| c == [0; 4] && !s.motors_may_run()), "motors restarted after stage 2");
+}
+
+#[test]
+fn a_link_that_delivers_less_than_half_of_its_frames_ends_in_stage_2_within_3_s() {
+    // Gaps longer than the 100 ms channel timeout, bursts no longer than the gaps: each gap
+    // counts from the last pulse before it, so the 1.0 s of lost time comes within 3 s of the
+    // first loss, and the bursts (never 1.0 s of good link) never hand control back.
+    for (off, on) in [(110, 100), (120, 100), (150, 40), (200, 180), (300, 60), (500, 450), (900, 40)] {
+        let (log, handed_back) = flap(off, on, 1600.0, 6);
+        assert!(!handed_back, "off {off} / on {on} ms: control handed back");
+        let stage2 = log.iter().position(|&(_, s, _)| s == FlightState::FailsafeOff);
+        let stage2 = stage2.unwrap_or_else(|| panic!("off {off} / on {on} ms: never reached stage 2"));
+        eprintln!("off {off} / on {on}: stage 2 after {:.3} s", stage2 as f64 / 800.0);
+        assert!(stage2 <= 3 * TICKS_PER_S as usize, "off {off} / on {on} ms: stage 2 after {stage2} ticks");
+        assert!(log[stage2..].iter().all(|&(_, s, c)| c == [0; 4] && !s.motors_may_run()), "off {off} / on {on} ms: motors restarted");
+    }
+}
+
+#[test]
+fn a_single_short_loss_levels_holds_and_recovers_after_the_recovery_time() {
+    // The link-short case: 0.5 s without pulses, then a good link. Stage 1 all along, and the
+    // sticks back 1.0 s after the link.
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.sending = false;
+    b.run(FLY, TICKS_PER_S / 2);
+    assert_eq!(b.state(), FlightState::FailsafeLevel);
+    b.sending = true;
+    let back = first_tick_in(&mut b, 2 * TICKS_PER_S, FlightState::Armed).expect("control never came back");
+    // Counted from the end of the gap: the link is good once the first frame after it has
+    // reached all four channels (up to 20 ms to the frame, 9 ms to its last pulse).
+    assert!((TICKS_PER_S..=TICKS_PER_S + 24).contains(&back), "control back {back} ticks after the gap");
+}
+
+#[test]
+fn after_stage_2_only_a_full_arming_starts_the_motors() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.arm();
+    b.run(FLY, 400);
+    b.sending = false;
+    b.run(FLY, 2 * TICKS_PER_S);
+    assert_eq!(b.state(), FlightState::FailsafeOff);
+    // Back with the throttle up, then down, then flapping: nothing starts.
+    b.sending = true;
+    assert!(motors_off(&b.run(FLY, TICKS_PER_S)));
+    assert!(motors_off(&b.run(NEUTRAL, TICKS_PER_S)));
+    for _ in 0..5 {
+        b.sending = false;
+        assert!(motors_off(&b.run(FLY, 200)));
+        b.sending = true;
+        assert!(motors_off(&b.run(FLY, 100)));
+    }
+    assert_eq!(b.state(), FlightState::Disarmed);
+    b.run(NEUTRAL, 100);
+    b.arm();
+    assert!(!motors_off(&b.run(FLY, 100)));
+}
+
+/// The arm gesture's deflection with the throttle nudged off zero but still low (1140 µs: 110
+/// counts above the bottom, MIN_THR is 200).
+const ARM_NUDGED: [f64; 4] = [1100.0, 1100.0, 1140.0, 1950.0];
+
+#[test]
+fn a_throttle_nudge_with_the_sticks_deflected_does_not_arm() {
+    let mut b = Bench::new(Config::default());
+    b.boot();
+    b.run(ARM, 5 * TICKS_PER_S / 4);
+    // After a full hold only the throttle moves: no longer the arm gesture, but the aileron,
+    // elevator and rudder are still deflected. Not armed, motors off.
+    let out = b.run(ARM_NUDGED, TICKS_PER_S);
+    assert_eq!(b.fc.status().sticks.thr, 110);
+    assert_eq!(b.state(), FlightState::Arming);
+    assert!(motors_off(&out));
+    // The rudder alone still over: waiting.
+    b.run([NEUTRAL[0], NEUTRAL[1], 1140.0, 1950.0], 100);
+    assert_eq!(b.state(), FlightState::Arming);
+    // Every stick back in a safe place: armed.
+    b.run([NEUTRAL[0], NEUTRAL[1], 1140.0, NEUTRAL[3]], 40);
+    assert_eq!(b.state(), FlightState::Armed);
+}
+
+#[test]
+fn the_yaw_target_does_not_move_while_the_throttle_is_low() {
+    // Armed on the ground, throttle low but off zero, rudder full over for 2 s: the heading
+    // target stays 0 in every tick and every outer step (the reference resets it the same way).
+    for cfg in [Config::default(), Config::reference()] {
+        let mut b = Bench::new(cfg);
+        b.boot();
+        if cfg.supervisor == fcu_core::supervisor::SupervisorConfig::Reference {
+            b.run(ARM, 20);
+            b.run(NEUTRAL, 40);
+        } else {
+            b.arm();
+        }
+        assert_eq!(b.state(), FlightState::Armed);
+        for sticks in [[NEUTRAL[0], NEUTRAL[1], 1140.0, 2000.0], [NEUTRAL[0], NEUTRAL[1], 1140.0, 1100.0], NEUTRAL] {
+            b.sticks_us = sticks;
+            for _ in 0..TICKS_PER_S {
+                let out = b.tick();
+                assert_eq!(b.fc.status().target_rad[2], 0.0, "{sticks:?}");
+                assert!(motors_off(&out));
+            }
+        }
+        // With the throttle up the rudder turns the target again.
+        b.run([NEUTRAL[0], NEUTRAL[1], 1600.0, 2000.0], 200);
+        assert!(b.fc.status().target_rad[2] > 0.1);
+    }
+}
+
+#[test]
+fn pulses_longer_than_the_capture_wrap_never_make_a_link() {
+    // 8.192 ms longer than the arm gesture's pulses: on the 15-bit capture clock their counts
+    // read as the gesture. The reference arms on them; the default profile sees no pulse at all.
+    let wrap_us = f64::from(CAPTURE_WRAP) / 4.0;
+    let aliased_arm = ARM.map(|w| w + wrap_us);
+    let aliased_fly = FLY.map(|w| w + wrap_us);
+    let mut reference = Bench::new(Config::reference());
+    reference.run(aliased_arm, 2 * TICKS_PER_S);
+    assert_eq!(reference.state(), FlightState::Armed, "the reference reads the aliased widths");
+    assert!(!motors_off(&reference.run(aliased_fly, 100)));
+
+    let mut ours = Bench::new(Config::default());
+    ours.run(NEUTRAL, 5 * TICKS_PER_S / 2);
+    assert!(ours.fc.status().link);
+    for _ in 0..3 * TICKS_PER_S {
+        ours.sticks_us = aliased_arm;
+        let out = ours.tick();
+        assert!(motors_off(&out));
+    }
+    assert!(!ours.fc.status().link, "a link from pulses past the capture wrap");
+    ours.run(NEUTRAL, 40);
+    assert_eq!(ours.state(), FlightState::Disarmed);
+    assert!(motors_off(&ours.run(aliased_fly, TICKS_PER_S)));
 }

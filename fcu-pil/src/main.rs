@@ -90,7 +90,10 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
     let uart_path = a.out.join("uart.log");
     std::fs::write(&uart_path, &flight.uart_log).map_err(|e| format!("writing {}: {e}", uart_path.display()))?;
     let title = format!("fcu-pil fly: {} — firmware image {}, seed {}", sc.name, elf.display(), a.seed);
-    let code = host::report(&a.out, &title, &sc, &flight.log).map_err(|e| e.0)?;
+    // The board's rows are retimed from its own tick count once the flight is over: written then.
+    let mut csv = host::FlightCsv::create(&a.out).map_err(|e| e.0)?;
+    csv.rows(&flight.log).map_err(|e| csv.abandon(e).0)?;
+    let code = host::report(&a.out, &title, &sc, &flight.log, csv).map_err(|e| e.0)?;
     println!("wrote {}", uart_path.display());
     println!(
         "emulated {:.1} s of the board in {:.1} s ({:.1}× real time), {} instructions",

@@ -4,9 +4,10 @@
 //! - [`SafetyMonitor`] observes a [`FlightController`] tick by tick (what was fed: the raw IMU
 //!   words and the [`PulseBatch`]; what came out: the compare values, the outer job and
 //!   [`Status`]) and checks the rules of product.md §4 that can be seen from outside. It keeps
-//!   its own model of the radio (per-channel validity, sticks, gestures), the calibration, the
-//!   failsafe budget and the arming procedure; it never reads the supervisor's memory. A
-//!   violation names the [`Invariant`] and the tick.
+//!   its own model of the radio (capture edges to pulses, per-channel validity, sticks,
+//!   gestures), the calibration, the lost-time budget of the failsafe and the arming
+//!   procedure; it never reads the supervisor's memory. A violation names the [`Invariant`]
+//!   and the tick.
 //! - [`SupervisorMonitor`] does the same for the bare [`Supervisor`] (`Inputs` → `Decision`).
 //! - [`PwmReceiver`] turns a stick timeline into TIM2 capture edges (50 Hz frames, channels one
 //!   after the other, 15-bit 0.25 µs counter), [`LevelImu`] makes level LSM6DSL words with
@@ -21,12 +22,13 @@ use fcu_core::flight::{FlightController, Status, TickOutput};
 use fcu_core::imu::{CalibrationOutcome, CalibrationPhase, HealthConfig, RawImu};
 use fcu_core::math::Quat;
 use fcu_core::mixer::MixerConfig;
-use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, Sticks, CAPTURE_WRAP, CHANNELS};
+use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, Sticks, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, SupervisorConfig};
 
 use crate::sim::rng::Rng;
 
-/// Motors must be off once the link has been gone this long in total (product.md §4).
+/// Motors must be off once the link has been gone this long in total, each loss counted from
+/// the last pulse of the channel that fell silent first (product.md §4).
 pub const LINK_LOSS_OFF_S: f64 = 1.0;
 /// Slack on [`LINK_LOSS_OFF_S`] for tick rounding.
 pub const LINK_LOSS_MARGIN_S: f64 = 0.010;
@@ -45,11 +47,14 @@ pub enum Invariant {
     MotorsNotOff,
     /// (3) A compare value outside `[min_compare, max_compare]`.
     CompareOutOfRange,
-    /// (5) The motors may still run after the link was gone for more than 1.0 s in total.
+    /// (5) The motors may still run after the link was gone for more than 1.0 s in total:
+    /// the silences since the arming, each from the last pulse of the channel that fell
+    /// silent first and counted once, less what flying under stick control has forgotten
+    /// (one tick per `loss_forget_ticks`). A brief recovery forgets nothing.
     MotorsOnAfterLinkLoss,
     /// Armed (motors following the sticks) without a good link.
     ArmedWithoutLink,
-    /// Failsafe stage 1 handed control back before 100 ms of good link.
+    /// Failsafe stage 1 handed control back before `recovery_ticks` of good link.
     EarlyRecovery,
     /// Failsafe stage 1 flies with sticks that are not level, or a throttle above the last
     /// good one.
@@ -63,6 +68,12 @@ pub enum Invariant {
     RadioView,
     /// A width outside the accepted pulse range reached the controller.
     PulseOutOfRange,
+    /// A width reached the controller that no rising edge and next falling edge of its channel
+    /// made within the capture wrap plus the shortest valid width: a pulse longer than the
+    /// 15-bit capture clock's wrap read as a valid width (or a width from nowhere).
+    PulseAliased,
+    /// The yaw (heading) target is not 0 while the throttle in force is low.
+    YawTargetWithThrottleLow,
     /// A calibration started while the motors could run.
     CalibrationWhileFlying,
     /// (Supervisor alone) `motors_enabled` disagrees with the state, a calibration was
@@ -84,6 +95,8 @@ impl Invariant {
             Invariant::StuckSensorMissed => "stuck-sensor-missed",
             Invariant::RadioView => "radio-view",
             Invariant::PulseOutOfRange => "pulse-out-of-range",
+            Invariant::PulseAliased => "pulse-aliased",
+            Invariant::YawTargetWithThrottleLow => "yaw-target-with-throttle-low",
             Invariant::CalibrationWhileFlying => "calibration-while-flying",
             Invariant::DecisionInconsistent => "decision-inconsistent",
         }
@@ -152,8 +165,11 @@ struct ProcedureTracker {
     released: bool,
     /// Consecutive good-link ticks, including the current one.
     good_run: u32,
-    /// Ticks without a good link since the motors were last under stick control.
+    /// Lost time since the arming, ticks: every tick of every silence that ended in a loss
+    /// while flying, counted once, less what was forgotten.
     lost_ticks: u32,
+    /// Ticks flown under stick control (armed) since the arming or the last lost tick.
+    flown_ticks: u32,
     /// The last throttle seen on a good link while armed (the failsafe may hold it, never more).
     held_thr: i16,
     prev_state: FlightState,
@@ -169,26 +185,36 @@ impl ProcedureTracker {
             released: false,
             good_run: 0,
             lost_ticks: 0,
+            flown_ticks: 0,
             held_thr: 0,
             prev_state: FlightState::Calibrating,
         }
     }
 
-    /// Before the checks of a tick: the link run and the failsafe budgets.
-    fn before_checks(&mut self, link: bool, thr: i16, state: FlightState) {
+    /// Before the checks of a tick: the link run and the failsafe budgets. `silence` is the
+    /// age of the stalest channel's last pulse (read only without a good link).
+    fn before_checks(&mut self, link: bool, silence: u32, thr: i16, state: FlightState, forget_ticks: u32) {
+        let good_before = self.good_run;
         self.good_run = if link { self.good_run.saturating_add(1) } else { 0 };
         if state == FlightState::FailsafeLevel && self.prev_state == FlightState::Armed {
             self.held_thr = self.held_thr.min(thr);
         }
+        if self.is_arming(state) {
+            self.lost_ticks = 0;
+            self.flown_ticks = 0;
+        }
+        if !link && self.prev_state.motors_may_run() {
+            // The silence up to this tick, from the stalest channel's last pulse, except the
+            // part before the previous tick without a link (already counted). Forgetting only
+            // happens while flying under stick control, so a brief recovery forgets nothing.
+            let new = silence.min(good_before.saturating_add(1)).max(1);
+            let forgotten = self.flown_ticks / forget_ticks.max(1);
+            self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(new);
+            self.flown_ticks = 0;
+        }
         if state == FlightState::Armed && link {
             self.held_thr = thr;
-            self.lost_ticks = 0;
-        } else if state.motors_may_run() || self.prev_state.motors_may_run() {
-            if !link {
-                self.lost_ticks = self.lost_ticks.saturating_add(1);
-            }
-        } else {
-            self.lost_ticks = 0;
+            self.flown_ticks = self.flown_ticks.saturating_add(1);
         }
     }
 
@@ -286,6 +312,10 @@ pub struct Observation<'a> {
     pub imu: Option<RawImu>,
     /// The pulses fed this tick (enables the radio model; give it every tick from boot or never).
     pub batch: Option<&'a PulseBatch>,
+    /// The capture edges fed to the decoder before this tick's `take` (enables the check that
+    /// every width comes from one pulse shorter than the capture wrap; with `batch`, every
+    /// tick from boot or never).
+    pub edges: Option<&'a [Edge]>,
     pub out: &'a TickOutput,
     /// `status()` taken after the tick *and* its outer step (as `FlightController::step`).
     pub status: &'a Status,
@@ -299,10 +329,14 @@ pub struct SafetyMonitor {
     mixer: MixerConfig,
     health: Option<HealthConfig>,
     link_off_ticks: u64,
+    /// Capture counts in a control tick.
+    counts_per_tick: f64,
     tick: u64,
     // The radio model.
     channel_age: [u32; CHANNELS],
     sticks: Sticks,
+    /// Per channel, the last rising edge not yet followed by a falling one: counts and tick.
+    rise: [Option<(u16, u64)>; CHANNELS],
     // Procedure and failsafe.
     proc: ProcedureTracker,
     prev_quat: Quat,
@@ -327,9 +361,11 @@ impl SafetyMonitor {
             mixer: cfg.mixer,
             health: cfg.health,
             link_off_ticks: ((LINK_LOSS_OFF_S + LINK_LOSS_MARGIN_S) / dt).ceil() as u64,
+            counts_per_tick: f64::from(COUNTS_PER_US) * 1e6 * dt,
             tick: 0,
             channel_age: [u32::MAX; CHANNELS],
             sticks: Sticks::default(),
+            rise: [None; CHANNELS],
             proc: ProcedureTracker::new(),
             prev_quat: Quat::IDENTITY,
             prev_phase: CalibrationPhase::Settling,
@@ -368,8 +404,11 @@ impl SafetyMonitor {
         let off = self.mixer.off_compare();
         let motors_off = compare.iter().all(|&c| c == off);
 
-        // The radio, from the accepted pulses alone.
+        // The radio, from the accepted pulses alone (and the edges they came from).
         if let Some(batch) = o.batch {
+            if let Some(edges) = o.edges {
+                self.pulses(edges, batch)?;
+            }
             self.radio(batch)?;
         }
         let link = st.link;
@@ -389,7 +428,12 @@ impl SafetyMonitor {
             self.calibrated_once = true;
         }
 
-        self.proc.before_checks(link, sticks.thr, st.state);
+        // Without the radio model, assume the link was declared lost at the channel timeout.
+        let silence = match o.batch {
+            Some(_) => self.channel_age.iter().copied().max().unwrap_or(u32::MAX),
+            None => self.rc.link_timeout_ticks,
+        };
+        self.proc.before_checks(link, silence, sticks.thr, st.state, safety.loss_forget_ticks);
 
         // (1) Arming.
         if self.proc.is_arming(st.state) {
@@ -423,6 +467,12 @@ impl SafetyMonitor {
                 Some(_) => {}
             }
         }
+        if thr_in_force.is_some_and(|t| t < self.rc.min_throttle) && st.target_rad[2] != 0.0 {
+            return self.fail(
+                Invariant::YawTargetWithThrottleLow,
+                format!("yaw target {} rad in {} with the throttle low", st.target_rad[2], st.state.name()),
+            );
+        }
         if st.state == FlightState::FailsafeLevel {
             if let Some(job) = &o.out.outer_job {
                 let s = job.sticks;
@@ -432,9 +482,9 @@ impl SafetyMonitor {
             }
         }
 
-        // (5) Link loss: 100 ms to declare it, then the rest of the 1.0 s.
-        let gone = u64::from(self.proc.lost_ticks) + u64::from(self.rc.link_timeout_ticks);
-        if self.proc.lost_ticks > 0 && gone > self.link_off_ticks && (st.state.motors_may_run() || !motors_off) {
+        // (5) Link loss: 1.0 s in total, each loss from the last pulse.
+        let gone = u64::from(self.proc.lost_ticks);
+        if gone > self.link_off_ticks && (st.state.motors_may_run() || !motors_off) {
             return self.fail(
                 Invariant::MotorsOnAfterLinkLoss,
                 format!("link gone {gone} ticks in total, state {}, compare {compare:?}", st.state.name()),
@@ -444,6 +494,43 @@ impl SafetyMonitor {
         self.proc.after_checks(link, gesture, throttle_low, st.state);
         self.prev_quat = st.quat;
         self.prev_phase = st.calibration;
+        Ok(())
+    }
+
+    /// Every width the decoder handed over comes from a rising edge and the next falling edge
+    /// of its channel, fed at most so many ticks apart that the pulse was shorter than the
+    /// capture wrap plus the shortest valid width: then its counts cannot have wrapped into a
+    /// valid width. (Independent of the decoder's own window, which is tighter.)
+    fn pulses(&mut self, edges: &[Edge], batch: &PulseBatch) -> Result<(), Violation> {
+        let PulseRules::Validated { min_counts, .. } = self.rc.pulses else {
+            return Ok(());
+        };
+        let wrap = u64::from(CAPTURE_WRAP);
+        let mut made: [Vec<u32>; CHANNELS] = Default::default();
+        for e in edges {
+            let (Some(rise), Some(made)) = (self.rise.get_mut(e.channel), made.get_mut(e.channel)) else {
+                continue;
+            };
+            let counts = e.counts & 0x7FFF;
+            if e.level_high {
+                *rise = Some((counts, self.tick));
+            } else if let Some((r, at)) = rise.take() {
+                // Longest the pulse can have been: from the start of the rise's tick to the end of this one.
+                let longest = (self.tick - at + 1) as f64 * self.counts_per_tick;
+                if longest < (wrap + u64::from(min_counts)) as f64 {
+                    let w = (u64::from(counts) + wrap - u64::from(r) - 1) % wrap + 1;
+                    made.push(w as u32);
+                }
+            }
+        }
+        for (ch, (w, made)) in batch.width_counts.iter().zip(&made).enumerate() {
+            if let Some(w) = w {
+                if !made.contains(&u32::from(*w)) {
+                    return self
+                        .fail(Invariant::PulseAliased, format!("channel {ch} width {w} counts, but its pulses this tick made {made:?}"));
+                }
+            }
+        }
         Ok(())
     }
 
@@ -610,7 +697,7 @@ impl SupervisorMonitor {
             return self.fail(Invariant::FaultNotLatched, format!("after a fault: {}", state.name()));
         }
 
-        self.proc.before_checks(i.link, i.sticks.thr, state);
+        self.proc.before_checks(i.link, i.silence_ticks, i.sticks.thr, state, cfg.loss_forget_ticks);
         if self.proc.is_arming(state) {
             let mut why = self.proc.procedure_faults(state, gesture, &i.sticks, &cfg, self.tick);
             if !d.blockers.is_empty() {
@@ -637,7 +724,7 @@ impl SupervisorMonitor {
                 return self.fail(Invariant::FailsafeSticks, format!("failsafe throttle {t} above the last good {}", self.proc.held_thr));
             }
         }
-        if self.proc.lost_ticks > cfg.failsafe_off_ticks && state.motors_may_run() {
+        if self.proc.lost_ticks >= cfg.failsafe_off_ticks && state.motors_may_run() {
             return self.fail(
                 Invariant::MotorsOnAfterLinkLoss,
                 format!("link gone {} ticks (limit {}), state {}", self.proc.lost_ticks, cfg.failsafe_off_ticks, state.name()),
@@ -825,7 +912,7 @@ impl Rig {
             self.fc.run_outer(job);
         }
         let status = self.fc.status();
-        self.monitor.check(&Observation { imu: Some(imu), batch: Some(&batch), out: &out, status: &status })?;
+        self.monitor.check(&Observation { imu: Some(imu), batch: Some(&batch), edges: Some(edges), out: &out, status: &status })?;
         Ok(out)
     }
 

@@ -122,3 +122,24 @@ fn a_recording_whose_time_goes_back_or_whose_truth_is_zero_is_refused() {
         assert!(!d.join("est.csv").exists(), "{name}: output left behind");
     }
 }
+
+#[test]
+#[cfg(unix)]
+fn the_flight_log_is_streamed_and_a_write_error_stops_the_flight_at_once() {
+    // The CSV is written as the flight runs: with its file on a full disk, the first buffer
+    // that reaches it fails within the first few dozen rows of an hour's flight (were the log
+    // written at the end, this test would fly the whole hour), and nothing is left behind.
+    if !std::path::Path::new("/dev/full").exists() {
+        eprintln!("skipped: no /dev/full on this system");
+        return;
+    }
+    let d = dir("stream");
+    let out = d.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::os::unix::fs::symlink("/dev/full", out.join(".flight.csv.partial")).unwrap();
+    let (code, _, err) = fcu_sim(&["fly", "--scenario", "hover", "--duration", "3600", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("flight.csv") && err.contains("No space left"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}

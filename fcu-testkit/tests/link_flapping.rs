@@ -6,9 +6,12 @@ use fcu_testkit::sim::scenario::{self, StickRow, Throttle, Timeline};
 use fcu_testkit::sim::{self, RunOptions};
 use fcu_testkit::Profile;
 
+/// The link starts flapping here, s.
+const FIRST_LOSS_S: f64 = 6.0;
+
 fn flap(off_ms: f64, on_ms: f64, thr_us: f64) -> sim::FlightLog {
-    // Armed by the gesture, flying at `thr_us`, then from 6 s the link is off for `off_ms`
-    // and on for `on_ms`, over and over.
+    // Armed by the gesture, flying at `thr_us` from 4.5 s, then from 6 s the link is off for
+    // `off_ms` and on for `on_ms`, over and over, the bursts carrying the same throttle.
     let gesture = |t_s: f64| StickRow {
         t_s,
         ail_us: scenario::AIL_CENTRE_US - 325.0,
@@ -19,7 +22,7 @@ fn flap(off_ms: f64, on_ms: f64, thr_us: f64) -> sim::FlightLog {
     };
     let mut rows =
         vec![StickRow::idle(0.0), gesture(2.5), StickRow::idle(4.0), StickRow { thr: Throttle::Us(thr_us), ..StickRow::idle(4.5) }];
-    let mut t = 6.0;
+    let mut t = FIRST_LOSS_S;
     while t < 14.0 {
         rows.push(StickRow { link: false, thr: Throttle::Us(thr_us), ..StickRow::idle(t) });
         rows.push(StickRow { link: true, thr: Throttle::Us(thr_us), ..StickRow::idle(t + off_ms / 1000.0) });
@@ -29,24 +32,23 @@ fn flap(off_ms: f64, on_ms: f64, thr_us: f64) -> sim::FlightLog {
     sim::run(&sc, Profile::Default, &RunOptions { seed: 6, duration_s: Some(14.0), ..RunOptions::default() }).unwrap()
 }
 
-fn stage2_at(log: &sim::FlightLog) -> Option<f64> {
-    log.rows.iter().find(|r| r.state == "failsafe2").map(|r| r.t_s)
-}
-
 #[test]
-fn a_link_that_delivers_a_fifth_of_its_frames_ends_in_stage_2_within_about_3_s() {
-    for (off, on) in [(150.0, 40.0), (900.0, 40.0), (300.0, 60.0)] {
+fn a_link_delivering_less_than_half_of_its_frames_ends_in_stage_2_within_3_s() {
+    // From a fifth of the frames (off 150 / on 40 ms) to nearly half (off 200 / on 180 ms);
+    // off 900 / on 40 ms is the review's 4 %.
+    for (off, on) in [(150.0, 40.0), (900.0, 40.0), (300.0, 60.0), (120.0, 100.0), (200.0, 180.0)] {
         let log = flap(off, on, 1400.0);
-        let at = stage2_at(&log).unwrap_or_else(|| panic!("off {off} / on {on} ms: never reached stage 2"));
-        eprintln!("off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - 6.0);
-        assert!(at - 6.0 <= 3.5, "off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - 6.0);
+        let stage2 = log.rows.iter().find(|r| r.state == "failsafe2").map(|r| r.t_s);
+        let at = stage2.unwrap_or_else(|| panic!("off {off} / on {on} ms: never reached stage 2"));
+        eprintln!("off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - FIRST_LOSS_S);
+        assert!(at - FIRST_LOSS_S <= 3.0, "off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - FIRST_LOSS_S);
+        assert!(
+            !log.rows.iter().any(|r| r.t_s > FIRST_LOSS_S + 0.2 && r.t_s < at && r.state == "armed"),
+            "off {off} / on {on} ms: control handed back to the flapping link"
+        );
         assert!(log.rows.iter().filter(|r| r.t_s >= at).all(|r| !r.armed && r.motors == [0; 4]), "motors restarted after stage 2");
+        let at_loss = log.rows.iter().find(|r| r.t_s >= FIRST_LOSS_S).map_or(0.0, |r| r.alt_m);
+        let top = log.rows.iter().map(|r| r.alt_m).fold(0.0, f64::max);
+        assert!(top - at_loss < 5.0, "off {off} / on {on} ms: climbed {:.1} m after the first loss", top - at_loss);
     }
-}
-
-#[test]
-fn a_flapping_link_never_hands_control_back() {
-    let log = flap(150.0, 40.0, 1400.0);
-    let after_loss: Vec<&str> = log.rows.iter().filter(|r| r.t_s > 6.2).map(|r| r.state).collect();
-    assert!(!after_loss.contains(&"armed"), "control went back to a link that delivers a fifth of its frames");
 }

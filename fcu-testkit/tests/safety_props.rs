@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use fcu_core::config::Config;
 use fcu_core::flight::{Status, TickOutput};
 use fcu_core::imu::{RawImu, SensorFault};
-use fcu_core::rc::{Gesture, RcConfig, Sticks};
+use fcu_core::rc::{Gesture, PulseBatch, RcConfig, Sticks};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, Supervisor};
 use fcu_testkit::safety::*;
 use fcu_testkit::sim::rng::Rng;
@@ -292,9 +292,13 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
     let thr = prop_oneof![3 => Just(0i16), 1 => 0i16..200, 2 => 200i16..3000, 1 => any::<i16>()];
     let fault = prop_oneof![60 => Just(None), 1 => Just(Some(SensorFault::Stuck)), 1 => Just(Some(SensorFault::NotFinite))];
     let tilt = prop_oneof![6 => Just(0.0f32), 2 => 0.0f32..0.6, 1 => Just(f32::NAN), 1 => Just(f32::INFINITY)];
-    (link, gesture_strategy(), thr, prop::bool::weighted(0.75), prop::bool::weighted(0.9), prop::bool::weighted(0.1), fault, tilt).prop_map(
-        |(link, gesture, thr, throttle_low, calibrated, calibrating, sensor_fault, tilt_rad)| Inputs {
+    // What a radio reports (the channel timeout, or more) and anything else.
+    let silence = prop_oneof![4 => Just(80u32), 2 => 80u32..1200, 1 => Just(0u32), 1 => any::<u32>()];
+    let flags = (prop::bool::weighted(0.75), prop::bool::weighted(0.9), prop::bool::weighted(0.1));
+    (link, silence, gesture_strategy(), thr, flags, fault, tilt).prop_map(
+        |(link, silence_ticks, gesture, thr, (throttle_low, calibrated, calibrating), sensor_fault, tilt_rad)| Inputs {
             link,
+            silence_ticks,
             sticks: Sticks { ail: 0, ele: 0, thr, rud: 0 },
             gesture,
             throttle_low,
@@ -308,9 +312,12 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
 
 fn run_supervisor(cfg: &SafetyConfig, s: &mut Supervisor, m: &mut SupervisorMonitor, segs: &[(Inputs, u32)]) -> Result<(), Violation> {
     for (i, n) in segs {
+        let mut i = *i;
         for _ in 0..*n {
-            let d: Decision = s.step(cfg, i);
-            m.observe(i, &d)?;
+            let d: Decision = s.step(cfg, &i);
+            m.observe(&i, &d)?;
+            // The silence grows while the link stays lost, as a radio reports it.
+            i.silence_ticks = i.silence_ticks.saturating_add(1);
         }
     }
     Ok(())
@@ -326,7 +333,7 @@ fn settled_supervisor(cfg: &SafetyConfig) -> (Supervisor, SupervisorMonitor) {
 }
 
 fn safety_config_strategy() -> impl Strategy<Value = SafetyConfig> {
-    (1u32..24, 1u32..24, 1u32..60, 1u32..40, 0u32..12, 0.05f32..1.0, 0u32..30).prop_map(
+    (1u32..24, 1u32..24, 1u32..60, 1u32..40, 1u32..12, 0.05f32..1.0, 0u32..30).prop_map(
         |(
             arm_hold_ticks,
             disarm_hold_ticks,
@@ -394,6 +401,60 @@ proptest! {
         let mut rig = start(if esc { Start::EscFlying } else { Start::Flying });
         if let Err(v) = run_sensor_timeline(&mut rig, &segments) {
             prop_assert!(false, "{v}");
+        }
+    }
+}
+
+/// Flying with `sticks`, the receiver goes quiet for `off` ticks and sends for `on` ticks, for
+/// each cycle in turn and then repeating, for `ticks` ticks in all. Returns the tick (from the
+/// first gap) of stage 2, and whether control came back to the sticks after stage 1.
+fn flap(rig: &mut Rig, sticks: Sticks, cycles: &[(u32, u32)], ticks: u32) -> Result<(Option<u32>, bool), Violation> {
+    let rc = rig.fc.config().rc;
+    let frame = RadioFrame::from_sticks(&rc, sticks);
+    let (mut stage1, mut stage2, mut handed_back) = (false, None, false);
+    let mut t = 0;
+    for &(off, on) in cycles.iter().cycle() {
+        for (f, n) in [(&RadioFrame::OFF, off), (&frame, on)] {
+            for _ in 0..n {
+                if t >= ticks {
+                    return Ok((stage2, handed_back));
+                }
+                rig.tick_frame(f, 0)?;
+                match rig.state() {
+                    FlightState::FailsafeLevel => stage1 = true,
+                    FlightState::Armed => handed_back |= stage1,
+                    FlightState::FailsafeOff => stage2 = stage2.or(Some(t)),
+                    _ => {}
+                }
+                t += 1;
+            }
+        }
+    }
+    Ok((stage2, handed_back))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, max_shrink_iters: 500, ..ProptestConfig::default() })]
+
+    /// A link that loses more than it delivers (gaps past the 100 ms channel timeout, each
+    /// burst no longer than the gap before it and shorter than the recovery time) never gets
+    /// control back, and ends in stage 2 within 3 s of the first gap, whatever the pattern;
+    /// the monitor checks every tick (lost time, never restarted motors).
+    #[test]
+    fn a_link_that_loses_more_than_it_delivers_ends_in_stage_2_within_3_s(
+        esc in prop::bool::weighted(0.2),
+        cycles in prop::collection::vec((100u32..=800).prop_flat_map(|off| (Just(off), 1..=off.min(600))), 1..6),
+        thr in 200i16..2500,
+    ) {
+        let mut rig = start(if esc { Start::EscFlying } else { Start::Flying });
+        let sticks = Sticks { thr, ..sticks::FLY };
+        match flap(&mut rig, sticks, &cycles, 3 * 800 + 400) {
+            Err(v) => prop_assert!(false, "{v}"),
+            Ok((stage2, handed_back)) => {
+                prop_assert!(!handed_back, "control handed back");
+                let at = stage2.unwrap_or(u32::MAX);
+                prop_assert!(at <= 3 * 800, "stage 2 at tick {at} of the flapping");
+            }
         }
     }
 }
@@ -510,7 +571,7 @@ fn tampered(f: impl FnOnce(&mut TickOutput, &mut Status)) -> Violation {
     f(&mut out, &mut st);
     st.compare = out.compare;
     let mut m = rig.monitor.clone();
-    m.observe(&Observation { imu: None, batch: None, out: &out, status: &st }).expect_err("the monitor must object")
+    m.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("the monitor must object")
 }
 
 #[test]
@@ -542,7 +603,7 @@ fn monitor_rejects_motors_with_the_throttle_low_while_armed() {
     assert_eq!(st.state, FlightState::Armed);
     out.compare = [700; 4];
     st.compare = out.compare;
-    let v = rig.monitor.observe(&Observation { imu: None, batch: None, out: &out, status: &st }).expect_err("must object");
+    let v = rig.monitor.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("must object");
     assert_eq!(v.invariant, Invariant::MotorsNotOff, "{v}");
 }
 
@@ -555,7 +616,7 @@ fn monitor_rejects_a_stuck_sensor_without_a_fault_and_a_forgotten_fault() {
     let stuck = Config::default().health.map_or(0, |h| h.stuck_ticks);
     let mut result = Ok(());
     for _ in 0..=stuck {
-        result = m.observe(&Observation { imu: Some(raw), batch: None, out: &out, status: &st });
+        result = m.observe(&Observation { imu: Some(raw), batch: None, edges: None, out: &out, status: &st });
         if result.is_err() {
             break;
         }
@@ -566,8 +627,8 @@ fn monitor_rejects_a_stuck_sensor_without_a_fault_and_a_forgotten_fault() {
     let mut faulted = st;
     faulted.fault = Some(SensorFault::Stuck);
     faulted.state = FlightState::Fault;
-    m.observe(&Observation { imu: None, batch: None, out: &out, status: &faulted }).unwrap_or_else(|v| panic!("{v}"));
-    let v = m.observe(&Observation { imu: None, batch: None, out: &out, status: &st }).expect_err("must object");
+    m.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &faulted }).unwrap_or_else(|v| panic!("{v}"));
+    let v = m.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("must object");
     assert_eq!(v.invariant, Invariant::FaultNotLatched);
 }
 
@@ -583,16 +644,85 @@ fn monitor_rejects_motors_after_a_long_link_loss() {
     let out = TickOutput { compare: st.compare, outer_job: None };
     let mut first = None;
     for _ in 0..2000 {
-        if let Err(v) = m.observe(&Observation { imu: None, batch: None, out: &out, status: &st }) {
+        if let Err(v) = m.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }) {
             first = Some(v);
             break;
         }
     }
     let v = first.expect("must object");
     assert_eq!(v.invariant, Invariant::MotorsOnAfterLinkLoss, "{v}");
-    // 1.0 s + 10 ms from the last pulse, of which 100 ms before the link was declared lost.
+    // Past 1.0 s + 10 ms from the last pulse; without the radio model the monitor takes the
+    // link as declared lost 100 ms after it, at the first tampered tick.
     let ticks_after_start = v.tick - rig.monitor.ticks();
-    assert_eq!(ticks_after_start, 800 + 8 - 80 + 1, "{v}");
+    assert_eq!(ticks_after_start, 800 + 8 - 80 + 2, "{v}");
+}
+
+#[test]
+fn monitor_adds_up_lost_time_across_a_brief_recovery() {
+    // Stage 1 reported throughout: 500 ticks without a link (80 + 499 of silence), 100 with,
+    // then without again: the 1.0 s + 10 ms (808 ticks) are past at the 151st tick of the
+    // second loss (579 + 80 + 150 = 809), not 729 ticks into it as a reset would make it.
+    let mut rig = start(Start::Flying);
+    let _ = next_tick(&mut rig);
+    let mut m = rig.monitor.clone();
+    let mut st = rig.fc.status();
+    st.state = FlightState::FailsafeLevel;
+    let out = TickOutput { compare: st.compare, outer_job: None };
+    let mut observe = |link: bool, n: u32| -> Result<(), (u32, Violation)> {
+        let st = Status { link, ..st };
+        for k in 1..=n {
+            m.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).map_err(|v| (k, v))?;
+        }
+        Ok(())
+    };
+    observe(false, 500).unwrap_or_else(|(_, v)| panic!("{v}"));
+    observe(true, 100).unwrap_or_else(|(_, v)| panic!("{v}"));
+    let (k, v) = observe(false, 1000).expect_err("must object");
+    assert_eq!(v.invariant, Invariant::MotorsOnAfterLinkLoss, "{v}");
+    assert_eq!(k, 151, "{v}");
+}
+
+#[test]
+fn monitor_rejects_a_width_from_a_pulse_longer_than_the_capture_wrap() {
+    // A 9.5 ms pulse on the aileron: its edges are 1.308 ms apart on the 15-bit clock, a valid
+    // width, but they came 7 ticks apart. A decoder that handed it over is caught.
+    let mut rig = start(Start::Booted);
+    let (out, st) = next_tick(&mut rig);
+    let mut m = rig.monitor.clone();
+    let empty = PulseBatch::default();
+    let rise = [Edge { channel: 0, counts: 1000, level_high: true }];
+    let mut seen = |edges: &[Edge], batch: &PulseBatch| {
+        m.observe(&Observation { imu: None, batch: Some(batch), edges: Some(edges), out: &out, status: &st })
+    };
+    seen(&rise, &empty).unwrap_or_else(|v| panic!("{v}"));
+    for _ in 0..6 {
+        seen(&[], &empty).unwrap_or_else(|v| panic!("{v}"));
+    }
+    let fall = [Edge { channel: 0, counts: (1000 + 38_000 - 32_768) as u16, level_high: false }];
+    let aliased = PulseBatch { width_counts: [Some(38_000 - 32_768), None, None, None], ..PulseBatch::default() };
+    let v = seen(&fall, &aliased).expect_err("must object");
+    assert_eq!(v.invariant, Invariant::PulseAliased, "{v}");
+
+    // The same width from a pulse whose edges came 2 ticks apart is fine.
+    let mut m = rig.monitor.clone();
+    let mut seen = |edges: &[Edge], batch: &PulseBatch| {
+        m.observe(&Observation { imu: None, batch: Some(batch), edges: Some(edges), out: &out, status: &st })
+    };
+    seen(&rise, &empty).unwrap_or_else(|v| panic!("{v}"));
+    seen(&[], &empty).unwrap_or_else(|v| panic!("{v}"));
+    let fall = [Edge { channel: 0, counts: 1000 + 5232, level_high: false }];
+    seen(&fall, &aliased).unwrap_or_else(|v| panic!("{v}"));
+}
+
+#[test]
+fn monitor_rejects_a_yaw_target_with_the_throttle_low() {
+    let mut rig = start(Start::Flying);
+    rig.sticks(sticks::NEUTRAL, 40).unwrap_or_else(|v| panic!("{v}"));
+    let (out, mut st) = next_tick(&mut rig);
+    assert_eq!(st.state, FlightState::Armed);
+    st.target_rad[2] = 0.3;
+    let v = rig.monitor.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("must object");
+    assert_eq!(v.invariant, Invariant::YawTargetWithThrottleLow, "{v}");
 }
 
 #[test]

@@ -90,3 +90,60 @@ fn reference_profile_runs_at_its_real_tick_rate() {
     assert!((log.tick_hz - 807.69).abs() < 0.01, "{}", log.tick_hz);
     assert_eq!(log.rows.len(), 808);
 }
+
+// ---------------------------------------------------------------------------------------
+// The safety layer's rules, flown against the simulated drone (the core tests in
+// fcu-core/tests/flight_safety.rs show the same rules tick by tick).
+// ---------------------------------------------------------------------------------------
+
+use scenario::{StickRow, Throttle, Timeline, AIL_CENTRE_US, ELE_CENTRE_US, RUD_CENTRE_US};
+
+/// The arm gesture's deflection, µs (1300 counts of 0.25 µs beyond centre).
+const GESTURE_US: f64 = 325.0;
+
+fn fly_timeline(rows: Vec<StickRow>, seconds: f64, seed: u64) -> sim::FlightLog {
+    let sc = scenario::from_timeline("safety rule", Timeline { rows }, seconds);
+    let opts = RunOptions { seed, duration_s: Some(seconds), ..RunOptions::default() };
+    sim::run(&sc, Profile::Default, &opts).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn arm_gesture(t_s: f64, thr_us: f64) -> StickRow {
+    StickRow {
+        t_s,
+        ail_us: AIL_CENTRE_US - GESTURE_US,
+        ele_us: ELE_CENTRE_US - GESTURE_US,
+        thr: Throttle::Us(thr_us),
+        rud_us: RUD_CENTRE_US + GESTURE_US,
+        link: true,
+    }
+}
+
+#[test]
+fn flown_a_throttle_nudge_with_the_sticks_deflected_does_not_arm() {
+    // Full hold from 2.5 s; at 4.0 s the throttle leaves the bottom (1140 µs: 110 counts, still
+    // low) with aileron, elevator and rudder still deflected; 1400 µs would then fly it rolled.
+    // Everything centred at 6 s: armed only then.
+    let rows = vec![StickRow::idle(0.0), arm_gesture(2.5, 1000.0), arm_gesture(4.0, 1140.0), StickRow::idle(6.0)];
+    let log = fly_timeline(rows, 7.0, 4);
+    let armed_at = log.rows.iter().find(|r| r.armed).map(|r| r.t_s).expect("never armed after the sticks were centred");
+    assert!(armed_at >= 6.0, "armed at {armed_at:.3} s with the sticks still deflected");
+    assert!(log.rows.iter().filter(|r| r.t_s < 6.0).all(|r| r.motors == [0; 4]));
+}
+
+#[test]
+fn flown_the_yaw_target_does_not_move_while_the_throttle_is_low() {
+    // Armed on the ground, throttle nudged off the bottom but low (1140 µs), rudder full right
+    // for 2 s, then centred: the heading target stays 0 throughout.
+    let nudged = |t_s: f64, rud_us: f64| StickRow { thr: Throttle::Us(1140.0), rud_us, ..StickRow::idle(t_s) };
+    let rows = vec![
+        StickRow::idle(0.0),
+        arm_gesture(2.5, 1000.0),
+        StickRow::idle(4.0),
+        nudged(5.0, RUD_CENTRE_US + 450.0),
+        nudged(7.0, RUD_CENTRE_US),
+    ];
+    let log = fly_timeline(rows, 8.0, 4);
+    assert!(log.rows.iter().any(|r| r.armed && r.t_s > 5.0 && r.thr_us > 1100.0), "not armed with the throttle nudged");
+    let worst = log.rows.iter().filter(|r| r.t_s > 4.0).map(|r| r.yaw_target_deg.abs()).fold(0.0, f64::max);
+    assert!(worst == 0.0, "the yaw target moved to {worst:.2}° with the throttle low");
+}

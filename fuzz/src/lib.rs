@@ -77,9 +77,10 @@ fn build_starts(cfg: Config) -> Vec<Rig> {
         let mut idle = armed.clone();
         must(idle.sticks(sticks::NEUTRAL, hold.auto_disarm_ticks - 12), "idle");
         out.push(idle);
-        // Stage 1, 20 ticks before stage 2.
+        // Stage 1, a few ticks before stage 2 (lost time counts from the last pulse, which
+        // came up to a frame before the receiver went quiet).
         let mut stage1 = flying.clone();
-        must(stage1.run(&RadioFrame::OFF, 80 + hold.failsafe_off_ticks - 20, 0), "stage 1");
+        must(stage1.run(&RadioFrame::OFF, hold.failsafe_off_ticks - 20, 0), "stage 1");
         assert_eq!(stage1.state(), FlightState::FailsafeLevel);
         out.push(stage1.clone());
         // Stage 2.
@@ -91,6 +92,16 @@ fn build_starts(cfg: Config) -> Vec<Rig> {
         let mut disarming = flying.clone();
         must(disarming.sticks(sticks::DISARM, hold.disarm_hold_ticks - 3), "disarming");
         out.push(disarming);
+        // Stage 1 on a flapping link (off 150 ms, on 40 ms), most of the lost time spent,
+        // the link good again for now.
+        let mut flapping = flying.clone();
+        let fly = RadioFrame::from_sticks(&cfg.rc, sticks::FLY);
+        for _ in 0..4 {
+            must(flapping.run(&RadioFrame::OFF, 120, 0), "flapping");
+            must(flapping.run(&fly, 32, 0), "flapping");
+        }
+        assert_eq!(flapping.state(), FlightState::FailsafeLevel);
+        out.push(flapping);
     }
     out
 }

@@ -3,13 +3,15 @@
 //! Exit codes: 0 the scenario's criteria passed, 1 they did not, 2 bad usage or input
 //! (returned as a [`CliError`] for the dispatcher to print).
 
+use std::fs::File;
+use std::io::{BufWriter, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use super::CliError;
 use crate::sim::metrics::{self, Metrics, Verdict};
 use crate::sim::scenario::{self, Scenario, Timeline};
-use crate::sim::{self as sim, FlightLog, Profile, RunOptions};
+use crate::sim::{self as sim, FlightLog, LogRow, Profile, RunOptions};
 
 #[derive(clap::Args, Debug)]
 pub struct FlyArgs {
@@ -99,11 +101,67 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
     let spread = check_spread(a.spread)?;
     let sc = prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration)?;
     let out = OutputDir::prepare(&a.out)?;
+    let mut csv = FlightCsv::create(&a.out).map_err(|e| out.abandon(e))?;
 
     let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
-    let log = sim::run(&sc, profile, &opts).map_err(|e| out.abandon(CliError(e.to_string())))?;
+    let mut computer = sim::InProcess::new(profile.config()).map_err(|e| out.abandon(CliError(e.to_string())))?;
+    let flown = sim::run_streaming(&mut computer, &sc, profile, &opts, &mut |r| csv.row(r));
+    let log = flown.map_err(|e| out.abandon(csv.abandon(CliError(e.to_string()))))?;
     let title = format!("fcu-sim fly: {} — profile {}, seed {}", sc.name, profile.name(), a.seed);
-    report(&a.out, &title, &sc, &log).map_err(|e| out.abandon(e))
+    report(&a.out, &title, &sc, &log, csv).map_err(|e| out.abandon(e))
+}
+
+/// `flight.csv`, written row by row as the flight runs (a long flight never holds its whole
+/// CSV in memory) under a temporary name, renamed by [`report`] once its plot is written too.
+pub struct FlightCsv {
+    path: PathBuf,
+    partial: PathBuf,
+    file: BufWriter<File>,
+}
+
+impl FlightCsv {
+    /// Opens `out/.flight.csv.partial` and writes the header.
+    pub fn create(out: &Path) -> Result<FlightCsv, CliError> {
+        let path = out.join("flight.csv");
+        let partial = out.join(".flight.csv.partial");
+        let opened = File::create(&partial).map(BufWriter::new);
+        let mut csv = match opened {
+            Ok(file) => FlightCsv { path, partial, file },
+            Err(e) => return Err(CliError(format!("writing {}: {e}", path.display()))),
+        };
+        if let Err(e) = csv.file.write_all(sim::CSV_HEADER.as_bytes()) {
+            return Err(csv.abandon(CliError(format!("writing {}: {e}", csv.path.display()))));
+        }
+        Ok(csv)
+    }
+
+    /// One more row; the error names the file.
+    pub fn row(&mut self, r: &LogRow) -> Result<(), String> {
+        r.write_csv(&mut self.file).map_err(|e| format!("writing {}: {e}", self.path.display()))
+    }
+
+    /// Every row of `log` (for a flight whose rows are known only at its end).
+    pub fn rows(&mut self, log: &FlightLog) -> Result<(), CliError> {
+        log.rows.iter().try_for_each(|r| self.row(r)).map_err(CliError)
+    }
+
+    /// Flushed and renamed to `flight.csv`.
+    fn finish(mut self) -> Result<PathBuf, CliError> {
+        let done = self.file.flush().and_then(|()| std::fs::rename(&self.partial, &self.path));
+        match done {
+            Ok(()) => Ok(self.path),
+            Err(e) => {
+                let e = CliError(format!("writing {}: {e}", self.path.display()));
+                Err(self.abandon(e))
+            }
+        }
+    }
+
+    /// The flight failed: the partial file goes, the error is handed on.
+    pub fn abandon(&self, e: CliError) -> CliError {
+        let _ = std::fs::remove_file(&self.partial);
+        e
+    }
 }
 
 /// The `--out` directory of a flight: checked writable before the flight starts (not after
@@ -135,25 +193,31 @@ impl OutputDir {
     }
 }
 
-/// Writes `flight.csv` and `flight.svg` into `out`, prints the metrics and the criteria, and
-/// returns exit status 0 if every criterion passed, 1 if not. Shared with `fcu-pil fly`.
-pub fn report(out: &Path, title: &str, sc: &Scenario, log: &FlightLog) -> Result<ExitCode, CliError> {
+/// Completes `flight.csv` (streamed into `csv` as the flight ran) and writes `flight.svg` into
+/// `out`, prints the metrics and the criteria, and returns exit status 0 if every criterion
+/// passed, 1 if not. Shared with `fcu-pil fly`.
+pub fn report(out: &Path, title: &str, sc: &Scenario, log: &FlightLog, csv: FlightCsv) -> Result<ExitCode, CliError> {
     let m = metrics::compute(log, sc);
     let verdicts = metrics::check_all(log, sc);
-    let csv_path = out.join("flight.csv");
     let svg_path = out.join("flight.svg");
-    // Both under temporary names first, renamed once both are complete: never a CSV without
-    // its plot.
-    let (csv_tmp, svg_tmp) = (out.join(".flight.csv.partial"), out.join(".flight.svg.partial"));
-    let written = std::fs::write(&csv_tmp, log.to_csv())
-        .map_err(|e| CliError(format!("writing {}: {e}", csv_path.display())))
-        .and_then(|()| sim::plot::write_svg(log, title, &svg_tmp).map_err(CliError))
-        .and_then(|()| std::fs::rename(&csv_tmp, &csv_path).map_err(|e| CliError(format!("writing {}: {e}", csv_path.display()))))
-        .and_then(|()| std::fs::rename(&svg_tmp, &svg_path).map_err(|e| CliError(format!("writing {}: {e}", svg_path.display()))));
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&csv_tmp);
+    // The plot under a temporary name first, both renamed once both are complete: never a CSV
+    // without its plot.
+    let svg_tmp = out.join(".flight.svg.partial");
+    if let Err(e) = sim::plot::write_svg(log, title, &svg_tmp) {
         let _ = std::fs::remove_file(&svg_tmp);
-        return Err(e);
+        return Err(csv.abandon(CliError(e)));
+    }
+    let csv_path = match csv.finish() {
+        Ok(p) => p,
+        Err(e) => {
+            let _ = std::fs::remove_file(&svg_tmp);
+            return Err(e);
+        }
+    };
+    if let Err(e) = std::fs::rename(&svg_tmp, &svg_path) {
+        let _ = std::fs::remove_file(&svg_tmp);
+        let _ = std::fs::remove_file(&csv_path);
+        return Err(CliError(format!("writing {}: {e}", svg_path.display())));
     }
 
     print_summary(sc, log, &m, &verdicts);

@@ -95,12 +95,14 @@ pub enum SimError {
     Config(String),
     /// The flight computer failed (an emulated board's fault, for instance).
     Computer(String),
+    /// A logged row could not be handed on (the CSV being written as the flight runs).
+    Output(String),
 }
 
 impl std::fmt::Display for SimError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            SimError::Config(m) | SimError::Computer(m) => write!(f, "{m}"),
+            SimError::Config(m) | SimError::Computer(m) | SimError::Output(m) => write!(f, "{m}"),
         }
     }
 }
@@ -252,8 +254,7 @@ impl FlightComputer for InProcess {
 
 /// Fly `scenario` with `profile`'s flight core in this process. Deterministic for a given seed.
 pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<FlightLog, SimError> {
-    let mut computer = InProcess::new(profile.config())?;
-    run_with(&mut computer, scenario, profile, opts)
+    run_streaming(&mut InProcess::new(profile.config())?, scenario, profile, opts, &mut |_| Ok(()))
 }
 
 /// Fly `scenario` with any [`FlightComputer`]; `profile` is the configuration it flies (the
@@ -263,6 +264,18 @@ pub fn run_with(
     scenario: &Scenario,
     profile: Profile,
     opts: &RunOptions,
+) -> Result<FlightLog, SimError> {
+    run_streaming(computer, scenario, profile, opts, &mut |_| Ok(()))
+}
+
+/// [`run_with`], handing every row to `on_row` as soon as it is logged (`fcu-sim fly` writes
+/// its CSV this way, as the flight runs). An error from `on_row` stops the flight.
+pub fn run_streaming(
+    computer: &mut dyn FlightComputer,
+    scenario: &Scenario,
+    profile: Profile,
+    opts: &RunOptions,
+    on_row: &mut dyn FnMut(&LogRow) -> Result<(), String>,
 ) -> Result<FlightLog, SimError> {
     let cfg = profile.config();
     let mut params = if opts.plant_spread > 0.0 { PlantParams::randomized(opts.seed, opts.plant_spread) } else { PlantParams::default() };
@@ -283,7 +296,8 @@ pub fn run_with(
     let n_ticks = (duration_s * tick_hz).round() as u64;
     let vibration = Vibration { amplitude_g_at_full_speed: params.vibration_accel_g, full_speed_hz: params.motor_full_speed_hz };
 
-    let mut rows = Vec::with_capacity(n_ticks as usize);
+    // Grown as the flight goes, never sized from the duration up front.
+    let mut rows = Vec::new();
     let mut edges: Vec<CaptureEdge> = Vec::with_capacity(32);
     let mut last_thr_us = scenario::THR_LOW_US;
     let started = Instant::now();
@@ -343,7 +357,7 @@ pub fn run_with(
         let v = computer.view();
         let (pitch, roll, yaw) = plant.euler_rad();
         let row = scenario.timeline.at(t1);
-        rows.push(LogRow {
+        let logged = LogRow {
             t_s: t1,
             state: v.state,
             armed: v.armed,
@@ -365,7 +379,9 @@ pub fn run_with(
             calibrated: v.calibrated,
             calibrating: v.calibrating,
             calibration_restarts: v.calibration_restarts,
-        });
+        };
+        on_row(&logged).map_err(SimError::Output)?;
+        rows.push(logged);
 
         if opts.progress && started.elapsed() >= next_progress {
             next_progress += Duration::from_secs(1);
@@ -382,42 +398,50 @@ pub fn run_with(
     Ok(FlightLog { scenario: scenario.name.clone(), profile, seed: opts.seed, tick_hz, plant: params, rows })
 }
 
+/// The header of a flight's CSV, one row per control tick ([`LogRow::write_csv`]).
+pub const CSV_HEADER: &str = "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,roll_target_deg,\
+                              pitch_target_deg,yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us\n";
+
+impl LogRow {
+    /// This row as one line of the flight's CSV (under [`CSV_HEADER`]).
+    pub fn write_csv(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
+        let r = self;
+        writeln!(
+            w,
+            "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
+            r.t_s,
+            r.state,
+            u8::from(r.armed),
+            u8::from(r.link_tx),
+            r.roll_deg,
+            r.pitch_deg,
+            r.yaw_deg,
+            r.est_roll_deg,
+            r.est_pitch_deg,
+            r.roll_target_deg,
+            r.pitch_target_deg,
+            r.yaw_target_deg,
+            r.yaw_rate_dps,
+            r.motors[0],
+            r.motors[1],
+            r.motors[2],
+            r.motors[3],
+            r.alt_m,
+            r.battery_v,
+            r.thr_us
+        )
+    }
+}
+
 impl FlightLog {
-    /// The flight as CSV, one row per control tick.
+    /// The whole flight as CSV text (what `fcu-sim fly` streams to `flight.csv`).
     pub fn to_csv(&self) -> String {
-        use std::fmt::Write as _;
-        let mut s = String::with_capacity(self.rows.len() * 160);
-        s.push_str(
-            "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,roll_target_deg,pitch_target_deg,\
-             yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us\n",
-        );
+        let mut bytes = CSV_HEADER.as_bytes().to_vec();
         for r in &self.rows {
-            let _ = writeln!(
-                s,
-                "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
-                r.t_s,
-                r.state,
-                u8::from(r.armed),
-                u8::from(r.link_tx),
-                r.roll_deg,
-                r.pitch_deg,
-                r.yaw_deg,
-                r.est_roll_deg,
-                r.est_pitch_deg,
-                r.roll_target_deg,
-                r.pitch_target_deg,
-                r.yaw_target_deg,
-                r.yaw_rate_dps,
-                r.motors[0],
-                r.motors[1],
-                r.motors[2],
-                r.motors[3],
-                r.alt_m,
-                r.battery_v,
-                r.thr_us
-            );
+            // Writing to a Vec cannot fail.
+            let _ = r.write_csv(&mut bytes);
         }
-        s
+        String::from_utf8_lossy(&bytes).into_owned()
     }
 }
 
