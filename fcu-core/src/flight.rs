@@ -246,6 +246,13 @@ impl FlightController {
         self.inner.status()
     }
 
+    /// Tests only (feature `test-switches`): with `true`, the supervisor runs its full table
+    /// every tick, without the steady-flight shortcut or the repeat of the last decision.
+    #[cfg(feature = "test-switches")]
+    pub fn set_table_only(&mut self, table_only: bool) {
+        self.inner.supervisor.set_table_only(table_only);
+    }
+
     /// Split for a firmware that runs the outer step in its own task.
     pub fn into_parts(self) -> (Inner, Outer) {
         (self.inner, self.outer)
@@ -364,11 +371,10 @@ impl Inner {
         let repeated = self.last_raw == Some(imu);
         self.last_raw = Some(imu);
         self.check_health(imu, repeated);
-        // Steady flight with nothing new from the radio or the sensor: the supervisor's inputs
-        // are the last tick's, so is its decision (see `Supervisor::repeat_steady_flight`).
-        let unchanged = !self.receiver.changed() && self.fault.is_none();
-        if !(unchanged && self.supervisor.repeat_steady_flight()) {
-            self.decision = self.supervise(&radio, armed_override);
+        // Steady flight with nothing new from the radio or the sensor repeats the last decision
+        // and what follows from it (the rule is `Supervisor::step_or_repeat`'s).
+        if let Some(decision) = self.supervise(&radio, armed_override) {
+            self.decision = decision;
             self.cal_pending |= self.decision.request_calibration;
             // What follows from the decision and the sticks, until either changes.
             self.sticks_in_force = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
@@ -511,27 +517,34 @@ impl Inner {
         }
     }
 
-    fn supervise(&mut self, radio: &RadioState, armed_override: Option<bool>) -> Decision {
-        let calibrating = self.calibrator.in_startup() || self.calibrator.is_averaging();
-        match self.cfg.supervisor {
-            SupervisorConfig::Reference => self.supervisor.step_reference(radio.link, armed_override, calibrating),
-            SupervisorConfig::Safe(ref safety) => {
-                let sticks = radio.sticks;
-                let inputs = Inputs {
-                    link: radio.link,
-                    // Only read without a good link.
-                    silence_ticks: if radio.link { 0 } else { self.receiver.silence_ticks(&self.cfg.rc) },
-                    sticks,
-                    gesture: radio.gesture,
-                    throttle_low: self.cfg.rc.throttle_low(&sticks),
-                    calibrated: self.calibrator.has_passed(),
-                    calibrating,
-                    sensor_fault: self.fault,
-                    tilt_rad: self.tilt_rad,
-                };
-                self.supervisor.step_with(safety, inputs)
+    /// This tick's decision, or `None` when the last one stands.
+    #[inline(always)]
+    fn supervise(&mut self, radio: &RadioState, armed_override: Option<bool>) -> Option<Decision> {
+        let (cfg, calibrator, receiver, fault, tilt_rad) = (&self.cfg, &self.calibrator, &self.receiver, self.fault, self.tilt_rad);
+        // Run only when the last decision cannot simply stand.
+        let decide = |supervisor: &mut Supervisor| {
+            let calibrating = calibrator.in_startup() || calibrator.is_averaging();
+            match cfg.supervisor {
+                SupervisorConfig::Reference => supervisor.step_reference(radio.link, armed_override, calibrating),
+                SupervisorConfig::Safe(ref safety) => {
+                    let sticks = radio.sticks;
+                    let inputs = Inputs {
+                        link: radio.link,
+                        // Only read without a good link.
+                        silence_ticks: if radio.link { 0 } else { receiver.silence_ticks(&cfg.rc) },
+                        sticks,
+                        gesture: radio.gesture,
+                        throttle_low: cfg.rc.throttle_low(&sticks),
+                        calibrated: calibrator.has_passed(),
+                        calibrating,
+                        sensor_fault: fault,
+                        tilt_rad,
+                    };
+                    supervisor.step_with(safety, inputs)
+                }
             }
-        }
+        };
+        self.supervisor.step_or_repeat(receiver.changed(), fault, decide)
     }
 
     fn motors_off(&mut self) -> TickOutput {

@@ -251,6 +251,9 @@ pub struct Supervisor {
     reference_armed: bool,
     /// The last step was steady flight (see [`step_in_flight`](Self::step_in_flight)).
     steady: bool,
+    /// Tests only: every step runs the full table (no steady-flight shortcut, no repeat).
+    #[cfg(feature = "test-switches")]
+    table_only: bool,
 }
 
 impl Default for Supervisor {
@@ -274,6 +277,8 @@ impl Supervisor {
             fault: None,
             reference_armed: false,
             steady: false,
+            #[cfg(feature = "test-switches")]
+            table_only: false,
         }
     }
 
@@ -349,6 +354,26 @@ impl Supervisor {
         self.step_with(cfg, *i)
     }
 
+    /// Tests only: with `true`, every step runs the full state table — no steady-flight
+    /// shortcut, no repeat — so that a test can fly two controllers, one without the
+    /// shortcuts, and compare them tick by tick.
+    #[cfg(feature = "test-switches")]
+    pub fn set_table_only(&mut self, table_only: bool) {
+        self.table_only = table_only;
+    }
+
+    #[cfg(feature = "test-switches")]
+    #[inline(always)]
+    fn shortcuts_allowed(&self) -> bool {
+        !self.table_only
+    }
+
+    #[cfg(not(feature = "test-switches"))]
+    #[inline(always)]
+    fn shortcuts_allowed(&self) -> bool {
+        true
+    }
+
     /// [`step`](Self::step) with the inputs by value, for the 800 Hz path: inlined there, the
     /// steady-flight test reads the few inputs it needs where they are, and the full `Inputs`
     /// is only assembled in memory when the table has to run.
@@ -361,11 +386,42 @@ impl Supervisor {
             && i.sensor_fault.is_none()
             && self.fault.is_none()
             && cfg.auto_disarm_ticks > 0
+            && self.shortcuts_allowed()
         {
             return self.step_in_flight(&i);
         }
         // By value: the caller assembles the inputs at this call, on the table's path only.
         self.step_table(cfg, i)
+    }
+
+    /// The 800 Hz path's call: `None` when this tick's decision is the last one's (the caller
+    /// keeps it and everything it derived from it), else the decision `decide` takes (the
+    /// caller's [`step_with`](Self::step_with) or [`step_reference`](Self::step_reference),
+    /// assembling the inputs only then).
+    ///
+    /// Why a repeat is exact: steady flight ([`step_in_flight`](Self::step_in_flight)) reads
+    /// only the link, the gesture, the throttle and the sensor fault among the inputs. When the
+    /// last tick was steady flight, `radio_changed` is false (link, sticks and so gesture and
+    /// throttle are the last tick's) and there is no sensor fault, this tick is steady flight
+    /// too with the same decision; only the boot and good-link counters move. The other inputs
+    /// (tilt, calibration flags, silence) may differ: steady flight does not read them. (The
+    /// reference's supervisor never flies steady, so it never repeats.)
+    /// `the_flight_shortcut_decides_exactly_as_the_table` checks this on random input
+    /// sequences, and `fcu-testkit/tests/shortcuts.rs` on whole flights.
+    #[inline(always)]
+    pub fn step_or_repeat(
+        &mut self,
+        radio_changed: bool,
+        sensor_fault: Option<SensorFault>,
+        decide: impl FnOnce(&mut Supervisor) -> Decision,
+    ) -> Option<Decision> {
+        if self.can_repeat(radio_changed, sensor_fault) {
+            self.boot_ticks = self.boot_ticks.saturating_add(1);
+            self.good_ticks = self.good_ticks.saturating_add(1);
+            None
+        } else {
+            Some(decide(self))
+        }
     }
 
     /// [`step_table`](Self::step_table) in the state the 800 Hz path is in almost every tick:
@@ -392,18 +448,11 @@ impl Supervisor {
         }
     }
 
-    /// Another tick of steady flight, for a caller that knows the inputs are those of the last
-    /// tick: if that tick was steady flight, this one is too, with the same decision, and only
-    /// the two counters move (every other line of [`step_in_flight`](Self::step_in_flight)
-    /// rewrites what is already there). Returns false, changing nothing, when the last tick
-    /// was not steady flight; then call [`step`](Self::step).
+    /// Whether [`step_or_repeat`](Self::step_or_repeat) may repeat the last decision (no side
+    /// effect).
     #[inline(always)]
-    pub fn repeat_steady_flight(&mut self) -> bool {
-        if self.steady {
-            self.boot_ticks = self.boot_ticks.saturating_add(1);
-            self.good_ticks = self.good_ticks.saturating_add(1);
-        }
-        self.steady
+    fn can_repeat(&self, radio_changed: bool, sensor_fault: Option<SensorFault>) -> bool {
+        self.steady && !radio_changed && sensor_fault.is_none() && self.shortcuts_allowed()
     }
 
     /// The state table, for any state and inputs.
@@ -1186,12 +1235,16 @@ mod tests {
                     shortcut_ticks += u32::from(in_flight);
                     let a = fast.step(&cfg, &i);
                     let b = table.step_table(&cfg, i);
-                    let c = match lazy_decision {
-                        Some(d) if previous == Some(i) && lazy.repeat_steady_flight() => {
+                    // The radio "changed" whenever link or sticks differ from the last tick's; the
+                    // other inputs may differ on a repeat, as in the pipeline.
+                    let radio_changed = previous.is_none_or(|p| p.link != i.link || p.sticks != i.sticks);
+                    let c = match lazy.step_or_repeat(radio_changed, i.sensor_fault, |s| s.step(&cfg, &i)) {
+                        Some(d) => d,
+                        None => {
                             repeats += 1;
-                            d
+                            proptest::prop_assert!(lazy_decision.is_some(), "a repeat before any decision");
+                            lazy_decision.unwrap_or(a)
                         }
-                        _ => lazy.step(&cfg, &i),
                     };
                     lazy_decision = Some(c);
                     previous = Some(i);

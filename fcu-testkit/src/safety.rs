@@ -279,8 +279,9 @@ impl ProcedureTracker {
             self.arm_run = self.arm_run.saturating_add(1);
         } else {
             // A later, shorter run (the gesture taken up again while waiting) does not undo a
-            // completed hold: the supervisor keeps counting from it.
-            if self.arm_run > 0 && self.arm_run >= self.pending_run {
+            // completed hold: the supervisor keeps counting from it. A run that did not start
+            // released could never arm, so any later run replaces it.
+            if self.arm_run > 0 && (self.arm_run >= self.pending_run || !self.pending_released) {
                 self.pending_run = self.arm_run;
                 self.pending_released = self.arm_run_released;
             }
