@@ -11,7 +11,7 @@
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
 use crate::ahrs::{EstimatorConfig, MahonyConfig, VqfConfig};
-use crate::control::{ControlConfig, Derivative};
+use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
@@ -237,8 +237,22 @@ impl Default for Config {
                 ..r.rc
             },
             control: ControlConfig {
-                // D3: the same D low-pass on yaw.
-                yaw: crate::control::AxisGains { d_lowpass: true, ..r.control.yaw },
+                // D15: gains for the loop's bandwidth, not the reference's (see `fcu-sim
+                // margins` for the margins they keep). Roll and pitch: the angle loop at 6.5/s
+                // (rise ~0.24 s), a rate loop three times as stiff with twice the integral
+                // (gusts, a weak motor). The reference's D on the error also acted through the
+                // angle loop's demand (kd·outer_kp = 30 counts per rad/s of extra rate gain);
+                // D on measurement (D7) dropped that, and this gain puts it back and more.
+                pitch: AxisGains { outer_kp: 6.5, inner_kp: 300.0, inner_ki: 150.0, ..r.control.pitch },
+                roll: AxisGains { outer_kp: 6.5, inner_kp: 300.0, inner_ki: 150.0, ..r.control.roll },
+                // D3: the same D low-pass on yaw; D15: a stiffer, damped yaw rate loop with the
+                // whole compare range (the yaw torque of a quad is small: a full-stick turn
+                // needs all of it to start and stop), and a softer heading loop now that the
+                // stick's rate goes straight to the rate loop (D13).
+                yaw: AxisGains { outer_kp: 2.0, inner_kp: 2500.0, inner_kd: 50.0, output_limit: 2000.0, d_lowpass: true, ..r.control.yaw },
+                // D15: the derivative's low-pass at ~13 Hz (0.1 at 800 Hz) instead of 3.2 Hz: it
+                // adds damping up to the rate loop's crossover instead of lagging behind it.
+                d_filter_k: 0.1,
                 // D7: derivative on measurement.
                 derivative: Derivative::OnMeasurement,
                 // D2: the outer integrator steps by the real outer period.
@@ -246,7 +260,10 @@ impl Default for Config {
                 inner_dt_s: 1.0 / tick_hz as f32,
                 // D6: anti-windup against mixer saturation.
                 anti_windup: true,
-                ..r.control
+                // D13: the yaw stick's rate straight into the yaw rate demand.
+                yaw_rate_feedforward: 0.9,
+                // D14: thrust kept as the battery sags.
+                battery: Some(BatteryCompensation::LIPO_1S),
             },
             // D6: attitude priority when a motor saturates.
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..r.mixer },

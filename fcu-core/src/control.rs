@@ -63,6 +63,105 @@ pub struct ControlConfig {
     pub outer_integrator_dt_s: f32,
     /// Stop integrating in the direction the mixer saturates (D6).
     pub anti_windup: bool,
+    /// Fraction of the yaw stick's commanded rate fed straight into the yaw rate demand
+    /// (D13). 0 in the reference: the rate comes only from the heading loop, as
+    /// `outer_kp` × the heading error, so a turn lags its stick by a heading error of
+    /// rate / `outer_kp` and the rate loop sees the demand only as that error builds up.
+    pub yaw_rate_feedforward: f32,
+    /// Scale the rate loop's output and the throttle map with the battery voltage (D14);
+    /// `None` in the reference, whose gains weaken as the battery sags.
+    pub battery: Option<BatteryCompensation>,
+}
+
+/// Thrust compensation for the battery (D14). A brushed motor's speed at a given duty is
+/// proportional to the voltage and its thrust to the speed squared, so at `v` the same duty
+/// gives `(v / nominal)²` of the thrust it gave at `nominal`: the rate loop's gains, its output
+/// limit and the throttle map are multiplied by `(nominal / v)²` (the thrust gain), so the
+/// loop and the throttle stick feel the same from a full battery to an empty one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatteryCompensation {
+    /// The voltage the gains and the throttle map are tuned for, mV.
+    pub nominal_mv: u32,
+    /// Readings below this are not a battery (unplugged, USB power): ignored, mV.
+    pub min_valid_mv: u32,
+    /// The thrust gain stays within `[1 / max_gain, max_gain]`: a nearly empty battery is not
+    /// chased into motors that cannot deliver anyway.
+    pub max_gain: f32,
+    /// Time constant of the reading's low-pass, s. The sag follows the current within
+    /// milliseconds; compensating it that fast would turn more throttle into more sag into
+    /// more throttle, so the gain follows the battery's charge, not each burst of current.
+    pub filter_s: f32,
+}
+
+impl BatteryCompensation {
+    /// A 1S LiPo: tuned at 4.0 V (a charged cell hovering), ignored under 2.5 V, at most
+    /// ×1.5, 2 s low-pass.
+    pub const LIPO_1S: BatteryCompensation = BatteryCompensation { nominal_mv: 4000, min_valid_mv: 2500, max_gain: 1.5, filter_s: 2.0 };
+
+    pub fn is_valid(&self) -> bool {
+        self.nominal_mv > 0
+            && self.min_valid_mv > 0
+            && self.max_gain.is_finite()
+            && (1.0..=4.0).contains(&self.max_gain)
+            && self.filter_s.is_finite()
+            && self.filter_s > 0.0
+    }
+
+    /// The thrust gain for a (filtered) battery voltage.
+    pub fn thrust_gain(&self, battery_mv: f32) -> f32 {
+        let ratio = self.nominal_mv as f32 / battery_mv;
+        let g = ratio * ratio;
+        if g.is_finite() {
+            g.clamp(1.0 / self.max_gain, self.max_gain)
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The battery voltage as the compensation sees it: the low-passed valid readings, and the
+/// thrust gain they give (1 until the first valid reading).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BatteryFilter {
+    filtered_mv: Option<f32>,
+    latest_mv: u32,
+}
+
+impl BatteryFilter {
+    /// The latest reading (the firmware's ADC gives one every 100 ms).
+    pub fn set_reading(&mut self, battery_mv: u32) {
+        self.latest_mv = battery_mv;
+    }
+
+    /// One outer step of `dt_s`: the filter follows the latest valid reading; the thrust gain.
+    pub fn step(&mut self, cfg: &BatteryCompensation, dt_s: f32) -> f32 {
+        if self.latest_mv >= cfg.min_valid_mv {
+            let v = self.latest_mv as f32;
+            let alpha = (dt_s / cfg.filter_s).min(1.0);
+            self.filtered_mv = Some(match self.filtered_mv {
+                Some(f) => f + alpha * (v - f),
+                // The first reading: no start-up ramp from nothing.
+                None => v,
+            });
+        }
+        // In steps of 1/512 (0.2 %): the rate loop is rescaled only when the gain moves a
+        // step, a few hundred times a flight at most, not on every outer step.
+        self.filtered_mv.map_or(1.0, |mv| libm::roundf(cfg.thrust_gain(mv) * 512.0) / 512.0)
+    }
+}
+
+impl ControlConfig {
+    /// This configuration's rate loop for a thrust gain `g` (see [`BatteryCompensation`]).
+    pub fn scaled_rate_loop(&self, g: f32) -> ControlConfig {
+        let scale = |a: AxisGains| AxisGains {
+            inner_kp: a.inner_kp * g,
+            inner_ki: a.inner_ki * g,
+            inner_kd: a.inner_kd * g,
+            output_limit: a.output_limit * g,
+            ..a
+        };
+        ControlConfig { pitch: scale(self.pitch), roll: scale(self.roll), yaw: scale(self.yaw), ..*self }
+    }
 }
 
 impl ControlConfig {
@@ -105,6 +204,8 @@ impl ControlConfig {
         inner_dt_s: 0.00125,
         outer_integrator_dt_s: 0.00125,
         anti_windup: false,
+        yaw_rate_feedforward: 0.0,
+        battery: None,
     };
 
     pub fn axes(&self) -> [&AxisGains; 3] {
@@ -119,6 +220,9 @@ impl ControlConfig {
             && self.d_filter_k <= 1.0
             && dt_ok(self.inner_dt_s)
             && dt_ok(self.outer_integrator_dt_s)
+            && self.yaw_rate_feedforward.is_finite()
+            && (0.0..=1.5).contains(&self.yaw_rate_feedforward)
+            && self.battery.is_none_or(|b| b.is_valid())
     }
 }
 

@@ -19,7 +19,7 @@
 
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
-use crate::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
+use crate::control::{AngleLoop, BatteryFilter, ControlConfig, RateLoop, Saturation};
 use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
@@ -100,6 +100,9 @@ pub struct OuterResult {
     pub target_rad: [f32; 3],
     /// Rate demands for the inner loop, rad/s (`s1`).
     pub rate_demand_rad_s: [f32; 3],
+    /// The battery compensation's thrust gain (1 without it; see
+    /// [`BatteryCompensation`](crate::control::BatteryCompensation)).
+    pub thrust_gain: f32,
 }
 
 /// The radio state given directly (golden replay): the reference's `rc_connection_flag`,
@@ -132,11 +135,16 @@ pub struct Status {
     /// Motor commands before the compare clamp (the reference prints motor 1's).
     pub motor_command: [f32; 4],
     pub compare: [u16; 4],
+    /// The battery compensation's thrust gain in force (1 without it).
+    pub thrust_gain: f32,
 }
 
 /// The per-tick half.
 #[derive(Clone, Debug)]
 pub struct Inner {
+    /// The configuration, except that its rate loop and throttle map are the ones in force:
+    /// scaled by the battery compensation's thrust gain (`outer.thrust_gain`), rewritten only
+    /// when that gain changes (from `Outer`'s unscaled copy, see [`Inner::apply_outer`]).
     cfg: Config,
     decoder: Decoder,
     compare_range: CompareRange,
@@ -187,6 +195,9 @@ pub struct Outer {
     reference_arithmetic: bool,
     angle_loop: AngleLoop,
     yaw_target_rad: f32,
+    /// Outer steps per second (the yaw stick's step per outer step, times this, is its rate).
+    outer_hz: f32,
+    battery: BatteryFilter,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
@@ -225,6 +236,11 @@ impl FlightController {
     /// One control tick when the sensor read failed (see [`Inner::tick_without_sample`]).
     pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
         self.inner.tick_without_sample(pulses)
+    }
+
+    /// The latest battery reading, mV (the battery compensation's input).
+    pub fn set_battery_mv(&mut self, battery_mv: u32) {
+        self.outer.set_battery_mv(battery_mv);
     }
 
     /// Run an outer step now and apply its result.
@@ -309,7 +325,14 @@ impl Inner {
             yaw_target_reset: false,
             rate_loop: RateLoop::default(),
             saturation: Saturation::NONE,
-            outer: OuterResult { quat: Quat::IDENTITY, tilt: Tilt::default(), target_rad: [0.0; 3], rate_demand_rad_s: [0.0; 3] },
+            outer: OuterResult {
+                quat: Quat::IDENTITY,
+                tilt: Tilt::default(),
+                target_rad: [0.0; 3],
+                rate_demand_rad_s: [0.0; 3],
+                thrust_gain: 1.0,
+            },
+
             motor_command: [0.0; 4],
             compare: [0; 4],
         }
@@ -354,6 +377,14 @@ impl Inner {
 
     /// Take in an outer step's result (at the start of the next tick in the firmware).
     pub fn apply_outer(&mut self, r: &OuterResult) {
+        if r.thrust_gain != self.outer.thrust_gain {
+            // Rescaled from what is in force: the ratio of the new gain to the old. Exact
+            // enough: the gain moves in steps of 1/512 (see `BatteryFilter`), a few hundred
+            // times a flight at most, and each rescale rounds by 2^-24.
+            let ratio = r.thrust_gain / self.outer.thrust_gain;
+            self.cfg.control = self.cfg.control.scaled_rate_loop(ratio);
+            self.cfg.mixer = self.cfg.mixer.scaled_throttle(ratio);
+        }
         self.outer = *r;
         // Only the safe supervisor's arming check reads it (sqrt + acos: ~300 instructions).
         if let SupervisorConfig::Safe(_) = self.cfg.supervisor {
@@ -570,6 +601,7 @@ impl Inner {
             rate_demand_rad_s: self.outer.rate_demand_rad_s,
             motor_command: self.motor_command,
             compare: self.compare,
+            thrust_gain: self.outer.thrust_gain,
         }
     }
 }
@@ -584,6 +616,8 @@ impl Outer {
             reference_arithmetic: cfg.reference_arithmetic,
             angle_loop: AngleLoop::default(),
             yaw_target_rad: 0.0,
+            outer_hz: (1.0 / (cfg.timing.tick_dt_s * BLOCK as f64)) as f32,
+            battery: BatteryFilter::default(),
         }
     }
 
@@ -608,8 +642,23 @@ impl Outer {
         }
         let target_rad = [pitch_target, roll_target, self.yaw_target_rad];
         let estimate = [tilt.pitch_rad, tilt.roll_rad, job.yaw_est_rad];
-        let rate_demand_rad_s = self.angle_loop.step(&self.control, target_rad, estimate, job.throttle_low);
-        OuterResult { quat, tilt, target_rad, rate_demand_rad_s }
+        let mut rate_demand_rad_s = self.angle_loop.step(&self.control, target_rad, estimate, job.throttle_low);
+        let ff = self.control.yaw_rate_feedforward;
+        if ff != 0.0 && !job.throttle_low {
+            // The heading loop keeps correcting what the rate loop misses; the stick's rate
+            // itself goes to the rate loop now, not once a heading error has built up.
+            rate_demand_rad_s[2] += ff * yaw_step * self.outer_hz;
+        }
+        let thrust_gain = match self.control.battery {
+            Some(b) => self.battery.step(&b, 1.0 / self.outer_hz),
+            None => 1.0,
+        };
+        OuterResult { quat, tilt, target_rad, rate_demand_rad_s, thrust_gain }
+    }
+
+    /// The latest battery reading, mV (for the battery compensation; ignored without it).
+    pub fn set_battery_mv(&mut self, battery_mv: u32) {
+        self.battery.set_reading(battery_mv);
     }
 }
 

@@ -67,6 +67,12 @@ impl MixerConfig {
         saturate: Saturate::Clip,
     };
 
+    /// This throttle map for a thrust gain `g` (see `control::BatteryCompensation`); the
+    /// compare range is the timer's and does not move.
+    pub fn scaled_throttle(&self, g: f32) -> MixerConfig {
+        MixerConfig { throttle_slope: self.throttle_slope * g, throttle_offset: self.throttle_offset * g, ..*self }
+    }
+
     pub fn is_valid(&self) -> bool {
         let finite = [self.throttle_slope, self.throttle_offset, self.min_compare, self.max_compare].iter().all(|v| v.is_finite());
         finite

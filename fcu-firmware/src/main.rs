@@ -7,10 +7,10 @@
 //! |--------------|-------------------------|------|----------------------------------------------|
 //! | rc_capture   | TIM2 (both edges)       | 4    | CCRx + pin level → `EdgeDecoder::on_edge`    |
 //! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `Inner::tick` → TIM4, feed IWDG  |
-//! | outer_step   | software                | 2    | `Outer::step`, result back to `control`      |
+//! | outer_step   | software                | 2    | battery reading + `Outer::step` → `control`  |
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
-//! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC                            |
+//! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
 #![no_std]
 #![no_main]
 // RTIC's generated `spawn` hands the message back in `Err` when the task is busy; for the
@@ -441,8 +441,11 @@ mod app {
     }
 
     /// The outer step (estimator + angle loop) on the job's snapshot.
-    #[task(priority = 2, shared = [outer_result], local = [outer])]
+    #[task(priority = 2, shared = [outer_result, battery_mv], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context, job: OuterJob) {
+        // The battery compensation's input (the core filters it and decides what it does).
+        let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
+        cx.local.outer.set_battery_mv(battery_mv);
         let result = cx.local.outer.step(&job);
         cx.shared.outer_result.lock(|slot| *slot = Some(result));
     }

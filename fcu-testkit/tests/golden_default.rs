@@ -1,5 +1,5 @@
-//! Golden vectors of the default profile, the one that ships: capture edges and raw sensor words
-//! in, compare values, quaternion and flight state out, tick for tick, for the first seconds of
+//! Golden vectors of the default profile, the one that ships: capture edges, raw sensor words
+//! and the battery voltage in, compare values, quaternion and flight state out, tick for tick, for the first seconds of
 //! several scenarios (boot, calibration, the arm gesture, take-off, steps, a link loss). The
 //! inputs are stored, so the simulator can change without touching them; only a change of the
 //! core's behaviour moves the outputs, and every value is compared bit for bit.
@@ -62,7 +62,9 @@ impl FlightComputer for Recorder {
         let compare = self.core.step(t_end_s, edges, imu, battery_v)?;
         let g = imu.gyro;
         let a = imu.accel;
-        let _ = write!(self.text, "{},{},{},{},{},{},{},", self.tick, g[0], g[1], g[2], a[0], a[1], a[2]);
+        // The battery as the core is given it (whole millivolts).
+        let battery_mv = (battery_v * 1000.0).round() as u32;
+        let _ = write!(self.text, "{},{},{},{},{},{},{},{battery_mv},", self.tick, g[0], g[1], g[2], a[0], a[1], a[2]);
         let edge_field: Vec<String> =
             edges.iter().map(|e| format!("{}:{}:{}", e.channel, e.capture_counts, u8::from(e.level_high))).collect();
         let _ = write!(self.text, "{},", edge_field.join(";"));
@@ -77,7 +79,7 @@ impl FlightComputer for Recorder {
     }
 }
 
-const HEADER: &str = "tick,gx,gy,gz,ax,ay,az,edges,m1,m2,m3,m4,qw_bits,qx_bits,qy_bits,qz_bits,state\n";
+const HEADER: &str = "tick,gx,gy,gz,ax,ay,az,battery_mv,edges,m1,m2,m3,m4,qw_bits,qx_bits,qy_bits,qz_bits,state\n";
 
 fn record(name: &str, seconds: f64) -> String {
     let sc = scenario::by_name(name).unwrap_or_else(|| panic!("no scenario {name}"));
@@ -116,10 +118,11 @@ fn replay(name: &str, seconds: f64) {
     let mut rows = 0;
     for (i, line) in lines.enumerate() {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 17, "{name} line {}: {line}", i + 2);
+        assert_eq!(f.len(), 18, "{name} line {}: {line}", i + 2);
         let n = |k: usize| f[k].parse::<i16>().unwrap_or_else(|_| panic!("{name} line {}: field {}", i + 2, k + 1));
         let imu = RawImu { gyro: [n(1), n(2), n(3)], accel: [n(4), n(5), n(6)] };
-        let edges: Vec<CaptureEdge> = f[7]
+        let battery_mv: u32 = f[7].parse().unwrap_or_else(|_| panic!("{name} line {}: battery_mv", i + 2));
+        let edges: Vec<CaptureEdge> = f[8]
             .split(';')
             .filter(|e| !e.is_empty())
             .map(|e| {
@@ -127,10 +130,10 @@ fn replay(name: &str, seconds: f64) {
                 CaptureEdge { t_s: 0.0, channel: p[0].parse().unwrap(), capture_counts: p[1].parse().unwrap(), level_high: p[2] == "1" }
             })
             .collect();
-        let compare = core.step(0.0, &edges, imu, 4.0).unwrap();
+        let compare = core.step(0.0, &edges, imu, f64::from(battery_mv) / 1000.0).unwrap();
         let mut got = String::new();
         output_fields(&mut got, compare, &core);
-        let want = f[8..].join(",");
+        let want = f[9..].join(",");
         assert_eq!(
             got, want,
             "{name}, tick {}: the default profile's output moved (a deliberate change? FCU_BLESS=1, see this file)",

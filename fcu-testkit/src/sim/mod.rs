@@ -216,7 +216,9 @@ impl FlightComputer for InProcess {
         f64::from(self.fc.config().timing.tick_hz())
     }
 
-    fn step(&mut self, _t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, _battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, _t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        // What the firmware's ADC reports (every tick here; every 100 ms on the board).
+        self.fc.set_battery_mv((battery_v * 1000.0).round().clamp(0.0, f64::from(u32::MAX)) as u32);
         for e in edges {
             self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
         }
