@@ -3,8 +3,9 @@
 //! - [`Config::reference()`] is the ST reference's R release, number for number, including
 //!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
 //!   reference's golden vectors bit for bit.
-//! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings,
-//!   gains and stick mapping, with the documented differences D1–D12 of product.md §3, each a
+//! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
+//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D15
+//!   (yaw feedforward, battery compensation, gains from the measured loop; README), each a
 //!   field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
@@ -206,7 +207,7 @@ impl Config {
 }
 
 impl Default for Config {
-    /// The product: the reference's structure and tuning with differences D1–D12.
+    /// The product: the reference's structure with differences D1–D15.
     fn default() -> Config {
         let r = Config::reference();
         let tick_hz = 800.0;
@@ -221,7 +222,8 @@ impl Default for Config {
             },
             // §4: non-finite, impossible or stuck (100 ms) sensor values are faults.
             health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 }),
-            gyro_filter: r.gyro_filter,
+            // D15: the gyro low-pass at 150 Hz instead of 100 Hz: phase for the faster loop.
+            gyro_filter: BiquadCoeffs::GYRO_150_HZ_AT_800_HZ,
             // D4 and D5: a VQF-style estimator (exact normalisation, accelerometer low-passed
             // in a quasi-inertial frame, rest detection, gyro bias estimation); see `ahrs::vqf`.
             estimator: EstimatorConfig::Vqf(VqfConfig::DEFAULT),
@@ -237,22 +239,25 @@ impl Default for Config {
                 ..r.rc
             },
             control: ControlConfig {
-                // D15: gains for the loop's bandwidth, not the reference's (see `fcu-sim
-                // margins` for the margins they keep). Roll and pitch: the angle loop at 6.5/s
-                // (rise ~0.24 s), a rate loop three times as stiff with twice the integral
-                // (gusts, a weak motor). The reference's D on the error also acted through the
-                // angle loop's demand (kd·outer_kp = 30 counts per rad/s of extra rate gain);
-                // D on measurement (D7) dropped that, and this gain puts it back and more.
-                pitch: AxisGains { outer_kp: 6.5, inner_kp: 300.0, inner_ki: 150.0, ..r.control.pitch },
-                roll: AxisGains { outer_kp: 6.5, inner_kp: 300.0, inner_ki: 150.0, ..r.control.roll },
-                // D3: the same D low-pass on yaw; D15: a stiffer, damped yaw rate loop with the
-                // whole compare range (the yaw torque of a quad is small: a full-stick turn
-                // needs all of it to start and stop), and a softer heading loop now that the
-                // stick's rate goes straight to the rate loop (D13).
-                yaw: AxisGains { outer_kp: 2.0, inner_kp: 2500.0, inner_kd: 50.0, output_limit: 2000.0, d_lowpass: true, ..r.control.yaw },
-                // D15: the derivative's low-pass at ~13 Hz (0.1 at 800 Hz) instead of 3.2 Hz: it
-                // adds damping up to the rate loop's crossover instead of lagging behind it.
-                d_filter_k: 0.1,
+                // D15: gains chosen with `fcu-sim margins` (at least 45° and 6 dB with one tick
+                // more delay, on the nominal airframe and ±30 % ones) for the gusts, steps and
+                // weak motors of `fcu-testkit/tests/control_quality.rs`. Roll and pitch: the D
+                // term's zero (kp/kd ≈ 29 rad/s) near the motors' lag (1/70 ms ≈ 14 rad/s), so
+                // past it the loop falls like an integrator; twice the integral for gusts and a
+                // weak motor; the angle loop at 6.5/s. (The reference's D on the error also
+                // acted through the angle loop's demand, as kd·outer_kp = 30 counts per rad/s of
+                // extra rate gain; D on measurement, D7, dropped that: why the earlier default
+                // tilted more than the reference in a gust.)
+                pitch: AxisGains { outer_kp: 6.5, inner_kp: 200.0, inner_ki: 300.0, inner_kd: 7.0, ..r.control.pitch },
+                roll: AxisGains { outer_kp: 6.5, inner_kp: 200.0, inner_ki: 300.0, inner_kd: 7.0, ..r.control.roll },
+                // D3: the same D low-pass on yaw. D15: a damped yaw rate loop with the whole
+                // compare range (a quad's yaw torque is small: a full-stick turn needs all of it
+                // to start and stop) and a softer heading loop now that the stick's rate goes
+                // straight to the rate loop (D13).
+                yaw: AxisGains { outer_kp: 2.0, inner_kp: 1500.0, inner_kd: 60.0, output_limit: 2000.0, d_lowpass: true, ..r.control.yaw },
+                // D15: the derivative's low-pass at ~65 Hz (0.4 at 800 Hz) instead of 3.2 Hz: it
+                // damps up to the crossover instead of lagging behind it.
+                d_filter_k: 0.4,
                 // D7: derivative on measurement.
                 derivative: Derivative::OnMeasurement,
                 // D2: the outer integrator steps by the real outer period.

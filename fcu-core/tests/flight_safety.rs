@@ -282,8 +282,15 @@ fn stage_1_levels_and_never_raises_the_throttle() {
     let mut b = Bench::new(Config::default());
     b.boot();
     b.arm();
+    // The sticks the next outer job flies with (what the failsafe puts in force).
+    let job_sticks = |b: &mut Bench| loop {
+        if let Some(job) = b.tick().outer_job {
+            break job.sticks;
+        }
+    };
     b.run([1300.0, 1700.0, 1600.0, 1800.0], 400);
     let before = b.fc.status();
+    let flown = job_sticks(&mut b);
     b.sending = false;
     b.run(FLY, 100);
     let st = b.fc.status();
@@ -291,8 +298,9 @@ fn stage_1_levels_and_never_raises_the_throttle() {
     assert_eq!(st.target_rad[0], 0.0);
     assert_eq!(st.target_rad[1], 0.0);
     assert!(before.target_rad[0] != 0.0 && before.target_rad[1] != 0.0);
-    let mean = |c: [u16; 4]| c.iter().map(|&v| f32::from(v)).sum::<f32>() / 4.0;
-    assert!(mean(st.compare) <= mean(before.compare) + 50.0, "{:?} vs {:?}", st.compare, before.compare);
+    let held = job_sticks(&mut b);
+    assert_eq!((held.ail, held.ele, held.rud), (0, 0, 0), "{held:?}");
+    assert!(held.thr <= flown.thr && held.thr > 0, "{held:?} vs {flown:?}");
 }
 
 #[test]

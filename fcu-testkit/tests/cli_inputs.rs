@@ -143,3 +143,33 @@ fn the_flight_log_is_streamed_and_a_write_error_stops_the_flight_at_once() {
     let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+#[test]
+fn margins_refuses_bad_options_by_name() {
+    for (args, named) in [
+        (&["margins", "--extra-delay-ticks", "100"][..], "--extra-delay-ticks"),
+        (&["margins", "--spread", "2"][..], "--spread"),
+        (&["margins", "--profile", "fast"][..], "--profile"),
+    ] {
+        let (code, _, err) = fcu_sim(args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(err.contains(named) && err.len() < 300, "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn margins_writes_its_response_and_bode_plot_and_passes() {
+    let d = dir("margins");
+    let out = d.join("out");
+    let (code, stdout, err) = fcu_sim(&["margins", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert!(stdout.contains("PASS") && stdout.contains("pitch") && stdout.contains("yaw"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("margins.csv")).unwrap();
+    assert!(csv.starts_with("freq_hz,pitch_gain_db,pitch_phase_deg,roll_gain_db"), "{csv}");
+    assert!(csv.lines().count() > 30);
+    let svg = std::fs::read_to_string(out.join("margins.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("PM"), "svg without its legend");
+    // The reference's gains fail the requirement: exit 1.
+    let (code, stdout, _) = fcu_sim(&["margins", "--profile", "reference"]);
+    assert_eq!(code, 1, "{stdout}");
+}

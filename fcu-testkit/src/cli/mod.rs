@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod estimate;
 pub mod fly;
+pub mod margins;
 pub mod replay;
 
 #[derive(Parser, Debug)]
@@ -25,6 +26,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Run the attitude estimator over a BROAD-format IMU recording.
     Estimate(estimate::EstimateArgs),
+    /// Measure the attitude loops' frequency response in hover: gain and phase margins, Bode plot.
+    Margins(margins::MarginsArgs),
 }
 
 /// Parse the arguments, run the subcommand, and turn any error into a message and exit 2
@@ -36,6 +39,7 @@ pub fn main() -> ExitCode {
         Command::Compare(a) => fly::run_compare(&a),
         Command::Replay(a) => replay::run(&a),
         Command::Estimate(a) => estimate::run(&a),
+        Command::Margins(a) => margins::run(&a),
     };
     match result {
         Ok(code) => code,

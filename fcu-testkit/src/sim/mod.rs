@@ -10,6 +10,7 @@
 //!    values, and runs its outer step inline when one is due (as the replay does).
 
 pub mod imu_model;
+pub mod loop_id;
 pub mod metrics;
 pub mod plant;
 pub mod plot;
@@ -41,11 +42,16 @@ pub struct RunOptions {
     pub duration_s: Option<f64>,
     /// Print a progress line on stderr once the run has taken more than a couple of seconds.
     pub progress: bool,
+    /// Added to the compare values before the plant gets them (loop identification).
+    pub excitation: Option<loop_id::Multisine>,
+    /// Control ticks the plant gets the compare values late, beyond the zero-order hold of
+    /// one tick (robustness: does the loop keep its margins with one more tick of delay?).
+    pub extra_delay_ticks: u32,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
-        RunOptions { seed: 1, plant_spread: 0.0, substeps: 5, duration_s: None, progress: false }
+        RunOptions { seed: 1, plant_spread: 0.0, substeps: 5, duration_s: None, progress: false, excitation: None, extra_delay_ticks: 0 }
     }
 }
 
@@ -300,6 +306,8 @@ pub fn run_streaming(
 
     // Grown as the flight goes, never sized from the duration up front.
     let mut rows = Vec::new();
+    // Compare values on their way to the plant with `extra_delay_ticks` (motors off before).
+    let mut late: std::collections::VecDeque<[u16; 4]> = std::collections::VecDeque::new();
     let mut edges: Vec<CaptureEdge> = Vec::with_capacity(32);
     let mut last_thr_us = scenario::THR_LOW_US;
     let started = Instant::now();
@@ -354,7 +362,15 @@ pub fn run_streaming(
 
         // 3. The flight computer's tick: edges and the IMU's words in, compare values out.
         let compare = computer.step(t1, &edges, imu.read(), plant.state.battery_v)?;
-        plant.set_compare(compare);
+        let to_plant = opts.excitation.as_ref().map_or(compare, |x| x.add_to(compare, t1));
+        if opts.extra_delay_ticks == 0 {
+            plant.set_compare(to_plant);
+        } else {
+            late.push_back(to_plant);
+            while late.len() > opts.extra_delay_ticks as usize {
+                plant.set_compare(late.pop_front().unwrap_or(to_plant));
+            }
+        }
 
         let v = computer.view();
         let (pitch, roll, yaw) = plant.euler_rad();

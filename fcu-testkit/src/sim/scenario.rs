@@ -387,9 +387,9 @@ pub fn by_name(name: &str) -> Option<Scenario> {
             s.steps = steps.to_vec();
             s.criteria = flight_criteria((6.0, 8.0), 1.0, 26.5);
             for &(axis, t_s, target_deg) in &s.steps {
-                // The outer P gain of 3 /s makes a ~0.35 s time constant: the nominal drone rises
-                // (10→90 %) in 0.49 s; +30 % inertia in the randomised airframes slows that to
-                // ~0.52 s, hence 0.6 s. Overshoot is a few per cent; 20 % flags a real regression.
+                // Loose enough for both profiles (the reference's angle loop at 3/s rises in
+                // ~0.55 s); the default's own goals (0.30 s, 5 %) are checked on five ±30 %
+                // airframes by tests/control_quality.rs. 20 % overshoot flags a real regression.
                 s.criteria.push(Criterion::Step { axis, t_s, target_deg, rise_max_s: 0.6, overshoot_max_pct: 20.0 });
             }
             s.criteria.push(Criterion::AltitudeAbove { from_s: 6.0, to_s: 20.0, min_m: 0.2 });
@@ -505,7 +505,8 @@ pub fn by_name(name: &str) -> Option<Scenario> {
             s.motor_thrust_scale = [0.85, 1.0, 1.0, 1.0];
             s.hover_window_s = Some((8.0, 15.5));
             // The rate-loop integrators take over the lost thrust; what remains is the slow
-            // horizontal drift an accelerometer-only estimator cannot see (0.6–0.9° measured).
+            // horizontal drift an accelerometer-only estimator cannot see (the reference's
+            // 1.6°; the default's 0.17°, tests/control_quality.rs).
             s.criteria = flight_criteria((8.0, 15.5), 1.5, 21.5);
             s.criteria.push(Criterion::TiltBelow { from_s: 6.0, to_s: 15.5, max_deg: 8.0 });
             s

@@ -1,0 +1,209 @@
+//! `fcu-sim margins`: the attitude loops' frequency response, measured on the simulated drone
+//! in hover, with their gain and phase margins and a Bode plot (see `sim::loop_id`).
+//!
+//! Exit codes: 0 every axis has at least [`MIN_GAIN_MARGIN_DB`] and [`MIN_PHASE_MARGIN_DEG`],
+//! 1 one does not, 2 bad usage.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use plotters::prelude::*;
+
+use super::fly::{check_spread, OutputDir};
+use super::CliError;
+use crate::sim::loop_id::{self, AxisLoop, Plan, AXES};
+use crate::sim::{InProcess, Profile, RunOptions};
+
+/// The margins a loop must keep (classical robustness figures).
+pub const MIN_GAIN_MARGIN_DB: f64 = 6.0;
+pub const MIN_PHASE_MARGIN_DEG: f64 = 45.0;
+/// More delay than this is not a robustness question any more.
+pub const MAX_EXTRA_DELAY_TICKS: u32 = 40;
+
+#[derive(clap::Args, Debug)]
+pub struct MarginsArgs {
+    /// Flight-controller profile: `default` (the product) or `reference` (ST's firmware).
+    #[arg(long, default_value = "default")]
+    pub profile: String,
+    /// Seed for sensor noise and (with --spread) the airframe.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Randomise every airframe parameter by ±this fraction from the seed (0 = nominal drone).
+    #[arg(long, default_value_t = 0.0)]
+    pub spread: f64,
+    /// Extra control ticks between the computer's compare values and the motors.
+    #[arg(long, default_value_t = 0)]
+    pub extra_delay_ticks: u32,
+    /// Directory for margins.csv (the response) and margins.svg (its Bode plot).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// All three axes measured with `opts`.
+pub fn measure(profile: Profile, opts: &RunOptions) -> Result<Vec<AxisLoop>, CliError> {
+    (0..AXES.len())
+        .map(|axis| {
+            let mut computer = InProcess::new(profile.config()).map_err(|e| CliError(e.to_string()))?;
+            loop_id::measure_axis(&mut computer, profile, axis, &Plan::DEFAULT, opts).map_err(|e| CliError(e.to_string()))
+        })
+        .collect()
+}
+
+/// Whether every axis keeps the required margins.
+pub fn all_meet(loops: &[AxisLoop]) -> bool {
+    loops.iter().all(|l| l.margins.meets(MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG, Plan::DEFAULT.to_hz))
+}
+
+pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
+    let profile = Profile::parse(&a.profile)
+        .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
+    let spread = check_spread(a.spread)?;
+    if a.extra_delay_ticks > MAX_EXTRA_DELAY_TICKS {
+        return Err(CliError(format!("--extra-delay-ticks: {} is more than {MAX_EXTRA_DELAY_TICKS}", a.extra_delay_ticks)));
+    }
+    let out = a.out.as_deref().map(OutputDir::prepare).transpose()?;
+    let opts = RunOptions { seed: a.seed, plant_spread: spread, extra_delay_ticks: a.extra_delay_ticks, ..RunOptions::default() };
+    let abandon = |e: CliError| match &out {
+        Some(o) => o.abandon(e),
+        None => e,
+    };
+    let loops = measure(profile, &opts).map_err(abandon)?;
+
+    println!(
+        "fcu-sim margins: profile {}, seed {}, spread ±{:.0} %, {} extra tick(s) of delay; loop broken at the motors",
+        profile.name(),
+        a.seed,
+        spread * 100.0,
+        a.extra_delay_ticks
+    );
+    println!("{:<6} {:>12} {:>14} {:>14} {:>12}", "axis", "crossover", "phase margin", "gain margin", "at");
+    let show = |v: Option<f64>, unit: &str, prec: usize| v.map_or("—".to_string(), |v| format!("{v:.prec$} {unit}"));
+    for l in &loops {
+        let m = &l.margins;
+        println!(
+            "{:<6} {:>12} {:>14} {:>14} {:>12}",
+            AXES[l.axis],
+            show(m.crossover_hz, "Hz", 2),
+            show(m.phase_margin_deg, "°", 1),
+            m.gain_margin_db.map_or(format!("> {:.0} Hz", Plan::DEFAULT.to_hz), |g| format!("{g:.1} dB")),
+            show(m.phase_crossover_hz, "Hz", 1),
+        );
+    }
+    let passed = all_meet(&loops);
+    println!(
+        "requirement: at least {MIN_PHASE_MARGIN_DEG}° and {MIN_GAIN_MARGIN_DB} dB on every axis: {}",
+        if passed { "PASS" } else { "FAIL" }
+    );
+    if let (Some(dir), Some(o)) = (a.out.as_deref(), &out) {
+        let title = format!(
+            "fcu-sim margins: {} profile, seed {}, ±{:.0} %, +{} tick(s)",
+            profile.name(),
+            a.seed,
+            spread * 100.0,
+            a.extra_delay_ticks
+        );
+        write_outputs(dir, &title, &loops).map_err(|e| o.abandon(e))?;
+        println!("wrote {} and {}", dir.join("margins.csv").display(), dir.join("margins.svg").display());
+    }
+    Ok(if passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+fn write_outputs(dir: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), CliError> {
+    let mut csv = String::from("freq_hz");
+    for l in loops {
+        let name = AXES[l.axis];
+        csv.push_str(&format!(",{name}_gain_db,{name}_phase_deg"));
+    }
+    csv.push('\n');
+    let n = loops.iter().map(|l| l.response.len()).min().unwrap_or(0);
+    for k in 0..n {
+        csv.push_str(&format!("{:.3}", loops[0].response[k].freq_hz));
+        for l in loops {
+            let p = l.response[k];
+            csv.push_str(&format!(",{:.3},{:.2}", p.gain_db, p.phase_deg));
+        }
+        csv.push('\n');
+    }
+    let svg_tmp = dir.join(".margins.svg.partial");
+    if let Err(e) = bode_svg(&svg_tmp, title, loops) {
+        let _ = std::fs::remove_file(&svg_tmp);
+        return Err(CliError(e));
+    }
+    super::write_output(Some(&dir.join("margins.csv")), csv.as_bytes())?;
+    std::fs::rename(&svg_tmp, dir.join("margins.svg")).map_err(|e| {
+        let _ = std::fs::remove_file(&svg_tmp);
+        CliError(format!("writing {}: {e}", dir.join("margins.svg").display()))
+    })
+}
+
+/// Gain and phase against log frequency, one curve per axis, 0 dB and −180° marked, each
+/// axis's crossover and phase crossover dotted.
+fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    let root = SVGBackend::new(path, (1000, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let (top, body) = root.split_vertically(40);
+    top.titled(title, ("sans-serif", 20)).map_err(|e| err(&e))?;
+    let (gain_area, phase_area) = body.split_vertically(430);
+    let colors = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44)];
+    let (lo, hi) = (Plan::DEFAULT.from_hz.log10(), Plan::DEFAULT.to_hz.log10());
+    let hz_label = |x: &f64| {
+        let f = 10f64.powf(*x);
+        if f < 10.0 {
+            format!("{f:.1}")
+        } else {
+            format!("{f:.0}")
+        }
+    };
+    let finite = |v: f64| v.is_finite();
+    let gains: Vec<f64> = loops.iter().flat_map(|l| l.response.iter().map(|p| p.gain_db)).filter(|v| finite(*v)).collect();
+    let (g_lo, g_hi) = (gains.iter().copied().fold(-20.0f64, f64::min).max(-60.0), gains.iter().copied().fold(20.0f64, f64::max).min(60.0));
+    let phases: Vec<f64> = loops.iter().flat_map(|l| l.response.iter().map(|p| p.phase_deg)).filter(|v| finite(*v)).collect();
+    let (p_lo, p_hi) =
+        (phases.iter().copied().fold(-200.0f64, f64::min).max(-540.0), phases.iter().copied().fold(-90.0f64, f64::max).min(180.0));
+
+    let mut gain = ChartBuilder::on(&gain_area)
+        .caption("|L| (dB)", ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(lo..hi, g_lo..g_hi)
+        .map_err(|e| err(&e))?;
+    gain.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).draw().map_err(|e| err(&e))?;
+    gain.draw_series(LineSeries::new([(lo, 0.0), (hi, 0.0)], BLACK.stroke_width(1))).map_err(|e| err(&e))?;
+    let mut phase = ChartBuilder::on(&phase_area)
+        .caption("arg L (°)", ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(lo..hi, p_lo..p_hi)
+        .map_err(|e| err(&e))?;
+    phase.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).draw().map_err(|e| err(&e))?;
+    phase.draw_series(LineSeries::new([(lo, -180.0), (hi, -180.0)], BLACK.stroke_width(1))).map_err(|e| err(&e))?;
+
+    for (l, color) in loops.iter().zip(colors) {
+        let pts = |pick: fn(&loop_id::ResponsePoint) -> f64| -> Vec<(f64, f64)> {
+            l.response.iter().filter(|p| pick(p).is_finite()).map(|p| (p.freq_hz.log10(), pick(p))).collect()
+        };
+        let m = l.margins;
+        let label = format!(
+            "{}: PM {}, GM {}",
+            AXES[l.axis],
+            m.phase_margin_deg.map_or("—".into(), |v| format!("{v:.0}°")),
+            m.gain_margin_db.map_or("—".into(), |v| format!("{v:.1} dB"))
+        );
+        gain.draw_series(LineSeries::new(pts(|p| p.gain_db), color.stroke_width(2)))
+            .map_err(|e| err(&e))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        phase.draw_series(LineSeries::new(pts(|p| p.phase_deg), color.stroke_width(2))).map_err(|e| err(&e))?;
+        for f in [m.crossover_hz, m.phase_crossover_hz].into_iter().flatten() {
+            let x = f.log10();
+            gain.draw_series(LineSeries::new([(x, g_lo), (x, g_hi)], color.mix(0.4).stroke_width(1))).map_err(|e| err(&e))?;
+            phase.draw_series(LineSeries::new([(x, p_lo), (x, p_hi)], color.mix(0.4).stroke_width(1))).map_err(|e| err(&e))?;
+        }
+    }
+    gain.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
