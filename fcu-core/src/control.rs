@@ -310,7 +310,7 @@ impl RateAxis {
         g: &AxisGains,
         e: f32,
         rate: f32,
-        sat_bits: u8,
+        saturated_dirs: u8,
         ts: f32,
         dt_recip: f32,
     ) -> f32 {
@@ -328,7 +328,7 @@ impl RateAxis {
         // `over` is the output clamp's own test, shared with the anti-windup: in steady flight
         // neither the clamp nor the mixer holds anything back, and one comparison says so.
         let over = unclamped.abs() > g.output_limit;
-        if ANTI_WINDUP && (over || sat_bits != 0) && winds_up(e, sat_bits, unclamped, over) {
+        if ANTI_WINDUP && (over || saturated_dirs != 0) && winds_up(e, saturated_dirs, unclamped, over) {
             // Keep the integrator where it was and say what that gives.
             let held = g.inner_kp * e + g.inner_ki * self.integ + g.inner_kd * d;
             return clamp_symmetric(held, g.output_limit);
@@ -416,20 +416,18 @@ impl RateLoop {
 /// Anti-windup (D6): integrating `e` would push further in a direction that is already
 /// saturated, either in the mixer on the last tick (`sat`) or by this output's own clamp
 /// (`over`: conditional integration, since what the clamp holds back would only have to be
-/// unwound later). Compared by sign bits, not `e > 0.0`: every float comparison costs the
-/// Cortex-M4 a `vcmp`/`vmrs` pair on the 800 Hz path. With `e = ±0` the integrator cannot
-/// move, so which way a zero counts does not matter.
+/// unwound later). Compared by sign bits (docs/performance.md, «sign bits»): with `e = ±0`
+/// the integrator cannot move, so which way a zero counts does not matter.
 #[inline(always)]
-fn winds_up(e: f32, sat_bits: u8, unclamped: f32, over: bool) -> bool {
+fn winds_up(e: f32, saturated_dirs: u8, unclamped: f32, over: bool) -> bool {
     let e_negative = e.is_sign_negative();
-    let mixer_blocks = sat_bits & if e_negative { 2 } else { 1 } != 0;
+    let mixer_blocks = saturated_dirs & if e_negative { 2 } else { 1 } != 0;
     mixer_blocks || (over && unclamped.is_sign_negative() == e_negative)
 }
 
 /// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`, for the
-/// validated `lim ≥ 0`. Written as one magnitude test, which is all an in-range value (the
-/// usual case, every tick) costs: the same result for every `v`, NaN included (it passes
-/// through, as in C; the mixer's final clamp catches it).
+/// validated `lim ≥ 0`, as one magnitude test (docs/performance.md): the same result for
+/// every `v`, NaN included (it passes through, as in C; the mixer's final clamp catches it).
 #[inline(always)]
 fn clamp_symmetric(v: f32, lim: f32) -> f32 {
     if v.abs() > lim {

@@ -39,22 +39,20 @@ pub struct TickOutput {
 /// What the outer step needs of the last five ticks: the accelerometer words and the summed
 /// gyro, and what the sticks said.
 ///
-/// Only the estimator reads the accelerometer, at the outer rate, so the tick stores the
-/// sensor's words and the outer step converts them (mount, sensitivity, offsets: the same
-/// integer arithmetic the tick would do, five samples at 160 Hz instead of one at 800 Hz).
-/// The estimator takes block means, so the gyro arrives as the sum the mean is made of,
-/// accumulated tick by tick in slot order (bit for bit the reference's sum of five stored
-/// slots). Both keep the job small: building it costs the job's tick a copy of this struct.
+/// The tick stores the accelerometer's raw words and the outer step converts them (mount,
+/// sensitivity, offsets: the tick's integer arithmetic, done at 160 Hz); the gyro arrives as
+/// the sum its block mean is made of, accumulated in slot order (bit for bit the reference's
+/// sum of five stored slots). Why: docs/performance.md, «accel words, not values».
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OuterJob {
-    /// Accelerometer words, sensor axes, of the slots `accel_first_raw..`.
+    /// Accelerometer words, sensor axes, of the slots `first_raw_slot..`.
     pub accel_words: AccelWords,
     /// The offsets in force for those words.
     pub accel_offsets: Offsets,
-    /// The slots before `accel_first_raw`, converted and corrected with the offsets they were
+    /// The slots before `first_raw_slot`, converted and corrected with the offsets they were
     /// taken under and summed (only a block that spans the end of a calibration has any).
     pub accel_sum_before_mg: [f32; 3],
-    pub accel_first_raw: u8,
+    pub first_raw_slot: u8,
     /// Low-passed gyro summed over the block, mdps, body axes.
     pub gyro_sum_mdps: [f32; 3],
     /// The sticks in force (the failsafe's level sticks while it holds).
@@ -66,9 +64,8 @@ pub struct OuterJob {
     pub yaw_target_reset: bool,
 }
 
-/// The accelerometer words of a block, one per slot. Aligned to 4 bytes so that copying them
-/// into a job is a few word moves: as a plain 2-byte aligned array the copy went through a
-/// byte-wise `memcpy`, a hundred-odd instructions on the job's tick.
+/// The accelerometer words of a block, one per slot, aligned to 4 bytes (docs/performance.md,
+/// «aligned words»).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[repr(C, align(4))]
 pub struct AccelWords(pub [[i16; 3]; BLOCK]);
@@ -77,7 +74,7 @@ impl OuterJob {
     /// The block's summed accelerometer, corrected mg, body axes.
     pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
         let mut sum = self.accel_sum_before_mg;
-        let raw = self.accel_words.0.get(usize::from(self.accel_first_raw)..).unwrap_or(&[]);
+        let raw = self.accel_words.0.get(usize::from(self.first_raw_slot)..).unwrap_or(&[]);
         accumulate_accel_mg(&mut sum, raw, decoder, &self.accel_offsets);
         sum
     }
@@ -137,14 +134,18 @@ pub struct Status {
     pub compare: [u16; 4],
     /// The battery compensation's thrust gain in force (1 without it).
     pub thrust_gain: f32,
+    /// The yaw rate the stick asks for, rad/s (0 with the throttle low): the rate at which
+    /// the heading target moves, and what the yaw feedforward (D13) passes on.
+    pub yaw_rate_target_rad_s: f32,
 }
 
 /// The per-tick half.
 #[derive(Clone, Debug)]
 pub struct Inner {
     /// The configuration, except that its rate loop and throttle map are the ones in force:
-    /// scaled by the battery compensation's thrust gain (`outer.thrust_gain`), rewritten only
-    /// when that gain changes (from `Outer`'s unscaled copy, see [`Inner::apply_outer`]).
+    /// scaled by the battery compensation's thrust gain (`outer.thrust_gain`), rescaled only
+    /// when that gain changes ([`Inner::apply_outer`]; docs/performance.md, «scaled in
+    /// place»).
     cfg: Config,
     decoder: Decoder,
     compare_range: CompareRange,
@@ -166,10 +167,10 @@ pub struct Inner {
     missing_samples: u32,
     gyro_lpf: BiquadBank<3>,
     /// Samples of the current block written so far.
-    fifo_k: usize,
+    block_len: usize,
     accel_words: AccelWords,
     accel_sum_before_mg: [f32; 3],
-    accel_first_raw: u8,
+    first_raw_slot: u8,
     gyro_sum_mdps: [f32; 3],
     yaw_est_rad: f32,
     /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
@@ -313,10 +314,10 @@ impl Inner {
             last_raw: None,
             missing_samples: 0,
             gyro_lpf: BiquadBank::new(cfg.gyro_filter),
-            fifo_k: 0,
+            block_len: 0,
             accel_words: AccelWords::default(),
             accel_sum_before_mg: [0.0; 3],
-            accel_first_raw: 0,
+            first_raw_slot: 0,
             gyro_sum_mdps: [0.0; 3],
             yaw_est_rad: 0.0,
             tilt_rad: 0.0,
@@ -386,7 +387,7 @@ impl Inner {
             self.cfg.mixer = self.cfg.mixer.scaled_throttle(ratio);
         }
         self.outer = *r;
-        // Only the safe supervisor's arming check reads it (sqrt + acos: ~300 instructions).
+        // Only the safe supervisor's arming check reads it («tilt once per outer result»).
         if let SupervisorConfig::Safe(_) = self.cfg.supervisor {
             self.tilt_rad = tilt_angle_rad(r.quat);
         }
@@ -395,7 +396,7 @@ impl Inner {
 
     /// The pipeline, top to bottom. Every decision that touches a motor is in this function.
     fn run(&mut self, imu: RawImu, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
-        // No `let cfg = self.cfg`: copying the whole Config costs ~350 instructions per tick.
+        // `self.cfg.…` read in place, never copied (docs/performance.md, «no config copy»).
         let radio = self.receiver.state();
 
         // 1. Supervise: sensor health, then the state machine decides whether motors may run.
@@ -432,12 +433,12 @@ impl Inner {
                 self.fault.get_or_insert(SensorFault::NotFinite);
             }
         }
-        if let Some(words) = self.accel_words.0.get_mut(self.fifo_k) {
+        if let Some(words) = self.accel_words.0.get_mut(self.block_len) {
             *words = imu.accel;
         }
         accumulate(&mut self.gyro_sum_mdps, gyro_f);
-        self.fifo_k += 1;
-        let job_due = self.fifo_k >= BLOCK;
+        self.block_len += 1;
+        let job_due = self.block_len >= BLOCK;
         let gyro_rad_s =
             gyro_f.map(|g| if self.cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
@@ -458,8 +459,9 @@ impl Inner {
 
         // 5. Rate loop and mixer, only while the supervisor lets the motors run.
         if self.decision.motors_enabled {
-            let s2 = self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
-            let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), s2);
+            let rate_commands =
+                self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
+            let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), rate_commands);
             self.motor_command = cmd;
             self.saturation = sat;
         } else {
@@ -478,24 +480,23 @@ impl Inner {
             self.compare = [self.cfg.mixer.off_compare(); 4];
         }
 
-        // One output per branch: an `Option<OuterJob>` moved into a single output was copied
-        // (memcpy) on every tick, job or not.
+        // One output per branch (docs/performance.md, «one output per branch»).
         let yaw_target_reset = self.yaw_target_reset;
         if job_due {
             let job = OuterJob {
                 accel_words: self.accel_words,
                 accel_offsets: self.offsets,
                 accel_sum_before_mg: self.accel_sum_before_mg,
-                accel_first_raw: self.accel_first_raw,
+                first_raw_slot: self.first_raw_slot,
                 gyro_sum_mdps: self.gyro_sum_mdps,
                 sticks,
                 throttle_low,
                 yaw_est_rad: self.yaw_est_rad,
                 yaw_target_reset,
             };
-            self.fifo_k = 0;
+            self.block_len = 0;
             self.accel_sum_before_mg = [0.0; 3];
-            self.accel_first_raw = 0;
+            self.first_raw_slot = 0;
             self.gyro_sum_mdps = [0.0; 3];
             self.yaw_target_reset = false;
             TickOutput { compare: self.compare, outer_job: Some(job) }
@@ -533,10 +534,10 @@ impl Inner {
     /// New offsets from a calibration. The samples of the current block taken before it keep
     /// the offsets they were taken under: they are converted now and join the sum before.
     fn set_offsets(&mut self, o: Offsets) {
-        let taken = self.accel_words.0.get(usize::from(self.accel_first_raw)..self.fifo_k).unwrap_or(&[]);
+        let taken = self.accel_words.0.get(usize::from(self.first_raw_slot)..self.block_len).unwrap_or(&[]);
         accumulate_accel_mg(&mut self.accel_sum_before_mg, taken, &self.decoder, &self.offsets);
-        // `fifo_k` < BLOCK here (a job resets it), so the cast is exact.
-        self.accel_first_raw = self.fifo_k.min(BLOCK) as u8;
+        // `block_len` < BLOCK here (a job resets it), so the cast is exact.
+        self.first_raw_slot = self.block_len.min(BLOCK) as u8;
         self.offsets = o;
     }
 
@@ -602,6 +603,12 @@ impl Inner {
             motor_command: self.motor_command,
             compare: self.compare,
             thrust_gain: self.outer.thrust_gain,
+            yaw_rate_target_rad_s: if self.throttle_low {
+                0.0
+            } else {
+                // One outer step's heading change, BLOCK ticks apart.
+                self.cfg.rc.yaw_step(&self.sticks_in_force) / (self.tick_dt_s * BLOCK as f32)
+            },
         }
     }
 }
@@ -700,7 +707,7 @@ mod tests {
                 k += 1;
             }
             let job = job.expect("a job every five ticks");
-            assert_eq!(job.accel_first_raw as usize, change_at);
+            assert_eq!(job.first_raw_slot as usize, change_at);
             assert_eq!(job.accel_sum_mg(&decoder).map(f32::to_bits), expected.map(f32::to_bits), "change at slot {change_at}");
         }
     }

@@ -7,6 +7,22 @@
 //! Frames and signs are the reference's (see [`math`]): body +X right, +Y forward, +Z up;
 //! "pitch" is the rotation about X (nose up positive), "roll" about Y (right side down
 //! positive), yaw about Z (counter-clockwise seen from above positive).
+//!
+//! # Where a rule lives
+//!
+//! | to change… | look at |
+//! |---|---|
+//! | the order of a tick, what runs when | [`flight::Inner`]'s `run` (numbered stages) and [`flight::Outer::step`] |
+//! | arming, disarming, failsafe stages, blockers | [`supervisor::Supervisor`] (its `step_table`; every arm has tests named after its rule) and [`supervisor::SafetyConfig`] |
+//! | when the last decision may simply stand | [`supervisor::Supervisor::step_or_repeat`] |
+//! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
+//! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
+//! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |
+//! | the attitude estimate | [`ahrs`] (the reference's Mahony, the default's VQF-style estimator) |
+//! | gains, feedforward, battery compensation | [`control`] and the `control` field of [`Config::default`] |
+//! | motor mixing and saturation | [`mixer`] |
+//! | status lines, LEDs, boot checks | [`telemetry`], [`boot`] |
+//! | what the default changes from the reference (D1–D15) | [`config`]: each difference is a field with a comment |
 #![no_std]
 #![cfg_attr(
     not(test),

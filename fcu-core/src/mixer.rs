@@ -91,8 +91,8 @@ impl MixerConfig {
 
     /// The reference's `(int16)(slope·gTHR + offset)`, saturating instead of undefined.
     pub fn throttle_counts(&self, throttle: i16) -> i16 {
-        // Through i32 (one native conversion) and a saturate to 16 bits, where `as i16` from
-        // f32 costs two float range checks; the result is the same for every input.
+        // Through i32 and a saturate to 16 bits: the same result as `as i16` for every input
+        // (docs/performance.md, «integer throttle cast»).
         let v = (self.throttle_slope * f32::from(throttle) + self.throttle_offset) as i32;
         v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
     }
@@ -114,27 +114,26 @@ impl MixerConfig {
         let [x, y, z] = s;
         // The quad-X rows of MIX: the corrections are z − (x+y), (x−y) − z, (x+y) + z and
         // −(x−y) − z, so their extremes are z ± |x+y| and ±|x−y| − z, each exactly one of the
-        // four: two comparisons instead of six. (Compare-and-select, not f32::min/max: the M4's
-        // FPU has no VMINNM/VMAXNM, so those are calls to fminf/fmaxf.) A NaN is caught by
-        // `spread` below.
+        // four (docs/performance.md, «extremes from |x ± y|»). A NaN is caught by `spread`
+        // below.
         let (a, b) = (x + y, x - y);
-        let rel = [z - a, b - z, a + z, -b - z];
+        let corrections = [z - a, b - z, a + z, -b - z];
         let (abs_a, abs_b) = (a.abs(), b.abs());
         let lower = |a: f32, b: f32| if b < a { b } else { a };
         let upper = |a: f32, b: f32| if b > a { b } else { a };
-        let hi_rel = upper(z + abs_a, abs_b - z);
-        let lo_rel = lower(z - abs_a, -abs_b - z);
+        let highest = upper(z + abs_a, abs_b - z);
+        let lowest = lower(z - abs_a, -abs_b - z);
         let range = self.max_compare - self.min_compare;
-        let spread = hi_rel - lo_rel;
+        let spread = highest - lowest;
         let none = Saturation::NONE;
         if spread <= range {
             // The usual case: shift the throttle (never above what fits) so no motor clips.
             // (`thr` comes from an i16, so it is finite; a NaN spread fails this test.)
-            let hi_thr = self.max_compare - hi_rel;
-            let lo_thr = self.min_compare - lo_rel;
+            let hi_thr = self.max_compare - highest;
+            let lo_thr = self.min_compare - lowest;
             let t = if thr < hi_thr { thr } else { hi_thr };
             let base = if t > lo_thr { t } else { lo_thr };
-            return (rel.map(|r| base + r), none);
+            return (corrections.map(|r| base + r), none);
         }
         if !spread.is_finite() {
             return ([self.min_compare; 4], none);
@@ -142,8 +141,8 @@ impl MixerConfig {
         // Even the corrections alone do not fit: keep their proportions, centred.
         let sat = Saturation::of_commands(s);
         let scale = range / spread;
-        let base = self.min_compare - lo_rel * scale;
-        (rel.map(|r| base + r * scale), sat)
+        let base = self.min_compare - lowest * scale;
+        (corrections.map(|r| base + r * scale), sat)
     }
 
     /// The reference's `set_motor_pwm`: `cmd ≥ max → max`, `cmd ≤ min → min`, otherwise

@@ -437,9 +437,8 @@ impl Receiver {
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
         self.now += 1;
         let now = self.now;
-        // Written out per channel (in channel order, as the reference's gestures need): with a
-        // constant channel each width-to-stick folds to one subtraction. A loop over the four
-        // cost the 800 Hz tick a hundred instructions on the Cortex-M4.
+        // Written out per channel, in channel order as the reference's gestures need
+        // (docs/performance.md, «channels written out»).
         let [w0, w1, w2, w3] = batch.width_counts;
         let [t0, t1, t2, t3] = &mut self.last_pulse_at;
         let sticks = &mut self.sticks;

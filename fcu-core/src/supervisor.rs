@@ -399,7 +399,7 @@ impl Supervisor {
     /// caller's [`step_with`](Self::step_with) or [`step_reference`](Self::step_reference),
     /// assembling the inputs only then).
     ///
-    /// Why a repeat is exact: steady flight ([`step_in_flight`](Self::step_in_flight)) reads
+    /// Why a repeat is exact: steady flight (`step_in_flight`, the table's `Armed` line) reads
     /// only the link, the gesture, the throttle and the sensor fault among the inputs. When the
     /// last tick was steady flight, `radio_changed` is false (link, sticks and so gesture and
     /// throttle are the last tick's) and there is no sensor fault, this tick is steady flight
@@ -609,8 +609,8 @@ impl Supervisor {
             motors_enabled: next.motors_may_run(),
             failsafe_throttle: (next == FlightState::FailsafeLevel).then_some(self.last_good_throttle),
             request_calibration,
-            // Blockers say why arming is refused; armed, there is nothing to refuse (and the
-            // check would cost the flying tick ~60 instructions for nothing).
+            // Blockers say why arming is refused; armed, there is nothing to refuse
+            // (docs/performance.md, «no blockers while armed»).
             blockers: if next == FlightState::Armed { Blockers::default() } else { self.blockers(cfg, i) },
         }
     }

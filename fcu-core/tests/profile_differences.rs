@@ -193,7 +193,7 @@ fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
         accel_words: AccelWords([[0, 0, 8197]; 5]),
         accel_offsets: Offsets::UNCALIBRATED,
         accel_sum_before_mg: [0.0; 3],
-        accel_first_raw: 0,
+        first_raw_slot: 0,
         gyro_sum_mdps: [0.0; 3],
         sticks,
         throttle_low: false,
@@ -218,6 +218,25 @@ fn d13_a_yaw_stick_commands_its_rate_at_once() {
 }
 
 #[test]
+fn status_reports_the_yaw_rate_the_stick_asks_for() {
+    // Forced radio, the rudder at +1800 counts of 2000 beyond the dead band, throttle up.
+    let mut fc = FlightController::new(Config::default()).unwrap();
+    let turning = ForcedRadio { width_counts: [6000, 6000, 8000, 7800], link: true, armed: false, cal_request: false };
+    let level = RawImu { accel: [0, 0, 8197], gyro: [0, 0, 0] };
+    for _ in 0..10 {
+        fc.tick_forced(level, &turning);
+    }
+    let st = fc.status();
+    let want = fc.config().rc.yaw_step(&st.sticks) * 800.0 / 5.0;
+    assert!(want.abs() > 0.5, "{want}");
+    assert!((st.yaw_rate_target_rad_s - want).abs() < 1e-5, "{} vs {want}", st.yaw_rate_target_rad_s);
+    // Throttle low: no turn asked.
+    let low = ForcedRadio { width_counts: [6000, 6000, 4450, 7800], ..turning };
+    fc.tick_forced(level, &low);
+    assert_eq!(fc.status().yaw_rate_target_rad_s, 0.0);
+}
+
+#[test]
 fn d14_the_thrust_gain_follows_the_battery() {
     let gain_after = |cfg: Config, readings_mv: &[(u32, u32)]| {
         let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
@@ -225,7 +244,7 @@ fn d14_the_thrust_gain_follows_the_battery() {
             accel_words: AccelWords([[0, 0, 8197]; 5]),
             accel_offsets: Offsets::UNCALIBRATED,
             accel_sum_before_mg: [0.0; 3],
-            accel_first_raw: 0,
+            first_raw_slot: 0,
             gyro_sum_mdps: [0.0; 3],
             sticks: Sticks::default(),
             throttle_low: true,

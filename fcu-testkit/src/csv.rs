@@ -1,5 +1,14 @@
 //! A small CSV reader for the project's numeric files: header by name, every error names the
 //! line (1-based, the header is line 1) and the column.
+//!
+//! Why not the `csv` crate: the files here are plain numeric tables (no quoting, no embedded
+//! commas or newlines), and what the readers need beyond splitting is all project-specific:
+//! a byte-order mark accepted, a size cap before and after decompression, duplicate or
+//! backwards times refused, values that overflow f32 refused, and every message short and
+//! printable with the offending field echoed and cut ([`echo`], [`short_number`]). The crate
+//! reports record and byte positions, not the column by name, so those wrappers would stay
+//! and only the `split(',')` would go; for that, a dependency (and its own error type to map
+//! into these messages) is not worth it. `fuzz/` runs every reader on arbitrary bytes.
 
 use std::fmt;
 

@@ -8,7 +8,7 @@
 //!   gestures), the calibration, the lost-time budget of the failsafe and the arming
 //!   procedure; it never reads the supervisor's memory. A violation names the [`Invariant`]
 //!   and the tick.
-//! - [`SupervisorMonitor`] does the same for the bare [`Supervisor`] (`Inputs` → `Decision`).
+//! - [`SupervisorMonitor`] does the same for the bare [`Supervisor`](fcu_core::supervisor::Supervisor) (`Inputs` → `Decision`).
 //! - [`PwmReceiver`] turns a stick timeline into TIM2 capture edges (50 Hz frames, channels one
 //!   after the other, 15-bit 0.25 µs counter), [`LevelImu`] makes level LSM6DSL words with
 //!   ±2 LSB noise, and [`Rig`] wires them to an [`EdgeDecoder`], a controller and a monitor.

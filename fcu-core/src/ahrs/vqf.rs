@@ -391,9 +391,9 @@ impl Vqf {
         if !(acc.is_finite() && gyr.is_finite()) || acc.norm_squared() == 0.0 {
             return;
         }
-        // Snapshot only the attitude and the bias (copying the whole 0.5 KiB filter costs
-        // ~500 instructions per step on the M4); if a step ever goes non-finite, those come
-        // back and the low-pass filters restart from their initial state.
+        // Snapshot only the attitude and the bias (docs/performance.md, «snapshot what can go
+        // bad»); if a step ever goes non-finite, those come back and the low-pass filters
+        // restart from their initial state.
         let (gyr_q, acc_q, q, bias, bias_p) = (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p);
         self.step(acc, gyr);
         if !(self.q.is_finite() && self.bias_rad_s.is_finite()) {
