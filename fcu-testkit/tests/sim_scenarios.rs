@@ -93,7 +93,7 @@ fn reference_profile_runs_at_its_real_tick_rate() {
 
 // ---------------------------------------------------------------------------------------
 // The safety layer's rules, flown against the simulated drone (the core tests in
-// fcu-core/tests/flight_safety.rs show the same rules tick by tick).
+// fcu-testkit/tests/flight_safety.rs show the same rules tick by tick).
 // ---------------------------------------------------------------------------------------
 
 use scenario::{StickRow, Throttle, Timeline, AIL_CENTRE_US, ELE_CENTRE_US, RUD_CENTRE_US};

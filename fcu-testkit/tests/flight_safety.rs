@@ -1,16 +1,17 @@
 //! The safety layer through the whole pipeline, driven the way the firmware drives it: raw
-//! LSM6DSL words and radio capture edges on the 15-bit TIM2 counter, one control tick at a time.
-//! Each test is a rule of product.md §4; several show the reference's accident beside ours.
+//! LSM6DSL words and radio capture edges on the 15-bit TIM2 counter, one control tick at a time
+//! (from the testkit's one PWM receiver and one level IMU, `fcu_testkit::safety`). Each test is
+//! a rule of product.md §4; several show the reference's accident beside ours.
 
 use fcu_core::flight::TickOutput;
-use fcu_core::imu::RawImu;
 use fcu_core::rc::{EdgeDecoder, CAPTURE_WRAP};
 use fcu_core::supervisor::FlightState;
 use fcu_core::{Config, FlightController};
+use fcu_testkit::safety::{ChannelLayout, Edge, LevelImu, PwmReceiver, RadioFrame, COUNTS_PER_FRAME, COUNTS_PER_TICK};
 
 /// TIM2 counts (0.25 µs) per control tick at 800 Hz, and per 50 Hz radio frame.
-const TICK_COUNTS: u64 = 5_000;
-const FRAME_COUNTS: u64 = 80_000;
+const TICK_COUNTS: u64 = COUNTS_PER_TICK;
+const FRAME_COUNTS: u64 = COUNTS_PER_FRAME;
 const TICKS_PER_S: u32 = 800;
 
 /// Stick positions as pulse widths in µs: [AIL, ELE, THR, RUD].
@@ -19,89 +20,75 @@ const ARM: [f64; 4] = [1100.0, 1100.0, 1000.0, 1950.0];
 const DISARM: [f64; 4] = [1465.5, 1537.75, 1000.0, 1100.0];
 const FLY: [f64; 4] = [1465.5, 1537.75, 1600.0, 1599.25];
 
-/// A board on the bench: a level IMU with a little noise, a PWM receiver, the core.
+/// A board on the bench: the testkit's level IMU and PWM receiver (its first frame at the
+/// first tick's start, channel `k` rising `k × channel_spacing_counts` into each frame), the
+/// core. The test changes the fields between ticks.
 struct Bench {
     fc: FlightController,
     decoder: EdgeDecoder,
-    now_counts: u64,
+    radio: PwmReceiver,
+    imu: LevelImu,
     sticks_us: [f64; 4],
     sending: bool,
     /// Delay between the channels' pulses in a frame (0: all rise together, as many receivers).
     channel_spacing_counts: u64,
+    /// Edges for the next tick only: (channel, counts after the tick's start, level).
     extra_edges: Vec<(usize, u64, bool)>,
     stuck_imu: bool,
-    noise: u32,
     last: Option<TickOutput>,
     /// Control ticks run, and the tick each channel's last falling edge was fed in.
     ticks: u32,
     last_fall_tick: [u32; 4],
+    /// TIM2 counts at the start of the next tick.
+    now_counts: u64,
 }
 
 impl Bench {
     fn new(cfg: Config) -> Bench {
         let fc = FlightController::new(cfg).unwrap();
         let decoder = fc.edge_decoder();
+        let spacing = 10_000;
+        let mut imu = LevelImu::new(12_345);
+        imu.noise_lsb = 1;
         Bench {
             fc,
             decoder,
-            now_counts: 0,
+            radio: PwmReceiver::with_layout(0, ChannelLayout::Spaced { offset_counts: spacing }, 1),
+            imu,
             sticks_us: NEUTRAL,
             sending: true,
-            channel_spacing_counts: 10_000,
+            channel_spacing_counts: spacing,
             extra_edges: Vec::new(),
             stuck_imu: false,
-            noise: 12345,
             last: None,
             ticks: 0,
             last_fall_tick: [0; 4],
+            now_counts: 0,
         }
-    }
-
-    fn imu(&mut self) -> RawImu {
-        if !self.stuck_imu {
-            self.noise = self.noise.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-        }
-        let d = |shift: u32| ((self.noise >> shift) % 3) as i16 - 1;
-        RawImu { accel: [d(4), d(8), 8197 + d(12)], gyro: [d(16), d(20), d(24)] }
-    }
-
-    /// Edges of the receiver's frames inside (now, now + tick], in time order.
-    fn radio_edges(&self) -> Vec<(u64, usize, bool)> {
-        let (from, to) = (self.now_counts, self.now_counts + TICK_COUNTS);
-        let mut edges = Vec::new();
-        if self.sending {
-            let first_frame = from / FRAME_COUNTS;
-            for frame in first_frame..=to / FRAME_COUNTS {
-                for (ch, w) in self.sticks_us.iter().enumerate() {
-                    let rise = frame * FRAME_COUNTS + ch as u64 * self.channel_spacing_counts;
-                    let fall = rise + (w * 4.0) as u64;
-                    for (t, level) in [(rise, true), (fall, false)] {
-                        if t > from && t <= to {
-                            edges.push((t, ch, level));
-                        }
-                    }
-                }
-            }
-        }
-        for &(ch, offset, level) in &self.extra_edges {
-            edges.push((from + offset, ch, level));
-        }
-        edges.sort_by_key(|e| e.0);
-        edges
     }
 
     fn tick(&mut self) -> TickOutput {
         self.ticks += 1;
-        for (t, ch, level) in self.radio_edges() {
-            self.decoder.on_edge(ch, (t % u64::from(CAPTURE_WRAP)) as u16, level);
-            if !level {
-                self.last_fall_tick[ch] = self.ticks;
+        self.radio.set_layout(ChannelLayout::Spaced { offset_counts: self.channel_spacing_counts });
+        for (channel, offset, level) in self.extra_edges.drain(..) {
+            self.radio.inject(channel, offset, level);
+        }
+        let frame =
+            if self.sending { RadioFrame { width_counts: self.sticks_us.map(|w| (w * 4.0) as u16), link: true } } else { RadioFrame::OFF };
+        let mut edges: Vec<Edge> = Vec::new();
+        self.radio.tick(&frame, 0, &mut edges);
+        for e in &edges {
+            self.decoder.on_edge(e.channel, e.counts, e.level_high);
+            if !e.level_high {
+                if let Some(t) = self.last_fall_tick.get_mut(e.channel) {
+                    *t = self.ticks;
+                }
             }
         }
-        self.extra_edges.clear();
-        self.now_counts += TICK_COUNTS;
+        self.now_counts = self.radio.now_counts();
         let pulses = self.decoder.take();
-        let imu = self.imu();
+        self.imu.stuck = self.stuck_imu;
+        let imu = self.imu.sample();
         let out = self.fc.tick(imu, &pulses);
         if let Some(job) = out.outer_job {
             self.fc.run_outer(&job);
@@ -194,11 +181,14 @@ fn reference_arms_by_accident_when_the_link_comes_back_with_the_rudder_held() {
         b.channel_spacing_counts = 0;
         b.run(rudder_left, 5 * TICKS_PER_S / 2);
         b.sending = false;
-        // Lose the link for 0.2 s, and come back just after a frame's pulses started (every
-        // frame starts on a tick boundary: 16 ticks of 1.25 ms per 20 ms).
+        // Lose the link for 0.2 s (ten frames: the next one starts with the next tick), and
+        // come back just after that frame's pulses started: its rising edges are missed, the
+        // first edge of each channel is its falling one.
         b.run(rudder_left, 160);
+        b.extra_edges = rudder_left.iter().enumerate().map(|(ch, w)| (ch, (w * 4.0) as u64, false)).collect();
+        b.run(rudder_left, 1);
         b.sending = true;
-        b.run(rudder_left, 40);
+        b.run(rudder_left, 39);
         b.run(FLY, 400);
         b
     };
