@@ -120,12 +120,15 @@ impl Config {
         }
     }
 
-    /// The ESC build of the product: TIM4 at 400 Hz, idle 850, max 1700, MIN_THR 20.
+    /// The ESC build of the product: TIM4 at 400 Hz, idle 850, max 1700, MIN_THR 20. No
+    /// battery compensation (D14): its compare values are pulse widths an ESC reads as a
+    /// command, not a duty on the motor, and scaling them would move the idle pulse itself.
     pub fn esc() -> Config {
         let d = Config::default();
         Config {
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_ESC },
             rc: RcConfig { min_throttle: 20, ..d.rc },
+            control: ControlConfig { battery: None, ..d.control },
             ..d
         }
     }
