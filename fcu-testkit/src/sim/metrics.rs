@@ -22,6 +22,10 @@ pub struct Metrics {
     pub yaw_rate_rms_dps: Option<f64>,
     /// Largest tilt from level while armed, degrees.
     pub max_tilt_armed_deg: Option<f64>,
+    /// RMS of the compare values' change from one tick to the next over the hover window,
+    /// counts: the noise the controller puts on the motors (the derivative's low-pass is the
+    /// main knob).
+    pub motor_jitter_counts: Option<f64>,
 }
 
 fn window(log: &FlightLog, from_s: f64, to_s: f64) -> impl Iterator<Item = &LogRow> {
@@ -140,7 +144,25 @@ pub fn compute(log: &FlightLog, s: &Scenario) -> Metrics {
         m.yaw_rate_rms_dps = yaw_rate_rms_dps(log, a, b);
     }
     m.max_tilt_armed_deg = log.rows.iter().filter(|r| r.armed && r.alt_m > 0.05).map(tilt_deg).reduce(f64::max);
+    if let Some((a, b)) = s.hover_window_s {
+        m.motor_jitter_counts = motor_jitter_counts(log, a, b);
+    }
     m
+}
+
+/// RMS over the four motors of the compare value's change between consecutive ticks in
+/// `[from_s, to_s)`, counts.
+pub fn motor_jitter_counts(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
+    let rows: Vec<&LogRow> = window(log, from_s, to_s).collect();
+    let (mut sum, mut n) = (0.0, 0usize);
+    for w in rows.windows(2) {
+        for (a, b) in w[0].motors.iter().zip(&w[1].motors) {
+            let d = f64::from(*b) - f64::from(*a);
+            sum += d * d;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| (sum / n as f64).sqrt())
 }
 
 /// The verdict on one criterion.
@@ -240,5 +262,6 @@ pub fn lines(m: &Metrics) -> Vec<(&'static str, String)> {
         ("time to level after link loss", fmt_opt(m.level_after_link_loss_s, " s")),
         ("yaw rate RMS error", fmt_opt(m.yaw_rate_rms_dps, " °/s")),
         ("max tilt while armed and airborne", fmt_opt(m.max_tilt_armed_deg, "°")),
+        ("motor jitter (tick to tick, RMS, hovering)", fmt_opt(m.motor_jitter_counts, " counts")),
     ]
 }
