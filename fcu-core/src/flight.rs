@@ -147,8 +147,8 @@ pub struct Inner {
     /// when that gain changes ([`Inner::apply_outer`]; docs/performance.md, «scaled in
     /// place»).
     cfg: Config,
-    decoder: Decoder,
-    compare_range: CompareRange,
+    /// What the configuration settles, worked out once at construction.
+    derived: Derived,
     receiver: Receiver,
     supervisor: Supervisor,
     decision: Decision,
@@ -175,8 +175,6 @@ pub struct Inner {
     yaw_est_rad: f32,
     /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
     tilt_rad: f32,
-    /// `cfg.timing.tick_dt_s` rounded to f32 once (the f64 → f32 conversion is a library call).
-    tick_dt_s: f32,
     yaw_target_rad: f32,
     yaw_target_reset: bool,
     rate_loop: RateLoop,
@@ -184,6 +182,23 @@ pub struct Inner {
     outer: OuterResult,
     motor_command: [f32; 4],
     compare: [u16; 4],
+}
+
+/// What [`Inner`] works out from its configuration once, at construction.
+#[derive(Clone, Debug)]
+struct Derived {
+    /// Sensor words to body axes and physical units (mount, sensitivities).
+    decoder: Decoder,
+    /// The compare clamp as integers.
+    compare_range: CompareRange,
+    /// `cfg.timing.tick_dt_s` rounded to f32 once (the f64 → f32 conversion is a library call).
+    tick_dt_s: f32,
+}
+
+impl Derived {
+    fn new(cfg: &Config) -> Derived {
+        Derived { decoder: Decoder::new(&cfg.imu), compare_range: cfg.mixer.compare_range(), tick_dt_s: cfg.timing.tick_dt_s as f32 }
+    }
 }
 
 /// The outer-step half.
@@ -293,8 +308,7 @@ impl Inner {
     fn new(cfg: Config) -> Self {
         Inner {
             cfg,
-            decoder: Decoder::new(&cfg.imu),
-            compare_range: cfg.mixer.compare_range(),
+            derived: Derived::new(&cfg),
             receiver: Receiver::new(),
             supervisor: Supervisor::new(),
             decision: Decision {
@@ -321,7 +335,6 @@ impl Inner {
             gyro_sum_mdps: [0.0; 3],
             yaw_est_rad: 0.0,
             tilt_rad: 0.0,
-            tick_dt_s: cfg.timing.tick_dt_s as f32,
             yaw_target_rad: 0.0,
             yaw_target_reset: false,
             rate_loop: RateLoop::default(),
@@ -422,7 +435,7 @@ impl Inner {
         }
 
         // 3. Condition the sensors: offsets, FIFO, gyro low-pass.
-        let gyro_mdps = self.offsets.gyro(self.decoder.gyro_mdps(imu.gyro));
+        let gyro_mdps = self.offsets.gyro(self.derived.decoder.gyro_mdps(imu.gyro));
         let mut gyro_f = self.gyro_lpf.update(gyro_mdps.map(|g| g as f32));
         if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
             // Integer inputs cannot make this happen; if it ever did, restart the filters and
@@ -446,7 +459,7 @@ impl Inner {
         self.yaw_est_rad = if self.cfg.reference_arithmetic {
             (f64::from(self.yaw_est_rad) + f64::from(gyro_rad_s[2]) * self.cfg.timing.tick_dt_s) as f32
         } else {
-            self.yaw_est_rad + gyro_rad_s[2] * self.tick_dt_s
+            self.yaw_est_rad + gyro_rad_s[2] * self.derived.tick_dt_s
         };
         if !self.yaw_est_rad.is_finite() {
             self.yaw_est_rad = 0.0;
@@ -474,7 +487,7 @@ impl Inner {
 
         // 6. Guard, last and unconditional. The one other writer of compare values is
         // `motors_off`, for a tick that a calibration in progress ends early: off values too.
-        let range = self.compare_range;
+        let range = self.derived.compare_range;
         self.compare = self.motor_command.map(|c| range.to_compare(c));
         if !self.decision.motors_enabled || self.fault.is_some() {
             self.compare = [self.cfg.mixer.off_compare(); 4];
@@ -514,7 +527,7 @@ impl Inner {
             if self.calibrator.settle() {
                 return Calibration::StopsTheTick;
             }
-            match self.calibrator.feed(self.decoder.to_body(imu)) {
+            match self.calibrator.feed(self.derived.decoder.to_body(imu)) {
                 Some(o) => self.set_offsets(o), // and this tick goes on, as the reference's does
                 None => return Calibration::StopsTheTick,
             }
@@ -524,7 +537,7 @@ impl Inner {
         }
         self.cal_pending = false;
         if self.calibrator.is_averaging() {
-            if let Some(o) = self.calibrator.feed(self.decoder.to_body(imu)) {
+            if let Some(o) = self.calibrator.feed(self.derived.decoder.to_body(imu)) {
                 self.set_offsets(o);
             }
         }
@@ -535,7 +548,7 @@ impl Inner {
     /// the offsets they were taken under: they are converted now and join the sum before.
     fn set_offsets(&mut self, o: Offsets) {
         let taken = self.accel_words.0.get(usize::from(self.first_raw_slot)..self.block_len).unwrap_or(&[]);
-        accumulate_accel_mg(&mut self.accel_sum_before_mg, taken, &self.decoder, &self.offsets);
+        accumulate_accel_mg(&mut self.accel_sum_before_mg, taken, &self.derived.decoder, &self.offsets);
         // `block_len` < BLOCK here (a job resets it), so the cast is exact.
         self.first_raw_slot = self.block_len.min(BLOCK) as u8;
         self.offsets = o;
@@ -607,7 +620,7 @@ impl Inner {
                 0.0
             } else {
                 // One outer step's heading change, BLOCK ticks apart.
-                self.cfg.rc.yaw_step(&self.sticks_in_force) / (self.tick_dt_s * BLOCK as f32)
+                self.cfg.rc.yaw_step(&self.sticks_in_force) / (self.derived.tick_dt_s * BLOCK as f32)
             },
         }
     }
