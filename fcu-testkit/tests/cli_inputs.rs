@@ -150,6 +150,10 @@ fn margins_refuses_bad_options_by_name() {
         (&["margins", "--extra-delay-ticks", "100"][..], "--extra-delay-ticks"),
         (&["margins", "--spread", "2"][..], "--spread"),
         (&["margins", "--profile", "fast"][..], "--profile"),
+        (&["margins", "--spread", "NaN"][..], "--spread"),
+        (&["margins", "--seed", "x"][..], "--seed"),
+        (&["margins", "--extra-delay-ticks", "-1"][..], "--extra-delay-ticks"),
+        (&["margins", "--out"][..], "--out"),
     ] {
         let (code, _, err) = fcu_sim(args);
         assert_eq!(code, 2, "{args:?}: {err}");
@@ -165,11 +169,30 @@ fn margins_writes_its_response_and_bode_plot_and_passes() {
     assert_eq!(code, 0, "{stdout}{err}");
     assert!(stdout.contains("PASS") && stdout.contains("pitch") && stdout.contains("yaw"), "{stdout}");
     let csv = std::fs::read_to_string(out.join("margins.csv")).unwrap();
-    assert!(csv.starts_with("freq_hz,pitch_gain_db,pitch_phase_deg,roll_gain_db"), "{csv}");
+    assert!(csv.starts_with("freq_hz,pitch_gain_db,pitch_phase_deg,pitch_coherence,roll_gain_db"), "{csv}");
     assert!(csv.lines().count() > 30);
+    // Every row: a frequency and, per axis, a gain, a phase and a coherence in 0..1.
+    for line in csv.lines().skip(1) {
+        let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect();
+        assert_eq!(v.len(), 10, "{line}");
+        assert!(v[0] > 0.0 && [3, 6, 9].iter().all(|&k| (0.0..=1.0).contains(&v[k])), "{line}");
+    }
     let svg = std::fs::read_to_string(out.join("margins.svg")).unwrap();
-    assert!(svg.contains("<svg") && svg.contains("PM"), "svg without its legend");
+    assert!(svg.contains("<svg") && svg.contains("PM") && svg.contains("coherence"), "svg without its legend");
+    let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(left.iter().all(|n| !n.contains("partial")), "temporary files left: {left:?}");
     // The reference's gains fail the requirement: exit 1.
     let (code, stdout, _) = fcu_sim(&["margins", "--profile", "reference"]);
     assert_eq!(code, 1, "{stdout}");
+}
+
+#[test]
+fn margins_cannot_write_into_a_file_and_says_so() {
+    let d = dir("margins-file");
+    let file = d.join("not-a-dir");
+    std::fs::write(&file, b"x").unwrap();
+    let (code, _, err) = fcu_sim(&["margins", "--out", file.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out") && err.len() < 300, "{err}");
+    assert_eq!(std::fs::read(&file).unwrap(), b"x");
 }

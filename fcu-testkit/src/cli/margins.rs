@@ -25,16 +25,20 @@ pub struct MarginsArgs {
     /// Flight-controller profile: `default` (the product) or `reference` (ST's firmware).
     #[arg(long, default_value = "default")]
     pub profile: String,
+    // `allow_negative_numbers`: `--seed -1` is a bad value of --seed (refused naming it), not
+    // an unknown flag `-1`; the same for --spread and --extra-delay-ticks.
     /// Seed for sensor noise and (with --spread) the airframe.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// Randomise every airframe parameter by ±this fraction from the seed (0 = nominal drone).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub spread: f64,
-    /// Extra control ticks between the computer's compare values and the motors.
-    #[arg(long, default_value_t = 0)]
+    /// Extra control ticks between the computer's compare values and the motors (0..=40;
+    /// one is the robustness requirement).
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub extra_delay_ticks: u32,
-    /// Directory for margins.csv (the response) and margins.svg (its Bode plot).
+    /// Directory for margins.csv (per tone: freq_hz, then per axis gain_db, phase_deg and
+    /// coherence) and margins.svg (its Bode plot, margins marked).
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -51,7 +55,7 @@ pub fn measure(profile: Profile, opts: &RunOptions) -> Result<Vec<AxisLoop>, Cli
 
 /// Whether every axis keeps the required margins.
 pub fn all_meet(loops: &[AxisLoop]) -> bool {
-    loops.iter().all(|l| l.margins.meets(MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG, Plan::DEFAULT.to_hz))
+    loops.iter().all(|l| l.meets(MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG, Plan::DEFAULT.to_hz))
 }
 
 pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
@@ -76,18 +80,33 @@ pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
         spread * 100.0,
         a.extra_delay_ticks
     );
-    println!("{:<6} {:>12} {:>14} {:>14} {:>12}", "axis", "crossover", "phase margin", "gain margin", "at");
+    println!(
+        "{:<6} {:>12} {:>14} {:>14} {:>16} {:>14} {:>10}",
+        "axis", "crossover", "phase margin", "gain margin", "phase crossover", "coherence", "max tilt"
+    );
     let show = |v: Option<f64>, unit: &str, prec: usize| v.map_or("—".to_string(), |v| format!("{v:.prec$} {unit}"));
     for l in &loops {
         let m = &l.margins;
+        // No phase crossover above the crossover inside the band: the gain margin is more
+        // than the band shows (`Margins::meets` accepts that only for a band 5× the crossover).
+        let gm = match (m.gain_margin_db, m.crossover_hz) {
+            (Some(g), _) => format!("{g:.1} dB"),
+            (None, Some(_)) => "none ≤ band".to_string(),
+            (None, None) => "—".to_string(),
+        };
         println!(
-            "{:<6} {:>12} {:>14} {:>14} {:>12}",
+            "{:<6} {:>12} {:>14} {:>14} {:>16} {:>14} {:>10}",
             AXES[l.axis],
             show(m.crossover_hz, "Hz", 2),
             show(m.phase_margin_deg, "°", 1),
-            m.gain_margin_db.map_or(format!("> {:.0} Hz", Plan::DEFAULT.to_hz), |g| format!("{g:.1} dB")),
-            show(m.phase_crossover_hz, "Hz", 1),
+            gm,
+            m.phase_crossover_hz.map_or(format!("> {:.0} Hz", Plan::DEFAULT.to_hz), |f| format!("{f:.1} Hz")),
+            coherence(l),
+            format!("{:.1}°", l.max_tilt_deg),
         );
+        if let Some(why) = &l.hover_lost {
+            println!("  the drone did not hover throughout, so this is not the hovering loop: {why}");
+        }
     }
     let passed = all_meet(&loops);
     println!(
@@ -108,11 +127,18 @@ pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
     Ok(if passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
+/// The coherence where the two margins were read (`a / b`: at the crossover, at the phase
+/// crossover), so a margin read in noise shows as one.
+fn coherence(l: &AxisLoop) -> String {
+    let at = |f: Option<f64>| f.and_then(|f| l.coherence_at(f)).map_or("—".to_string(), |c| format!("{c:.2}"));
+    format!("{} / {}", at(l.margins.crossover_hz), at(l.margins.phase_crossover_hz))
+}
+
 fn write_outputs(dir: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), CliError> {
     let mut csv = String::from("freq_hz");
     for l in loops {
         let name = AXES[l.axis];
-        csv.push_str(&format!(",{name}_gain_db,{name}_phase_deg"));
+        csv.push_str(&format!(",{name}_gain_db,{name}_phase_deg,{name}_coherence"));
     }
     csv.push('\n');
     let n = loops.iter().map(|l| l.response.len()).min().unwrap_or(0);
@@ -120,7 +146,7 @@ fn write_outputs(dir: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), CliE
         csv.push_str(&format!("{:.3}", loops[0].response[k].freq_hz));
         for l in loops {
             let p = l.response[k];
-            csv.push_str(&format!(",{:.3},{:.2}", p.gain_db, p.phase_deg));
+            csv.push_str(&format!(",{:.3},{:.2},{:.4}", p.gain_db, p.phase_deg, p.coherence));
         }
         csv.push('\n');
     }
@@ -136,15 +162,18 @@ fn write_outputs(dir: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), CliE
     })
 }
 
-/// Gain and phase against log frequency, one curve per axis, 0 dB and −180° marked, each
-/// axis's crossover and phase crossover dotted.
+/// Gain, phase and coherence against log frequency, one curve per axis; 0 dB and −180°
+/// drawn; at each axis's crossover the phase margin is a bar from −180° up to the phase, at
+/// its phase crossover the gain margin a bar from the gain up to 0 dB (both with faint
+/// vertical guides through every panel).
 fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> {
     let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
-    let root = SVGBackend::new(path, (1000, 900)).into_drawing_area();
+    let root = SVGBackend::new(path, (1000, 1050)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let (top, body) = root.split_vertically(40);
     top.titled(title, ("sans-serif", 20)).map_err(|e| err(&e))?;
-    let (gain_area, phase_area) = body.split_vertically(430);
+    let (gain_area, rest) = body.split_vertically(430);
+    let (phase_area, coherence_area) = rest.split_vertically(400);
     let colors = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44)];
     let (lo, hi) = (Plan::DEFAULT.from_hz.log10(), Plan::DEFAULT.to_hz.log10());
     let hz_label = |x: &f64| {
@@ -161,6 +190,8 @@ fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> 
     let phases: Vec<f64> = loops.iter().flat_map(|l| l.response.iter().map(|p| p.phase_deg)).filter(|v| finite(*v)).collect();
     let (p_lo, p_hi) =
         (phases.iter().copied().fold(-200.0f64, f64::min).max(-540.0), phases.iter().copied().fold(-90.0f64, f64::max).min(180.0));
+    // Values outside a panel's range are drawn at its edge rather than off the picture.
+    let clip = |v: f64, lo: f64, hi: f64| v.clamp(lo, hi);
 
     let mut gain = ChartBuilder::on(&gain_area)
         .caption("|L| (dB)", ("sans-serif", 16))
@@ -180,15 +211,24 @@ fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> 
         .map_err(|e| err(&e))?;
     phase.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).draw().map_err(|e| err(&e))?;
     phase.draw_series(LineSeries::new([(lo, -180.0), (hi, -180.0)], BLACK.stroke_width(1))).map_err(|e| err(&e))?;
+    let mut coherence = ChartBuilder::on(&coherence_area)
+        .caption("coherence of u and e over the periods", ("sans-serif", 14))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(lo..hi, 0.0..1.05)
+        .map_err(|e| err(&e))?;
+    coherence.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).y_labels(3).draw().map_err(|e| err(&e))?;
 
     for (l, color) in loops.iter().zip(colors) {
         let pts = |pick: fn(&loop_id::ResponsePoint) -> f64| -> Vec<(f64, f64)> {
-            l.response.iter().filter(|p| pick(p).is_finite()).map(|p| (p.freq_hz.log10(), pick(p))).collect()
+            l.response.iter().filter(|p| pick(p).is_finite() && p.freq_hz > 0.0).map(|p| (p.freq_hz.log10(), pick(p))).collect()
         };
         let m = l.margins;
         let label = format!(
-            "{}: PM {}, GM {}",
+            "{}: crossover {}, PM {}, GM {}",
             AXES[l.axis],
+            m.crossover_hz.map_or("—".into(), |v| format!("{v:.1} Hz")),
             m.phase_margin_deg.map_or("—".into(), |v| format!("{v:.0}°")),
             m.gain_margin_db.map_or("—".into(), |v| format!("{v:.1} dB"))
         );
@@ -197,10 +237,26 @@ fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> 
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         phase.draw_series(LineSeries::new(pts(|p| p.phase_deg), color.stroke_width(2))).map_err(|e| err(&e))?;
-        for f in [m.crossover_hz, m.phase_crossover_hz].into_iter().flatten() {
+        coherence.draw_series(LineSeries::new(pts(|p| p.coherence), color.stroke_width(2))).map_err(|e| err(&e))?;
+        for f in [m.crossover_hz, m.phase_crossover_hz].into_iter().flatten().filter(|f| *f > 0.0) {
             let x = f.log10();
-            gain.draw_series(LineSeries::new([(x, g_lo), (x, g_hi)], color.mix(0.4).stroke_width(1))).map_err(|e| err(&e))?;
-            phase.draw_series(LineSeries::new([(x, p_lo), (x, p_hi)], color.mix(0.4).stroke_width(1))).map_err(|e| err(&e))?;
+            gain.draw_series(LineSeries::new([(x, g_lo), (x, g_hi)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
+            phase.draw_series(LineSeries::new([(x, p_lo), (x, p_hi)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
+            coherence.draw_series(LineSeries::new([(x, 0.0), (x, 1.05)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
+        }
+        // The margins themselves: the phase margin is the distance from −180° at the
+        // crossover, the gain margin the distance below 0 dB at the phase crossover.
+        if let (Some(fc), Some(pm)) = (m.crossover_hz.filter(|f| *f > 0.0), m.phase_margin_deg) {
+            let (x, ph) = (fc.log10(), clip(pm - 180.0, p_lo, p_hi));
+            phase.draw_series(LineSeries::new([(x, clip(-180.0, p_lo, p_hi)), (x, ph)], color.stroke_width(4))).map_err(|e| err(&e))?;
+            phase.draw_series(std::iter::once(Circle::new((x, ph), 5, color.filled()))).map_err(|e| err(&e))?;
+            gain.draw_series(std::iter::once(Circle::new((x, clip(0.0, g_lo, g_hi)), 5, color.filled()))).map_err(|e| err(&e))?;
+        }
+        if let (Some(f180), Some(gm)) = (m.phase_crossover_hz.filter(|f| *f > 0.0), m.gain_margin_db) {
+            let (x, g) = (f180.log10(), clip(-gm, g_lo, g_hi));
+            gain.draw_series(LineSeries::new([(x, clip(0.0, g_lo, g_hi)), (x, g)], color.stroke_width(4))).map_err(|e| err(&e))?;
+            gain.draw_series(std::iter::once(Circle::new((x, g), 5, color.filled()))).map_err(|e| err(&e))?;
+            phase.draw_series(std::iter::once(Circle::new((x, clip(-180.0, p_lo, p_hi)), 5, color.filled()))).map_err(|e| err(&e))?;
         }
     }
     gain.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| err(&e))?;
