@@ -186,21 +186,25 @@ fn d8_yaw_rate_is_proportional_to_the_stick() {
     assert_eq!(d.yaw_step(&full), r.yaw_step(&full));
 }
 
-/// One outer step from level with `sticks`, throttle up: the rate demands.
-fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
-    let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
-    let job = OuterJob {
+/// An outer job of a level, still block with `sticks`.
+fn level_job(sticks: Sticks, throttle_low: bool) -> OuterJob {
+    OuterJob {
         accel_words: AccelWords([[0, 0, 8197]; 5]),
         accel_offsets: Offsets::UNCALIBRATED,
         accel_sum_before_mg: [0.0; 3],
         first_raw_slot: 0,
         gyro_sum_mdps: [0.0; 3],
         sticks,
-        throttle_low: false,
+        throttle_low,
         yaw_est_rad: 0.0,
         yaw_target_reset: false,
-    };
-    outer.step(&job).rate_demand_rad_s
+    }
+}
+
+/// One outer step from level with `sticks`, throttle up: the rate demands.
+fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
+    let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+    outer.step(&level_job(sticks, false)).rate_demand_rad_s
 }
 
 #[test]
@@ -240,17 +244,7 @@ fn status_reports_the_yaw_rate_the_stick_asks_for() {
 fn d14_the_thrust_gain_follows_the_battery() {
     let gain_after = |cfg: Config, readings_mv: &[(u32, u32)]| {
         let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
-        let job = OuterJob {
-            accel_words: AccelWords([[0, 0, 8197]; 5]),
-            accel_offsets: Offsets::UNCALIBRATED,
-            accel_sum_before_mg: [0.0; 3],
-            first_raw_slot: 0,
-            gyro_sum_mdps: [0.0; 3],
-            sticks: Sticks::default(),
-            throttle_low: true,
-            yaw_est_rad: 0.0,
-            yaw_target_reset: false,
-        };
+        let job = level_job(Sticks::default(), true);
         let mut g = f32::NAN;
         for &(mv, steps) in readings_mv {
             outer.set_battery_mv(mv);
