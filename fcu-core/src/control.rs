@@ -134,7 +134,7 @@ impl BatteryFilter {
     }
 
     /// One outer step of `dt_s`: the filter follows the latest valid reading; the thrust gain.
-    pub fn step(&mut self, cfg: &BatteryCompensation, dt_s: f32) -> f32 {
+    pub fn update(&mut self, cfg: &BatteryCompensation, dt_s: f32) -> f32 {
         if self.latest_mv >= cfg.min_valid_mv {
             let v = self.latest_mv as f32;
             let alpha = (dt_s / cfg.filter_s).min(1.0);
@@ -234,7 +234,7 @@ pub struct AngleLoop {
 
 impl AngleLoop {
     /// One outer step. `throttle_low` resets the integrators first, as the reference.
-    pub fn step(&mut self, cfg: &ControlConfig, target_rad: [f32; 3], estimate_rad: [f32; 3], throttle_low: bool) -> [f32; 3] {
+    pub fn rate_demands(&mut self, cfg: &ControlConfig, target_rad: [f32; 3], estimate_rad: [f32; 3], throttle_low: bool) -> [f32; 3] {
         if throttle_low {
             self.integ = [0.0; 3];
         }
@@ -304,7 +304,7 @@ impl RateAxis {
     /// measurement or on the error and with or without anti-windup.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)] // the per-tick values of one axis, kept in registers
-    fn step<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
+    fn command<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
         &mut self,
         cfg: &ControlConfig,
         g: &AxisGains,
@@ -351,7 +351,7 @@ pub struct RateLoop {
 impl RateLoop {
     /// One tick: rate demands `s1` and measured rates (rad/s) in, clamped commands out.
     /// `saturation` is the mixer's verdict of the previous tick (used only with anti-windup).
-    pub fn step(
+    pub fn commands(
         &mut self,
         cfg: &ControlConfig,
         demand_rad_s: [f32; 3],
@@ -369,15 +369,15 @@ impl RateLoop {
         let errors = [d0 - r0, d1 - r1, d2 - r2];
         // The profile's two switches, decided once per tick rather than on every axis.
         match (cfg.derivative, cfg.anti_windup) {
-            (Derivative::OnMeasurement, true) => self.step_axes::<true, true>(cfg, errors, rate_rad_s, saturation),
-            (Derivative::OnMeasurement, false) => self.step_axes::<true, false>(cfg, errors, rate_rad_s, saturation),
-            (Derivative::OnError, true) => self.step_axes::<false, true>(cfg, errors, rate_rad_s, saturation),
-            (Derivative::OnError, false) => self.step_axes::<false, false>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnMeasurement, true) => self.commands_of_axes::<true, true>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnMeasurement, false) => self.commands_of_axes::<true, false>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnError, true) => self.commands_of_axes::<false, true>(cfg, errors, rate_rad_s, saturation),
+            (Derivative::OnError, false) => self.commands_of_axes::<false, false>(cfg, errors, rate_rad_s, saturation),
         }
     }
 
     #[inline(always)]
-    fn step_axes<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
+    fn commands_of_axes<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
         &mut self,
         cfg: &ControlConfig,
         errors: [f32; 3],
@@ -395,13 +395,13 @@ impl RateLoop {
         // overflow the sum to infinity, which just sends the tick down the careful loop.)
         if (e0 + e1 + e2).is_finite() {
             for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
-                *o = st.step::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip);
+                *o = st.command::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip);
             }
         } else {
             for (o, (((st, g), (e, rate)), sat)) in out.iter_mut().zip(per_axis) {
                 // A non-finite error must not enter the state: no correction on this axis this
                 // tick, the state holds.
-                *o = if e.is_finite() { st.step::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip) } else { 0.0 };
+                *o = if e.is_finite() { st.command::<ON_MEASUREMENT, ANTI_WINDUP>(cfg, g, e, rate, sat, ts, dt_recip) } else { 0.0 };
             }
         }
         out
@@ -451,11 +451,11 @@ mod tests {
         let cfg = ControlConfig::REFERENCE;
         let mut r = RateLoop::default();
         let none = Saturation::NONE;
-        let out = r.step(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+        let out = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
         let p = 100.0 * 0.1;
         let i = 100.0 * 0.1 * 0.00125;
         assert!((out[0] - (p + i + 20.0)).abs() < 1e-3, "{}", out[0]);
-        let out2 = r.step(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+        let out2 = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
         let i2 = 100.0 * 0.1 * 0.0025;
         assert!((out2[0] - (p + i2 + 19.5)).abs() < 1e-3, "{}", out2[0]);
     }
@@ -467,8 +467,8 @@ mod tests {
         let none = Saturation::NONE;
         let mut on_meas = RateLoop::default();
         let mut on_err = RateLoop::default();
-        let a = on_meas.step(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
-        let b = on_err.step(&ControlConfig::REFERENCE, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+        let a = on_meas.commands(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+        let b = on_err.commands(&ControlConfig::REFERENCE, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
         // P + I only, vs P + I + a 200-count derivative kick.
         assert!(a < 101.0, "{a}");
         assert!(b > 290.0, "{b}");
@@ -480,11 +480,11 @@ mod tests {
         let none = Saturation::NONE;
         let mut r = RateLoop::default();
         for _ in 0..100_000 {
-            r.step(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
+            r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
         }
         assert_eq!(r.integrators()[0], 20.0);
         assert_eq!(r.integrators()[1], -20.0);
-        r.step(&cfg, [35.0, -35.0, 0.0], [0.0; 3], true, none);
+        r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], true, none);
         assert_eq!(r.integrators()[0], 35.0 * 0.00125);
     }
 
@@ -494,10 +494,10 @@ mod tests {
         cfg.anti_windup = true;
         let sat = Saturation::NONE.with(0, true, false);
         let mut r = RateLoop::default();
-        r.step(&cfg, [1.0, 1.0, 0.0], [0.0; 3], false, sat);
+        r.commands(&cfg, [1.0, 1.0, 0.0], [0.0; 3], false, sat);
         assert_eq!(r.integrators()[0], 0.0);
         assert!(r.integrators()[1] > 0.0);
-        r.step(&cfg, [-1.0, 0.0, 0.0], [0.0; 3], false, sat);
+        r.commands(&cfg, [-1.0, 0.0, 0.0], [0.0; 3], false, sat);
         assert!(r.integrators()[0] < 0.0);
     }
 
@@ -505,7 +505,7 @@ mod tests {
     fn outer_loop_is_proportional_with_the_reference_gains() {
         let cfg = ControlConfig::REFERENCE;
         let mut o = AngleLoop::default();
-        let s1 = o.step(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
+        let s1 = o.rate_demands(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
         assert!((s1[0] - 0.3).abs() < 1e-6 && (s1[1] + 0.6).abs() < 1e-6 && (s1[2] - 0.2).abs() < 1e-6);
     }
 
@@ -532,8 +532,8 @@ mod tests {
         let cfg = ControlConfig::REFERENCE;
         let none = Saturation::NONE;
         let mut r = RateLoop::default();
-        r.step(&cfg, [0.0; 3], [f32::NAN, 0.0, 0.0], false, none);
-        let out = r.step(&cfg, [0.0; 3], [0.0; 3], false, none);
+        r.commands(&cfg, [0.0; 3], [f32::NAN, 0.0, 0.0], false, none);
+        let out = r.commands(&cfg, [0.0; 3], [0.0; 3], false, none);
         assert!(out.iter().all(|v| v.is_finite()));
     }
 }

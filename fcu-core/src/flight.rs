@@ -2,10 +2,10 @@
 //!
 //! The firmware and the simulator drive this one type. It has two halves so the firmware can
 //! run the outer step in a lower-priority task:
-//! - [`Inner`] runs every control tick: radio → supervisor → sensor conditioning → rate loop
+//! - [`ControlTick`] runs every control tick: radio → supervisor → sensor conditioning → rate loop
 //!   → mixer → guard. Every fifth tick it hands out an [`OuterJob`] (the block's
 //!   accelerometer words and summed gyro, and the sticks).
-//! - [`Outer`] runs the job: accelerometer conversion → block means → estimator → Euler →
+//! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler →
 //!   stick targets → angle loop, and returns an [`OuterResult`] that the inner half applies at
 //!   its next tick.
 //!
@@ -141,10 +141,10 @@ pub struct Status {
 
 /// The per-tick half.
 #[derive(Clone, Debug)]
-pub struct Inner {
+pub struct ControlTick {
     /// The configuration, except that its rate loop and throttle map are the ones in force:
-    /// scaled by the battery compensation's thrust gain (`outer.thrust_gain`), rescaled only
-    /// when that gain changes ([`Inner::apply_outer`]; docs/performance.md, «scaled in
+    /// scaled by the battery compensation's thrust gain (`outer_result.thrust_gain`), rescaled only
+    /// when that gain changes ([`ControlTick::apply_outer`]; docs/performance.md, «scaled in
     /// place»).
     cfg: Config,
     /// What the configuration settles, worked out once at construction.
@@ -179,12 +179,12 @@ pub struct Inner {
     yaw_target_reset: bool,
     rate_loop: RateLoop,
     saturation: Saturation,
-    outer: OuterResult,
+    outer_result: OuterResult,
     motor_command: [f32; 4],
     compare: [u16; 4],
 }
 
-/// What [`Inner`] works out from its configuration once, at construction.
+/// What [`ControlTick`] works out from its configuration once, at construction.
 #[derive(Clone, Debug)]
 struct Derived {
     /// Sensor words to body axes and physical units (mount, sensitivities).
@@ -203,7 +203,7 @@ impl Derived {
 
 /// The outer-step half.
 #[derive(Clone, Debug)]
-pub struct Outer {
+pub struct OuterStep {
     decoder: Decoder,
     estimator: Estimator,
     rc: RcConfig,
@@ -219,75 +219,75 @@ pub struct Outer {
 /// The whole flight controller: both halves, for callers that run the outer step inline.
 #[derive(Clone, Debug)]
 pub struct FlightController {
-    inner: Inner,
-    outer: Outer,
+    control_tick: ControlTick,
+    outer_step: OuterStep,
 }
 
 impl FlightController {
     /// Build from a configuration; an invalid one is refused with the field that is wrong.
     pub fn new(cfg: Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
-        Ok(FlightController { inner: Inner::new(cfg), outer: Outer::new(&cfg) })
+        Ok(FlightController { control_tick: ControlTick::new(cfg), outer_step: OuterStep::new(&cfg) })
     }
 
     pub fn config(&self) -> &Config {
-        &self.inner.cfg
+        &self.control_tick.cfg
     }
 
     /// The edge decoder the capture interrupt should feed for this configuration.
     pub fn edge_decoder(&self) -> EdgeDecoder {
-        EdgeDecoder::new(self.inner.cfg.rc.pulses)
+        EdgeDecoder::new(self.control_tick.cfg.rc.pulses)
     }
 
     /// One control tick from a sensor reading and the pulses of that tick.
     pub fn tick(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
-        self.inner.tick(imu, pulses)
+        self.control_tick.tick(imu, pulses)
     }
 
     /// One control tick with the radio state given directly (golden replay).
     pub fn tick_forced(&mut self, imu: RawImu, radio: &ForcedRadio) -> TickOutput {
-        self.inner.tick_forced(imu, radio)
+        self.control_tick.tick_forced(imu, radio)
     }
 
-    /// One control tick when the sensor read failed (see [`Inner::tick_without_sample`]).
+    /// One control tick when the sensor read failed (see [`ControlTick::tick_without_sample`]).
     pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
-        self.inner.tick_without_sample(pulses)
+        self.control_tick.tick_without_sample(pulses)
     }
 
     /// The latest battery reading, mV (the battery compensation's input).
     pub fn set_battery_mv(&mut self, battery_mv: u32) {
-        self.outer.set_battery_mv(battery_mv);
+        self.outer_step.set_battery_mv(battery_mv);
     }
 
     /// Run an outer step now and apply its result.
     pub fn run_outer(&mut self, job: &OuterJob) {
-        let r = self.outer.step(job);
-        self.inner.apply_outer(&r);
+        let r = self.outer_step.run(job);
+        self.control_tick.apply_outer(&r);
     }
 
     /// One tick followed by its outer step when one is due (simulator, replay).
-    pub fn step(&mut self, imu: RawImu, pulses: &PulseBatch) -> [u16; 4] {
+    pub fn tick_and_run_outer(&mut self, imu: RawImu, pulses: &PulseBatch) -> [u16; 4] {
         let out = self.tick(imu, pulses);
         if let Some(job) = out.outer_job {
             self.run_outer(&job);
         }
-        self.inner.compare
+        self.control_tick.compare
     }
 
     pub fn status(&self) -> Status {
-        self.inner.status()
+        self.control_tick.status()
     }
 
     /// Tests only (feature `test-switches`): with `true`, the supervisor runs its full table
     /// every tick, without the steady-flight shortcut or the repeat of the last decision.
     #[cfg(feature = "test-switches")]
     pub fn set_table_only(&mut self, table_only: bool) {
-        self.inner.supervisor.set_table_only(table_only);
+        self.control_tick.supervisor.set_table_only(table_only);
     }
 
     /// Split for a firmware that runs the outer step in its own task.
-    pub fn into_parts(self) -> (Inner, Outer) {
-        (self.inner, self.outer)
+    pub fn into_parts(self) -> (ControlTick, OuterStep) {
+        (self.control_tick, self.outer_step)
     }
 }
 
@@ -304,9 +304,9 @@ fn failsafe_sticks(throttle: i16) -> Sticks {
     Sticks { ail: 0, ele: 0, thr: throttle, rud: 0 }
 }
 
-impl Inner {
+impl ControlTick {
     fn new(cfg: Config) -> Self {
-        Inner {
+        ControlTick {
             cfg,
             derived: Derived::new(&cfg),
             receiver: Receiver::new(),
@@ -339,7 +339,7 @@ impl Inner {
             yaw_target_reset: false,
             rate_loop: RateLoop::default(),
             saturation: Saturation::NONE,
-            outer: OuterResult {
+            outer_result: OuterResult {
                 quat: Quat::IDENTITY,
                 tilt: Tilt::default(),
                 target_rad: [0.0; 3],
@@ -391,15 +391,15 @@ impl Inner {
 
     /// Take in an outer step's result (at the start of the next tick in the firmware).
     pub fn apply_outer(&mut self, r: &OuterResult) {
-        if r.thrust_gain != self.outer.thrust_gain {
+        if r.thrust_gain != self.outer_result.thrust_gain {
             // Rescaled from what is in force: the ratio of the new gain to the old. Exact
             // enough: the gain moves in steps of 1/512 (see `BatteryFilter`), a few hundred
             // times a flight at most, and each rescale rounds by 2^-24.
-            let ratio = r.thrust_gain / self.outer.thrust_gain;
+            let ratio = r.thrust_gain / self.outer_result.thrust_gain;
             self.cfg.control = self.cfg.control.scaled_rate_loop(ratio);
             self.cfg.mixer = self.cfg.mixer.scaled_throttle(ratio);
         }
-        self.outer = *r;
+        self.outer_result = *r;
         // Only the safe supervisor's arming check reads it («tilt once per outer result»).
         if let SupervisorConfig::Safe(_) = self.cfg.supervisor {
             self.tilt_rad = tilt_angle_rad(r.quat);
@@ -417,7 +417,7 @@ impl Inner {
         self.last_raw = Some(imu);
         self.check_health(imu, repeated);
         // Steady flight with nothing new from the radio or the sensor repeats the last decision
-        // and what follows from it (the rule is `Supervisor::step_or_repeat`'s).
+        // and what follows from it (the rule is `Supervisor::decide_or_repeat`'s).
         if let Some(decision) = self.supervise(&radio, armed_override) {
             self.decision = decision;
             self.cal_pending |= self.decision.request_calibration;
@@ -473,7 +473,7 @@ impl Inner {
         // 5. Rate loop and mixer, only while the supervisor lets the motors run.
         if self.decision.motors_enabled {
             let rate_commands =
-                self.rate_loop.step(&self.cfg.control, self.outer.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
+                self.rate_loop.commands(&self.cfg.control, self.outer_result.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
             let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), rate_commands);
             self.motor_command = cmd;
             self.saturation = sat;
@@ -570,7 +570,7 @@ impl Inner {
         let decide = |supervisor: &mut Supervisor| {
             let calibrating = calibrator.in_startup() || calibrator.is_averaging();
             match cfg.supervisor {
-                SupervisorConfig::Reference => supervisor.step_reference(radio.link, armed_override, calibrating),
+                SupervisorConfig::Reference => supervisor.decide_reference(radio.link, armed_override, calibrating),
                 SupervisorConfig::Safe(ref safety) => {
                     let sticks = radio.sticks;
                     let inputs = Inputs {
@@ -585,11 +585,11 @@ impl Inner {
                         sensor_fault: fault,
                         tilt_rad,
                     };
-                    supervisor.step_with(safety, inputs)
+                    supervisor.decide_inline(safety, inputs)
                 }
             }
         };
-        self.supervisor.step_or_repeat(receiver.changed(), fault, decide)
+        self.supervisor.decide_or_repeat(receiver.changed(), fault, decide)
     }
 
     fn motors_off(&mut self) -> TickOutput {
@@ -608,14 +608,14 @@ impl Inner {
             calibration: self.calibrator.phase(),
             calibrated: self.calibrator.has_passed(),
             fault: self.fault,
-            quat: self.outer.quat,
-            tilt: self.outer.tilt,
-            target_rad: [self.outer.target_rad[0], self.outer.target_rad[1], self.yaw_target_rad],
+            quat: self.outer_result.quat,
+            tilt: self.outer_result.tilt,
+            target_rad: [self.outer_result.target_rad[0], self.outer_result.target_rad[1], self.yaw_target_rad],
             yaw_est_rad: self.yaw_est_rad,
-            rate_demand_rad_s: self.outer.rate_demand_rad_s,
+            rate_demand_rad_s: self.outer_result.rate_demand_rad_s,
             motor_command: self.motor_command,
             compare: self.compare,
-            thrust_gain: self.outer.thrust_gain,
+            thrust_gain: self.outer_result.thrust_gain,
             yaw_rate_target_rad_s: if self.throttle_low {
                 0.0
             } else {
@@ -626,9 +626,9 @@ impl Inner {
     }
 }
 
-impl Outer {
+impl OuterStep {
     fn new(cfg: &Config) -> Self {
-        Outer {
+        OuterStep {
             decoder: Decoder::new(&cfg.imu),
             estimator: Estimator::new(cfg.estimator),
             rc: cfg.rc,
@@ -642,7 +642,7 @@ impl Outer {
     }
 
     /// The outer step: block average → estimator → Euler → stick targets → angle loop.
-    pub fn step(&mut self, job: &OuterJob) -> OuterResult {
+    pub fn run(&mut self, job: &OuterJob) -> OuterResult {
         let accel = block_mean(job.accel_sum_mg(&self.decoder), self.reference_arithmetic);
         let gyro = block_mean(job.gyro_sum_mdps, self.reference_arithmetic);
         self.estimator.update(accel, gyro, job.throttle_low);
@@ -662,7 +662,7 @@ impl Outer {
         }
         let target_rad = [pitch_target, roll_target, self.yaw_target_rad];
         let estimate = [tilt.pitch_rad, tilt.roll_rad, job.yaw_est_rad];
-        let mut rate_demand_rad_s = self.angle_loop.step(&self.control, target_rad, estimate, job.throttle_low);
+        let mut rate_demand_rad_s = self.angle_loop.rate_demands(&self.control, target_rad, estimate, job.throttle_low);
         let ff = self.control.yaw_rate_feedforward;
         if ff != 0.0 && !job.throttle_low {
             // The heading loop keeps correcting what the rate loop misses; the stick's rate
@@ -670,7 +670,7 @@ impl Outer {
             rate_demand_rad_s[2] += ff * yaw_step * self.outer_hz;
         }
         let thrust_gain = match self.control.battery {
-            Some(b) => self.battery.step(&b, 1.0 / self.outer_hz),
+            Some(b) => self.battery.update(&b, 1.0 / self.outer_hz),
             None => 1.0,
         };
         OuterResult { quat, tilt, target_rad, rate_demand_rad_s, thrust_gain }
@@ -712,9 +712,9 @@ mod tests {
             let mut job = None;
             for slot in 0..BLOCK {
                 if slot == change_at {
-                    fc.inner.set_offsets(Offsets { accel_mg: [5, -7, 1020], gyro_mdps: [0; 3] });
+                    fc.control_tick.set_offsets(Offsets { accel_mg: [5, -7, 1020], gyro_mdps: [0; 3] });
                 }
-                let offsets = fc.inner.offsets;
+                let offsets = fc.control_tick.offsets;
                 accumulate(&mut expected, offsets.accel(decoder.accel_mg(sample(k).accel)).map(|v| v as f32));
                 job = fc.tick_forced(sample(k), &radio).outer_job;
                 k += 1;

@@ -12,9 +12,9 @@
 //!
 //! | to change… | look at |
 //! |---|---|
-//! | the order of a tick, what runs when | [`flight::Inner`]'s `run` (numbered stages) and [`flight::Outer::step`] |
-//! | arming, disarming, failsafe stages, blockers | [`supervisor::Supervisor`] (its `step_table`; every arm has tests named after its rule) and [`supervisor::SafetyConfig`] |
-//! | when the last decision may simply stand | [`supervisor::Supervisor::step_or_repeat`] |
+//! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (numbered stages) and [`flight::OuterStep::run`] |
+//! | arming, disarming, failsafe stages, blockers | [`supervisor::Supervisor`] (its `decide_by_table`; every arm has tests named after its rule) and [`supervisor::SafetyConfig`] |
+//! | when the last decision may simply stand | [`supervisor::Supervisor::decide_or_repeat`] |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
 //! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
 //! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |

@@ -5,7 +5,7 @@
 //!   gesture latches "armed" for ever, motors run while armed and any edge arrived in the
 //!   last 31 ms, no failsafe, calibration on the gesture at any time.
 //! - [`SupervisorConfig::Safe`]: the product's safety layer (product.md §4), a state machine
-//!   whose table is `Supervisor::step_table` (entered through [`Supervisor::step`]). Every number is a field of [`SafetyConfig`], in
+//!   whose table is `Supervisor::decide_by_table` (entered through [`Supervisor::decide`]). Every number is a field of [`SafetyConfig`], in
 //!   control ticks.
 
 use crate::imu::SensorFault;
@@ -249,7 +249,7 @@ pub struct Supervisor {
     fault: Option<SensorFault>,
     /// Reference latch (the reference has no disarm).
     reference_armed: bool,
-    /// The last step was steady flight (see [`step_in_flight`](Self::step_in_flight)).
+    /// The last step was steady flight (see [`decide_in_flight`](Self::decide_in_flight)).
     steady: bool,
     /// Tests only: every step runs the full table (no steady-flight shortcut, no repeat).
     #[cfg(feature = "test-switches")]
@@ -295,7 +295,7 @@ impl Supervisor {
     }
 
     /// The reference's supervisor: armed latch, motors while the link is up.
-    pub fn step_reference(&mut self, link: bool, armed_override: Option<bool>, calibrating: bool) -> Decision {
+    pub fn decide_reference(&mut self, link: bool, armed_override: Option<bool>, calibrating: bool) -> Decision {
         self.steady = false;
         if let Some(a) = armed_override {
             self.reference_armed = a;
@@ -350,8 +350,8 @@ impl Supervisor {
 
     /// One tick of the safety layer. The `match` is the state table; every arm has tests
     /// named after its rule in `tests::`.
-    pub fn step(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
-        self.step_with(cfg, *i)
+    pub fn decide(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
+        self.decide_inline(cfg, *i)
     }
 
     /// Tests only: with `true`, every step runs the full state table — no steady-flight
@@ -374,11 +374,11 @@ impl Supervisor {
         true
     }
 
-    /// [`step`](Self::step) with the inputs by value, for the 800 Hz path: inlined there, the
+    /// [`decide`](Self::decide) with the inputs by value, for the 800 Hz path: inlined there, the
     /// steady-flight test reads the few inputs it needs where they are, and the full `Inputs`
     /// is only assembled in memory when the table has to run.
     #[inline(always)]
-    pub fn step_with(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
+    pub fn decide_inline(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
         if self.state == FlightState::Armed
             && i.link
             && i.gesture.is_none()
@@ -388,18 +388,18 @@ impl Supervisor {
             && cfg.auto_disarm_ticks > 0
             && self.shortcuts_allowed()
         {
-            return self.step_in_flight(&i);
+            return self.decide_in_flight(&i);
         }
         // By value: the caller assembles the inputs at this call, on the table's path only.
-        self.step_table(cfg, i)
+        self.decide_by_table(cfg, i)
     }
 
     /// The 800 Hz path's call: `None` when this tick's decision is the last one's (the caller
     /// keeps it and everything it derived from it), else the decision `decide` takes (the
-    /// caller's [`step_with`](Self::step_with) or [`step_reference`](Self::step_reference),
+    /// caller's [`decide_inline`](Self::decide_inline) or [`decide_reference`](Self::decide_reference),
     /// assembling the inputs only then).
     ///
-    /// Why a repeat is exact: steady flight (`step_in_flight`, the table's `Armed` line) reads
+    /// Why a repeat is exact: steady flight (`decide_in_flight`, the table's `Armed` line) reads
     /// only the link, the gesture, the throttle and the sensor fault among the inputs. When the
     /// last tick was steady flight, `radio_changed` is false (link, sticks and so gesture and
     /// throttle are the last tick's) and there is no sensor fault, this tick is steady flight
@@ -409,7 +409,7 @@ impl Supervisor {
     /// `the_flight_shortcut_decides_exactly_as_the_table` checks this on random input
     /// sequences, and `fcu-testkit/tests/shortcuts.rs` on whole flights.
     #[inline(always)]
-    pub fn step_or_repeat(
+    pub fn decide_or_repeat(
         &mut self,
         radio_changed: bool,
         sensor_fault: Option<SensorFault>,
@@ -424,14 +424,14 @@ impl Supervisor {
         }
     }
 
-    /// [`step_table`](Self::step_table) in the state the 800 Hz path is in almost every tick:
+    /// [`decide_by_table`](Self::decide_by_table) in the state the 800 Hz path is in almost every tick:
     /// armed on a good link, throttle up, no gesture, no fault. The table's every line for
     /// those inputs, and nothing else: the `Armed` arm without its branches (the throttle is
     /// up, so the auto-disarm count restarts and cannot reach its non-zero limit), no
     /// transition, the gesture released, the throttle remembered. The test
     /// `the_flight_shortcut_decides_exactly_as_the_table` compares the two on random input
     /// sequences.
-    fn step_in_flight(&mut self, i: &Inputs) -> Decision {
+    fn decide_in_flight(&mut self, i: &Inputs) -> Decision {
         self.boot_ticks = self.boot_ticks.saturating_add(1);
         self.good_ticks = self.good_ticks.saturating_add(1);
         self.low_throttle_ticks = 0;
@@ -448,7 +448,7 @@ impl Supervisor {
         }
     }
 
-    /// Whether [`step_or_repeat`](Self::step_or_repeat) may repeat the last decision (no side
+    /// Whether [`decide_or_repeat`](Self::decide_or_repeat) may repeat the last decision (no side
     /// effect).
     #[inline(always)]
     fn can_repeat(&self, radio_changed: bool, sensor_fault: Option<SensorFault>) -> bool {
@@ -457,7 +457,7 @@ impl Supervisor {
 
     /// The state table, for any state and inputs.
     #[inline(never)]
-    fn step_table(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
+    fn decide_by_table(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
         let i = &i;
         self.steady = false;
         self.boot_ticks = self.boot_ticks.saturating_add(1);
@@ -645,7 +645,7 @@ mod tests {
     impl Rig {
         fn new() -> Rig {
             let i = Inputs::READY;
-            let mut r = Rig { s: Supervisor::new(), i, last: Supervisor::new().step_reference(false, None, false) };
+            let mut r = Rig { s: Supervisor::new(), i, last: Supervisor::new().decide_reference(false, None, false) };
             r.run(IDLE, CFG.boot_settle_ticks);
             assert_eq!(r.last.state, FlightState::Disarmed);
             r
@@ -660,7 +660,7 @@ mod tests {
         fn run(&mut self, s: Sticks, ticks: u32) -> Decision {
             self.sticks(s);
             for _ in 0..ticks {
-                self.last = self.s.step(&CFG, &self.i);
+                self.last = self.s.decide(&CFG, &self.i);
             }
             self.last
         }
@@ -677,7 +677,7 @@ mod tests {
             for _ in 0..ticks {
                 self.i.silence_ticks = if self.i.link { TIMEOUT } else { self.i.silence_ticks + 1 };
                 self.i.link = false;
-                self.last = self.s.step(&CFG, &self.i);
+                self.last = self.s.decide(&CFG, &self.i);
             }
             self.last
         }
@@ -686,7 +686,7 @@ mod tests {
             self.i.link = true;
             self.i.silence_ticks = 0;
             for _ in 0..ticks {
-                self.last = self.s.step(&CFG, &self.i);
+                self.last = self.s.decide(&CFG, &self.i);
             }
             self.last
         }
@@ -706,7 +706,7 @@ mod tests {
             sensor_fault: None,
             tilt_rad: 0.0,
         };
-        let d = s.step(&CFG, &i);
+        let d = s.decide(&CFG, &i);
         assert_eq!(d.state, FlightState::Calibrating);
         assert!(!d.motors_enabled);
         assert!(d.blockers.contains(Blocker::Calibrating) && d.blockers.contains(Blocker::NotCalibrated));
@@ -811,17 +811,17 @@ mod tests {
         let mut s = Supervisor::new();
         let mut i = Rig::new().i;
         i.sticks = IDLE;
-        s.step(&CFG, &i);
+        s.decide(&CFG, &i);
         i.sticks = ARM;
         i.gesture = Some(Gesture::Arm);
-        let mut d = s.step(&CFG, &i);
+        let mut d = s.decide(&CFG, &i);
         for _ in 0..CFG.arm_hold_ticks {
-            d = s.step(&CFG, &i);
+            d = s.decide(&CFG, &i);
         }
         assert!(d.blockers.contains(Blocker::BootSettling));
         i.sticks = IDLE;
         i.gesture = None;
-        assert_eq!(s.step(&CFG, &i).state, FlightState::Disarmed);
+        assert_eq!(s.decide(&CFG, &i).state, FlightState::Disarmed);
     }
 
     #[test]
@@ -1016,15 +1016,15 @@ mod tests {
         r.restore_link(5);
         r.i.link = false;
         r.i.silence_ticks = TIMEOUT + 200;
-        let mut d = r.s.step(&CFG, &r.i); // + 6 = 185
+        let mut d = r.s.decide(&CFG, &r.i); // + 6 = 185
         assert_eq!(d.state, FlightState::FailsafeLevel);
         for _ in 0..CFG.failsafe_off_ticks - 185 - 1 {
             r.i.silence_ticks += 1;
-            d = r.s.step(&CFG, &r.i);
+            d = r.s.decide(&CFG, &r.i);
             assert_eq!(d.state, FlightState::FailsafeLevel);
         }
         r.i.silence_ticks += 1;
-        assert_eq!(r.s.step(&CFG, &r.i).state, FlightState::FailsafeOff);
+        assert_eq!(r.s.decide(&CFG, &r.i).state, FlightState::FailsafeOff);
     }
 
     #[test]
@@ -1186,12 +1186,12 @@ mod tests {
     fn reference_latch_never_disarms() {
         let mut s = Supervisor::new();
         s.reference_gesture(Some(Gesture::Arm));
-        assert!(s.step_reference(true, None, false).motors_enabled);
+        assert!(s.decide_reference(true, None, false).motors_enabled);
         s.reference_gesture(Some(Gesture::Disarm));
-        assert!(s.step_reference(true, None, false).motors_enabled);
+        assert!(s.decide_reference(true, None, false).motors_enabled);
         // Link loss stops the motors but keeps "armed": they resume when edges return (B8).
-        assert!(!s.step_reference(false, None, false).motors_enabled);
-        assert!(s.step_reference(true, None, false).motors_enabled);
+        assert!(!s.decide_reference(false, None, false).motors_enabled);
+        assert!(s.decide_reference(true, None, false).motors_enabled);
     }
 
     proptest::proptest! {
@@ -1233,12 +1233,12 @@ mod tests {
                 for _ in 0..ticks {
                     let in_flight = fast.state == FlightState::Armed && i.link && i.gesture.is_none() && !i.throttle_low;
                     shortcut_ticks += u32::from(in_flight);
-                    let a = fast.step(&cfg, &i);
-                    let b = table.step_table(&cfg, i);
+                    let a = fast.decide(&cfg, &i);
+                    let b = table.decide_by_table(&cfg, i);
                     // The radio "changed" whenever link or sticks differ from the last tick's; the
                     // other inputs may differ on a repeat, as in the pipeline.
                     let radio_changed = previous.is_none_or(|p| p.link != i.link || p.sticks != i.sticks);
-                    let c = match lazy.step_or_repeat(radio_changed, i.sensor_fault, |s| s.step(&cfg, &i)) {
+                    let c = match lazy.decide_or_repeat(radio_changed, i.sensor_fault, |s| s.decide(&cfg, &i)) {
                         Some(d) => d,
                         None => {
                             repeats += 1;
@@ -1267,9 +1267,9 @@ mod tests {
         r.arm();
         r.run(FLY, 10);
         let before = r.s.clone();
-        let d = r.s.step_in_flight(&r.i);
+        let d = r.s.decide_in_flight(&r.i);
         let mut table = before;
-        assert_eq!(d, table.step_table(&CFG, r.i));
+        assert_eq!(d, table.decide_by_table(&CFG, r.i));
         assert_eq!(r.s, Supervisor { steady: true, ..table });
     }
 }

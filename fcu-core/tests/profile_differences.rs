@@ -58,7 +58,7 @@ fn d2_the_outer_integrator_steps_by_the_outer_period() {
         let mut s1 = [0.0; 3];
         // One second of outer steps (160) with a constant 0.1 rad error.
         for _ in 0..160 {
-            s1 = outer.step(&cfg.control, [0.1, 0.0, 0.0], [0.0; 3], false);
+            s1 = outer.rate_demands(&cfg.control, [0.1, 0.0, 0.0], [0.0; 3], false);
         }
         s1[0] - cfg.control.pitch.outer_kp * 0.1
     };
@@ -79,7 +79,7 @@ fn d3_the_yaw_derivative_is_low_passed_like_roll_and_pitch() {
         let mut hi = f32::MIN;
         for n in 0..800 {
             let noise = if n % 2 == 0 { 0.05 } else { -0.05 };
-            let out = rl.step(&cfg.control, [0.0; 3], [0.0, 0.0, noise], false, NO_SAT)[2];
+            let out = rl.commands(&cfg.control, [0.0; 3], [0.0, 0.0, noise], false, NO_SAT)[2];
             if n > 400 {
                 lo = lo.min(out);
                 hi = hi.max(out);
@@ -151,7 +151,7 @@ fn d6_the_rate_integrator_does_not_wind_up_against_a_saturated_mixer() {
         let mut sat = NO_SAT;
         // 5 s of a 5 rad/s demand the drone cannot follow: the output sits on its clamp.
         for _ in 0..4000 {
-            let s2 = rl.step(&cfg.control, [5.0, 0.0, 0.0], [0.0; 3], false, sat);
+            let s2 = rl.commands(&cfg.control, [5.0, 0.0, 0.0], [0.0; 3], false, sat);
             sat = cfg.mixer.mix(cfg.mixer.throttle_counts(3000), s2).1;
         }
         rl.integrators()[0]
@@ -166,8 +166,8 @@ fn d6_the_rate_integrator_does_not_wind_up_against_a_saturated_mixer() {
 fn d7_a_stick_step_does_not_kick_the_derivative() {
     let first_output = |cfg: Config| {
         let mut rl = RateLoop::default();
-        rl.step(&cfg.control, [0.0; 3], [0.0; 3], false, NO_SAT);
-        rl.step(&cfg.control, [1.0, 0.0, 0.0], [0.0; 3], false, NO_SAT)[0]
+        rl.commands(&cfg.control, [0.0; 3], [0.0; 3], false, NO_SAT);
+        rl.commands(&cfg.control, [1.0, 0.0, 0.0], [0.0; 3], false, NO_SAT)[0]
     };
     // P + I (one tick of it); the reference adds KD · 0.025 · 800 = 200 on the step.
     let p_and_i = |cfg: Config| cfg.control.pitch.inner_kp + cfg.control.pitch.inner_ki * cfg.control.inner_dt_s;
@@ -204,7 +204,7 @@ fn level_job(sticks: Sticks, throttle_low: bool) -> OuterJob {
 /// One outer step from level with `sticks`, throttle up: the rate demands.
 fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
     let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
-    outer.step(&level_job(sticks, false)).rate_demand_rad_s
+    outer.run(&level_job(sticks, false)).rate_demand_rad_s
 }
 
 #[test]
@@ -249,7 +249,7 @@ fn d14_the_thrust_gain_follows_the_battery() {
         for &(mv, steps) in readings_mv {
             outer.set_battery_mv(mv);
             for _ in 0..steps {
-                g = outer.step(&job).thrust_gain;
+                g = outer.run(&job).thrust_gain;
             }
         }
         g
@@ -280,7 +280,7 @@ fn d14_a_thrust_gain_scales_the_rate_loop_and_the_throttle_map() {
         let mut rl = RateLoop::default();
         let mut out = [0.0; 3];
         for n in 0..50 {
-            out = rl.step(cfg, [0.5, -0.3, 0.2], [0.01 * n as f32, 0.0, -0.02], false, NO_SAT);
+            out = rl.commands(cfg, [0.5, -0.3, 0.2], [0.01 * n as f32, 0.0, -0.02], false, NO_SAT);
         }
         out
     };

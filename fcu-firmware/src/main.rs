@@ -6,8 +6,8 @@
 //! | task         | binds / kind            | prio | work                                         |
 //! |--------------|-------------------------|------|----------------------------------------------|
 //! | rc_capture   | TIM2 (both edges)       | 4    | CCRx + pin level → `EdgeDecoder::on_edge`    |
-//! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `Inner::tick` → TIM4, feed IWDG  |
-//! | outer_step   | software                | 2    | battery reading + `Outer::step` → `control`  |
+//! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `ControlTick::tick` → TIM4, feed IWDG  |
+//! | outer_step   | software                | 2    | battery reading + `OuterStep::run` → `control`  |
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
@@ -87,7 +87,7 @@ mod app {
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
-    use fcu_core::flight::{Inner, Outer, OuterJob, OuterResult, Status};
+    use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::EdgeDecoder;
     use fcu_core::telemetry::{self as tlm, FirmwareCounters, LedPattern, LineBuf, Reporter};
@@ -181,8 +181,8 @@ mod app {
         capture: RcCapture,
         tick_timer: TickTimer,
         bus: SensorBus,
-        inner: Inner,
-        outer: Outer,
+        inner: ControlTick,
+        outer: OuterStep,
         motors: Motors,
         watchdog: Option<Watchdog>,
         leds: Leds,
@@ -384,7 +384,7 @@ mod app {
         });
     }
 
-    /// The control tick: IMU burst → `Inner::tick` → TIM4; the outer step when due.
+    /// The control tick: IMU burst → `ControlTick::tick` → TIM4; the outer step when due.
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
@@ -446,7 +446,7 @@ mod app {
         // The battery compensation's input (the core filters it and decides what it does).
         let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
         cx.local.outer.set_battery_mv(battery_mv);
-        let result = cx.local.outer.step(&job);
+        let result = cx.local.outer.run(&job);
         cx.shared.outer_result.lock(|slot| *slot = Some(result));
     }
 

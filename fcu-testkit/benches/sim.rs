@@ -35,7 +35,7 @@ impl Flying {
         for (widths, ticks) in [(neutral, 2000), (arm, 1000), (neutral, 40), (fly, 400)] {
             for _ in 0..ticks {
                 let (imu, pulses) = f.inputs(widths);
-                f.fc.step(imu, &pulses);
+                f.fc.tick_and_run_outer(imu, &pulses);
             }
         }
         assert!(f.fc.status().state.motors_may_run(), "the benchmark must measure a flying tick");

@@ -318,7 +318,7 @@ pub struct Observation<'a> {
     /// tick from boot or never).
     pub edges: Option<&'a [Edge]>,
     pub out: &'a TickOutput,
-    /// `status()` taken after the tick *and* its outer step (as `FlightController::step`).
+    /// `status()` taken after the tick *and* its outer step (as `FlightController::tick_and_run_outer`).
     pub status: &'a Status,
 }
 

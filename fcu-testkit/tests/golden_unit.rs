@@ -143,12 +143,12 @@ fn cascade_mixer_and_clamp_are_bit_exact() {
         if r[8] == "1" {
             let target = [f(&r[2]), f(&r[3]), f(&r[4])];
             let est = [f(&r[5]), f(&r[6]), f(&r[7])];
-            s1 = outer.step(&ctrl, target, est, low);
+            s1 = outer.rate_demands(&ctrl, target, est, low);
         }
         for (a, i) in s1.iter().zip(12..) {
             assert!(same(*a, f(&r[i])), "step {}: s1 {s1:?}", r[0]);
         }
-        let s2 = inner.step(&ctrl, s1, [f(&r[9]), f(&r[10]), f(&r[11])], low, Saturation::NONE);
+        let s2 = inner.commands(&ctrl, s1, [f(&r[9]), f(&r[10]), f(&r[11])], low, Saturation::NONE);
         for (a, i) in s2.iter().zip(15..) {
             assert!(same(*a, f(&r[i])), "step {}: s2 {s2:?} vs {:?}", r[0], &r[15..18]);
         }

@@ -314,7 +314,7 @@ fn run_supervisor(cfg: &SafetyConfig, s: &mut Supervisor, m: &mut SupervisorMoni
     for (i, n) in segs {
         let mut i = *i;
         for _ in 0..*n {
-            let d: Decision = s.step(cfg, &i);
+            let d: Decision = s.decide(cfg, &i);
             m.observe(&i, &d)?;
             // The silence grows while the link stays lost, as a radio reports it.
             i.silence_ticks = i.silence_ticks.saturating_add(1);
@@ -791,7 +791,7 @@ fn timeline_generator_reaches_every_safety_state() {
 /// the arm gesture (throttle at 0, so the motors are stopped and the drone looks disarmed);
 /// after 5 s the automatic disarm fires; the gesture is still held for 1 s more and let go:
 /// the supervisor arms again, although §4 blocks arming until the gesture has been released
-/// since the last disarm. Fails until `Supervisor::step` clears `released` on the automatic
+/// since the last disarm. Fails until `Supervisor::decide` clears `released` on the automatic
 /// disarm (as it does on the gesture disarm and on stage 2).
 #[test]
 fn f1_arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
