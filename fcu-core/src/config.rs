@@ -16,7 +16,7 @@ use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
-use crate::rc::{PulseRules, RcConfig, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
+use crate::rc::{PulseRules, RcConfig, StickCounts, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
 
 /// The control tick.
@@ -38,6 +38,13 @@ impl Timing {
         // In u64: (PSC + 1)·(ARR + 1) reaches 2^32 at PSC = ARR = 65 535.
         let div = (u64::from(self.tick_timer_psc) + 1) * (u64::from(self.tick_timer_arr) + 1);
         TIMER_CLOCK_HZ as f32 / div as f32
+    }
+
+    /// Outer steps per second as the integrations assume them: one per
+    /// [`BLOCK`](crate::filter::BLOCK) ticks of `tick_dt_s`. (f64 arithmetic: worked out at
+    /// construction or for telemetry, never per tick.)
+    pub fn outer_hz(&self) -> f32 {
+        (1.0 / (self.tick_dt_s * crate::filter::BLOCK as f64)) as f32
     }
 }
 
@@ -127,7 +134,7 @@ impl Config {
         let d = Config::default();
         Config {
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_ESC },
-            rc: RcConfig { min_throttle: 20, ..d.rc },
+            rc: RcConfig { min_throttle: StickCounts(20), ..d.rc },
             control: ControlConfig { battery: None, ..d.control },
             ..d
         }

@@ -24,7 +24,7 @@ use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::mixer::CompareRange;
-use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, Sticks, CHANNELS};
+use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, StickCounts, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
 
 /// What one control tick produces.
@@ -151,11 +151,9 @@ pub struct ControlTick {
     derived: Derived,
     receiver: Receiver,
     supervisor: Supervisor,
-    decision: Decision,
-    /// The sticks the pipeline flies with (the failsafe's while it holds) and whether their
-    /// throttle is low: set with each decision.
-    sticks_in_force: Sticks,
-    throttle_low: bool,
+    /// The last decision and what the tick derives from it: replaced whole, never field by
+    /// field, so the three cannot drift apart.
+    in_force: InForce,
     calibrator: Calibrator,
     cal_pending: bool,
     offsets: Offsets,
@@ -182,6 +180,29 @@ pub struct ControlTick {
     outer_result: OuterResult,
     motor_command: [f32; 4],
     compare: [u16; 4],
+}
+
+/// The supervisor's last decision and what follows from it and the sticks, kept until the
+/// supervisor decides again (on a repeat, [`Supervisor::decide_or_repeat`], it stands).
+#[derive(Clone, Copy, Debug)]
+struct InForce {
+    decision: Decision,
+    /// The sticks the pipeline flies with: the radio's, or the failsafe's while it holds.
+    sticks: Sticks,
+    /// Whether their throttle is low (motors stopped, integrators and yaw reset).
+    throttle_low: bool,
+}
+
+impl InForce {
+    /// A new decision, and what follows from it and the radio's sticks: the one writer of all
+    /// three. (Written in place: building a new value and moving it in cost 12 instructions
+    /// on every tick the table runs; docs/performance.md, «in place».)
+    #[inline(always)]
+    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, rc: &RcConfig) {
+        self.decision = decision;
+        self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);
+        self.throttle_low = rc.throttle_low(&self.sticks);
+    }
 }
 
 /// What [`ControlTick`] works out from its configuration once, at construction.
@@ -300,8 +321,8 @@ enum Calibration {
 }
 
 /// The sticks the failsafe flies with: centred (level, no yaw) and the held throttle.
-fn failsafe_sticks(throttle: i16) -> Sticks {
-    Sticks { ail: 0, ele: 0, thr: throttle, rud: 0 }
+fn failsafe_sticks(throttle: StickCounts) -> Sticks {
+    Sticks { thr: throttle, ..Sticks::default() }
 }
 
 impl ControlTick {
@@ -311,16 +332,18 @@ impl ControlTick {
             derived: Derived::new(&cfg),
             receiver: Receiver::new(),
             supervisor: Supervisor::new(),
-            decision: Decision {
-                state: FlightState::Calibrating,
-                motors_enabled: false,
-                failsafe_throttle: None,
-                request_calibration: false,
-                blockers: Blockers::default(),
+            in_force: InForce {
+                decision: Decision {
+                    state: FlightState::Calibrating,
+                    motors_enabled: false,
+                    failsafe_throttle: None,
+                    request_calibration: false,
+                    blockers: Blockers::default(),
+                },
+                sticks: Sticks::default(),
+                throttle_low: true,
             },
             calibrator: Calibrator::new(cfg.calibration),
-            sticks_in_force: Sticks::default(),
-            throttle_low: true,
             cal_pending: false,
             offsets: Offsets::UNCALIBRATED,
             health: cfg.health.map(|h| HealthMonitor::new(h, &cfg.imu)),
@@ -419,14 +442,11 @@ impl ControlTick {
         // Steady flight with nothing new from the radio or the sensor repeats the last decision
         // and what follows from it (the rule is `Supervisor::decide_or_repeat`'s).
         if let Some(decision) = self.supervise(&radio, armed_override) {
-            self.decision = decision;
-            self.cal_pending |= self.decision.request_calibration;
-            // What follows from the decision and the sticks, until either changes.
-            self.sticks_in_force = self.decision.failsafe_throttle.map_or(radio.sticks, failsafe_sticks);
-            self.throttle_low = self.cfg.rc.throttle_low(&self.sticks_in_force);
+            self.cal_pending |= decision.request_calibration;
+            self.in_force.decided(decision, radio.sticks, &self.cfg.rc);
         }
         self.cal_pending |= cal_request;
-        let (sticks, throttle_low) = (self.sticks_in_force, self.throttle_low);
+        let (sticks, throttle_low) = (self.in_force.sticks, self.in_force.throttle_low);
 
         // 2. Calibration: start-up (nothing else runs until the first offsets exist) and
         // requested. Idle with nothing asked, it has nothing to do.
@@ -471,7 +491,7 @@ impl ControlTick {
         }
 
         // 5. Rate loop and mixer, only while the supervisor lets the motors run.
-        if self.decision.motors_enabled {
+        if self.in_force.decision.motors_enabled {
             let rate_commands =
                 self.rate_loop.commands(&self.cfg.control, self.outer_result.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
             let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), rate_commands);
@@ -489,7 +509,7 @@ impl ControlTick {
         // `motors_off`, for a tick that a calibration in progress ends early: off values too.
         let range = self.derived.compare_range;
         self.compare = self.motor_command.map(|c| range.to_compare(c));
-        if !self.decision.motors_enabled || self.fault.is_some() {
+        if !self.in_force.decision.motors_enabled || self.fault.is_some() {
             self.compare = [self.cfg.mixer.off_compare(); 4];
         }
 
@@ -601,8 +621,8 @@ impl ControlTick {
     pub fn status(&self) -> Status {
         let radio = self.receiver.state();
         Status {
-            state: self.decision.state,
-            blockers: self.decision.blockers,
+            state: self.in_force.decision.state,
+            blockers: self.in_force.decision.blockers,
             link: radio.link,
             sticks: radio.sticks,
             calibration: self.calibrator.phase(),
@@ -616,11 +636,11 @@ impl ControlTick {
             motor_command: self.motor_command,
             compare: self.compare,
             thrust_gain: self.outer_result.thrust_gain,
-            yaw_rate_target_rad_s: if self.throttle_low {
+            yaw_rate_target_rad_s: if self.in_force.throttle_low {
                 0.0
             } else {
-                // One outer step's heading change, BLOCK ticks apart.
-                self.cfg.rc.yaw_step(&self.sticks_in_force) / (self.derived.tick_dt_s * BLOCK as f32)
+                // One outer step's heading change, at the outer steps' rate.
+                self.cfg.rc.yaw_step(&self.in_force.sticks) * self.cfg.timing.outer_hz()
             },
         }
     }
@@ -636,7 +656,7 @@ impl OuterStep {
             reference_arithmetic: cfg.reference_arithmetic,
             angle_loop: AngleLoop::default(),
             yaw_target_rad: 0.0,
-            outer_hz: (1.0 / (cfg.timing.tick_dt_s * BLOCK as f64)) as f32,
+            outer_hz: cfg.timing.outer_hz(),
             battery: BatteryFilter::default(),
         }
     }

@@ -14,6 +14,15 @@
 //! raises the left ones, positive yaw (counter-clockwise) raises the CW-spinning pair.
 
 use crate::control::Saturation;
+use crate::rc::StickCounts;
+
+/// A motor command in TIM4 compare counts, before the compare clamp: the reference's `int16`
+/// `motor_thr`, what the throttle stick maps to. Its own type so that a stick value (also 16-bit
+/// counts, [`StickCounts`]) cannot be passed where a compare value is meant; the registers'
+/// values after the clamp are `u16` ([`MixerConfig::to_compare`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+#[repr(transparent)]
+pub struct CompareCounts(pub i16);
 
 /// Sign of each command axis `[x, y, z]` in each motor.
 pub const MIX: [[f32; 3]; 4] = [[-1.0, -1.0, 1.0], [1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, -1.0]];
@@ -90,17 +99,17 @@ impl MixerConfig {
     }
 
     /// The reference's `(int16)(slope·gTHR + offset)`, saturating instead of undefined.
-    pub fn throttle_counts(&self, throttle: i16) -> i16 {
+    pub fn throttle_counts(&self, throttle: StickCounts) -> CompareCounts {
         // Through i32 and a saturate to 16 bits: the same result as `as i16` for every input
         // (docs/performance.md, «integer throttle cast»).
-        let v = (self.throttle_slope * f32::from(throttle) + self.throttle_offset) as i32;
-        v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
+        let v = (self.throttle_slope * f32::from(throttle.0) + self.throttle_offset) as i32;
+        CompareCounts(v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16)
     }
 
     /// Distribute throttle and commands to the four motors. Returns the motor commands
     /// (before the compare clamp) and, per axis, the direction the mix could not deliver.
-    pub fn mix(&self, throttle_counts: i16, s: [f32; 3]) -> ([f32; 4], Saturation) {
-        let thr = f32::from(throttle_counts);
+    pub fn mix(&self, throttle: CompareCounts, s: [f32; 3]) -> ([f32; 4], Saturation) {
+        let thr = f32::from(throttle.0);
         let [x, y, z] = s;
         // The reference's exact expressions: ((thr ∓ x) ∓ y) ± z, then "+ MOTOR_OFF" (0).
         let reference = [thr - x - y + z + 0.0, thr + x - y - z + 0.0, thr + x + y + z + 0.0, thr - x + y - z + 0.0];
@@ -191,15 +200,15 @@ mod tests {
     #[test]
     fn reference_throttle_map_spot_values() {
         let m = MixerConfig::REFERENCE_DC;
-        assert_eq!(m.throttle_counts(200), 699);
-        assert_eq!(m.throttle_counts(1500), 1133);
-        assert_eq!(m.throttle_counts(3630), 1843);
+        assert_eq!(m.throttle_counts(StickCounts(200)), CompareCounts(699));
+        assert_eq!(m.throttle_counts(StickCounts(1500)), CompareCounts(1133));
+        assert_eq!(m.throttle_counts(StickCounts(3630)), CompareCounts(1843));
     }
 
     #[test]
     fn reference_mixer_worked_example() {
         let m = MixerConfig::REFERENCE_DC;
-        let (cmd, _) = m.mix(1133, [50.0, -20.0, 10.0]);
+        let (cmd, _) = m.mix(CompareCounts(1133), [50.0, -20.0, 10.0]);
         let ccr = cmd.map(|c| m.to_compare(c));
         assert_eq!(ccr, [1113, 1193, 1173, 1053]);
     }
@@ -220,10 +229,10 @@ mod tests {
     fn attitude_priority_keeps_the_roll_torque_when_a_motor_hits_the_top() {
         let mut m = MixerConfig::REFERENCE_DC;
         let s = [0.0, 300.0, 0.0];
-        let (clipped, _) = m.mix(1800, s);
+        let (clipped, _) = m.mix(CompareCounts(1800), s);
         let clip_ccr = clipped.map(|c| m.to_compare(c));
         m.saturate = Saturate::AttitudePriority;
-        let (kept, sat) = m.mix(1800, s);
+        let (kept, sat) = m.mix(CompareCounts(1800), s);
         let ccr = kept.map(|c| m.to_compare(c));
         let torque = |c: [u16; 4]| (i32::from(c[2]) + i32::from(c[3])) - (i32::from(c[0]) + i32::from(c[1]));
         // Reference: left motors clip at 1900, torque shrinks to 2·(1900 − 1500) = 800.
@@ -237,7 +246,7 @@ mod tests {
     fn attitude_priority_spreads_the_corrections_as_the_mix_matrix() {
         let m = MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_DC };
         for s in [[50.0, -20.0, 10.0], [-300.0, 120.5, -40.25], [0.0, 0.0, 700.0], [1.5, 2.5, -3.5]] {
-            let (cmd, _) = m.mix(1000, s);
+            let (cmd, _) = m.mix(CompareCounts(1000), s);
             for (c, row) in cmd.iter().zip(MIX) {
                 let want = 1000.0 + row[0] * s[0] + row[1] * s[1] + row[2] * s[2];
                 assert!((c - want).abs() < 1e-3, "{s:?}: {c} vs {want}");
@@ -248,7 +257,7 @@ mod tests {
     #[test]
     fn attitude_priority_scales_when_the_spread_does_not_fit() {
         let m = MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_DC };
-        let (cmd, sat) = m.mix(1000, [800.0, 800.0, 0.0]);
+        let (cmd, sat) = m.mix(CompareCounts(1000), [800.0, 800.0, 0.0]);
         for c in cmd {
             assert!((-0.01..=1900.01).contains(&c), "{c}");
         }
@@ -301,7 +310,7 @@ mod tests {
         ) {
             let mut m = if esc { MixerConfig::REFERENCE_ESC } else { MixerConfig::REFERENCE_DC };
             if priority { m.saturate = Saturate::AttitudePriority; }
-            let (cmd, _) = m.mix(thr, [x, y, z]);
+            let (cmd, _) = m.mix(CompareCounts(thr), [x, y, z]);
             for c in cmd {
                 let ccr = m.to_compare(c);
                 proptest::prop_assert!(f32::from(ccr) >= m.min_compare && f32::from(ccr) <= m.max_compare);

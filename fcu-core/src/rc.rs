@@ -17,13 +17,51 @@ pub const CAPTURE_WRAP: u32 = 32_768;
 /// Capture counts per microsecond.
 pub const COUNTS_PER_US: u32 = 4;
 
-/// Stick values, reference counts.
+/// One stick's value: its pulse width minus the channel's centre (the throttle's: minus its
+/// bottom, never negative), in capture counts of 0.25 µs; the reference's `gAIL`.. `gRUD`.
+///
+/// Its own type because a throttle stick and a motor's compare value are both 16-bit counts
+/// that the reference passes around as `int16`: the mixer turns one into the other
+/// ([`MixerConfig::throttle_counts`](crate::mixer::MixerConfig::throttle_counts) gives a
+/// [`CompareCounts`](crate::mixer::CompareCounts)), and nothing else may.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[repr(transparent)]
+pub struct StickCounts(pub i16);
+
+impl StickCounts {
+    pub const ZERO: StickCounts = StickCounts(0);
+
+    pub fn get(self) -> i16 {
+        self.0
+    }
+}
+
+impl core::fmt::Display for StickCounts {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl From<StickCounts> for i32 {
+    fn from(s: StickCounts) -> i32 {
+        i32::from(s.0)
+    }
+}
+
+/// The four sticks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Sticks {
-    pub ail: i16,
-    pub ele: i16,
-    pub thr: i16,
-    pub rud: i16,
+    pub ail: StickCounts,
+    pub ele: StickCounts,
+    pub thr: StickCounts,
+    pub rud: StickCounts,
+}
+
+impl Sticks {
+    /// Aileron, elevator, throttle and rudder, counts.
+    pub const fn new(ail: i16, ele: i16, thr: i16, rud: i16) -> Sticks {
+        Sticks { ail: StickCounts(ail), ele: StickCounts(ele), thr: StickCounts(thr), rud: StickCounts(rud) }
+    }
 }
 
 /// How pulses are accepted (difference D9).
@@ -57,15 +95,15 @@ pub struct RcConfig {
     pub thr_bottom: i16,
     pub rud_center: i16,
     /// Stick full scale, counts (1800 = 450 µs).
-    pub full_scale: i16,
+    pub full_scale: StickCounts,
     /// Gesture threshold, counts (strict inequality, 1200).
-    pub gesture_threshold: i16,
+    pub gesture_threshold: StickCounts,
     /// `MIN_THR`: below it the throttle is "low" (200 DC, 20 ESC).
-    pub min_throttle: i16,
+    pub min_throttle: StickCounts,
     /// Roll and pitch target at full stick, rad (20° = 0.34906584).
     pub max_tilt_rad: f32,
     /// Yaw dead band, counts (600, inclusive).
-    pub yaw_deadband: i16,
+    pub yaw_deadband: StickCounts,
     /// Yaw target change per outer step at full rate, rad (120°/s × 6.25 ms).
     pub yaw_max_step_rad: f32,
     pub yaw_stick: YawStick,
@@ -82,12 +120,12 @@ impl RcConfig {
         ele_center: 6151,
         thr_bottom: 4450,
         rud_center: 6397,
-        full_scale: 1800,
-        gesture_threshold: 1200,
-        min_throttle: 200,
+        full_scale: StickCounts(1800),
+        gesture_threshold: StickCounts(1200),
+        min_throttle: StickCounts(200),
         // (float)(3.141592654*20/180.0) and (float)(3.141592654*(120.0*0.00625)/180.0)
         max_tilt_rad: 0.349_065_84,
-        yaw_deadband: 600,
+        yaw_deadband: StickCounts(600),
         yaw_max_step_rad: 0.013_089_97,
         yaw_stick: YawStick::BangBang,
         pulses: PulseRules::Reference { reset_after_ticks: 25 },
@@ -101,13 +139,13 @@ impl RcConfig {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        self.full_scale > 0
-            && self.gesture_threshold > 0
-            && self.min_throttle >= 0
+        self.full_scale > StickCounts::ZERO
+            && self.gesture_threshold > StickCounts::ZERO
+            && self.min_throttle >= StickCounts::ZERO
             && self.max_tilt_rad.is_finite()
             && self.max_tilt_rad > 0.0
             && self.max_tilt_rad < 1.5
-            && self.yaw_deadband >= 0
+            && self.yaw_deadband >= StickCounts::ZERO
             && self.yaw_deadband < self.full_scale
             && self.yaw_max_step_rad.is_finite()
             && self.yaw_max_step_rad >= 0.0
@@ -116,7 +154,7 @@ impl RcConfig {
     }
 
     /// The reference's `update_rc_data` for one channel: width → stick (int16).
-    pub fn stick_from_width(&self, channel: usize, width_counts: u16) -> i16 {
+    pub fn stick_from_width(&self, channel: usize, width_counts: u16) -> StickCounts {
         let w = i32::from(width_counts);
         let v = match channel {
             AIL => w - i32::from(self.ail_center),
@@ -132,7 +170,7 @@ impl RcConfig {
         };
         // Saturated, not wrapped: a width far past the centre stays a full deflection. (The
         // decoder's widths, below 32 768 counts, never reach either bound.)
-        v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
+        StickCounts(v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16)
     }
 
     /// Store a width into the sticks (one channel), as `update_rc_data`.
@@ -150,14 +188,14 @@ impl RcConfig {
         sticks.thr < self.min_throttle
     }
 
-    fn saturate(&self, v: i16) -> i32 {
+    fn saturate(&self, v: StickCounts) -> i32 {
         i32::from(v).clamp(-i32::from(self.full_scale), i32::from(self.full_scale))
     }
 
     /// Pitch and roll targets, rad: `(float)(−sat(stick))·max/full_scale` in f32, left to
     /// right, as `GetTargetEulerAngle`. Elevator forward (positive) is nose down.
     pub fn tilt_targets(&self, sticks: &Sticks) -> (f32, f32) {
-        let fs = f32::from(self.full_scale);
+        let fs = f32::from(self.full_scale.0);
         let pitch = (-self.saturate(sticks.ele)) as f32 * self.max_tilt_rad / fs;
         let roll = (-self.saturate(sticks.ail)) as f32 * self.max_tilt_rad / fs;
         (pitch, roll)
@@ -194,16 +232,17 @@ impl RcConfig {
     /// Which gesture the sticks make (strict comparisons, throttle exactly 0 for the
     /// reference's arm and calibration gestures).
     pub fn gesture(&self, s: &Sticks) -> Option<Gesture> {
-        let th = self.gesture_threshold;
-        if s.thr == 0 && s.ele < -th && s.ail > th && s.rud < -th {
+        // i16 arithmetic: `-th` of a positive i16 cannot overflow.
+        let th = self.gesture_threshold.0;
+        if s.thr == StickCounts::ZERO && s.ele.0 < -th && s.ail.0 > th && s.rud.0 < -th {
             return Some(Gesture::Calibrate);
         }
-        if s.thr == 0 && s.ele < -th && s.ail < -th && s.rud > th {
+        if s.thr == StickCounts::ZERO && s.ele.0 < -th && s.ail.0 < -th && s.rud.0 > th {
             return Some(Gesture::Arm);
         }
         // Ours (the reference has no disarm): throttle low, rudder hard over the other way,
         // elevator and aileron near centre.
-        if self.throttle_low(s) && s.rud < -th && centred(s.ele) && centred(s.ail) {
+        if self.throttle_low(s) && s.rud.0 < -th && centred(s.ele) && centred(s.ail) {
             return Some(Gesture::Disarm);
         }
         None
@@ -212,10 +251,10 @@ impl RcConfig {
 
 /// A stick this close to its centre (counts) counts as centred: for the disarm gesture, and
 /// for the release that must follow the arm gesture before the motors may run.
-pub const CENTRED_COUNTS: i16 = 300;
+pub const CENTRED_COUNTS: StickCounts = StickCounts(300);
 
 /// Whether a stick value is within [`CENTRED_COUNTS`] of centre.
-pub fn centred(v: i16) -> bool {
+pub fn centred(v: StickCounts) -> bool {
     i32::from(v).abs() <= i32::from(CENTRED_COUNTS)
 }
 
@@ -381,7 +420,7 @@ pub struct RadioState {
 
 impl RadioState {
     /// Nothing received yet.
-    pub const NONE: RadioState = RadioState { sticks: Sticks { ail: 0, ele: 0, thr: 0, rud: 0 }, link: false, gesture: None };
+    pub const NONE: RadioState = RadioState { sticks: Sticks::new(0, 0, 0, 0), link: false, gesture: None };
 }
 
 impl Default for Receiver {
@@ -502,9 +541,9 @@ mod tests {
         for ch in 0..CHANNELS {
             REF.apply_width(&mut s, ch, 6000);
         }
-        assert_eq!(s, Sticks { ail: 138, ele: -151, thr: 1550, rud: -397 });
+        assert_eq!(s, Sticks::new(138, -151, 1550, -397));
         REF.apply_width(&mut s, THR, 4450);
-        assert_eq!(s.thr, 0);
+        assert_eq!(s.thr, StickCounts::ZERO);
     }
 
     #[test]
@@ -516,7 +555,7 @@ mod tests {
 
     #[test]
     fn gestures_use_strict_thresholds() {
-        let g = |ele, ail, rud| REF.gesture(&Sticks { ail, ele, thr: 0, rud });
+        let g = |ele, ail, rud| REF.gesture(&Sticks::new(ail, ele, 0, rud));
         assert_eq!(g(-1300, 1300, -1300), Some(Gesture::Calibrate));
         assert_eq!(g(-1300, -1300, 1300), Some(Gesture::Arm));
         assert_eq!(g(-1200, -1300, 1300), None);
@@ -526,20 +565,20 @@ mod tests {
 
     #[test]
     fn targets_match_the_reference_examples() {
-        let (p, _) = REF.tilt_targets(&Sticks { ele: 900, ..Sticks::default() });
+        let (p, _) = REF.tilt_targets(&Sticks { ele: StickCounts(900), ..Sticks::default() });
         assert!((p + 0.174_532_93).abs() < 1e-7);
-        let (_, r) = REF.tilt_targets(&Sticks { ail: -2500, ..Sticks::default() });
+        let (_, r) = REF.tilt_targets(&Sticks { ail: StickCounts(-2500), ..Sticks::default() });
         assert!((r - 0.349_065_87).abs() < 1e-7);
-        assert_eq!(REF.yaw_step(&Sticks { rud: 601, ..Sticks::default() }), 0.013_089_97);
-        assert_eq!(REF.yaw_step(&Sticks { rud: 600, ..Sticks::default() }), 0.0);
+        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(601), ..Sticks::default() }), 0.013_089_97);
+        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }), 0.0);
     }
 
     #[test]
     fn proportional_yaw_reaches_the_same_maximum() {
         let cfg = RcConfig { yaw_stick: YawStick::Proportional, ..REF };
-        assert_eq!(cfg.yaw_step(&Sticks { rud: 600, ..Sticks::default() }), 0.0);
-        assert!((cfg.yaw_step(&Sticks { rud: 1800, ..Sticks::default() }) - REF.yaw_max_step_rad).abs() < 1e-9);
-        assert!((cfg.yaw_step(&Sticks { rud: -1200, ..Sticks::default() }) + REF.yaw_max_step_rad * 0.5).abs() < 1e-9);
+        assert_eq!(cfg.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }), 0.0);
+        assert!((cfg.yaw_step(&Sticks { rud: StickCounts(1800), ..Sticks::default() }) - REF.yaw_max_step_rad).abs() < 1e-9);
+        assert!((cfg.yaw_step(&Sticks { rud: StickCounts(-1200), ..Sticks::default() }) + REF.yaw_max_step_rad * 0.5).abs() < 1e-9);
     }
 
     #[test]
@@ -575,7 +614,7 @@ mod tests {
     fn a_width_far_past_centre_saturates_instead_of_wrapping() {
         let mut s = Sticks::default();
         REF.apply_width(&mut s, AIL, u16::MAX);
-        assert_eq!(s.ail, i16::MAX);
+        assert_eq!(s.ail, StickCounts(i16::MAX));
     }
 
     #[test]
@@ -712,10 +751,10 @@ mod tests {
 
         #[test]
         fn a_stick_beyond_full_scale_saturates_at_the_configured_angle(ele in proptest::num::i16::ANY, ail in proptest::num::i16::ANY) {
-            let (p, r) = REF.tilt_targets(&Sticks { ele, ail, ..Sticks::default() });
+            let (p, r) = REF.tilt_targets(&Sticks { ele: StickCounts(ele), ail: StickCounts(ail), ..Sticks::default() });
             // Full scale gives the configured angle to f32 rounding (the reference's own
             // arithmetic lands one ulp above it), and anything beyond gives exactly that.
-            let full = REF.tilt_targets(&Sticks { ele: 1800, ail: -1800, ..Sticks::default() });
+            let full = REF.tilt_targets(&Sticks { ele: StickCounts(1800), ail: StickCounts(-1800), ..Sticks::default() });
             proptest::prop_assert!((full.1 - REF.max_tilt_rad).abs() <= 1e-6 * REF.max_tilt_rad);
             proptest::prop_assert!(p.abs() <= full.1 && r.abs() <= full.1);
             if ele >= 1800 { proptest::prop_assert_eq!(p, full.0); }

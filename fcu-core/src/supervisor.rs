@@ -9,7 +9,7 @@
 //!   control ticks.
 
 use crate::imu::SensorFault;
-use crate::rc::{Gesture, Sticks};
+use crate::rc::{Gesture, StickCounts, Sticks};
 
 /// Numbers of the safety layer, in control ticks (800 per second in the default profile).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -204,7 +204,7 @@ impl Inputs {
     pub const READY: Inputs = Inputs {
         link: true,
         silence_ticks: 0,
-        sticks: Sticks { ail: 0, ele: 0, thr: 0, rud: 0 },
+        sticks: Sticks::new(0, 0, 0, 0),
         gesture: None,
         throttle_low: true,
         calibrated: true,
@@ -221,7 +221,7 @@ pub struct Decision {
     /// The motors may run this tick (the pipeline still cuts them while the throttle is low).
     pub motors_enabled: bool,
     /// Stage-1 failsafe: level targets, zero yaw rate and this throttle instead of the sticks.
-    pub failsafe_throttle: Option<i16>,
+    pub failsafe_throttle: Option<StickCounts>,
     /// Start a calibration now.
     pub request_calibration: bool,
     pub blockers: Blockers,
@@ -245,7 +245,7 @@ pub struct Supervisor {
     good_ticks: u32,
     low_throttle_ticks: u32,
     boot_ticks: u32,
-    last_good_throttle: i16,
+    last_good_throttle: StickCounts,
     fault: Option<SensorFault>,
     /// Reference latch (the reference has no disarm).
     reference_armed: bool,
@@ -273,7 +273,7 @@ impl Supervisor {
             good_ticks: 0,
             low_throttle_ticks: 0,
             boot_ticks: 0,
-            last_good_throttle: 0,
+            last_good_throttle: StickCounts::ZERO,
             fault: None,
             reference_armed: false,
             steady: false,
@@ -626,11 +626,11 @@ mod tests {
     use super::*;
 
     const CFG: SafetyConfig = SafetyConfig::DEFAULT;
-    const ARM: Sticks = Sticks { ail: -1500, ele: -1500, thr: 0, rud: 1500 };
-    const DISARM: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: -1500 };
-    const CAL: Sticks = Sticks { ail: 1500, ele: -1500, thr: 0, rud: -1500 };
-    const IDLE: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: 0 };
-    const FLY: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+    const ARM: Sticks = Sticks::new(-1500, -1500, 0, 1500);
+    const DISARM: Sticks = Sticks::new(0, 0, 0, -1500);
+    const CAL: Sticks = Sticks::new(1500, -1500, 0, -1500);
+    const IDLE: Sticks = Sticks::new(0, 0, 0, 0);
+    const FLY: Sticks = Sticks::new(0, 0, 1500, 0);
     /// The radio's channel timeout (100 ms): the first tick without a good link comes this
     /// long after the last pulse of the channel that fell silent.
     const TIMEOUT: u32 = 80;
@@ -653,7 +653,7 @@ mod tests {
 
         fn sticks(&mut self, s: Sticks) {
             self.i.sticks = s;
-            self.i.throttle_low = s.thr < 200;
+            self.i.throttle_low = s.thr < StickCounts(200);
             self.i.gesture = crate::rc::RcConfig::REFERENCE.gesture(&s);
         }
 
@@ -737,12 +737,12 @@ mod tests {
         // rudder still at the gesture's deflection: not armed yet, motors off.
         let mut r = Rig::new();
         r.run(ARM, CFG.arm_hold_ticks);
-        let nudged = Sticks { thr: 50, ..ARM };
+        let nudged = Sticks { thr: StickCounts(50), ..ARM };
         let d = r.run(nudged, 100);
         assert_eq!(d.state, FlightState::Arming);
         assert!(!d.motors_enabled);
         // Rudder still over: still waiting.
-        let d = r.run(Sticks { rud: 1300, ..IDLE }, 10);
+        let d = r.run(Sticks { rud: StickCounts(1300), ..IDLE }, 10);
         assert_eq!(d.state, FlightState::Arming);
         // Every stick centred, throttle low: armed.
         assert_eq!(r.run(IDLE, 1).state, FlightState::Armed);
@@ -940,7 +940,7 @@ mod tests {
         r.arm();
         r.run(FLY, 100);
         // Stale sticks claiming more throttle while the link is down change nothing.
-        r.i.sticks.thr = 3000;
+        r.i.sticks.thr = StickCounts(3000);
         let d = r.lose_link(50);
         assert_eq!(d.failsafe_throttle, Some(FLY.thr));
     }
@@ -1217,14 +1217,14 @@ mod tests {
             let seq = script.into_iter().chain(seq);
             for ((pattern, link, throttle_up, fault, calibrating, tilted), ticks) in seq {
                 let base = [IDLE, ARM, DISARM, CAL, FLY][usize::from(pattern)];
-                let sticks = Sticks { thr: if throttle_up { 1500 } else { base.thr }, ..base };
+                let sticks = Sticks { thr: if throttle_up { StickCounts(1500) } else { base.thr }, ..base };
                 let i = Inputs {
                     link,
                     // Any silence: the table and the shortcut must agree whatever the radio says.
                     silence_ticks: if link { 0 } else { ticks * 7 },
                     sticks,
                     gesture: crate::rc::RcConfig::REFERENCE.gesture(&sticks),
-                    throttle_low: sticks.thr < 200,
+                    throttle_low: sticks.thr < StickCounts(200),
                     calibrated: true,
                     calibrating,
                     sensor_fault: fault.then_some(SensorFault::Stuck),

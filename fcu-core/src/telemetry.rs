@@ -416,10 +416,10 @@ pub fn debug_fields(status: &Status) -> DebugFields {
     let [motor1_cmd, ..] = status.motor_command;
     let [pitch_target_rad, roll_target_rad, _yaw] = status.target_rad;
     DebugFields {
-        ele: status.sticks.ele,
-        ail: status.sticks.ail,
-        rud: status.sticks.rud,
-        thr: status.sticks.thr,
+        ele: status.sticks.ele.get(),
+        ail: status.sticks.ail.get(),
+        rud: status.sticks.rud.get(),
+        thr: status.sticks.thr.get(),
         motor1_cmd,
         pitch_rad: status.tilt.pitch_rad,
         roll_rad: status.tilt.roll_rad,

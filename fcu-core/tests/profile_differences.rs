@@ -8,7 +8,8 @@ use fcu_core::control::{AngleLoop, RateLoop, Saturation};
 use fcu_core::flight::{AccelWords, ForcedRadio, OuterJob};
 use fcu_core::imu::{Offsets, RawImu};
 use fcu_core::math::tilt_angle_rad;
-use fcu_core::rc::Sticks;
+use fcu_core::mixer::CompareCounts;
+use fcu_core::rc::{StickCounts, Sticks};
 use fcu_core::supervisor::FlightState;
 use fcu_core::telemetry::Reporter;
 use fcu_core::{Config, FlightController};
@@ -135,7 +136,7 @@ fn d5_back_and_forth_translation_does_not_tilt_the_estimate() {
 #[test]
 fn d6_a_saturated_motor_keeps_the_commanded_roll_torque() {
     let torque = |cfg: Config| {
-        let (cmd, _) = cfg.mixer.mix(1800, [0.0, 300.0, 0.0]);
+        let (cmd, _) = cfg.mixer.mix(CompareCounts(1800), [0.0, 300.0, 0.0]);
         let c = cmd.map(|m| i32::from(cfg.mixer.to_compare(m)));
         (c[2] + c[3]) - (c[0] + c[1])
     };
@@ -152,7 +153,7 @@ fn d6_the_rate_integrator_does_not_wind_up_against_a_saturated_mixer() {
         // 5 s of a 5 rad/s demand the drone cannot follow: the output sits on its clamp.
         for _ in 0..4000 {
             let s2 = rl.commands(&cfg.control, [5.0, 0.0, 0.0], [0.0; 3], false, sat);
-            sat = cfg.mixer.mix(cfg.mixer.throttle_counts(3000), s2).1;
+            sat = cfg.mixer.mix(cfg.mixer.throttle_counts(StickCounts(3000)), s2).1;
         }
         rl.integrators()[0]
     };
@@ -177,8 +178,8 @@ fn d7_a_stick_step_does_not_kick_the_derivative() {
 
 #[test]
 fn d8_yaw_rate_is_proportional_to_the_stick() {
-    let half = Sticks { rud: 1200, ..Sticks::default() };
-    let full = Sticks { rud: 1800, ..Sticks::default() };
+    let half = Sticks { rud: StickCounts(1200), ..Sticks::default() };
+    let full = Sticks { rud: StickCounts(1800), ..Sticks::default() };
     let r = Config::reference().rc;
     let d = Config::default().rc;
     assert_eq!(r.yaw_step(&half), r.yaw_step(&full));
@@ -209,7 +210,7 @@ fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
 
 #[test]
 fn d13_a_yaw_stick_commands_its_rate_at_once() {
-    let full_left = Sticks { rud: 1800, thr: 1500, ..Sticks::default() };
+    let full_left = Sticks { rud: StickCounts(1800), thr: StickCounts(1500), ..Sticks::default() };
     // The rate the stick asks for: one outer step's heading change, 160 steps a second.
     let stick_rate = |cfg: Config| cfg.rc.yaw_step(&full_left) * 800.0 / 5.0;
     // The reference turns only as the heading error builds: after one step, 4 × one step.
@@ -288,7 +289,10 @@ fn d14_a_thrust_gain_scales_the_rate_loop_and_the_throttle_map() {
         assert!((b - g * a).abs() < 1e-3 * a.abs().max(1.0), "{b} vs {g} × {a}");
     }
     let m = d.mixer.scaled_throttle(g);
-    assert_eq!(m.throttle_counts(1500), (g * (d.mixer.throttle_slope * 1500.0 + d.mixer.throttle_offset)) as i16);
+    assert_eq!(
+        m.throttle_counts(StickCounts(1500)),
+        CompareCounts((g * (d.mixer.throttle_slope * 1500.0 + d.mixer.throttle_offset)) as i16)
+    );
     assert_eq!((m.min_compare, m.max_compare), (d.mixer.min_compare, d.mixer.max_compare));
 }
 

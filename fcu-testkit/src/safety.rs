@@ -22,7 +22,7 @@ use fcu_core::flight::{FlightController, Status, TickOutput};
 use fcu_core::imu::{CalibrationOutcome, CalibrationPhase, HealthConfig, RawImu};
 use fcu_core::math::Quat;
 use fcu_core::mixer::MixerConfig;
-use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, Sticks, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US};
+use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, StickCounts, Sticks, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, SupervisorConfig};
 
 use crate::sim::rng::Rng;
@@ -171,7 +171,7 @@ struct ProcedureTracker {
     /// Ticks flown under stick control (armed) since the arming or the last lost tick.
     flown_ticks: u32,
     /// The last throttle seen on a good link while armed (the failsafe may hold it, never more).
-    held_thr: i16,
+    held_thr: StickCounts,
     prev_state: FlightState,
 }
 
@@ -186,14 +186,14 @@ impl ProcedureTracker {
             good_run: 0,
             lost_ticks: 0,
             flown_ticks: 0,
-            held_thr: 0,
+            held_thr: StickCounts::ZERO,
             prev_state: FlightState::Calibrating,
         }
     }
 
     /// Before the checks of a tick: the link run and the failsafe budgets. `silence` is the
     /// age of the stalest channel's last pulse (read only without a good link).
-    fn before_checks(&mut self, link: bool, silence: u32, thr: i16, state: FlightState, forget_ticks: u32) {
+    fn before_checks(&mut self, link: bool, silence: u32, thr: StickCounts, state: FlightState, forget_ticks: u32) {
         let good_before = self.good_run;
         self.good_run = if link { self.good_run.saturating_add(1) } else { 0 };
         if state == FlightState::FailsafeLevel && self.prev_state == FlightState::Armed {
@@ -477,7 +477,7 @@ impl SafetyMonitor {
         if st.state == FlightState::FailsafeLevel {
             if let Some(job) = &o.out.outer_job {
                 let s = job.sticks;
-                if s.ail != 0 || s.ele != 0 || s.rud != 0 || s.thr > self.proc.held_thr {
+                if s.ail != StickCounts::ZERO || s.ele != StickCounts::ZERO || s.rud != StickCounts::ZERO || s.thr > self.proc.held_thr {
                     return self.fail(Invariant::FailsafeSticks, format!("stage 1 flies {s:?}; last good throttle {}", self.proc.held_thr));
                 }
             }
@@ -557,10 +557,10 @@ impl SafetyMonitor {
                         _ => w - i32::from(self.rc.rud_center),
                     } as i16;
                     match ch {
-                        0 => self.sticks.ail = v,
-                        1 => self.sticks.ele = v,
-                        2 => self.sticks.thr = v,
-                        _ => self.sticks.rud = v,
+                        0 => self.sticks.ail = StickCounts(v),
+                        1 => self.sticks.ele = StickCounts(v),
+                        2 => self.sticks.thr = StickCounts(v),
+                        _ => self.sticks.rud = StickCounts(v),
                     }
                 }
                 None => {
@@ -767,7 +767,7 @@ impl RadioFrame {
 
     /// The widths that decode to `s` (throttle 0 is sent at the bottom of the range).
     pub fn from_sticks(rc: &RcConfig, s: Sticks) -> RadioFrame {
-        let w = |centre: i16, v: i16| (i32::from(centre) + i32::from(v)).clamp(1, i32::from(u16::MAX)) as u16;
+        let w = |centre: i16, v: StickCounts| (i32::from(centre) + i32::from(v)).clamp(1, i32::from(u16::MAX)) as u16;
         RadioFrame {
             width_counts: [w(rc.ail_center, s.ail), w(rc.ele_center, s.ele), w(rc.thr_bottom, s.thr), w(rc.rud_center, s.rud)],
             link: true,
@@ -779,12 +779,12 @@ impl RadioFrame {
 pub mod sticks {
     use fcu_core::rc::Sticks;
 
-    pub const NEUTRAL: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: 0 };
-    pub const ARM: Sticks = Sticks { ail: -1500, ele: -1500, thr: 0, rud: 1500 };
-    pub const DISARM: Sticks = Sticks { ail: 0, ele: 0, thr: 0, rud: -1500 };
-    pub const CALIBRATE: Sticks = Sticks { ail: 1500, ele: -1500, thr: 0, rud: -1500 };
+    pub const NEUTRAL: Sticks = Sticks::new(0, 0, 0, 0);
+    pub const ARM: Sticks = Sticks::new(-1500, -1500, 0, 1500);
+    pub const DISARM: Sticks = Sticks::new(0, 0, 0, -1500);
+    pub const CALIBRATE: Sticks = Sticks::new(1500, -1500, 0, -1500);
     /// Level flight at a mid throttle.
-    pub const FLY: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+    pub const FLY: Sticks = Sticks::new(0, 0, 1500, 0);
 }
 
 /// How a receiver lays the four channels' pulses out in a frame.

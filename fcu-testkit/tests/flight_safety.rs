@@ -4,7 +4,7 @@
 //! a rule of product.md §4; several show the reference's accident beside ours.
 
 use fcu_core::flight::TickOutput;
-use fcu_core::rc::{EdgeDecoder, CAPTURE_WRAP};
+use fcu_core::rc::{EdgeDecoder, StickCounts, CAPTURE_WRAP};
 use fcu_core::supervisor::FlightState;
 use fcu_core::{Config, FlightController};
 use fcu_testkit::safety::{ChannelLayout, Edge, LevelImu, PwmReceiver, RadioFrame, COUNTS_PER_FRAME, COUNTS_PER_TICK};
@@ -289,8 +289,8 @@ fn stage_1_levels_and_never_raises_the_throttle() {
     assert_eq!(st.target_rad[1], 0.0);
     assert!(before.target_rad[0] != 0.0 && before.target_rad[1] != 0.0);
     let held = job_sticks(&mut b);
-    assert_eq!((held.ail, held.ele, held.rud), (0, 0, 0), "{held:?}");
-    assert!(held.thr <= flown.thr && held.thr > 0, "{held:?} vs {flown:?}");
+    assert_eq!((held.ail, held.ele, held.rud), (StickCounts::ZERO, StickCounts::ZERO, StickCounts::ZERO), "{held:?}");
+    assert!(held.thr <= flown.thr && held.thr > StickCounts::ZERO, "{held:?} vs {flown:?}");
 }
 
 #[test]
@@ -516,7 +516,7 @@ fn a_throttle_nudge_with_the_sticks_deflected_does_not_arm() {
     // After a full hold only the throttle moves: no longer the arm gesture, but the aileron,
     // elevator and rudder are still deflected. Not armed, motors off.
     let out = b.run(ARM_NUDGED, TICKS_PER_S);
-    assert_eq!(b.fc.status().sticks.thr, 110);
+    assert_eq!(b.fc.status().sticks.thr, StickCounts(110));
     assert_eq!(b.state(), FlightState::Arming);
     assert!(motors_off(&out));
     // The rudder alone still over: waiting.

@@ -6,7 +6,7 @@ use fcu_core::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
 use fcu_core::filter::{Biquad, BiquadCoeffs};
 use fcu_core::math::{inv_sqrt_fast, quat_to_tilt, Quat};
 use fcu_core::mixer::MixerConfig;
-use fcu_core::rc::{RcConfig, Sticks};
+use fcu_core::rc::{RcConfig, StickCounts, Sticks};
 
 fn rows(name: &str) -> Vec<Vec<String>> {
     let path = format!("{}/data/golden/unit/{name}", env!("CARGO_MANIFEST_DIR"));
@@ -100,7 +100,7 @@ fn stick_targets_and_yaw_accumulation_are_bit_exact() {
             yaw = 0.0;
         }
         let n = |i: usize| -> i16 { r[i].parse().unwrap() };
-        let s = Sticks { ail: n(2), ele: n(3), rud: n(4), thr: n(5) };
+        let s = Sticks::new(n(2), n(3), n(5), n(4));
         let (pitch, roll) = cfg.tilt_targets(&s);
         let step = cfg.yaw_step(&s);
         if step != 0.0 {
@@ -123,7 +123,7 @@ fn pulse_width_to_stick_is_exact() {
         let ch: usize = r[0].parse().unwrap();
         let width: u16 = r[1].parse().unwrap();
         let want: i16 = r[2].parse().unwrap();
-        assert_eq!(cfg.stick_from_width(ch, width), want, "{r:?}");
+        assert_eq!(cfg.stick_from_width(ch, width), StickCounts(want), "{r:?}");
     }
 }
 
@@ -152,7 +152,7 @@ fn cascade_mixer_and_clamp_are_bit_exact() {
         for (a, i) in s2.iter().zip(15..) {
             assert!(same(*a, f(&r[i])), "step {}: s2 {s2:?} vs {:?}", r[0], &r[15..18]);
         }
-        let (m, _) = mixer.mix(mixer.throttle_counts(gthr), s2);
+        let (m, _) = mixer.mix(mixer.throttle_counts(StickCounts(gthr)), s2);
         for ((a, i), j) in m.iter().zip(18..).zip(22..) {
             assert!(same(*a, f(&r[i])), "step {}: motor {m:?}", r[0]);
             let ccr: u16 = r[j].parse().unwrap();

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use fcu_core::config::Config;
 use fcu_core::flight::{Status, TickOutput};
 use fcu_core::imu::{RawImu, SensorFault};
-use fcu_core::rc::{Gesture, PulseBatch, RcConfig, Sticks};
+use fcu_core::rc::{Gesture, PulseBatch, RcConfig, StickCounts, Sticks};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, Supervisor};
 use fcu_testkit::safety::*;
 use fcu_testkit::sim::rng::Rng;
@@ -107,21 +107,21 @@ impl Segment {
 fn arm_sticks() -> impl Strategy<Value = Sticks> {
     prop_oneof![
         3 => Just(sticks::ARM),
-        1 => (-1800i16..=-1201, -1800i16..=-1201, 1201i16..=1800).prop_map(|(ail, ele, rud)| Sticks { ail, ele, thr: 0, rud }),
+        1 => (-1800i16..=-1201, -1800i16..=-1201, 1201i16..=1800).prop_map(|(ail, ele, rud)| Sticks::new(ail, ele, 0, rud)),
     ]
 }
 
 fn disarm_sticks() -> impl Strategy<Value = Sticks> {
     prop_oneof![
         2 => Just(sticks::DISARM),
-        1 => (-300i16..=300, -300i16..=300, 0i16..200, -1800i16..=-1201).prop_map(|(ail, ele, thr, rud)| Sticks { ail, ele, thr, rud }),
+        1 => (-300i16..=300, -300i16..=300, 0i16..200, -1800i16..=-1201).prop_map(|(ail, ele, thr, rud)| Sticks::new(ail, ele, thr, rud)),
     ]
 }
 
 fn fly_sticks() -> impl Strategy<Value = Sticks> {
     prop_oneof![
         1 => Just(sticks::FLY),
-        3 => (-1800i16..=1800, -1800i16..=1800, 0i16..2500, -1800i16..=1800).prop_map(|(ail, ele, thr, rud)| Sticks { ail, ele, thr, rud }),
+        3 => (-1800i16..=1800, -1800i16..=1800, 0i16..2500, -1800i16..=1800).prop_map(|(ail, ele, thr, rud)| Sticks::new(ail, ele, thr, rud)),
     ]
 }
 
@@ -299,7 +299,7 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
         |(link, silence_ticks, gesture, thr, (throttle_low, calibrated, calibrating), sensor_fault, tilt_rad)| Inputs {
             link,
             silence_ticks,
-            sticks: Sticks { ail: 0, ele: 0, thr, rud: 0 },
+            sticks: Sticks::new(0, 0, thr, 0),
             gesture,
             throttle_low,
             calibrated,
@@ -447,7 +447,7 @@ proptest! {
         thr in 200i16..2500,
     ) {
         let mut rig = start(if esc { Start::EscFlying } else { Start::Flying });
-        let sticks = Sticks { thr, ..sticks::FLY };
+        let sticks = Sticks { thr: StickCounts(thr), ..sticks::FLY };
         match flap(&mut rig, sticks, &cycles, 3 * 800 + 400) {
             Err(v) => prop_assert!(false, "{v}"),
             Ok((stage2, handed_back)) => {
@@ -525,7 +525,7 @@ fn generators_fly_a_whole_flight_and_fail_safe() {
 #[test]
 fn receiver_generator_sends_50_hz_frames_that_decode_to_the_sticks() {
     let rc = Config::default().rc;
-    let s = Sticks { ail: -1234, ele: 567, thr: 890, rud: 1700 };
+    let s = Sticks::new(-1234, 567, 890, 1700);
     let frame = RadioFrame::from_sticks(&rc, s);
     let mut radio = PwmReceiver::new(3);
     let mut decoder = fcu_core::rc::EdgeDecoder::new(rc.pulses);

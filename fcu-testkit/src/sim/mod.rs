@@ -138,7 +138,7 @@ impl Pilot {
         let g_thr = if m.throttle_slope > 0.0 { (ccr - f64::from(m.throttle_offset)) / f64::from(m.throttle_slope) } else { 0.0 };
         // Never below MIN_THR + margin: below it the core cuts the motors (a pilot flying
         // knows not to pull the stick to the bottom).
-        let g_thr = g_thr.max(f64::from(cfg.rc.min_throttle) + 40.0);
+        let g_thr = g_thr.max(f64::from(cfg.rc.min_throttle.get()) + 40.0);
         (f64::from(cfg.rc.thr_bottom) + g_thr) / 4.0
     }
 }
