@@ -21,6 +21,7 @@
 //! | the attitude estimate | [`ahrs`] (the reference's Mahony, the default's VQF-style estimator) |
 //! | gains, feedforward, battery compensation | [`control`] and the `control` field of [`Config::default`] |
 //! | motor mixing and saturation | [`mixer`] |
+//! | stick values and compare counts (both 16-bit counts, never mixed up) | [`rc::StickCounts`], [`mixer::CompareCounts`] |
 //! | status lines, LEDs, boot checks | [`telemetry`], [`boot`] |
 //! | what the default changes from the reference (D1–D15) | [`config`]: each difference is a field with a comment |
 #![no_std]
