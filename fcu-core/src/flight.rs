@@ -6,8 +6,13 @@
 //!   → mixer → guard. Every fifth tick it hands out an [`OuterJob`] (the block's
 //!   accelerometer words and summed gyro, and the sticks).
 //! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler →
-//!   stick targets → angle loop, and returns an [`OuterResult`] that the inner half applies at
-//!   its next tick.
+//!   stick targets → angle loop, and returns an [`OuterResult`] that the control tick applies
+//!   at its next tick ([`ControlTick::apply_outer`]).
+//!
+//! From a tick to the supervisor's rules: [`ControlTick::tick`] → `run` (the numbered stages)
+//! → `supervise` → [`Supervisor::decide_or_repeat`] (the last decision stands in steady
+//! flight with nothing new) → [`Supervisor::decide_inline`] (the steady-flight shortcut) → the
+//! state table, `Supervisor::decide_by_table`.
 //!
 //! The 800 Hz half is written for a budget of 600 Cortex-M4 instructions (`scripts/bench-m4`):
 //! work that only the outer step needs is left to it, what the configuration settles is
