@@ -89,19 +89,37 @@ pub fn level_after_link_loss_s(log: &FlightLog, t_s: f64) -> Option<f64> {
         .map(|r| r.t_s - t_s)
 }
 
-/// RMS of commanded yaw rate (slope of the core's yaw target over 0.1 s) minus the true yaw
-/// rate (over the same 0.1 s), °/s.
+/// RMS of the commanded yaw rate minus the true yaw rate, each averaged over the same 0.1 s,
+/// °/s. The commanded rate is what the pilot's stick asks for (`LogRow::yaw_rate_cmd_dps`),
+/// not the core's own heading target, so that a controller which smooths or delays its target
+/// is measured against the stick all the same; where the computer does not report it (the
+/// firmware's telemetry), the slope of its yaw target stands in (the same for a target that
+/// moves at the stick's rate, as both profiles' do today).
 pub fn yaw_rate_rms_dps(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
     let w: Vec<&LogRow> = window(log, from_s, to_s).collect();
     let lag = (0.1 * log.tick_hz).round().max(1.0) as usize;
+    let from_stick = w.iter().all(|r| r.yaw_rate_cmd_dps.is_some());
+    // Sums of the stick's rate up to each row: a window's mean is a difference of two.
+    let mut cmd_sums = Vec::with_capacity(w.len() + 1);
+    cmd_sums.push(0.0);
+    for r in &w {
+        let last = cmd_sums.last().copied().unwrap_or(0.0);
+        cmd_sums.push(last + r.yaw_rate_cmd_dps.unwrap_or(0.0));
+    }
     let mut sum = 0.0;
     let mut n = 0usize;
-    for (a, b) in w.iter().zip(w.iter().skip(lag)) {
+    for (i, (a, b)) in w.iter().zip(w.iter().skip(lag)).enumerate() {
         let dt = b.t_s - a.t_s;
         if dt <= 0.0 {
             continue;
         }
-        let cmd = (b.yaw_target_deg - a.yaw_target_deg) / dt;
+        let cmd = if from_stick {
+            // The rate asked for over the ticks after `a` up to `b`: what moves the heading
+            // from a's to b's.
+            (cmd_sums[i + lag + 1] - cmd_sums[i + 1]) / lag as f64
+        } else {
+            (b.yaw_target_deg - a.yaw_target_deg) / dt
+        };
         let mut dyaw = b.yaw_deg - a.yaw_deg;
         // The true heading wraps at ±180°.
         while dyaw > 180.0 {

@@ -76,6 +76,8 @@ pub struct LogRow {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
+    /// See [`ComputerView::yaw_rate_cmd_dps`] (not written to the CSV).
+    pub yaw_rate_cmd_dps: Option<f64>,
     pub motors: [u16; 4],
     pub alt_m: f64,
     pub battery_v: f64,
@@ -158,6 +160,10 @@ pub struct ComputerView {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
+    /// The yaw rate the pilot's stick asks for, °/s (the core's
+    /// `Status::yaw_rate_target_rad_s`), or `None` where the computer does not report it (the
+    /// firmware's telemetry): what the yaw metric compares the airframe's rate with.
+    pub yaw_rate_cmd_dps: Option<f64>,
     /// A calibration has passed since power-on.
     pub calibrated: bool,
     pub calibrating: bool,
@@ -175,6 +181,7 @@ impl Default for ComputerView {
             roll_target_deg: 0.0,
             pitch_target_deg: 0.0,
             yaw_target_deg: 0.0,
+            yaw_rate_cmd_dps: None,
             calibrated: false,
             calibrating: false,
             calibration_restarts: 0,
@@ -253,6 +260,7 @@ impl FlightComputer for InProcess {
             roll_target_deg: deg(st.target_rad[1]),
             pitch_target_deg: deg(st.target_rad[0]),
             yaw_target_deg: deg(st.target_rad[2]),
+            yaw_rate_cmd_dps: Some(deg(st.yaw_rate_target_rad_s)),
             calibrated: st.calibrated,
             calibrating,
             calibration_restarts: restarts,
@@ -390,6 +398,7 @@ pub fn run_streaming(
             roll_target_deg: v.roll_target_deg,
             pitch_target_deg: v.pitch_target_deg,
             yaw_target_deg: v.yaw_target_deg,
+            yaw_rate_cmd_dps: v.yaw_rate_cmd_dps,
             motors: compare,
             alt_m: plant.state.pos_earth_m[2],
             battery_v: plant.state.battery_v,
