@@ -4,15 +4,15 @@
 //!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
 //!   reference's golden vectors bit for bit.
 //! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
-//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D15
-//!   (yaw feedforward, battery compensation, gains from the measured loop; README), each a
-//!   field here so a test can switch it on its own.
+//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D16
+//!   (yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns;
+//!   README), each a field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
 use crate::ahrs::{EstimatorConfig, MahonyConfig, VqfConfig};
-use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative};
+use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative, YawShaping};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
@@ -217,7 +217,7 @@ impl Config {
 }
 
 impl Default for Config {
-    /// The product: the reference's structure with differences D1–D15.
+    /// The product: the reference's structure with differences D1–D16.
     fn default() -> Config {
         let r = Config::reference();
         let tick_hz = 800.0;
@@ -277,6 +277,14 @@ impl Default for Config {
                 anti_windup: true,
                 // D13: the yaw stick's rate straight into the yaw rate demand.
                 yaw_rate_feedforward: 0.9,
+                // D16: the stick's yaw rate through two 20 ms stages (a stop from full stick
+                // takes ~0.1 s of full braking on the weakest ±30 % airframe) and the demand
+                // 80 ms ahead of it: the P term (1500) then gives 120 counts per rad/s² of
+                // acceleration, for the yaw inertia (~22 nominal, up to ~40 on a ±30 %
+                // airframe) and the D term on measurement (60), which opposes every change of
+                // rate. The lead that flew best on the five ±30 % airframes (0.05–0.1 s fly
+                // within 2 % of each other); outside the loop, so the margins do not move.
+                yaw_shaping: Some(YawShaping { stage_s: 0.02, lead_s: 0.08 }),
                 // D14: thrust kept as the battery sags.
                 battery: Some(BatteryCompensation::LIPO_1S),
             },
@@ -380,6 +388,25 @@ mod tests {
         let mut c = Config::default();
         c.gyro_filter.b0 = f32::NAN;
         assert_eq!(c.validate(), Err(ConfigError::GyroFilter));
+    }
+
+    #[test]
+    fn a_yaw_shaping_that_cannot_shape_is_an_error() {
+        let with = |stage_s: f32, lead_s: f32| {
+            let mut c = Config::default();
+            c.control.yaw_shaping = Some(YawShaping { stage_s, lead_s });
+            c.validate()
+        };
+        assert_eq!(with(0.02, 0.08), Ok(()));
+        assert_eq!(with(0.001, 0.0), Ok(()));
+        assert_eq!(with(1.0, 0.5), Ok(()));
+        // A zero or tiny stage would divide the acceleration by (nearly) nothing.
+        for stage_s in [0.0, 0.0005, -0.02, 1.5, f32::NAN, f32::INFINITY] {
+            assert_eq!(with(stage_s, 0.08), Err(ConfigError::Control), "stage {stage_s}");
+        }
+        for lead_s in [-0.01, 0.6, f32::NAN, f32::INFINITY] {
+            assert_eq!(with(0.02, lead_s), Err(ConfigError::Control), "lead {lead_s}");
+        }
     }
 
     #[test]

@@ -68,6 +68,10 @@ pub struct ControlConfig {
     /// `outer_kp` × the heading error, so a turn lags its stick by a heading error of
     /// rate / `outer_kp` and the rate loop sees the demand only as that error builds up.
     pub yaw_rate_feedforward: f32,
+    /// Shape the stick's yaw rate into one the airframe can follow, and lead the yaw rate
+    /// demand by the shaped rate's acceleration (D16); `None` in the reference, whose heading
+    /// target moves at the stick's rate from one outer step to the next.
+    pub yaw_shaping: Option<YawShaping>,
     /// Scale the rate loop's output and the throttle map with the battery voltage (D14);
     /// `None` in the reference, whose gains weaken as the battery sags.
     pub battery: Option<BatteryCompensation>,
@@ -205,6 +209,7 @@ impl ControlConfig {
         outer_integrator_dt_s: 0.00125,
         anti_windup: false,
         yaw_rate_feedforward: 0.0,
+        yaw_shaping: None,
         battery: None,
     };
 
@@ -222,7 +227,79 @@ impl ControlConfig {
             && dt_ok(self.outer_integrator_dt_s)
             && self.yaw_rate_feedforward.is_finite()
             && (0.0..=1.5).contains(&self.yaw_rate_feedforward)
+            && self.yaw_shaping.is_none_or(|y| y.is_valid())
             && self.battery.is_none_or(|b| b.is_valid())
+    }
+}
+
+/// Yaw turns shaped to what the airframe can follow (D16).
+///
+/// A stick step asks for a new yaw rate at once, which no airframe can give: the motors take
+/// tens of milliseconds to change their torque, and a quad's yaw torque is small against its
+/// yaw inertia (a full-stick turn takes about 0.1 s of full braking to stop on a weak ±30 %
+/// airframe). So the stick's rate passes through two first-order stages of `stage_s` each
+/// (critically damped: no overshoot, the turn's total heading unchanged) and the heading
+/// target moves at the shaped rate. The yaw rate demand then leads the shaped rate by
+/// `lead_s` times its acceleration: the rate loop's P term turns that into the torque the
+/// acceleration needs (the inertia's, and what the D term on the measurement, D7, takes away
+/// while the rate changes) before a rate error has to build up to ask for it. Both happen in
+/// the outer step; the tick sees only its rate demand.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YawShaping {
+    /// Time constant of each of the two stages, s.
+    pub stage_s: f32,
+    /// How far the yaw rate demand leads the shaped rate, s (demand += lead × acceleration).
+    pub lead_s: f32,
+}
+
+impl YawShaping {
+    /// Stages from 1 ms (the acceleration is divided by it) to 1 s, a lead of at most 0.5 s.
+    pub fn is_valid(&self) -> bool {
+        self.stage_s.is_finite() && (0.001..=1.0).contains(&self.stage_s) && self.lead_s.is_finite() && (0.0..=0.5).contains(&self.lead_s)
+    }
+}
+
+/// One outer step of the shaped yaw rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShapedYaw {
+    /// The rate the heading target moves at, rad/s.
+    pub rate_rad_s: f32,
+    /// What the rate demand adds ahead of it: `lead_s` × the shaped acceleration, rad/s.
+    pub lead_rad_s: f32,
+}
+
+/// The two stages of [`YawShaping`], stepped once per outer step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YawRateShaper {
+    cfg: YawShaping,
+    /// Each stage's step towards its input per outer step: 1 − e^(−dt / stage_s).
+    alpha: f32,
+    first: f32,
+    rate: f32,
+}
+
+impl YawRateShaper {
+    /// At rest, for steps of `dt_s`.
+    pub fn new(cfg: &YawShaping, dt_s: f32) -> YawRateShaper {
+        YawRateShaper { cfg: *cfg, alpha: 1.0 - libm::expf(-dt_s / cfg.stage_s), first: 0.0, rate: 0.0 }
+    }
+
+    /// One step towards the stick's rate. The acceleration is the second stage's own
+    /// derivative, (first − rate) / stage_s: exact, not a difference of two steps.
+    pub fn step(&mut self, stick_rate_rad_s: f32) -> ShapedYaw {
+        self.first += self.alpha * (stick_rate_rad_s - self.first);
+        self.rate += self.alpha * (self.first - self.rate);
+        if !(self.first.is_finite() && self.rate.is_finite()) {
+            self.reset();
+        }
+        let accel_rad_s2 = (self.first - self.rate) / self.cfg.stage_s;
+        ShapedYaw { rate_rad_s: self.rate, lead_rad_s: self.cfg.lead_s * accel_rad_s2 }
+    }
+
+    /// Back at rest (throttle low).
+    pub fn reset(&mut self) {
+        self.first = 0.0;
+        self.rate = 0.0;
     }
 }
 

@@ -24,7 +24,7 @@
 
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
-use crate::control::{AngleLoop, BatteryFilter, ControlConfig, RateLoop, Saturation};
+use crate::control::{AngleLoop, BatteryFilter, ControlConfig, RateLoop, Saturation, YawRateShaper};
 use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
@@ -140,7 +140,8 @@ pub struct Status {
     /// The battery compensation's thrust gain in force (1 without it).
     pub thrust_gain: f32,
     /// The yaw rate the stick asks for, rad/s (0 with the throttle low): the rate at which
-    /// the heading target moves, and what the yaw feedforward (D13) passes on.
+    /// the heading target moves, and what the yaw feedforward (D13) passes on; with D16 both
+    /// follow it through the shaping.
     pub yaw_rate_target_rad_s: f32,
 }
 
@@ -240,6 +241,8 @@ pub struct OuterStep {
     /// Outer steps per second (the yaw stick's step per outer step, times this, is its rate).
     outer_hz: f32,
     battery: BatteryFilter,
+    /// The stick's yaw rate shaped for the airframe (`None` without D16).
+    yaw_shaper: Option<YawRateShaper>,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
@@ -663,6 +666,7 @@ impl OuterStep {
             yaw_target_rad: 0.0,
             outer_hz: cfg.timing.outer_hz(),
             battery: BatteryFilter::default(),
+            yaw_shaper: cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, (cfg.timing.tick_dt_s * BLOCK as f64) as f32)),
         }
     }
 
@@ -679,8 +683,19 @@ impl OuterStep {
             self.yaw_target_rad = 0.0;
         }
         let yaw_step = self.rc.yaw_step(&job.sticks);
-        if yaw_step != 0.0 {
-            self.yaw_target_rad += yaw_step;
+        // The heading target moves at the stick's rate, or at its shaped rate (D16), which
+        // starts again from rest whenever the throttle has been low.
+        let shaped = self.yaw_shaper.as_mut().map(|shaper| {
+            if job.yaw_target_reset || job.throttle_low {
+                shaper.reset();
+            }
+            let stick_rate = if job.throttle_low { 0.0 } else { yaw_step * self.outer_hz };
+            shaper.step(stick_rate)
+        });
+        match shaped {
+            Some(s) => self.yaw_target_rad += s.rate_rad_s / self.outer_hz,
+            None if yaw_step != 0.0 => self.yaw_target_rad += yaw_step,
+            None => {}
         }
         if job.throttle_low || !self.yaw_target_rad.is_finite() {
             self.yaw_target_rad = 0.0;
@@ -689,10 +704,15 @@ impl OuterStep {
         let estimate = [tilt.pitch_rad, tilt.roll_rad, job.yaw_est_rad];
         let mut rate_demand_rad_s = self.angle_loop.rate_demands(&self.control, target_rad, estimate, job.throttle_low);
         let ff = self.control.yaw_rate_feedforward;
-        if ff != 0.0 && !job.throttle_low {
-            // The heading loop keeps correcting what the rate loop misses; the stick's rate
-            // itself goes to the rate loop now, not once a heading error has built up.
-            rate_demand_rad_s[2] += ff * yaw_step * self.outer_hz;
+        if !job.throttle_low {
+            match shaped {
+                // The shaped rate and, ahead of it, what gets the torque its acceleration needs.
+                Some(s) => rate_demand_rad_s[2] += ff * s.rate_rad_s + s.lead_rad_s,
+                // The heading loop keeps correcting what the rate loop misses; the stick's
+                // rate itself goes to the rate loop now, not once a heading error has built up.
+                None if ff != 0.0 => rate_demand_rad_s[2] += ff * yaw_step * self.outer_hz,
+                None => {}
+            }
         }
         let thrust_gain = match self.control.battery {
             Some(b) => self.battery.update(&b, 1.0 / self.outer_hz),

@@ -1,5 +1,5 @@
 //! The default profile's deliberate differences from the reference (product.md §3, D1–D8,
-//! D12–D14), one test each, showing what each changes. D9–D11 are the safety layer's
+//! D12–D14, D16), one test each, showing what each changes. D9–D11 are the safety layer's
 //! (`fcu-testkit/tests/flight_safety.rs`, `supervisor.rs`); D15, the retuned gains, is flown
 //! (`fcu-testkit/tests/control_quality.rs`, `fcu-testkit/tests/margins.rs`).
 
@@ -216,10 +216,91 @@ fn d13_a_yaw_stick_commands_its_rate_at_once() {
     // The reference turns only as the heading error builds: after one step, 4 × one step.
     let r = Config::reference();
     assert!(outer_demand(r, full_left)[2] < 0.05 * stick_rate(r), "{:?}", outer_demand(r, full_left));
-    // The default passes 90 % of it to the rate loop at once (the heading loop does the rest).
-    let d = Config::default();
+    // The default passes 90 % of it to the rate loop at once (the heading loop does the rest;
+    // D16, which shapes the stick's rate first, is off here and tested below).
+    let d = without_yaw_shaping(Config::default());
     let demand = outer_demand(d, full_left)[2];
     assert!(demand >= 0.9 * stick_rate(d) && demand < 1.0 * stick_rate(d), "{demand} of {}", stick_rate(d));
+}
+
+fn without_yaw_shaping(mut cfg: Config) -> Config {
+    cfg.control.yaw_shaping = None;
+    cfg
+}
+
+/// Outer steps (level, not turning) with the sticks `at(step)`: per step the heading target's
+/// rate (its change times 160 steps a second) and the yaw rate demand.
+fn yaw_turn(cfg: Config, steps: usize, at: impl Fn(usize) -> (Sticks, bool)) -> Vec<(f32, f32)> {
+    let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+    let mut last_target = 0.0;
+    (0..steps)
+        .map(|k| {
+            let (sticks, throttle_low) = at(k);
+            let r = outer.step(&level_job(sticks, throttle_low));
+            let rate = (r.target_rad[2] - last_target) * 160.0;
+            last_target = r.target_rad[2];
+            (rate, r.rate_demand_rad_s[2])
+        })
+        .collect()
+}
+
+const FULL_LEFT: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 1800 };
+const CENTRED: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+
+#[test]
+fn d16_a_yaw_turn_is_shaped_to_the_airframe_and_ends_on_the_sticks_heading() {
+    // Full left for one second (160 outer steps), then centred for one.
+    let turn = |k: usize| (if k < 160 { FULL_LEFT } else { CENTRED }, false);
+    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT) * 160.0;
+    // The reference's heading target moves a whole step at once, and stops at once.
+    let r = yaw_turn(Config::reference(), 320, turn);
+    assert!((r[0].0 - Config::reference().rc.yaw_step(&FULL_LEFT) * 160.0).abs() < 1e-3, "{:?}", r[0]);
+    let d = yaw_turn(Config::default(), 320, turn);
+    // The default's starts from rest and rises without overshoot: within 1 % of the stick's
+    // rate after 0.15 s (two 20 ms stages), a quarter of it after one step.
+    assert!(d[0].0 < 0.1 * stick_rate, "{:?}", d[0]);
+    assert!(d.windows(2).take(159).all(|w| w[1].0 >= w[0].0 - 1e-4 && w[1].0 <= stick_rate * 1.0001), "{d:?}");
+    assert!(d[24].0 > 0.99 * stick_rate, "{:?} of {stick_rate}", d[24]);
+    // And it stops the same way: down to 1 % 0.15 s after the stick is centred.
+    assert!(d[160].0 > 0.9 * stick_rate && d[184].0.abs() < 0.01 * stick_rate, "{:?} {:?}", d[160], d[184]);
+    // The turn's heading is the stick's: the same as without the shaping, once it has settled.
+    let heading = |v: &[(f32, f32)]| v.iter().map(|(rate, _)| rate / 160.0).sum::<f32>();
+    let unshaped = yaw_turn(without_yaw_shaping(Config::default()), 320, turn);
+    assert!((heading(&d) - heading(&unshaped)).abs() < 1e-4 * heading(&unshaped), "{} vs {}", heading(&d), heading(&unshaped));
+}
+
+#[test]
+fn d16_the_yaw_rate_demand_leads_the_shaped_rate_by_its_acceleration() {
+    // Without the heading loop the demand is the feedforward alone: 90 % of the shaped rate,
+    // plus lead × its acceleration.
+    let mut cfg = Config::default();
+    cfg.control.yaw.outer_kp = 0.0;
+    let lead_s = cfg.control.yaw_shaping.map(|y| y.lead_s).unwrap();
+    let stick_rate = cfg.rc.yaw_step(&FULL_LEFT) * 160.0;
+    let d = yaw_turn(cfg, 320, |k| (if k < 160 { FULL_LEFT } else { CENTRED }, false));
+    let ahead: Vec<f32> = d.iter().map(|&(rate, demand)| demand - 0.9 * rate).collect();
+    // Speeding up, the demand is ahead of the shaped rate; slowing down, behind it; turning
+    // steadily, on it.
+    assert!(ahead[..20].iter().all(|&a| a > 0.0) && ahead[160..180].iter().all(|&a| a < 0.0), "{ahead:?}");
+    assert!(ahead[150].abs() < 1e-3 * stick_rate, "{}", ahead[150]);
+    // At its largest, the shaped acceleration's (stick rate / (e × 20 ms) for two stages) worth.
+    let most = ahead.iter().copied().fold(0.0f32, f32::max);
+    let expected = lead_s * stick_rate / (core::f32::consts::E * 0.02);
+    assert!((most / expected - 1.0).abs() < 0.15, "{most} vs {expected}");
+    // Over the start of the turn it adds up to lead × the rate reached.
+    let sum: f32 = ahead[..80].iter().sum::<f32>() / 160.0;
+    assert!((sum / (lead_s * stick_rate) - 1.0).abs() < 0.2, "{sum} vs {}", lead_s * stick_rate);
+}
+
+#[test]
+fn d16_the_shaped_yaw_rate_starts_from_rest_after_the_throttle_was_low() {
+    // The arming gesture holds full rudder with the throttle low: nothing of it may be waiting
+    // in the shaping when the throttle comes up.
+    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT) * 160.0;
+    let low = Sticks { thr: -2000, ..FULL_LEFT };
+    let d = yaw_turn(Config::default(), 200, |k| if k < 160 { (low, true) } else { (FULL_LEFT, false) });
+    assert!(d[..160].iter().all(|&(rate, demand)| rate == 0.0 && demand == 0.0), "{:?}", &d[..160]);
+    assert!(d[160].0 < 0.1 * stick_rate, "{:?}", d[160]);
 }
 
 #[test]

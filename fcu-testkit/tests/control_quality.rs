@@ -1,4 +1,4 @@
-//! How well the default profile flies (D15), against ST's reference on the same airframes:
+//! How well the default profile flies (D15, D16 for yaw), against ST's reference on the same airframes:
 //! five seeds with every airframe parameter randomised by ±30 %, each scenario's metric
 //! checked against its goal and against the reference's on the same seed. The README's table
 //! is the medians of these numbers (`cargo test -p fcu-testkit --test control_quality --
@@ -68,12 +68,11 @@ fn a_weak_motor_leaves_less_than_0_5_deg_and_half_the_reference() {
 
 #[test]
 fn yaw_turns_track_their_rate_twice_as_well_as_the_reference() {
-    // Issue 13 asked for 9 °/s. The median is 9.3: a stiffer yaw loop reached 8.6 but kept only
-    // 31° of phase margin with one more tick of delay (`fcu-sim margins`), and the margins come
-    // first. What is left is mostly the motors' own lag (70 ms, up to 91 ms at +30 %) at the
-    // two stick steps inside the window. Each airframe within 10 °/s and half the reference.
-    let values = per_seed("yaw", |m| m.yaw_rate_rms_dps);
-    check("yaw rate RMS error, °/s", &values, 10.0);
-    let (d, _): (Vec<f64>, Vec<f64>) = values.into_iter().unzip();
-    assert!(median(d.clone()) <= 9.5, "median {}", median(d));
+    // Issue 13: within 9 °/s on every airframe. The stops and starts of the turns are the
+    // error: no loop can stop a full-stick turn faster than the motors' lag (70 ms, up to 91 ms
+    // at +30 %) and the weak yaw torque allow (~0.1 s of full braking on the weakest of these
+    // airframes, 9.3 °/s against the stick's own steps even with an unstable rate gain). D16
+    // shapes the stick's rate into a turn the airframe can follow and leads the demand by its
+    // acceleration, so the rate loop asks for the torque before an error builds up.
+    check("yaw rate RMS error, °/s", &per_seed("yaw", |m| m.yaw_rate_rms_dps), 9.0);
 }
