@@ -236,7 +236,7 @@ fn yaw_turn(cfg: Config, steps: usize, at: impl Fn(usize) -> (Sticks, bool)) -> 
     (0..steps)
         .map(|k| {
             let (sticks, throttle_low) = at(k);
-            let r = outer.step(&level_job(sticks, throttle_low));
+            let r = outer.run(&level_job(sticks, throttle_low));
             let rate = (r.target_rad[2] - last_target) * 160.0;
             last_target = r.target_rad[2];
             (rate, r.rate_demand_rad_s[2])
@@ -244,8 +244,8 @@ fn yaw_turn(cfg: Config, steps: usize, at: impl Fn(usize) -> (Sticks, bool)) -> 
         .collect()
 }
 
-const FULL_LEFT: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 1800 };
-const CENTRED: Sticks = Sticks { ail: 0, ele: 0, thr: 1500, rud: 0 };
+const FULL_LEFT: Sticks = Sticks::new(0, 0, 1500, 1800);
+const CENTRED: Sticks = Sticks::new(0, 0, 1500, 0);
 
 #[test]
 fn d16_a_yaw_turn_is_shaped_to_the_airframe_and_ends_on_the_sticks_heading() {
@@ -297,7 +297,7 @@ fn d16_the_shaped_yaw_rate_starts_from_rest_after_the_throttle_was_low() {
     // The arming gesture holds full rudder with the throttle low: nothing of it may be waiting
     // in the shaping when the throttle comes up.
     let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT) * 160.0;
-    let low = Sticks { thr: -2000, ..FULL_LEFT };
+    let low = Sticks { thr: StickCounts(-2000), ..FULL_LEFT };
     let d = yaw_turn(Config::default(), 200, |k| if k < 160 { (low, true) } else { (FULL_LEFT, false) });
     assert!(d[..160].iter().all(|&(rate, demand)| rate == 0.0 && demand == 0.0), "{:?}", &d[..160]);
     assert!(d[160].0 < 0.1 * stick_rate, "{:?}", d[160]);
