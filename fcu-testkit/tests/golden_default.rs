@@ -21,8 +21,9 @@ use fcu_testkit::Profile;
 
 /// The scenarios and the seconds recorded of each: boot (2 s), calibration, the arm gesture
 /// (2.5..4 s), take-off, the 20° roll step at 8 s, the 0.5 s link loss at 8 s, the calibration
-/// retried while the drone is rocked.
-const SCENARIOS: [(&str, f64); 4] = [("hover", 6.0), ("steps", 9.5), ("link-short", 10.0), ("calibration-motion", 10.0)];
+/// retried while the drone is rocked, a full-stick yaw turn from 8 s and its stop at 11 s (the
+/// shaped turn of D16).
+const SCENARIOS: [(&str, f64); 5] = [("hover", 6.0), ("steps", 9.5), ("link-short", 10.0), ("calibration-motion", 10.0), ("yaw", 12.0)];
 
 fn path(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/golden-default").join(format!("{name}.csv.gz"))
