@@ -139,9 +139,10 @@ pub struct Status {
     pub compare: [u16; 4],
     /// The battery compensation's thrust gain in force (1 without it).
     pub thrust_gain: f32,
-    /// The yaw rate the stick asks for, rad/s (0 with the throttle low): the rate at which
-    /// the heading target moves, and what the yaw feedforward (D13) passes on; with D16 both
-    /// follow it through the shaping.
+    /// The yaw rate the stick asks for, rad/s (0 with the throttle low): what the pilot
+    /// commands, and what the simulator's yaw metric holds the airframe to. Without D16 the
+    /// heading target moves at this rate and the yaw feedforward (D13) passes it on; with D16
+    /// both follow its shaped version.
     pub yaw_rate_target_rad_s: f32,
 }
 
