@@ -4,15 +4,16 @@
 //!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
 //!   reference's golden vectors bit for bit.
 //! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
-//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D16
-//!   (yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns;
+//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D17
+//!   (yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns,
+//!   thrust linearisation;
 //!   README), each a field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
 use crate::ahrs::{EstimatorConfig, MahonyConfig, VqfConfig};
-use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative, YawShaping};
+use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative, ThrustCurve, YawShaping};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
@@ -128,14 +129,15 @@ impl Config {
     }
 
     /// The ESC build of the product: TIM4 at 400 Hz, idle 850, max 1700, MIN_THR 20. No
-    /// battery compensation (D14): its compare values are pulse widths an ESC reads as a
-    /// command, not a duty on the motor, and scaling them would move the idle pulse itself.
+    /// battery compensation (D14) and no thrust curve (D17): its compare values are pulse
+    /// widths an ESC reads as a command, not a duty on a brushed motor, and scaling them would
+    /// move the idle pulse itself.
     pub fn esc() -> Config {
         let d = Config::default();
         Config {
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_ESC },
             rc: RcConfig { min_throttle: StickCounts(20), ..d.rc },
-            control: ControlConfig { battery: None, ..d.control },
+            control: ControlConfig { battery: None, thrust_curve: None, ..d.control },
             ..d
         }
     }
@@ -217,7 +219,7 @@ impl Config {
 }
 
 impl Default for Config {
-    /// The product: the reference's structure with differences D1–D16.
+    /// The product: the reference's structure with differences D1–D17.
     fn default() -> Config {
         let r = Config::reference();
         let tick_hz = 800.0;
@@ -287,6 +289,9 @@ impl Default for Config {
                 yaw_shaping: Some(YawShaping { stage_s: 0.02, lead_s: 0.08 }),
                 // D14: thrust kept as the battery sags.
                 battery: Some(BatteryCompensation::LIPO_1S),
+                // D17: the rate loop's gain follows the motors' thrust curve at the throttle
+                // flown, so a correction makes the same torque at any throttle.
+                thrust_curve: Some(ThrustCurve::MOTOR_8520),
             },
             // D6: attitude priority when a motor saturates.
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..r.mixer },

@@ -75,6 +75,61 @@ pub struct ControlConfig {
     /// Scale the rate loop's output and the throttle map with the battery voltage (D14);
     /// `None` in the reference, whose gains weaken as the battery sags.
     pub battery: Option<BatteryCompensation>,
+    /// Scale the rate loop with the motors' thrust curve at the throttle flown (D17); `None`
+    /// in the reference, whose corrections make less thrust the higher the throttle.
+    pub thrust_curve: Option<ThrustCurve>,
+}
+
+/// The motors' static thrust against duty, for the rate loop's gain (D17).
+///
+/// A brushed motor's thrust is not linear in its duty: the STEVAL-DRONE01's 8520 motors give
+/// `quad·d² + lin·d` of their full thrust at duty `d` (−0.33 d² + 1.32 d), so a correction of
+/// one compare count makes 1.32 − 0.66 d of thrust: a third less at full throttle than at zero.
+/// The rate loop's gains are tuned at `reference_duty`; at the duty the throttle asks for, they
+/// are multiplied by `slope(reference_duty) / slope(d)`, so a rate error asks for the same
+/// torque at any throttle and the loop keeps the crossover and margins it was tuned for.
+/// This linearises the corrections around the throttle flown, the part the loop depends on,
+/// with no work on the 800 Hz path (the outer step works out the gain; the tick is rescaled
+/// only when it moves a step of 1/256); the throttle stick itself keeps the reference's map.
+/// On another airframe, measure its curve and set these three numbers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThrustCurve {
+    /// Thrust fraction = `quad·d² + lin·d`.
+    pub quad: f32,
+    pub lin: f32,
+    /// The duty the rate loop's gains were tuned at (the nominal drone's hover), 0..1.
+    pub reference_duty: f32,
+}
+
+impl ThrustCurve {
+    /// The 8520 motors of the STEVAL-DRONE01 (the DC build), gains tuned at the nominal hover.
+    pub const MOTOR_8520: ThrustCurve = ThrustCurve { quad: -0.33, lin: 1.32, reference_duty: 0.45 };
+
+    /// The gain stays within `[1 / MAX_GAIN, MAX_GAIN]`.
+    pub const MAX_GAIN: f32 = 2.0;
+
+    /// Thrust per unit of duty at `duty`.
+    pub fn slope(&self, duty: f32) -> f32 {
+        2.0 * self.quad * duty + self.lin
+    }
+
+    /// A curve whose thrust rises with the duty over the whole range, tuned inside it.
+    pub fn is_valid(&self) -> bool {
+        let finite = self.quad.is_finite() && self.lin.is_finite() && self.reference_duty.is_finite();
+        finite && self.slope(0.0) > 0.0 && self.slope(1.0) > 0.0 && self.reference_duty > 0.0 && self.reference_duty < 1.0
+    }
+
+    /// The rate loop's gain factor at `duty`, in steps of 1/256 so that the tick is rescaled
+    /// only when it moves a step.
+    pub fn gain_at(&self, duty: f32) -> f32 {
+        let d = if duty.is_finite() { duty.clamp(0.0, 1.0) } else { self.reference_duty };
+        let g = self.slope(self.reference_duty) / self.slope(d);
+        if g.is_finite() {
+            libm::roundf(g.clamp(1.0 / Self::MAX_GAIN, Self::MAX_GAIN) * 256.0) / 256.0
+        } else {
+            1.0
+        }
+    }
 }
 
 /// Thrust compensation for the battery (D14). A brushed motor's speed at a given duty is
@@ -211,6 +266,7 @@ impl ControlConfig {
         yaw_rate_feedforward: 0.0,
         yaw_shaping: None,
         battery: None,
+        thrust_curve: None,
     };
 
     pub fn axes(&self) -> [&AxisGains; 3] {
@@ -229,6 +285,7 @@ impl ControlConfig {
             && (0.0..=1.5).contains(&self.yaw_rate_feedforward)
             && self.yaw_shaping.is_none_or(|y| y.is_valid())
             && self.battery.is_none_or(|b| b.is_valid())
+            && self.thrust_curve.is_none_or(|c| c.is_valid())
     }
 }
 

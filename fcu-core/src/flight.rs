@@ -28,7 +28,7 @@ use crate::control::{AngleLoop, BatteryFilter, ControlConfig, RateLoop, Saturati
 use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
-use crate::mixer::CompareRange;
+use crate::mixer::{CompareRange, MixerConfig};
 use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, StickCounts, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
 
@@ -103,8 +103,11 @@ pub struct OuterResult {
     /// Rate demands for the inner loop, rad/s (`s1`).
     pub rate_demand_rad_s: [f32; 3],
     /// The battery compensation's thrust gain (1 without it; see
-    /// [`BatteryCompensation`](crate::control::BatteryCompensation)).
+    /// [`BatteryCompensation`](crate::control::BatteryCompensation)): the throttle map's.
     pub thrust_gain: f32,
+    /// The rate loop's gain: the thrust gain times the thrust curve's factor at the throttle
+    /// flown (see [`ThrustCurve`](crate::control::ThrustCurve); the thrust gain without one).
+    pub rate_gain: f32,
 }
 
 /// The radio state given directly (golden replay): the reference's `rc_connection_flag`,
@@ -242,6 +245,10 @@ pub struct OuterStep {
     /// Outer steps per second (the yaw stick's step per outer step, times this, is its rate).
     outer_hz: f32,
     battery: BatteryFilter,
+    /// The throttle map (unscaled) and compare counts per unit of duty, for the thrust curve's
+    /// operating point (D17).
+    mixer: MixerConfig,
+    counts_per_duty: f32,
     /// The stick's yaw rate shaped for the airframe (`None` without D16).
     yaw_shaper: Option<YawRateShaper>,
 }
@@ -377,11 +384,18 @@ impl ControlTick {
                 target_rad: [0.0; 3],
                 rate_demand_rad_s: [0.0; 3],
                 thrust_gain: 1.0,
+                rate_gain: 1.0,
             },
 
             motor_command: [0.0; 4],
             compare: [0; 4],
         }
+    }
+
+    /// The configuration in force: its rate loop and throttle map scaled by the gains of the
+    /// last outer result (battery, thrust curve).
+    pub fn config(&self) -> &Config {
+        &self.cfg
     }
 
     /// One control tick: the radio from capture pulses.
@@ -423,13 +437,15 @@ impl ControlTick {
 
     /// Take in an outer step's result (at the start of the next tick in the firmware).
     pub fn apply_outer(&mut self, r: &OuterResult) {
+        // Rescaled from what is in force: the ratio of the new gain to the old. Exact enough:
+        // the gains move in steps of 1/512 (battery, `BatteryFilter`) and 1/256 (thrust curve,
+        // `ThrustCurve::gain_at`), only when the battery or the throttle moves that far, and
+        // each rescale rounds by 2^-24 (a thousand of them move a gain by less than 1e-4).
+        if r.rate_gain != self.outer_result.rate_gain {
+            self.cfg.control = self.cfg.control.scaled_rate_loop(r.rate_gain / self.outer_result.rate_gain);
+        }
         if r.thrust_gain != self.outer_result.thrust_gain {
-            // Rescaled from what is in force: the ratio of the new gain to the old. Exact
-            // enough: the gain moves in steps of 1/512 (see `BatteryFilter`), a few hundred
-            // times a flight at most, and each rescale rounds by 2^-24.
-            let ratio = r.thrust_gain / self.outer_result.thrust_gain;
-            self.cfg.control = self.cfg.control.scaled_rate_loop(ratio);
-            self.cfg.mixer = self.cfg.mixer.scaled_throttle(ratio);
+            self.cfg.mixer = self.cfg.mixer.scaled_throttle(r.thrust_gain / self.outer_result.thrust_gain);
         }
         self.outer_result = *r;
         // Only the safe supervisor's arming check reads it («tilt once per outer result»).
@@ -667,6 +683,8 @@ impl OuterStep {
             yaw_target_rad: 0.0,
             outer_hz: cfg.timing.outer_hz(),
             battery: BatteryFilter::default(),
+            mixer: cfg.mixer,
+            counts_per_duty: f32::from(cfg.mixer.timer_arr) + 1.0,
             yaw_shaper: cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, (cfg.timing.tick_dt_s * BLOCK as f64) as f32)),
         }
     }
@@ -719,7 +737,15 @@ impl OuterStep {
             Some(b) => self.battery.update(&b, 1.0 / self.outer_hz),
             None => 1.0,
         };
-        OuterResult { quat, tilt, target_rad, rate_demand_rad_s, thrust_gain }
+        let rate_gain = match self.control.thrust_curve {
+            Some(curve) => {
+                // The duty the throttle stick flies at, through the map in force.
+                let counts = f32::from(self.mixer.throttle_counts(job.sticks.thr).0) * thrust_gain;
+                thrust_gain * curve.gain_at(counts / self.counts_per_duty)
+            }
+            None => thrust_gain,
+        };
+        OuterResult { quat, tilt, target_rad, rate_demand_rad_s, thrust_gain, rate_gain }
     }
 
     /// The latest battery reading, mV (for the battery compensation; ignored without it).

@@ -23,7 +23,7 @@
 //! | motor mixing and saturation | [`mixer`] |
 //! | stick values and compare counts (both 16-bit counts, never mixed up) | [`rc::StickCounts`], [`mixer::CompareCounts`] |
 //! | status lines, LEDs, boot checks | [`telemetry`], [`boot`] |
-//! | what the default changes from the reference (D1–D16) | [`config`]: each difference is a field with a comment |
+//! | what the default changes from the reference (D1–D17) | [`config`]: each difference is a field with a comment |
 #![no_std]
 #![cfg_attr(
     not(test),

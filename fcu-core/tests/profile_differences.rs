@@ -378,6 +378,56 @@ fn d14_a_thrust_gain_scales_the_rate_loop_and_the_throttle_map() {
 }
 
 #[test]
+fn d17_a_rate_error_asks_for_the_same_thrust_at_any_throttle() {
+    // The rate loop's gain at a throttle stick, from one outer step (no battery reading, so
+    // the thrust gain is 1 and only the thrust curve acts).
+    let rate_gain = |cfg: Config, thr: i16| {
+        let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+        outer.run(&level_job(Sticks::new(0, 0, thr, 0), false)).rate_gain
+    };
+    let d = Config::default();
+    let curve = d.control.thrust_curve.expect("the default has a thrust curve");
+    let duty = |thr: i16| f32::from(d.mixer.throttle_counts(StickCounts(thr)).0) / (f32::from(d.mixer.timer_arr) + 1.0);
+    // Thrust per count of correction, times the gain: the same at a low, a mid and a high
+    // throttle (to the gain's steps of 1/256), and what the gains were tuned for.
+    let tuned = curve.slope(curve.reference_duty);
+    for thr in [300, 900, 1500, 2500, 3500] {
+        let per_count = curve.slope(duty(thr)) * rate_gain(d, thr);
+        assert!((per_count / tuned - 1.0).abs() <= 1.0 / 256.0, "stick {thr}: duty {}, {per_count} vs {tuned}", duty(thr));
+    }
+    // The motors' curve flattens with the duty: a third less thrust per count at full throttle,
+    // so the gain there is higher than at a low throttle.
+    assert!(rate_gain(d, 3500) > 1.1 * rate_gain(d, 300), "{} vs {}", rate_gain(d, 3500), rate_gain(d, 300));
+    // The reference's gains do not move with the throttle; nor do the ESC build's (its compare
+    // values are pulse widths, not duties on a brushed motor).
+    for cfg in [Config::reference(), Config::esc()] {
+        assert_eq!((rate_gain(cfg, 300), rate_gain(cfg, 3500)), (1.0, 1.0));
+    }
+}
+
+#[test]
+fn d17_the_thrust_curve_scales_the_rate_loop_but_not_the_throttle_map() {
+    // Flown through the whole controller: the rate loop in force follows the rate gain, the
+    // throttle map follows only the battery's thrust gain.
+    let fc = FlightController::new(Config::default()).unwrap();
+    let before = *fc.config();
+    let result = fcu_core::flight::OuterResult {
+        quat: fcu_core::math::Quat::IDENTITY,
+        tilt: fcu_core::math::Tilt::default(),
+        target_rad: [0.0; 3],
+        rate_demand_rad_s: [0.0; 3],
+        thrust_gain: 1.0,
+        rate_gain: 1.25,
+    };
+    let (mut tick, _) = fc.into_parts();
+    tick.apply_outer(&result);
+    let after = tick.config();
+    assert_eq!(after.control.pitch.inner_kp, 1.25 * before.control.pitch.inner_kp);
+    assert_eq!(after.control.yaw.inner_kd, 1.25 * before.control.yaw.inner_kd);
+    assert_eq!(after.mixer, before.mixer);
+}
+
+#[test]
 fn d12_the_debug_line_is_rate_limited_and_status_lines_follow_state_changes() {
     // The reference prints (blocking, ~6 ms) on every main-loop pass. The firmware asks its
     // reporter once every SNAPSHOT_EVERY_TICKS ticks: over one second of ticks it sends 25

@@ -5,7 +5,7 @@ use fcu_core::Config;
 /// Which `Config` flies, replays or estimates.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Profile {
-    /// `Config::default()`: the product, with the safety layer and differences D1–D16.
+    /// `Config::default()`: the product, with the safety layer and differences D1–D17.
     Default,
     /// `Config::reference()`: ST's reference firmware, number for number.
     Reference,
