@@ -6,8 +6,7 @@
 //! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
 //!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D17
 //!   (yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns,
-//!   thrust linearisation;
-//!   README), each a field here so a test can switch it on its own.
+//!   thrust linearisation; README), each a field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
@@ -46,6 +45,11 @@ impl Timing {
     /// construction or for telemetry, never per tick.)
     pub fn outer_hz(&self) -> f32 {
         (1.0 / (self.tick_dt_s * crate::filter::BLOCK as f64)) as f32
+    }
+
+    /// The outer step's period as the integrations assume it, s.
+    pub fn outer_dt_s(&self) -> f32 {
+        (self.tick_dt_s * crate::filter::BLOCK as f64) as f32
     }
 }
 

@@ -343,7 +343,7 @@ impl YawRateShaper {
 
     /// One step towards the stick's rate. The acceleration is the second stage's own
     /// derivative, (first − rate) / stage_s: exact, not a difference of two steps.
-    pub fn step(&mut self, stick_rate_rad_s: f32) -> ShapedYaw {
+    pub fn shape(&mut self, stick_rate_rad_s: f32) -> ShapedYaw {
         self.first += self.alpha * (stick_rate_rad_s - self.first);
         self.rate += self.alpha * (self.first - self.rate);
         if !(self.first.is_finite() && self.rate.is_finite()) {

@@ -153,16 +153,16 @@ pub struct Status {
 #[derive(Clone, Debug)]
 pub struct ControlTick {
     /// The configuration, except that its rate loop and throttle map are the ones in force:
-    /// scaled by the battery compensation's thrust gain (`outer_result.thrust_gain`), rescaled only
-    /// when that gain changes ([`ControlTick::apply_outer`]; docs/performance.md, «scaled in
-    /// place»).
+    /// the rate loop scaled by `outer_result.rate_gain` (battery and thrust curve), the throttle
+    /// map by `outer_result.thrust_gain` (battery), each rescaled only when its gain changes
+    /// ([`ControlTick::apply_outer`]; docs/performance.md, «scaled in place»).
     cfg: Config,
     /// What the configuration settles, worked out once at construction.
     derived: Derived,
     receiver: Receiver,
     supervisor: Supervisor,
-    /// The last decision and what the tick derives from it: replaced whole, never field by
-    /// field, so the three cannot drift apart.
+    /// The last decision and what the tick derives from it, written only by
+    /// [`InForce::decided`], so the three cannot drift apart.
     in_force: InForce,
     calibrator: Calibrator,
     cal_pending: bool,
@@ -245,10 +245,8 @@ pub struct OuterStep {
     /// Outer steps per second (the yaw stick's step per outer step, times this, is its rate).
     outer_hz: f32,
     battery: BatteryFilter,
-    /// The throttle map (unscaled) and compare counts per unit of duty, for the thrust curve's
-    /// operating point (D17).
+    /// The throttle map (unscaled), for the thrust curve's operating point (D17).
     mixer: MixerConfig,
-    counts_per_duty: f32,
     /// The stick's yaw rate shaped for the airframe (`None` without D16).
     yaw_shaper: Option<YawRateShaper>,
 }
@@ -268,7 +266,7 @@ impl FlightController {
     }
 
     pub fn config(&self) -> &Config {
-        &self.control_tick.cfg
+        self.control_tick.config()
     }
 
     /// The edge decoder the capture interrupt should feed for this configuration.
@@ -684,8 +682,7 @@ impl OuterStep {
             outer_hz: cfg.timing.outer_hz(),
             battery: BatteryFilter::default(),
             mixer: cfg.mixer,
-            counts_per_duty: f32::from(cfg.mixer.timer_arr) + 1.0,
-            yaw_shaper: cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, (cfg.timing.tick_dt_s * BLOCK as f64) as f32)),
+            yaw_shaper: cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s())),
         }
     }
 
@@ -709,7 +706,7 @@ impl OuterStep {
                 shaper.reset();
             }
             let stick_rate = if job.throttle_low { 0.0 } else { yaw_step * self.outer_hz };
-            shaper.step(stick_rate)
+            shaper.shape(stick_rate)
         });
         match shaped {
             Some(s) => self.yaw_target_rad += s.rate_rad_s / self.outer_hz,
@@ -741,7 +738,7 @@ impl OuterStep {
             Some(curve) => {
                 // The duty the throttle stick flies at, through the map in force.
                 let counts = f32::from(self.mixer.throttle_counts(job.sticks.thr).0) * thrust_gain;
-                thrust_gain * curve.gain_at(counts / self.counts_per_duty)
+                thrust_gain * curve.gain_at(counts / self.mixer.period_counts())
             }
             None => thrust_gain,
         };

@@ -88,9 +88,14 @@ impl MixerConfig {
             && self.throttle_slope >= 0.0
             && self.min_compare >= 0.0
             && self.min_compare < self.max_compare
-            && self.max_compare <= f32::from(self.timer_arr) + 1.0
+            && self.max_compare <= self.period_counts()
             // CCRx is 16 bits: ARR + 1 = 65 536 (full duty at ARR 65 535) would be written as 0.
             && self.max_compare <= f32::from(u16::MAX)
+    }
+
+    /// TIM4 counts per PWM period (`arr + 1`): the compare value of full duty.
+    pub fn period_counts(&self) -> f32 {
+        f32::from(self.timer_arr) + 1.0
     }
 
     /// The compare value written when the motors must not run: 0 (DC) or the ESC idle pulse.

@@ -387,7 +387,7 @@ fn d17_a_rate_error_asks_for_the_same_thrust_at_any_throttle() {
     };
     let d = Config::default();
     let curve = d.control.thrust_curve.expect("the default has a thrust curve");
-    let duty = |thr: i16| f32::from(d.mixer.throttle_counts(StickCounts(thr)).0) / (f32::from(d.mixer.timer_arr) + 1.0);
+    let duty = |thr: i16| f32::from(d.mixer.throttle_counts(StickCounts(thr)).0) / d.mixer.period_counts();
     // Thrust per count of correction, times the gain: the same at a low, a mid and a high
     // throttle (to the gain's steps of 1/256), and what the gains were tuned for.
     let tuned = curve.slope(curve.reference_duty);
