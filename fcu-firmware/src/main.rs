@@ -5,7 +5,8 @@
 //!
 //! | task         | binds / kind            | prio | work                                         |
 //! |--------------|-------------------------|------|----------------------------------------------|
-//! | rc_capture   | TIM2 (both edges)       | 4    | CCRx + pin level → `EdgeDecoder::on_edge`    |
+//! | rc_capture   | TIM2 (both edges, wrap) | 4    | CCRx + pin level → `EdgeDecoder::on_edge`; a |
+//! |              |                         |      | pin past its edge budget muted till the wrap |
 //! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `ControlTick::tick` → TIM4, feed IWDG  |
 //! | outer_step   | software                | 2    | battery reading + `OuterStep::run` → `control`  |
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |

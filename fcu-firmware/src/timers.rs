@@ -36,7 +36,19 @@ pub struct RcCapture {
     /// Owned so nothing else reconfigures them; read at interrupt time to tell a rising from
     /// a falling edge, as the reference does.
     pins: CapturePins,
+    /// Edges taken from each channel since TIM2's last update (one capture wrap, 8.192 ms).
+    edges_in_window: [u8; CHANNELS],
 }
+
+/// Edges one channel may raise interrupts for in one capture wrap (8.192 ms). A receiver's
+/// pulses are at least 0.8 ms wide in frames of at least 2 ms, so a working channel gives at
+/// most 2 edges per 2 ms, 9 per wrap; a broken wire or an interfering signal on the pin can
+/// give millions per second, and the capture interrupt outranks the control tick. Past this
+/// budget the channel's interrupt is off until the next wrap: the interrupt's cost is bounded
+/// (4 channels × 16 edges per 8.192 ms, under 1 % of the CPU) and the core, seeing that
+/// channel's pulses stop, declares the link lost and flies its failsafe, as for a receiver
+/// that went silent, instead of the watchdog resetting a starved board in the air.
+pub const EDGE_BUDGET_PER_WRAP: u8 = 16;
 
 impl RcCapture {
     pub fn new(tim: TIM2, pins: CapturePins, rcc: &mut Rcc) -> Self {
@@ -64,28 +76,81 @@ impl RcCapture {
             }
             w
         });
-        tim.dier().write(|w| w.cc1ie().set_bit().cc2ie().set_bit().cc3ie().set_bit().cc4ie().set_bit());
+        // The capture interrupts and the wrap's, which reopens the edge budget.
+        enable_all_interrupts(&tim);
         tim.cr1().write(|w| w.cen().set_bit());
-        RcCapture { tim, pins }
+        RcCapture { tim, pins, edges_in_window: [0; CHANNELS] }
     }
 
     /// The edges captured since the last call, one per channel at most. Reading CCRx clears
     /// its flag. An over-capture (a second edge before the first was read) cannot happen
     /// with RC pulses of 0.8 ms or more, and would only lose one width that the core rejects.
+    ///
+    /// A channel that has used its [`EDGE_BUDGET_PER_WRAP`] has its interrupt turned off here;
+    /// the next wrap (this same interrupt, UIF) turns it back on, dropping what it captured
+    /// meanwhile.
     pub fn take_edges(&mut self) -> [Option<Edge>; CHANNELS] {
         let sr = self.tim.sr().read();
+        if sr.uif().bit_is_set() {
+            self.reopen_window();
+        }
+        let dier = self.tim.dier().read();
         let levels = [self.pins.0.is_high(), self.pins.1.is_high(), self.pins.2.is_high(), self.pins.3.is_high()];
         let mut edges = [None; CHANNELS];
+        let mut muted = [false; CHANNELS];
         for (channel, (edge, level_high)) in edges.iter_mut().zip(levels).enumerate() {
-            if sr.ccif(channel as u8).bit_is_set() {
+            if dier.ccie(channel as u8).bit_is_set() && sr.ccif(channel as u8).bit_is_set() {
                 let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
                 *edge = Some(Edge { channel, capture_counts, level_high });
+                let count = &mut self.edges_in_window[channel];
+                *count = count.saturating_add(1);
+                muted[channel] = *count >= EDGE_BUDGET_PER_WRAP;
             }
+        }
+        if muted.contains(&true) {
+            // DIER is written by this interrupt alone after init: no other writer to race.
+            self.tim.dier().modify(|_, w| {
+                for (n, &mute) in muted.iter().enumerate() {
+                    if mute {
+                        w.ccie(n as u8).clear_bit();
+                    }
+                }
+                w
+            });
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
         edges
     }
+
+    /// A new capture wrap: every channel gets its budget back. A channel that was muted
+    /// loses what it captured meanwhile (read and dropped: a latched time from the middle
+    /// of a storm pairs with nothing), then raises interrupts again.
+    fn reopen_window(&mut self) {
+        self.tim.sr().write(|w| w.uif().clear());
+        let dier = self.tim.dier().read();
+        let mut any_muted = false;
+        for (channel, count) in self.edges_in_window.iter_mut().enumerate() {
+            if dier.ccie(channel as u8).bit_is_clear() {
+                let _stale = self.tim.ccr(channel).read();
+                any_muted = true;
+            }
+            *count = 0;
+        }
+        if any_muted {
+            enable_all_interrupts(&self.tim);
+        }
+    }
+}
+
+/// TIM2's capture interrupts (CC1IE..CC4IE) and its update interrupt (UIE), nothing else.
+fn enable_all_interrupts(tim: &TIM2) {
+    tim.dier().write(|w| {
+        for n in 0..4 {
+            w.ccie(n).set_bit();
+        }
+        w.uie().set_bit()
+    });
 }
 
 /// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, at the off compare (0 on the DC

@@ -191,25 +191,72 @@ fn a_sensor_that_stops_answering_in_flight_stops_the_motors_and_latches() {
     assert!(!last.armed);
 }
 
-/// A control task that stalls (here: an interrupt storm on a radio pin starves it) is reset
-/// by the watchdog, and the board comes back with the motors off.
+/// PA0 toggling every 0.5 µs for 200 ms from `at_s`: a broken wire or an interfering signal
+/// on a radio pin, each edge a capture interrupt that outranks the control tick.
+fn edge_storm_on_pa0(b: &mut EmulatedBoard, at_s: f64) {
+    let start = b.time_of(at_s);
+    let half_period = time_from_s(0.5e-6);
+    let board = b.machine.board_mut();
+    for k in 0..400_000u64 {
+        board.schedule_edge(start + k * half_period, 0, k % 2 == 0);
+    }
+}
+
+/// An edge storm on a radio pin is contained: the capture interrupt gives up on the channel
+/// for the rest of each capture wrap (`timers::EDGE_BUDGET_PER_WRAP`), so the control tick
+/// keeps its 800 Hz and the watchdog has nothing to reset; the core sees the aileron's pulses
+/// stop, declares the link lost and flies its failsafe, and the link is back once the storm
+/// is over. (Before, the storm starved the control task and the watchdog reset the board in
+/// the air.)
+#[test]
+fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
+    let (log, c) = fly_and_inject("hover", 8.0, 11.0, |b| edge_storm_on_pa0(b, 8.0));
+    let resets = &c.board.machine.state().resets;
+    assert!(resets.is_empty(), "the board was reset: {resets:?}");
+    let statuses: Vec<(f64, &fcu_pil::telemetry::StatusLine)> = c.board.statuses.iter().map(|(t, s)| (c.board.scenario_s(*t), s)).collect();
+    // Control ticks keep their pace through the storm.
+    let tick_at = |t_s: f64| {
+        let (at, s) = statuses.iter().find(|(at, _)| *at >= t_s).unwrap_or_else(|| panic!("no status line after {t_s} s"));
+        (*at, s.tick.expect("status lines carry the tick count"))
+    };
+    let (t_a, tick_a) = tick_at(8.0);
+    let (t_b, tick_b) = tick_at(8.2);
+    let rate_hz = (tick_b - tick_a) as f64 / (t_b - t_a);
+    assert!((rate_hz - 800.0).abs() < 16.0, "{rate_hz:.1} control ticks per second during the storm");
+    // The link is declared lost during the storm and the failsafe flies...
+    let during: Vec<_> = statuses.iter().filter(|(t, _)| *t > 8.05 && *t < 8.2).collect();
+    assert!(!during.is_empty() && during.iter().all(|(_, s)| s.failsafe != "none"), "no failsafe during the storm: {during:?}");
+    let airborne = log.rows.iter().filter(|r| r.t_s > 8.0 && r.t_s < 11.0);
+    assert!(airborne.clone().all(|r| r.alt_m > 0.3 && r.armed), "the drone came down or disarmed");
+    // ...and the radio is back after it.
+    let after: Vec<_> = statuses.iter().filter(|(t, _)| *t > 9.0).collect();
+    assert!(
+        !after.is_empty() && after.iter().all(|(_, s)| s.failsafe == "none" && s.armed),
+        "the radio did not come back: {:?}",
+        after.first()
+    );
+}
+
+/// A control task that hangs (here: made to call an endless loop while it runs) is reset by
+/// the watchdog, and the board comes back with the motors off.
 #[test]
 fn a_stalled_control_task_is_reset_by_the_watchdog_with_the_motors_off() {
     // 12 s: the reboot takes about 2 s (the barometer's 1 s wait), and boot lines leave the
     // UART only once `init` has ended.
     let (log, c) = fly_and_inject("hover", 8.0, 12.0, |b| {
-        let start = b.time_of(8.0);
-        // PA0 toggling every 0.5 µs for 200 ms: the capture interrupt never lets go.
-        let half_period = time_from_s(0.5e-6);
-        let board = b.machine.board_mut();
-        for k in 0..400_000u64 {
-            board.schedule_edge(start + k * half_period, 0, k % 2 == 0);
+        let control = 16 + fcu_pil::periph::irq::TIM1_BRK_TIM9 as usize;
+        let endless = b.machine.image().symbol("DefaultHandler_").expect("no DefaultHandler_ (an endless loop) in the image");
+        let mut t = b.machine.now();
+        while b.machine.current_exception() != control {
+            t += time_from_s(2e-6);
+            b.machine.run_until(t).unwrap();
         }
+        b.machine.inject_call(endless, 0).unwrap();
     });
     let resets = &c.board.machine.state().resets;
     assert!(resets.iter().any(|(_, why)| *why == "watchdog"), "no watchdog reset: {resets:?}");
     let reset_at = c.board.scenario_s(resets[0].0);
-    assert!(reset_at > 8.0 && reset_at < 8.2, "watchdog reset at {reset_at:.3} s");
+    assert!(reset_at > 8.0 && reset_at < 8.1, "watchdog reset at {reset_at:.3} s");
     assert!(log.rows.iter().filter(|r| r.t_s > reset_at + 0.001).all(|r| r.motors == [0; 4]), "motors ran after the reset");
     assert!(c.board.uart_text().matches("STEVAL-FCU001V1").count() >= 2, "the firmware did not boot again");
 }
