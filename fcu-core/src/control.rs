@@ -171,7 +171,7 @@ impl BatteryCompensation {
         let ratio = self.nominal_mv as f32 / battery_mv;
         let g = ratio * ratio;
         if g.is_finite() {
-            g.clamp(1.0 / self.max_gain, self.max_gain)
+            crate::math::limit(g, 1.0 / self.max_gain, self.max_gain)
         } else {
             1.0
         }

@@ -154,6 +154,20 @@ impl Quat {
     }
 }
 
+/// `v` limited to `lo..=hi`: `clamp` without its panic when `lo > hi`. The bounds where this
+/// is used come from the validated configuration, so the panic could never fire, but `clamp`
+/// still puts a panic call on the control tick's path, and the image should carry none. The
+/// same result as `clamp` whenever `lo <= hi`, NaN included (it comes back as NaN).
+pub fn limit<T: PartialOrd>(v: T, lo: T, hi: T) -> T {
+    if v < lo {
+        lo
+    } else if v > hi {
+        hi
+    } else {
+        v
+    }
+}
+
 /// Pitch (about body X) and roll (about body Y), rad, the reference's `QuaternionToEuler`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Tilt {
@@ -287,6 +301,19 @@ pub fn tan_small(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn limit_is_clamp_for_ordered_bounds_and_never_panics() {
+        for v in [-3.0f32, -1.0, 0.0, 0.5, 1.0, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::MIN_POSITIVE] {
+            assert_eq!(limit(v, -1.0, 1.0).to_bits(), v.clamp(-1.0, 1.0).to_bits(), "{v}");
+        }
+        assert!(limit(f32::NAN, -1.0, 1.0).is_nan());
+        for v in -5..5i32 {
+            assert_eq!(limit(v, -2, 3), v.clamp(-2, 3));
+        }
+        // Reversed bounds: an answer, not a panic.
+        assert_eq!(limit(0, 3, -2), 3);
+    }
 
     #[test]
     fn tan_small_is_libms_tanf_to_a_few_ulp() {

@@ -186,7 +186,7 @@ impl CompareRange {
     /// then clamps to `min_counts`, as the float clamp sends it to `min`. One `vcvt` and two
     /// integer compares instead of two float compares per motor.
     pub fn to_compare(self, cmd: f32) -> u16 {
-        (cmd as i32).clamp(self.min_counts, self.max_counts) as u16
+        crate::math::limit(cmd as i32, self.min_counts, self.max_counts) as u16
     }
 }
 

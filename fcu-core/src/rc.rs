@@ -189,7 +189,7 @@ impl RcConfig {
     }
 
     fn saturate(&self, v: StickCounts) -> i32 {
-        i32::from(v).clamp(-i32::from(self.full_scale), i32::from(self.full_scale))
+        crate::math::limit(i32::from(v), -i32::from(self.full_scale), i32::from(self.full_scale))
     }
 
     /// Pitch and roll targets, rad: `(float)(−sat(stick))·max/full_scale` in f32, left to

@@ -94,12 +94,12 @@ impl RcCapture {
         if sr.uif().bit_is_set() {
             self.reopen_window();
         }
-        let dier = self.tim.dier().read();
+        let enabled = self.capture_interrupts();
         let levels = [self.pins.0.is_high(), self.pins.1.is_high(), self.pins.2.is_high(), self.pins.3.is_high()];
         let mut edges = [None; CHANNELS];
         let mut muted = [false; CHANNELS];
         for (channel, (edge, level_high)) in edges.iter_mut().zip(levels).enumerate() {
-            if dier.ccie(channel as u8).bit_is_set() && sr.ccif(channel as u8).bit_is_set() {
+            if enabled[channel] && sr.ccif(channel as u8).bit_is_set() {
                 let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
                 *edge = Some(Edge { channel, capture_counts, level_high });
                 let count = &mut self.edges_in_window[channel];
@@ -109,14 +109,9 @@ impl RcCapture {
         }
         if muted.contains(&true) {
             // DIER is written by this interrupt alone after init: no other writer to race.
-            self.tim.dier().modify(|_, w| {
-                for (n, &mute) in muted.iter().enumerate() {
-                    if mute {
-                        w.ccie(n as u8).clear_bit();
-                    }
-                }
-                w
-            });
+            // (Each channel's bit by name: the indexed accessor carries a bounds check.)
+            let on = |n: usize| enabled[n] && !muted[n];
+            self.tim.dier().modify(|_, w| w.cc1ie().bit(on(0)).cc2ie().bit(on(1)).cc3ie().bit(on(2)).cc4ie().bit(on(3)));
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
@@ -128,10 +123,10 @@ impl RcCapture {
     /// of a storm pairs with nothing), then raises interrupts again.
     fn reopen_window(&mut self) {
         self.tim.sr().write(|w| w.uif().clear());
-        let dier = self.tim.dier().read();
+        let enabled = self.capture_interrupts();
         let mut any_muted = false;
         for (channel, count) in self.edges_in_window.iter_mut().enumerate() {
-            if dier.ccie(channel as u8).bit_is_clear() {
+            if !enabled[channel] {
                 let _stale = self.tim.ccr(channel).read();
                 any_muted = true;
             }
@@ -141,16 +136,17 @@ impl RcCapture {
             enable_all_interrupts(&self.tim);
         }
     }
+
+    /// Which channels' capture interrupts are on (CC1IE..CC4IE).
+    fn capture_interrupts(&self) -> [bool; CHANNELS] {
+        let dier = self.tim.dier().read();
+        [dier.cc1ie().bit(), dier.cc2ie().bit(), dier.cc3ie().bit(), dier.cc4ie().bit()]
+    }
 }
 
 /// TIM2's capture interrupts (CC1IE..CC4IE) and its update interrupt (UIE), nothing else.
 fn enable_all_interrupts(tim: &TIM2) {
-    tim.dier().write(|w| {
-        for n in 0..4 {
-            w.ccie(n).set_bit();
-        }
-        w.uie().set_bit()
-    });
+    tim.dier().write(|w| w.cc1ie().set_bit().cc2ie().set_bit().cc3ie().set_bit().cc4ie().set_bit().uie().set_bit());
 }
 
 /// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, at the off compare (0 on the DC
