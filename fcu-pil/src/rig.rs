@@ -12,6 +12,7 @@
 //! loop delay as the in-process core, bounded by a tick either way.
 
 use fcu_core::imu::RawImu;
+use fcu_core::rc::{EdgeDecoder, RcConfig, Receiver};
 use fcu_testkit::sim::radio_model::CaptureEdge;
 use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
 
@@ -56,6 +57,40 @@ pub struct EmulatedBoard {
     view: ComputerView,
     /// First problem with a UART line (format errors are failures of the image).
     pub line_errors: Vec<String>,
+    stick: StickReader,
+}
+
+/// The pilot's yaw stick as the image's radio rules read it: the same edges, decoded by
+/// fcu-core's own decoder and receiver with the configuration the image flies, give the yaw
+/// rate the stick asks for on each tick. The firmware's telemetry (the reference's debug line)
+/// carries no yaw, and the yaw metric needs the stick's rate, not the computer's opinion of
+/// it: this is the harness reading its own stick, as a pilot would know what they asked for.
+struct StickReader {
+    decoder: EdgeDecoder,
+    receiver: Receiver,
+    rc: RcConfig,
+    outer_hz: f32,
+}
+
+impl StickReader {
+    fn new() -> StickReader {
+        let cfg = fcu_core::Config::default();
+        StickReader { decoder: EdgeDecoder::new(cfg.rc.pulses), receiver: Receiver::new(), rc: cfg.rc, outer_hz: cfg.timing.outer_hz() }
+    }
+
+    /// One tick's edges in; the stick's yaw rate out, °/s (0 with the throttle low, as the core
+    /// reports it).
+    fn yaw_rate_dps(&mut self, edges: &[CaptureEdge]) -> f64 {
+        for e in edges {
+            self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
+        }
+        let radio = self.receiver.update(&self.rc, &self.decoder.take(), |_| {});
+        if self.rc.throttle_low(&radio.sticks) {
+            0.0
+        } else {
+            f64::from(self.rc.yaw_step(&radio.sticks) * self.outer_hz).to_degrees()
+        }
+    }
 }
 
 impl EmulatedBoard {
@@ -78,6 +113,7 @@ impl EmulatedBoard {
             statuses: Vec::new(),
             view: ComputerView::default(),
             line_errors: Vec::new(),
+            stick: StickReader::new(),
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -181,6 +217,7 @@ impl FlightComputer for EmulatedBoard {
                 board.schedule_edge(t0 + time_from_s(e.t_s), e.channel, e.level_high);
             }
         }
+        self.view.yaw_rate_cmd_dps = Some(self.stick.yaw_rate_dps(edges));
         let target = t0 + time_from_s(t_end_s);
         self.machine.run_until(target).map_err(|f| SimError::Computer(format!("firmware image: {f}")))?;
         if let Some(hf) = self.machine.state().hard_faults.first() {

@@ -98,7 +98,8 @@ fn every_radio_channel_decodes_its_own_pulses_on_the_image() {
 }
 
 /// Every scenario the host passes passes on the image too, with the same metrics within
-/// stated tolerances: hover RMS within 0.1°, the first armed tick within 5 ms.
+/// stated tolerances: hover RMS within 0.1°, yaw rate RMS error within 0.5 °/s, the first
+/// armed tick within 5 ms.
 fn same_as_in_process(name: &str) {
     let sc = scenario(name);
     let opts = RunOptions { seed: 1, ..RunOptions::default() };
@@ -111,6 +112,10 @@ fn same_as_in_process(name: &str) {
     let (hm, pm) = (metrics::compute(&host, &sc), metrics::compute(pil, &sc));
     if let (Some(h), Some(p)) = (hm.hover_rms_deg, pm.hover_rms_deg) {
         assert!((h - p).abs() <= 0.1, "{name}: hover RMS {p:.3}° on the image, {h:.3}° in-process");
+    }
+    if let (Some(h), Some(p)) = (hm.yaw_rate_rms_dps, pm.yaw_rate_rms_dps) {
+        eprintln!("{name}: yaw rate RMS error {p:.3} °/s on the image, {h:.3} °/s in-process");
+        assert!((h - p).abs() <= 0.5, "{name}: yaw rate RMS error {p:.3} °/s on the image, {h:.3} °/s in-process");
     }
     match (first_armed_s(&host), first_armed_s(pil)) {
         (Some(h), Some(p)) => assert!((h - p).abs() <= 0.005, "{name}: armed at {p:.4} s on the image, {h:.4} s in-process"),
@@ -143,6 +148,27 @@ fn link_long_flies_the_same_on_the_image() {
 #[test]
 fn calibration_motion_flies_the_same_on_the_image() {
     same_as_in_process("calibration-motion");
+}
+
+#[test]
+fn sweeps_fly_the_same_on_the_image() {
+    same_as_in_process("sweeps");
+}
+
+/// D16's shaped yaw turns on the image.
+#[test]
+fn yaw_turns_fly_the_same_on_the_image() {
+    same_as_in_process("yaw");
+}
+
+#[test]
+fn a_gust_flies_the_same_on_the_image() {
+    same_as_in_process("gust");
+}
+
+#[test]
+fn a_weak_motor_flies_the_same_on_the_image() {
+    same_as_in_process("weak-motor");
 }
 
 /// Boot with a sensor that answers a wrong WHO_AM_I: no flight, the FATAL line repeats, the

@@ -92,9 +92,10 @@ pub fn level_after_link_loss_s(log: &FlightLog, t_s: f64) -> Option<f64> {
 /// RMS of the commanded yaw rate minus the true yaw rate, each averaged over the same 0.1 s,
 /// °/s. The commanded rate is what the pilot's stick asks for (`LogRow::yaw_rate_cmd_dps`),
 /// not the core's own heading target, so that a controller which smooths or delays its target
-/// is measured against the stick all the same; where the computer does not report it (the
-/// firmware's telemetry), the slope of its yaw target stands in (the same for a target that
-/// moves at the stick's rate, as both profiles' do today).
+/// is measured against the stick all the same (fcu-pil's emulated board reads the stick's rate
+/// from the edges it sends, through fcu-core's own decoder: the firmware's telemetry carries no
+/// yaw). A computer that reports no stick rate gets the slope of its yaw target instead (the
+/// same for a target that moves at the stick's rate, as the reference's does).
 pub fn yaw_rate_rms_dps(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
     let w: Vec<&LogRow> = window(log, from_s, to_s).collect();
     let lag = (0.1 * log.tick_hz).round().max(1.0) as usize;

@@ -161,8 +161,9 @@ pub struct ComputerView {
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
     /// The yaw rate the pilot's stick asks for, °/s (the core's
-    /// `Status::yaw_rate_target_rad_s`), or `None` where the computer does not report it (the
-    /// firmware's telemetry): what the yaw metric compares the airframe's rate with.
+    /// `Status::yaw_rate_target_rad_s`; fcu-pil decodes it from the edges it sends, as the
+    /// firmware's telemetry has no yaw), or `None` where the computer cannot say: what the yaw
+    /// metric compares the airframe's rate with.
     pub yaw_rate_cmd_dps: Option<f64>,
     /// A calibration has passed since power-on.
     pub calibrated: bool,
