@@ -321,6 +321,67 @@ fn a_hard_fault_stops_the_motors_at_once() {
     }
 }
 
+/// The LED codes of product.md §5 on the image, through a flight with a lost link: calibrating
+/// (the two alternating at 2 Hz), ready (LED2 at 10 Hz), armed (LED2 solid), failsafe (LED1 at
+/// 10 Hz, LED2 off). Each state's stretch is dated by the control tick its STATUS line carries.
+#[test]
+fn the_leds_show_each_flight_state_on_the_image() {
+    let sc = scenario("link-short");
+    let opts = RunOptions { seed: 1, duration_s: Some(12.0), ..RunOptions::default() };
+    let flight = rig::fly(elf(), &sc, &opts).unwrap();
+    let b = &flight.board;
+    let leds: Vec<(f64, bool, bool)> = b.machine.board().records.leds.iter().map(|&(t, l1, l2)| (b.scenario_s(t), l1, l2)).collect();
+    // The levels at `t_s` and the number of changes of each LED in `from..to`.
+    let level_at = |t_s: f64| leds.iter().rev().find(|r| r.0 <= t_s).map_or((false, false), |r| (r.1, r.2));
+    let toggles = |from: f64, to: f64| {
+        let mut n = (0, 0);
+        let mut last = level_at(from);
+        for &(_, l1, l2) in leds.iter().filter(|r| r.0 > from && r.0 < to) {
+            n.0 += usize::from(l1 != last.0);
+            n.1 += usize::from(l2 != last.1);
+            last = (l1, l2);
+        }
+        n
+    };
+    let ticks: Vec<(&str, f64)> =
+        b.statuses.iter().map(|(_, s)| (s.state, s.tick.expect("status lines carry the tick") as f64 / rig::TICK_HZ)).collect();
+    let mut seen = Vec::new();
+    for (k, &(state, start_s)) in ticks.iter().enumerate() {
+        let end_s = ticks.get(k + 1).map_or(12.0, |&(_, t)| t);
+        // The housekeeping task shows a new pattern within 10 ms.
+        let (from, to) = (start_s + 0.05, end_s - 0.01);
+        if to - from < 0.4 {
+            continue;
+        }
+        let samples: Vec<(bool, bool)> = (0..=100).map(|i| level_at(from + (to - from) * f64::from(i) / 100.0)).collect();
+        let (t1, t2) = toggles(from, to);
+        // Toggles per second of a blink with period P: 2 / P.
+        let rate = |n: usize| n as f64 / (to - from);
+        let what = format!("{state} over {from:.2}..{to:.2} s: LED1 {:.1}, LED2 {:.1} changes/s", rate(t1), rate(t2));
+        match state {
+            "calibrating" => {
+                assert!(samples.iter().all(|&(l1, l2)| l1 != l2), "{what}: not alternating");
+                assert!((rate(t1) - 4.0).abs() < 1.0, "{what}: not at 2 Hz");
+            }
+            "disarmed" | "arming" => {
+                assert!(samples.iter().all(|&(l1, _)| !l1), "{what}: LED1 lit");
+                assert!((rate(t2) - 20.0).abs() < 2.0, "{what}: LED2 not at 10 Hz");
+            }
+            "armed" => assert!(samples.iter().all(|&l| l == (false, true)) && t1 + t2 == 0, "{what}: LED2 not solid"),
+            "failsafe1" => {
+                assert!(samples.iter().all(|&(_, l2)| !l2), "{what}: LED2 lit");
+                assert!((rate(t1) - 20.0).abs() < 2.0, "{what}: LED1 not at 10 Hz");
+            }
+            other => panic!("unexpected state {other} in this flight"),
+        }
+        eprintln!("{what}");
+        seen.push(state);
+    }
+    for state in ["calibrating", "disarmed", "armed", "failsafe1"] {
+        assert!(seen.contains(&state), "no stretch of {state} long enough to read: {ticks:?}");
+    }
+}
+
 /// The STATUS and TAB lines parse, and the states they report are the core's: the image goes
 /// through the same sequence of flight states as the core in-process.
 #[test]
