@@ -90,9 +90,11 @@ impl RcCapture {
     /// the next wrap (this same interrupt, UIF) turns it back on, dropping what it captured
     /// meanwhile.
     pub fn take_edges(&mut self) -> [Option<Edge>; CHANNELS] {
-        let sr = self.tim.sr().read();
+        let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
+            // Again: a reopened channel's flag was cleared with its stale capture.
+            sr = self.tim.sr().read();
         }
         let enabled = self.capture_interrupts();
         let levels = [self.pins.0.is_high(), self.pins.1.is_high(), self.pins.2.is_high(), self.pins.3.is_high()];
