@@ -229,13 +229,16 @@ pub struct StatusFields<'a> {
     pub bus_errors: u32,
     /// Telemetry bytes dropped because the UART queue was full.
     pub uart_dropped_bytes: u32,
+    /// Times a radio pin raised more edges in one capture wrap than a receiver can and was
+    /// muted for the rest of it (interference or a broken wire: the link is then lost for it).
+    pub radio_mutes: u32,
     /// Control ticks completed since boot when the snapshot was taken: dates the line to the
     /// tick, however long it waited in the UART queue.
     pub tick: u32,
 }
 
 /// `STATUS state=… armed=0|1 blockers=a,b|none cal=… failsafe=… fault=… vbat=3.912V overruns=N
-/// bus_errors=N uart_dropped=N tick=N`.
+/// bus_errors=N uart_dropped=N rc_muted=N tick=N`.
 pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<'_>) {
     out.clear();
     out.push_str("STATUS state=");
@@ -275,6 +278,8 @@ pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<
     out.push_uint(f.bus_errors);
     out.push_str(" uart_dropped=");
     out.push_uint(f.uart_dropped_bytes);
+    out.push_str(" rc_muted=");
+    out.push_uint(f.radio_mutes);
     out.push_str(" tick=");
     out.push_uint(f.tick);
     out.finish_line();
@@ -438,6 +443,8 @@ pub struct FirmwareCounters {
     pub bus_errors: u32,
     /// Telemetry bytes dropped because the UART queue was full.
     pub uart_dropped_bytes: u32,
+    /// Radio pins muted for an edge storm (see [`StatusFields::radio_mutes`]).
+    pub radio_mutes: u32,
     /// Control ticks completed since boot.
     pub tick: u32,
 }
@@ -461,6 +468,7 @@ pub fn write_status<const N: usize>(out: &mut LineBuf<N>, status: &Status, count
         outer_overruns: counters.outer_overruns,
         bus_errors: counters.bus_errors,
         uart_dropped_bytes: counters.uart_dropped_bytes,
+        radio_mutes: counters.radio_mutes,
         tick: counters.tick,
     };
     write_status_line(out, &fields);
@@ -616,13 +624,14 @@ mod tests {
             outer_overruns: 2,
             bus_errors: 3,
             uart_dropped_bytes: 4,
+            radio_mutes: 5,
             tick: 1234,
         };
         write_status_line(&mut b, &f);
         assert_eq!(
             line(&b),
             "STATUS state=disarmed armed=0 blockers=not_calibrated,link_not_good cal=running failsafe=none fault=none vbat=4.005V overruns=2 \
-             bus_errors=3 uart_dropped=4 tick=1234\n"
+             bus_errors=3 uart_dropped=4 rc_muted=5 tick=1234\n"
         );
     }
 
@@ -640,10 +649,11 @@ mod tests {
             outer_overruns: 0,
             bus_errors: 0,
             uart_dropped_bytes: 0,
+            radio_mutes: 0,
             tick: 0,
         };
         write_status_line(&mut b, &f);
-        assert_eq!(line(&b), "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0 bus_errors=0 uart_dropped=0 tick=0\n");
+        assert_eq!(line(&b), "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0 bus_errors=0 uart_dropped=0 rc_muted=0 tick=0\n");
     }
 
     #[test]
@@ -743,11 +753,11 @@ mod tests {
         write_status(
             &mut b,
             &st,
-            FirmwareCounters { battery_mv: 3950, outer_overruns: 1, bus_errors: 2, uart_dropped_bytes: 3, tick: u32::MAX },
+            FirmwareCounters { battery_mv: 3950, outer_overruns: 1, bus_errors: 2, uart_dropped_bytes: 3, radio_mutes: 4, tick: u32::MAX },
         );
         let text = b.as_str();
         assert!(text.starts_with("STATUS state="), "{text}");
-        assert!(text.ends_with(" vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 tick=4294967295\n"), "{text}");
+        assert!(text.ends_with(" vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 rc_muted=4 tick=4294967295\n"), "{text}");
         assert!(!b.is_truncated());
     }
 
@@ -763,6 +773,7 @@ mod tests {
             outer_overruns: u32::MAX,
             bus_errors: u32::MAX,
             uart_dropped_bytes: u32::MAX,
+            radio_mutes: u32::MAX,
             tick: u32::MAX,
         };
         write_status(&mut b, &st, most);

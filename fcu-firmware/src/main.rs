@@ -175,6 +175,8 @@ mod app {
         uart: UartOut,
         led_pattern: LedPattern,
         battery_mv: u32,
+        /// Radio pins muted for an edge storm since boot (`RcCapture::take_edges`).
+        radio_mutes: u32,
     }
 
     #[local]
@@ -299,7 +301,7 @@ mod app {
         }
 
         (
-            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0 },
+            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0 },
             Local { capture, tick_timer, bus, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
         )
     }
@@ -374,15 +376,19 @@ mod app {
         who_am_i
     }
 
-    /// Radio capture: timestamps and pin levels into the core's decoder, nothing else.
-    #[task(binds = TIM2, priority = 4, shared = [decoder], local = [capture])]
+    /// Radio capture: timestamps and pin levels into the core's decoder, nothing else (and a
+    /// count of the pins the capture muted for an edge storm, for the status line).
+    #[task(binds = TIM2, priority = 4, shared = [decoder, radio_mutes], local = [capture])]
     fn rc_capture(mut cx: rc_capture::Context) {
-        let edges = cx.local.capture.take_edges();
+        let (edges, muted) = cx.local.capture.take_edges();
         cx.shared.decoder.lock(|decoder| {
             for edge in edges.into_iter().flatten() {
                 decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
             }
         });
+        if muted > 0 {
+            cx.shared.radio_mutes.lock(|n| *n = n.saturating_add(muted));
+        }
     }
 
     /// The control tick: IMU burst → `ControlTick::tick` → TIM4; the outer step when due.
@@ -453,7 +459,7 @@ mod app {
 
     /// Status snapshots → LED code and UART lines (status on every state change, debug line
     /// at its rate).
-    #[task(priority = 1, shared = [uart, led_pattern, battery_mv], local = [reporter])]
+    #[task(priority = 1, shared = [uart, led_pattern, battery_mv, radio_mutes], local = [reporter])]
     async fn report(mut cx: report::Context, snapshot: Snapshot) {
         let status = &snapshot.status;
         let pattern = tlm::led_pattern(status);
@@ -462,12 +468,14 @@ mod app {
         let emit = cx.local.reporter.observe(status.state);
         if emit.status_line {
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
+            let radio_mutes = cx.shared.radio_mutes.lock(|n| *n);
             cx.shared.uart.lock(|uart| {
                 let counters = FirmwareCounters {
                     battery_mv,
                     outer_overruns: snapshot.outer_overruns,
                     bus_errors: snapshot.bus_errors,
                     uart_dropped_bytes: uart.dropped_bytes,
+                    radio_mutes,
                     tick: snapshot.tick,
                 };
                 let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();

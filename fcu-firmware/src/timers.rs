@@ -86,10 +86,10 @@ impl RcCapture {
     /// its flag. An over-capture (a second edge before the first was read) cannot happen
     /// with RC pulses of 0.8 ms or more, and would only lose one width that the core rejects.
     ///
-    /// A channel that has used its [`EDGE_BUDGET_PER_WRAP`] has its interrupt turned off here;
-    /// the next wrap (this same interrupt, UIF) turns it back on, dropping what it captured
-    /// meanwhile.
-    pub fn take_edges(&mut self) -> [Option<Edge>; CHANNELS] {
+    /// A channel that has used its [`EDGE_BUDGET_PER_WRAP`] has its interrupt turned off here
+    /// (the second value: how many were, this time); the next wrap (this same interrupt, UIF)
+    /// turns it back on, dropping what it captured meanwhile.
+    pub fn take_edges(&mut self) -> ([Option<Edge>; CHANNELS], u32) {
         let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
@@ -117,7 +117,7 @@ impl RcCapture {
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
-        edges
+        (edges, muted.iter().map(|&m| u32::from(m)).sum())
     }
 
     /// A new capture wrap: every channel gets its budget back. A channel that was muted

@@ -16,7 +16,7 @@ pub struct StatusLine {
     pub fault: String,
     pub vbat_v: f64,
     pub overruns: u32,
-    /// Fields the firmware appends after `overruns` (e.g. `bus_errors`, `uart_dropped`).
+    /// Fields the firmware appends after `overruns` (e.g. `bus_errors`, `uart_dropped`, `rc_muted`).
     pub counters: Vec<(String, u64)>,
     /// Control ticks completed since boot when the snapshot was taken, if the line has it.
     pub tick: Option<u64>,

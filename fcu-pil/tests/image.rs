@@ -231,8 +231,8 @@ fn edge_storm_on_pa0(b: &mut EmulatedBoard, at_s: f64) {
 /// An edge storm on a radio pin is contained: the capture interrupt gives up on the channel
 /// for the rest of each capture wrap (`timers::EDGE_BUDGET_PER_WRAP`), so the control tick
 /// keeps its 800 Hz and the watchdog has nothing to reset; the core sees the aileron's pulses
-/// stop, declares the link lost and flies its failsafe, and the link is back once the storm
-/// is over. (Before, the storm starved the control task and the watchdog reset the board in
+/// stop, declares the link lost and flies its failsafe (its status line counting the muted
+/// pin, `rc_muted`), and the link is back once the storm is over. (Before, the storm starved the control task and the watchdog reset the board in
 /// the air.)
 #[test]
 fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
@@ -260,6 +260,13 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
     assert!(!during.is_empty() && during.iter().all(|(_, s)| s.failsafe != "none"), "no failsafe during the storm: {during:?}");
     let airborne = log.rows.iter().filter(|r| r.t_s > 8.0 && r.t_s < 11.0);
     assert!(airborne.clone().all(|r| r.alt_m > 0.3 && r.armed), "the drone came down or disarmed");
+    // The status lines say why: the capture muted the pin (none before the storm).
+    let muted = |s: &fcu_pil::telemetry::StatusLine| s.counter("rc_muted").expect("status lines carry rc_muted");
+    assert!(statuses.iter().filter(|(t, _)| *t < 8.0).all(|(_, s)| muted(s) == 0), "rc_muted before the storm");
+    assert!(
+        !during.is_empty() && during.iter().all(|(_, s)| muted(s) > 0),
+        "the failsafe's status line does not count the muted pin: {during:?}"
+    );
     // ...and the radio is back after it.
     let after: Vec<_> = statuses.iter().filter(|(t, _)| *t > 9.0).collect();
     assert!(
