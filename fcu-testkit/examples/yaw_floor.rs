@@ -13,7 +13,7 @@
 //! cargo run --release -p fcu-testkit --example yaw_floor -- 1 5      # some seeds
 //! ```
 //!
-//! About a minute per seed on one core (two seeds run at once).
+//! About 30 s per seed on one core of this machine (two seeds run at once).
 
 use fcu_core::config::Config;
 use fcu_testkit::sim::radio_model::CaptureEdge;
