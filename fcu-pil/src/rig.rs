@@ -65,6 +65,8 @@ pub struct EmulatedBoard {
 /// rate the stick asks for on each tick. The firmware's telemetry (the reference's debug line)
 /// carries no yaw, and the yaw metric needs the stick's rate, not the computer's opinion of
 /// it: this is the harness reading its own stick, as a pilot would know what they asked for.
+/// (In a failsafe it stays the pilot's stick, where the core in-process reports the failsafe's
+/// centred one; no yaw window lies in a failsafe.)
 struct StickReader {
     decoder: EdgeDecoder,
     receiver: Receiver,
