@@ -659,12 +659,7 @@ impl ControlTick {
             motor_command: self.motor_command,
             compare: self.compare,
             thrust_gain: self.outer_result.thrust_gain,
-            yaw_rate_target_rad_s: if self.in_force.throttle_low {
-                0.0
-            } else {
-                // One outer step's heading change, at the outer steps' rate.
-                self.cfg.rc.yaw_step(&self.in_force.sticks) * self.cfg.timing.outer_hz()
-            },
+            yaw_rate_target_rad_s: self.cfg.rc.yaw_rate_rad_s(&self.in_force.sticks, self.cfg.timing.outer_hz()),
         }
     }
 }
@@ -705,6 +700,7 @@ impl OuterStep {
             if job.yaw_target_reset || job.throttle_low {
                 shaper.reset();
             }
+            // `RcConfig::yaw_rate_rad_s`, from the yaw step already worked out above.
             let stick_rate = if job.throttle_low { 0.0 } else { yaw_step * self.outer_hz };
             shaper.shape(stick_rate)
         });

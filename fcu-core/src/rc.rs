@@ -201,6 +201,17 @@ impl RcConfig {
         (pitch, roll)
     }
 
+    /// The yaw rate the sticks ask for, rad/s: one outer step's heading change at `outer_hz`
+    /// outer steps a second, none with the throttle low. What the core reports
+    /// (`Status::yaw_rate_target_rad_s`) and what fcu-pil reads from the stick it sends.
+    pub fn yaw_rate_rad_s(&self, sticks: &Sticks, outer_hz: f32) -> f32 {
+        if self.throttle_low(sticks) {
+            0.0
+        } else {
+            self.yaw_step(sticks) * outer_hz
+        }
+    }
+
     /// The yaw target change of one outer step, rad.
     pub fn yaw_step(&self, sticks: &Sticks) -> f32 {
         let t = self.saturate(sticks.rud);

@@ -87,11 +87,7 @@ impl StickReader {
             self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
         }
         let radio = self.receiver.update(&self.rc, &self.decoder.take(), |_| {});
-        if self.rc.throttle_low(&radio.sticks) {
-            0.0
-        } else {
-            f64::from(self.rc.yaw_step(&radio.sticks) * self.outer_hz).to_degrees()
-        }
+        f64::from(self.rc.yaw_rate_rad_s(&radio.sticks, self.outer_hz)).to_degrees()
     }
 }
 
