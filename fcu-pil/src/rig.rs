@@ -215,7 +215,7 @@ impl FlightComputer for EmulatedBoard {
                 board.schedule_edge(t0 + time_from_s(e.t_s), e.channel, e.level_high);
             }
         }
-        self.view.yaw_rate_cmd_dps = Some(self.stick.yaw_rate_dps(edges));
+        self.view.yaw_rate_cmd_dps = self.stick.yaw_rate_dps(edges);
         let target = t0 + time_from_s(t_end_s);
         self.machine.run_until(target).map_err(|f| SimError::Computer(format!("firmware image: {f}")))?;
         if let Some(hf) = self.machine.state().hard_faults.first() {

@@ -62,7 +62,7 @@ impl FlightComputer for Oracle {
 
     fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         let compare = self.core.step(t_end_s, edges, imu, battery_v)?;
-        let cmd_dps = self.core.view().yaw_rate_cmd_dps.unwrap_or(0.0);
+        let cmd_dps = self.core.view().yaw_rate_cmd_dps;
         // Only the steps inside the metric's window (8.5 s on): the turn's start at 8 s is
         // the core's.
         if t_end_s > 8.5 && (cmd_dps - self.last_cmd_dps).abs() > STEP_DPS && self.steps_seen < self.plan.len() {

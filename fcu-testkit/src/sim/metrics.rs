@@ -94,18 +94,16 @@ pub fn level_after_link_loss_s(log: &FlightLog, t_s: f64) -> Option<f64> {
 /// not the core's own heading target, so that a controller which smooths or delays its target
 /// is measured against the stick all the same (fcu-pil's emulated board reads the stick's rate
 /// from the edges it sends, through fcu-core's own decoder: the firmware's telemetry carries no
-/// yaw). A computer that reports no stick rate gets the slope of its yaw target instead (the
-/// same for a target that moves at the stick's rate, as the reference's does).
+/// yaw).
 pub fn yaw_rate_rms_dps(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
     let w: Vec<&LogRow> = window(log, from_s, to_s).collect();
     let lag = (0.1 * log.tick_hz).round().max(1.0) as usize;
-    let from_stick = w.iter().all(|r| r.yaw_rate_cmd_dps.is_some());
     // Sums of the stick's rate up to each row: a window's mean is a difference of two.
     let mut cmd_sums = Vec::with_capacity(w.len() + 1);
     cmd_sums.push(0.0);
     for r in &w {
         let last = cmd_sums.last().copied().unwrap_or(0.0);
-        cmd_sums.push(last + r.yaw_rate_cmd_dps.unwrap_or(0.0));
+        cmd_sums.push(last + r.yaw_rate_cmd_dps);
     }
     let mut sum = 0.0;
     let mut n = 0usize;
@@ -114,13 +112,9 @@ pub fn yaw_rate_rms_dps(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> 
         if dt <= 0.0 {
             continue;
         }
-        let cmd = if from_stick {
-            // The rate asked for over the ticks after `a` up to `b`: what moves the heading
-            // from a's to b's.
-            (cmd_sums[i + lag + 1] - cmd_sums[i + 1]) / lag as f64
-        } else {
-            (b.yaw_target_deg - a.yaw_target_deg) / dt
-        };
+        // The rate asked for over the ticks after `a` up to `b`: what moves the heading from
+        // a's to b's.
+        let cmd = (cmd_sums[i + lag + 1] - cmd_sums[i + 1]) / lag as f64;
         let mut dyaw = b.yaw_deg - a.yaw_deg;
         // The true heading wraps at ±180°.
         while dyaw > 180.0 {

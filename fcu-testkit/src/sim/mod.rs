@@ -77,7 +77,7 @@ pub struct LogRow {
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
     /// See [`ComputerView::yaw_rate_cmd_dps`] (not written to the CSV).
-    pub yaw_rate_cmd_dps: Option<f64>,
+    pub yaw_rate_cmd_dps: f64,
     pub motors: [u16; 4],
     pub alt_m: f64,
     pub battery_v: f64,
@@ -162,9 +162,8 @@ pub struct ComputerView {
     pub yaw_target_deg: f64,
     /// The yaw rate the pilot's stick asks for, °/s (the core's
     /// `Status::yaw_rate_target_rad_s`; fcu-pil decodes it from the edges it sends, as the
-    /// firmware's telemetry has no yaw), or `None` where the computer cannot say: what the yaw
-    /// metric compares the airframe's rate with.
-    pub yaw_rate_cmd_dps: Option<f64>,
+    /// firmware's telemetry has no yaw): what the yaw metric compares the airframe's rate with.
+    pub yaw_rate_cmd_dps: f64,
     /// A calibration has passed since power-on.
     pub calibrated: bool,
     pub calibrating: bool,
@@ -182,7 +181,7 @@ impl Default for ComputerView {
             roll_target_deg: 0.0,
             pitch_target_deg: 0.0,
             yaw_target_deg: 0.0,
-            yaw_rate_cmd_dps: None,
+            yaw_rate_cmd_dps: 0.0,
             calibrated: false,
             calibrating: false,
             calibration_restarts: 0,
@@ -261,7 +260,7 @@ impl FlightComputer for InProcess {
             roll_target_deg: deg(st.target_rad[1]),
             pitch_target_deg: deg(st.target_rad[0]),
             yaw_target_deg: deg(st.target_rad[2]),
-            yaw_rate_cmd_dps: Some(deg(st.yaw_rate_target_rad_s)),
+            yaw_rate_cmd_dps: deg(st.yaw_rate_target_rad_s),
             calibrated: st.calibrated,
             calibrating,
             calibration_restarts: restarts,
