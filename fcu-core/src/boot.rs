@@ -1,7 +1,8 @@
-//! What the board does once its sensors' boot tables are played: fly, or stay on the ground
-//! with the missing sensor named on the LEDs and the UART (product.md §4: "WHO_AM_I wrong at
-//! boot: no flight, LED error code, message on UART, never a silent hang"). The firmware
-//! collects the answers and acts on the verdict; the rule is here.
+//! What the board does once its boot checks are done: fly, or stay on the ground with what
+//! failed named on the LEDs and the UART, never a silent hang. The checks: every sensor's
+//! `WHO_AM_I`, the HSE crystal (the clock the radio's pulse widths and the control tick are
+//! timed by), and the independent watchdog taking its timeout (its LSI clock running). The
+//! firmware collects the answers and acts on the verdict; the rule is here.
 
 use crate::imu::registers::{first_missing, Sensor};
 use crate::telemetry::{write_sensor_missing_line, LedPattern, LineBuf};
@@ -15,6 +16,36 @@ pub enum BootVerdict {
     /// off compare; the watchdog is not armed, so the code stays visible instead of a reset
     /// loop.
     StayOnGround { sensor: Sensor, who_am_i: u8 },
+    /// A clock the flight depends on failed: the control tick never starts.
+    ClockFault(ClockFault),
+}
+
+/// A clock that failed its boot check.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClockFault {
+    /// The HSE crystal never became ready: the board runs on the internal HSI, whose ±1 %
+    /// would skew every radio pulse width and the control rate.
+    Crystal,
+    /// The independent watchdog never took its timeout: its LSI clock is not running, so
+    /// nothing would reset a stalled control loop.
+    WatchdogClock,
+}
+
+impl ClockFault {
+    /// LED blink count, after the three sensors' 1..3.
+    pub fn blink_count(self) -> u8 {
+        match self {
+            ClockFault::Crystal => 4,
+            ClockFault::WatchdogClock => 5,
+        }
+    }
+
+    fn description(self) -> &'static str {
+        match self {
+            ClockFault::Crystal => "HSE crystal did not start (running on HSI)",
+            ClockFault::WatchdogClock => "watchdog did not take its timeout (LSI not running)",
+        }
+    }
 }
 
 impl BootVerdict {
@@ -30,6 +61,25 @@ impl BootVerdict {
         }
     }
 
+    /// The verdict once the crystal has been checked: a board without its crystal stays on
+    /// the ground whatever the sensors said (reported first: it is found first).
+    pub fn with_crystal(self, crystal_ready: bool) -> BootVerdict {
+        if crystal_ready {
+            self
+        } else {
+            BootVerdict::ClockFault(ClockFault::Crystal)
+        }
+    }
+
+    /// The verdict once the watchdog's set-up has been tried (only on a board that may fly).
+    pub fn with_watchdog(self, took_timeout: bool) -> BootVerdict {
+        if took_timeout || !self.may_fly() {
+            self
+        } else {
+            BootVerdict::ClockFault(ClockFault::WatchdogClock)
+        }
+    }
+
     pub fn may_fly(self) -> bool {
         self == BootVerdict::Fly
     }
@@ -40,6 +90,7 @@ impl BootVerdict {
         match self {
             BootVerdict::Fly => LedPattern::Off,
             BootVerdict::StayOnGround { sensor, .. } => LedPattern::SensorFault { blinks: sensor.blink_count() },
+            BootVerdict::ClockFault(fault) => LedPattern::SensorFault { blinks: fault.blink_count() },
         }
     }
 
@@ -49,6 +100,14 @@ impl BootVerdict {
             BootVerdict::Fly => false,
             BootVerdict::StayOnGround { sensor, who_am_i } => {
                 write_sensor_missing_line(out, sensor.name(), who_am_i, sensor.who_am_i_value());
+                true
+            }
+            BootVerdict::ClockFault(fault) => {
+                out.clear();
+                out.push_str("FATAL clock ");
+                out.push_str(fault.description());
+                out.push_str(": motors off, no flight until reset");
+                out.finish_line();
                 true
             }
         }
@@ -86,5 +145,27 @@ mod tests {
         assert!(v.write_fatal_line(&mut line));
         assert!(line.as_str().starts_with("FATAL sensor LIS2MDL WHO_AM_I=0x41 expected 0x40"), "{}", line.as_str());
         assert!(!BootVerdict::Fly.write_fatal_line(&mut line));
+    }
+
+    #[test]
+    fn a_failed_clock_keeps_the_drone_on_the_ground_and_says_which() {
+        let fly = BootVerdict::from_answers(ALL_ANSWER);
+        let no_crystal = fly.with_crystal(false);
+        assert_eq!(no_crystal, BootVerdict::ClockFault(ClockFault::Crystal));
+        assert!(!no_crystal.may_fly());
+        assert_eq!(no_crystal.led_pattern(), LedPattern::SensorFault { blinks: 4 });
+        let mut line = LineBuf::<96>::new();
+        assert!(no_crystal.write_fatal_line(&mut line));
+        assert!(line.as_str().starts_with("FATAL clock HSE crystal did not start"), "{}", line.as_str());
+
+        assert_eq!(fly.with_crystal(true).with_watchdog(true), BootVerdict::Fly);
+        let no_watchdog = fly.with_crystal(true).with_watchdog(false);
+        assert_eq!(no_watchdog, BootVerdict::ClockFault(ClockFault::WatchdogClock));
+        assert_eq!(no_watchdog.led_pattern(), LedPattern::SensorFault { blinks: 5 });
+        assert!(no_watchdog.write_fatal_line(&mut line));
+        assert!(line.as_str().contains("LSI not running"), "{}", line.as_str());
+        // A board already on the ground keeps its first reason.
+        let missing = BootVerdict::from_answers([0x00, 0x40, 0xB1]);
+        assert_eq!(missing.with_watchdog(false), missing);
     }
 }

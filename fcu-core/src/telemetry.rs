@@ -337,8 +337,9 @@ pub enum LedPattern {
     Calibrating,
     /// Failsafe: LED1 fast (10 Hz), LED2 off.
     Failsafe,
-    /// Fatal sensor fault: both on, and every [`FAULT_CYCLE_MS`] LED1 goes dark `blinks` times
-    /// (1 = LSM6DSL, 2 = LIS2MDL, 3 = LPS22HB; see `imu::registers::Sensor::blink_count`).
+    /// Fatal boot fault: both on, and every [`FAULT_CYCLE_MS`] LED1 goes dark `blinks` times
+    /// (1 = LSM6DSL, 2 = LIS2MDL, 3 = LPS22HB, see `imu::registers::Sensor::blink_count`;
+    /// 4 = HSE crystal, 5 = watchdog clock, see `boot::ClockFault::blink_count`).
     SensorFault { blinks: u8 },
 }
 

@@ -208,10 +208,13 @@ mod app {
         core.DWT.enable_cycle_counter();
         // HSE 16 MHz → 84 MHz SYSCLK/HCLK/PCLK2, 42 MHz PCLK1; the HAL sets 2 flash wait
         // states. It picks M 8, N 168, P 4, Q 7: the reference's VCO (336 MHz) and outputs
-        // with a 2 MHz PLL input instead of 1 MHz.
-        let mut rcc = dp.RCC.freeze(
-            rcc::Config::hse(HSE_HZ.Hz()).sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()),
-        );
+        // with a 2 MHz PLL input instead of 1 MHz. The HAL waits for HSERDY without a bound, so
+        // the crystal is started and checked here first: a dead one leaves the board on the
+        // 16 MHz HSI (same PLL settings, same clocks), able to say so, never dark.
+        let crystal_ready = start_crystal(&dp.RCC);
+        let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
+        let mut rcc =
+            dp.RCC.freeze(source.sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()));
         Mono::start(core.SYST, SYSCLK_HZ);
 
         let gpioa = dp.GPIOA.split(&mut rcc);
@@ -257,7 +260,7 @@ mod app {
         );
         let (spi2, _sensor_pins) = spi2.release();
         let mut bus = SensorBus::new(spi2, cs);
-        let boot = init_sensors(&mut bus, &mut uart);
+        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(crystal_ready);
 
         let capture_pins = (
             gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
@@ -280,21 +283,21 @@ mod app {
         let decoder = fc.edge_decoder();
         let (inner, outer) = fc.into_parts();
 
-        let (led_pattern, watchdog) = if boot.may_fly() {
-            // Armed only once the sensors answered: from here a control tick that does not
-            // complete within the timeout resets the board (motors off at reset).
-            let watchdog = Watchdog::start(dp.IWDG, &dp.DBGMCU);
+        // Armed only once the sensors answered: from here a control tick that does not
+        // complete within the timeout resets the board (motors off at reset).
+        let watchdog = if boot.may_fly() { Watchdog::start(dp.IWDG, &dp.DBGMCU).ok() } else { None };
+        boot = boot.with_watchdog(watchdog.is_some());
+        if boot.may_fly() {
             tick_timer.start();
-            (boot.led_pattern(), Some(watchdog))
         } else {
-            // No flight without every sensor (the core's verdict): TIM9 stays stopped, so
-            // `control` never runs and the motors stay off. The watchdog is not armed, so the
-            // LED code and the UART message stay visible instead of a silent reset loop.
+            // No flight (the core's verdict): TIM9 stays stopped, so `control` never runs and
+            // the motors stay off. The watchdog is not armed, so the LED code and the UART
+            // message stay visible instead of a silent reset loop.
             if fault_report::spawn(boot).is_err() {
                 defmt::error!("fault report already running");
             }
-            (boot.led_pattern(), None)
-        };
+        }
+        let led_pattern = boot.led_pattern();
 
         if housekeeping::spawn().is_err() {
             defmt::error!("housekeeping already running");
@@ -320,6 +323,23 @@ mod app {
         loop {
             cortex_m::asm::wfi();
         }
+    }
+
+    /// Turns the HSE crystal on and waits for it, at most ST's `HSE_STARTUP_TIMEOUT` (100 ms;
+    /// the datasheet's typical start-up is 2 ms). Runs on the reset clock, the 16 MHz HSI, timed
+    /// on the cycle counter. A crystal that does not start is turned off again.
+    fn start_crystal(rcc: &stm32f4xx_hal::pac::RCC) -> bool {
+        const HSI_HZ: u32 = 16_000_000;
+        const STARTUP_BOUND_CYCLES: u32 = HSI_HZ / 10;
+        rcc.cr().modify(|_, w| w.hseon().set_bit());
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        while rcc.cr().read().hserdy().bit_is_clear() {
+            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > STARTUP_BOUND_CYCLES {
+                rcc.cr().modify(|_, w| w.hseon().clear_bit());
+                return false;
+            }
+        }
+        true
     }
 
     /// Waits `ms` milliseconds on the cycle counter (boot only: the control tick is not running).

@@ -16,11 +16,16 @@ use stm32f4xx_hal::pac::SPI2;
 /// bound is far above that and only ends a wait on a broken bus.
 const FLAG_WAIT_POLLS: u32 = 2_000;
 
-/// CPU cycles in a bit and a half of SPI clock (84 MHz / 2.625 MHz = 32 per bit): the wait
-/// between starting the clock for a single-byte read and stopping it again, timed on the
-/// cycle counter (`asm::delay` loops take about three cycles per count here, with the flash
-/// wait states).
-const HALF_BYTE_START_CYCLES: u32 = 48;
+/// CPU cycles per SPI clock period: 84 MHz / 2.625 MHz.
+const SCK_CYCLES: u32 = 32;
+/// When to clear SPE to end a receive, counted on the cycle counter from the moment the
+/// second-to-last RXNE is seen (or, for one byte, from setting SPE): a period and a half of
+/// the SPI clock. The RM's window (RM0090 §28.3.8, the F401's SPI block) runs from one SCK
+/// period after that RXNE rose, so the last byte has started, to the end of the last byte
+/// (8 periods, 256 cycles), so no byte follows it. Seen up to one poll late, plus the CR1
+/// read-modify-write, the clear lands 48 to about 90 cycles in: a period and more from each
+/// end. (`asm::delay` is not used: its cycles per count depend on the flash wait states.)
+const STOP_AFTER_CYCLES: u32 = SCK_CYCLES + SCK_CYCLES / 2;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
 pub enum BusError {
@@ -113,28 +118,25 @@ impl SensorBus {
 
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
-        // Setting SPE in 1-line receive mode starts the clock.
-        self.spi.cr1().modify(|_, w| w.spe().set_bit());
-
         let (last, head) = match buf.split_last_mut() {
             Some(parts) => parts,
             None => return Ok(()),
         };
+        // Setting SPE in 1-line receive mode starts the clock: the first byte starts now.
+        self.spi.cr1().modify(|_, w| w.spe().set_bit());
+        let mut last_byte_started = cortex_m::peripheral::DWT::cycle_count();
         let mut result = Ok(());
         for byte in head.iter_mut() {
             result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
             if result.is_err() {
                 break;
             }
+            // Each RXNE is the start of the next byte: after the second-to-last, the last one.
+            last_byte_started = cortex_m::peripheral::DWT::cycle_count();
             *byte = self.spi.dr().read().dr().bits() as u8;
         }
-        if head.is_empty() {
-            // Single byte: let its first bit start before stopping the clock.
-            let start = cortex_m::peripheral::DWT::cycle_count();
-            while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < HALF_BYTE_START_CYCLES {}
-        }
+        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(last_byte_started) < STOP_AFTER_CYCLES {}
         // Clearing SPE now stops the clock at the end of the byte in flight: the last one.
-        cortex_m::asm::dsb();
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         if result.is_ok() {
             result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());

@@ -1,5 +1,10 @@
 //! The independent watchdog, set on its registers for a 50 ms timeout. (The HAL's
 //! `IndependentWatchdog::start(50 ms)` picks prescaler /256 with reload 6: 56 ms.)
+//!
+//! The order is ST's (`HAL_IWDG_Init`): start first, then the values, then a bounded wait.
+//! The watchdog counts on the LSI, which is off after reset (RCC_CSR.LSION = 0); the start key
+//! turns it on (RM0368 §17.3.2). New PR/RLR values cross into the LSI's domain only while it
+//! runs, so waiting for SR.PVU/RVU to clear before the start key never ends on silicon.
 
 use stm32f4xx_hal::pac::{DBGMCU, IWDG};
 
@@ -9,24 +14,39 @@ const PRESCALER_DIV8: u8 = 1;
 /// over parts and temperature (datasheet), so the real timeout lies between about 34 and
 /// 94 ms: 27 to 75 missed control ticks.
 const RELOAD: u16 = 199;
+/// How long the new values may take to land: the LSI's start-up (40 µs at most) and five of
+/// its cycles at its slowest 17 kHz (294 µs), with margin: 2 ms of the 84 MHz cycle counter.
+/// Meanwhile the watchdog runs on its reset values (/4, 0xFFF: at least 348 ms), so the wait
+/// cannot be cut short by a reset.
+const UPDATE_BOUND_CYCLES: u32 = 2 * 84_000;
+
+/// The watchdog's values did not land within the bound: its LSI clock is not running.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub struct LsiNotRunning;
 
 pub struct Watchdog {
     iwdg: IWDG,
 }
 
 impl Watchdog {
-    /// Sets prescaler and reload, then starts the watchdog (it cannot be stopped again). A
-    /// core halted by a debugger does not reset under the probe.
-    pub fn start(iwdg: IWDG, dbgmcu: &DBGMCU) -> Watchdog {
+    /// Starts the watchdog (it cannot be stopped again), sets prescaler and reload, waits for
+    /// them to be in force, and reloads the counter with them. A core halted by a debugger
+    /// does not reset under the probe. Needs the DWT cycle counter running.
+    pub fn start(iwdg: IWDG, dbgmcu: &DBGMCU) -> Result<Watchdog, LsiNotRunning> {
         dbgmcu.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
+        iwdg.kr().write(|w| w.key().start());
         iwdg.kr().write(|w| w.key().unlock());
         iwdg.pr().write(|w| w.pr().set(PRESCALER_DIV8));
         iwdg.rlr().write(|w| w.rl().set(RELOAD));
-        // The new values cross into the LSI domain before they count (PVU, RVU).
-        while iwdg.sr().read().bits() != 0 {}
+        let started = cortex_m::peripheral::DWT::cycle_count();
+        while iwdg.sr().read().bits() != 0 {
+            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(started) > UPDATE_BOUND_CYCLES {
+                return Err(LsiNotRunning);
+            }
+        }
+        // The first reload after the values land: from here the timeout is 50 ms.
         iwdg.kr().write(|w| w.key().feed());
-        iwdg.kr().write(|w| w.key().start());
-        Watchdog { iwdg }
+        Ok(Watchdog { iwdg })
     }
 
     pub fn feed(&mut self) {

@@ -27,6 +27,42 @@ pub struct Records {
     pub uart: Vec<(Time, u8)>,
     /// Time TIM9 was started (the control tick), each boot.
     pub tick_timer_starts: Vec<Time>,
+    /// The last peripheral register read: (time, address, value). A firmware stuck in a
+    /// polling loop is stuck on this register.
+    pub last_read: Option<(Time, u32, u32)>,
+}
+
+/// A peripheral register's name for reports: `IWDG.SR`, `SPI2.SR`, `RCC.CR`, or the
+/// peripheral and offset (`TIM2+0x010`).
+pub fn register_name(addr: u32) -> String {
+    const PERIPHERALS: [(u32, &str, &[&str]); 14] = [
+        (0x4000_0000, "TIM2", &[]),
+        (0x4000_0800, "TIM4", &[]),
+        (0x4000_3000, "IWDG", &["KR", "PR", "RLR", "SR"]),
+        (0x4000_3800, "SPI2", &["CR1", "CR2", "SR", "DR"]),
+        (0x4000_7000, "PWR", &["CR", "CSR"]),
+        (0x4001_1000, "USART1", &["SR", "DR", "BRR", "CR1", "CR2", "CR3"]),
+        (0x4001_2000, "ADC1", &["SR", "CR1", "CR2"]),
+        (0x4001_4000, "TIM9", &[]),
+        (0x4002_0000, "GPIOA", &[]),
+        (0x4002_0400, "GPIOB", &[]),
+        (0x4002_0800, "GPIOC", &[]),
+        (0x4002_3800, "RCC", &["CR", "PLLCFGR", "CFGR", "CIR"]),
+        (0x4002_3C00, "FLASH", &["ACR", "KEYR", "OPTKEYR", "SR", "CR"]),
+        (0xE004_2000, "DBGMCU", &["IDCODE", "CR", "APB1_FZ", "APB2_FZ"]),
+    ];
+    // RCC's registers past CIR are named only where a report needs them.
+    if addr == 0x4002_3874 {
+        return "RCC.CSR".into();
+    }
+    let (base, offset) = (addr & !0x3FF, addr & 0x3FF);
+    match PERIPHERALS.iter().find(|(b, _, _)| *b == base) {
+        Some((_, name, regs)) => match regs.get((offset / 4) as usize) {
+            Some(reg) if offset % 4 == 0 => format!("{name}.{reg}"),
+            _ => format!("{name}+{offset:#05x}"),
+        },
+        None => format!("{addr:#010x}"),
+    }
 }
 
 pub struct Board {
@@ -196,11 +232,20 @@ impl Board {
                 }
                 Ok(v)
             }
-            0x4000_3000 => match op {
-                // The IWDG runs from the LSI and has no enable bit in RCC.
-                Op::Read => self.iwdg.read(offset, now),
-                Op::Write(v) => self.iwdg.write(offset, v, now).map(|()| 0),
-            },
+            0x4000_3000 => {
+                // The IWDG runs on the LSI and has no enable bit in RCC; its start key forces
+                // the LSI on.
+                self.iwdg.set_lsi(self.rcc.lsi_ready_at());
+                let v = match op {
+                    Op::Read => self.iwdg.read(offset, now),
+                    Op::Write(v) => self.iwdg.write(offset, v, now).map(|()| 0),
+                }?;
+                if self.iwdg.is_started() {
+                    self.rcc.force_lsi_on(now);
+                    self.iwdg.set_lsi(self.rcc.lsi_ready_at());
+                }
+                Ok(v)
+            }
             0x4000_3800 => {
                 self.clock_check("SPI2", Apb1, 14)?;
                 let clocks = clocks?;
@@ -295,6 +340,7 @@ impl Peripherals for Board {
     fn read(&mut self, addr: u32, size: u32, now: Time) -> Result<u32, Unmodelled> {
         self.deliver_edges(now);
         let word = self.route(addr & !3, now, Op::Read)?;
+        self.records.last_read = Some((now, addr & !3, word));
         self.after_access(now)?;
         let lane = 8 * (addr & 3);
         let mask = if size >= 4 { u32::MAX } else { (1u32 << (8 * size)) - 1 };
@@ -349,6 +395,7 @@ impl Peripherals for Board {
         self.spi2.advance(now, clocks);
         self.usart1.advance(now, clocks);
         self.records.uart.extend(self.usart1.take_output());
+        self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         self.iwdg.advance(now);
         self.adc.advance(now, clocks);
         lines(periph::irq::TIM2, self.tim2.irq_line());

@@ -22,6 +22,8 @@ pub struct Image {
     /// Word 0 of the vector table.
     pub initial_sp: u32,
     pub symbols: HashMap<String, u32>,
+    /// Functions by address: (start, size, name), sorted, for naming a PC.
+    pub functions: Vec<(u32, u32, String)>,
     /// Flash bytes (vector table + text + rodata + data's load image), as `cargo size` adds them.
     pub flash_bytes: u32,
     /// Static RAM (data + bss + uninit).
@@ -61,13 +63,19 @@ impl Image {
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .ok_or_else(|| format!("{name}: vector table too short"))?;
         let mut symbols = HashMap::new();
+        let mut functions = Vec::new();
         for sym in elf.symbols() {
             if let Ok(n) = sym.name() {
                 if !n.is_empty() {
                     symbols.insert(n.to_string(), sym.address() as u32);
+                    if sym.kind() == object::SymbolKind::Text && sym.size() > 0 {
+                        // Thumb functions have bit 0 set in their symbol value.
+                        functions.push(((sym.address() as u32) & !1, sym.size() as u32, n.to_string()));
+                    }
                 }
             }
         }
+        functions.sort();
         let mut flash_bytes = 0u32;
         let mut ram_bytes = 0u32;
         for s in elf.sections() {
@@ -83,7 +91,15 @@ impl Image {
                 _ => {}
             }
         }
-        Ok(Image { path: path.to_path_buf(), segments, initial_sp, symbols, flash_bytes, ram_bytes })
+        Ok(Image { path: path.to_path_buf(), segments, initial_sp, symbols, functions, flash_bytes, ram_bytes })
+    }
+
+    /// The function containing `pc`, its Rust path readable (`fcu_firmware::watchdog::Watchdog::start`).
+    pub fn function_at(&self, pc: u32) -> Option<String> {
+        let pc = pc & !1;
+        let i = self.functions.partition_point(|&(start, _, _)| start <= pc).checked_sub(1)?;
+        let (start, size, name) = self.functions.get(i)?;
+        (pc < start + size).then(|| demangle(name))
     }
 
     pub fn symbol(&self, name: &str) -> Option<u32> {
@@ -96,5 +112,40 @@ impl Image {
         let mut found = self.symbols.iter().filter(|(n, _)| n.contains(part)).map(|(_, &a)| a);
         let first = found.next()?;
         found.all(|a| a == first).then_some(first)
+    }
+}
+
+/// A legacy-mangled Rust name (`_ZN` + length-prefixed segments + `E`) as a path, without the
+/// trailing hash; any other name as it is.
+fn demangle(name: &str) -> String {
+    let Some(mut rest) = name.strip_prefix("_ZN") else {
+        return name.to_string();
+    };
+    let mut parts = Vec::new();
+    while let Some(digits) = rest.find(|c: char| !c.is_ascii_digit()).filter(|&d| d > 0) {
+        let Ok(len) = rest[..digits].parse::<usize>() else { break };
+        let Some(segment) = rest.get(digits..digits + len) else { break };
+        parts.push(segment);
+        rest = &rest[digits + len..];
+    }
+    if parts.last().is_some_and(|p| p.len() == 17 && p.starts_with('h')) {
+        parts.pop();
+    }
+    if parts.is_empty() {
+        name.to_string()
+    } else {
+        parts.join("::")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn legacy_names_demangle_to_their_path() {
+        assert_eq!(
+            super::demangle("_ZN12fcu_firmware8watchdog8Watchdog5start17h0123456789abcdefE"),
+            "fcu_firmware::watchdog::Watchdog::start"
+        );
+        assert_eq!(super::demangle("TIM1_BRK_TIM9"), "TIM1_BRK_TIM9");
     }
 }

@@ -132,6 +132,23 @@ impl EmulatedBoard {
         self.t0.is_some()
     }
 
+    /// Where a boot that never started the control timer is stuck: the PC, its function, and
+    /// the register the code last read (a polling loop's register), with its value.
+    pub fn boot_stall(&self) -> String {
+        let pc = self.machine.pc();
+        let function = self.machine.image().function_at(pc).unwrap_or_else(|| "an unnamed function".into());
+        let register = match self.machine.board().records.last_read {
+            Some((at, addr, value)) => {
+                format!("last register read {} = {value:#010x} at {:.6} s", crate::board::register_name(addr), time_to_s(at))
+            }
+            None => "no register read".into(),
+        };
+        format!(
+            "the firmware never started its control timer: at {:.3} s the CPU is at PC {pc:#010x} in {function}; {register}",
+            time_to_s(self.machine.now())
+        )
+    }
+
     /// Emulated time of a scenario time.
     pub fn time_of(&self, t_s: f64) -> Time {
         self.t0.unwrap_or(0) + time_from_s(t_s)
@@ -206,7 +223,7 @@ impl FlightComputer for EmulatedBoard {
     }
 
     fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
-        let t0 = self.t0.ok_or_else(|| SimError::Computer("the firmware never started its control timer (see uart.log)".into()))?;
+        let t0 = self.t0.ok_or_else(|| SimError::Computer(format!("{} (see uart.log)", self.boot_stall())))?;
         {
             let board = self.machine.board_mut();
             board.spi2.sensors_mut().lsm6dsl.set_output(imu.gyro, imu.accel);

@@ -249,8 +249,11 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
         .filter(|t| (8.0..8.2).contains(t))
         .collect();
     let longest_gap_s = entries.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    // A missed tick is a 2.5 ms gap. A tick may start late by one burst of the capture
+    // interrupt (which outranks it) when a wrap reopens the muted pin: 16 edges of a few
+    // microseconds each, well under the 0.1 ms allowed here.
     assert!(
-        entries.len() >= 159 && longest_gap_s < 1.3e-3,
+        entries.len() >= 159 && longest_gap_s < 1.35e-3,
         "{} control ticks in the storm's 200 ms, longest gap {:.3} ms",
         entries.len(),
         longest_gap_s * 1e3
@@ -436,17 +439,35 @@ fn the_sensor_bus_is_clean_on_the_image() {
     assert_eq!(spi.contentions(), 0, "MCU and sensor drove the data line together");
     assert_eq!(spi.i2c_exposures(), exposures_at_boot, "a deselected sensor with I2C on saw SPI traffic after boot");
     assert_eq!(spi.overruns(), 0, "SPI receive overruns");
+    // The 3-wire end-of-read window (SPE cleared between one SCK after the second-to-last RXNE
+    // and the end of the last byte), at both ends.
+    assert_eq!(spi.early_stops(), 0, "SPE cleared within one SCK of the second-to-last RXNE: the last byte never came");
+    assert_eq!(spi.cut_frames(), 0, "SPE cleared after the last byte: an extra byte clocked as the chip select rose");
+    let bus_errors: Vec<Option<u64>> = b.statuses.iter().map(|(_, s)| s.counter("bus_errors")).collect();
+    assert!(!bus_errors.is_empty() && bus_errors.iter().all(|&n| n == Some(0)), "sensor reads that failed, by status line: {bus_errors:?}");
     let sensors = spi.sensors();
     assert_eq!(sensors.unexpected_writes(), 0, "writes to read-only or reserved sensor registers");
     assert!(sensors.lsm6dsl.reads() >= 4000, "the control task read the IMU {} times in 6 s", sensors.lsm6dsl.reads());
 }
 
-/// The independent watchdog's timeout as the image programs it (nominal 32 kHz LSI).
+/// The independent watchdog's timeout as the image programs it (nominal 32 kHz LSI), and the
+/// values it wrote actually in force: they land only once the LSI runs, which is off after
+/// reset, so a set-up that waits for them before starting the watchdog never finishes booting
+/// on silicon. The boot must reach the control tick, and the failure says where it is stuck.
 #[test]
-fn the_watchdog_times_out_after_50_ms() {
-    let b = boot(&BoardSetup::default());
-    let t = b.machine.board().iwdg.timeout_s().expect("the watchdog was not started at boot");
+fn the_boot_reaches_the_control_tick_with_the_lsi_off_at_reset_and_a_50_ms_watchdog() {
+    let setup = BoardSetup { boot_timeout_s: Some(1.5), ..BoardSetup::default() };
+    let mut b = boot(&setup);
+    assert!(b.flying(), "{}", b.boot_stall());
+    b.run_to(0.01).unwrap();
+    let now = b.machine.now();
+    let iwdg = &b.machine.board().iwdg;
+    let t = iwdg.timeout_s().expect("the watchdog was not started at boot");
     assert!((t - 0.050).abs() <= 0.001, "watchdog timeout {:.1} ms", t * 1e3);
+    let expiry = iwdg.next_event().expect("a started watchdog with its LSI running has an expiry");
+    // Fed by the last control tick (at most 1.25 ms ago): the 50 ms reload is in force, not the
+    // reset value's 512 ms.
+    assert!(expiry > now && expiry <= now + time_from_s(0.050), "watchdog expiry {:.1} ms ahead", (expiry - now) as f64 / 336e3);
 }
 
 /// Deterministic: the same image and inputs give byte-identical flight logs and UART output.

@@ -14,11 +14,21 @@
 //!   would go below 0, i.e. (value + 1) prescaled ticks after the reload (RM0368's min/max
 //!   timeout table: RL = 0 gives the minimum timeout of one tick, 0.125 ms at /4).
 //!
-//! Assumptions: LSI at its nominal 32 kHz (the datasheet allows 17–47 kHz); the option byte
-//! WDG_SW selects the software watchdog (the counter only runs after 0xCCCC); no debugger, so
-//! DBG_IWDG_STOP has no effect. When a PR update completes while the counter runs, the counter
-//! continues from its current value with the new prescaler from that instant (the partial tick is
-//! dropped: the prescaler's phase is not documented).
+//! - The watchdog runs on the LSI, which is off after reset (RCC_CSR.LSION = 0). The start key
+//!   forces the LSI on (RM0368 §17.3.2); the board tells the model when the oscillator is stable
+//!   ([`Iwdg::set_lsi`], from the RCC model's LSION/LSIRDY and its start-up time). While the LSI
+//!   is off nothing crosses into the watchdog's domain: PVU/RVU stay set and the counter does
+//!   not move. So a set-up that waits for SR = 0 before writing the start key, with the LSI not
+//!   turned on by software, spins for ever on silicon and here (RM0368 IWDG_SR note: after a
+//!   PR/RLR update it is not necessary to wait for PVU/RVU before going on; ST's own
+//!   `HAL_IWDG_Init` writes 0xCCCC first, "LSI is turned on automatically", then the values,
+//!   then polls SR with a time-out).
+//!
+//! Assumptions: LSI at its nominal 32 kHz once running (the datasheet allows 17–47 kHz); the
+//! option byte WDG_SW selects the software watchdog (the counter only runs after 0xCCCC); no
+//! debugger, so DBG_IWDG_STOP has no effect. When a PR update completes while the counter runs,
+//! the counter continues from its current value with the new prescaler from that instant (the
+//! partial tick is dropped: the prescaler's phase is not documented).
 //!
 //! Layout and reset values from the `stm32f4` 0.16 PAC (`stm32f401/iwdg/*.rs`).
 
@@ -66,9 +76,12 @@ pub struct Iwdg {
     /// PR and RLR as effective in the VDD domain.
     pr: u32,
     rlr: u32,
-    /// A PR / RLR write on its way: (value, completion time).
+    /// A PR / RLR write on its way: (value, time written). It lands [`UPDATE_TIME`] after
+    /// both the write and the LSI's start.
     pr_pending: Option<(u32, Time)>,
     rlr_pending: Option<(u32, Time)>,
+    /// When the LSI is stable (None: off).
+    lsi_ready_at: Option<Time>,
     started: bool,
     /// Counter value at `reference`, the time of the last reload (or rebase).
     counter: u32,
@@ -91,6 +104,7 @@ impl Iwdg {
             rlr: RLR_RESET,
             pr_pending: None,
             rlr_pending: None,
+            lsi_ready_at: None,
             started: false,
             counter: COUNTER_START,
             reference: 0,
@@ -101,6 +115,22 @@ impl Iwdg {
     /// Whether the watchdog has been started (KR = 0xCCCC).
     pub fn is_started(&self) -> bool {
         self.started
+    }
+
+    /// The LSI as the RCC has it: stable from `ready_at`, or off.
+    pub fn set_lsi(&mut self, ready_at: Option<Time>) {
+        self.lsi_ready_at = ready_at;
+    }
+
+    /// When a PR/RLR value written at `written` reaches the watchdog's domain (never while
+    /// the LSI is off).
+    fn lands_at(&self, written: Time) -> Option<Time> {
+        self.lsi_ready_at.map(|lsi| written.max(lsi) + UPDATE_TIME)
+    }
+
+    /// The counter's reference time: it cannot count before the LSI runs.
+    fn counting_from(&self) -> Option<Time> {
+        self.lsi_ready_at.map(|lsi| self.reference.max(lsi))
     }
 
     /// Writes to PR/RLR ignored because the registers were write-protected.
@@ -131,16 +161,16 @@ impl Iwdg {
 
     /// Completes PR/RLR updates due by `now`.
     pub fn advance(&mut self, now: Time) {
-        if let Some((value, done)) = self.rlr_pending {
-            if done <= now {
+        if let Some((value, written)) = self.rlr_pending {
+            if self.lands_at(written).is_some_and(|done| done <= now) {
                 self.rlr = value;
                 self.rlr_pending = None;
             }
         }
-        if let Some((value, done)) = self.pr_pending {
-            if done <= now {
-                if self.started && done > self.reference {
-                    let elapsed = (done - self.reference) / tick(self.pr);
+        if let Some((value, written)) = self.pr_pending {
+            if let Some(done) = self.lands_at(written).filter(|&done| done <= now) {
+                if let Some(from) = self.counting_from().filter(|&from| self.started && done > from) {
+                    let elapsed = (done - from) / tick(self.pr);
                     self.counter = self.counter.saturating_sub(u32::try_from(elapsed).unwrap_or(u32::MAX));
                     self.reference = done;
                 }
@@ -155,9 +185,9 @@ impl Iwdg {
             return None;
         }
         let mut counter = u64::from(self.counter);
-        let mut reference = self.reference;
+        let mut reference = self.counting_from()?;
         let mut pr = self.pr;
-        if let Some((new_pr, done)) = self.pr_pending {
+        if let Some((new_pr, done)) = self.pr_pending.and_then(|(v, written)| Some((v, self.lands_at(written)?))) {
             let old = reference + (counter + 1) * tick(pr);
             if old <= done {
                 return Some(old);
@@ -210,7 +240,7 @@ impl Iwdg {
                 } else if self.pr_pending.is_some() {
                     return Err(Unmodelled::new("IWDG.PR", "write while SR.PVU = 1 (RM0368: PVU must be reset to change the prescaler)"));
                 } else {
-                    self.pr_pending = Some((value, now + UPDATE_TIME));
+                    self.pr_pending = Some((value, now));
                 }
                 Ok(())
             }
@@ -224,7 +254,7 @@ impl Iwdg {
                         "write while SR.RVU = 1 (RM0368: RVU must be reset to change the reload value)",
                     ));
                 } else {
-                    self.rlr_pending = Some((value, now + UPDATE_TIME));
+                    self.rlr_pending = Some((value, now));
                 }
                 Ok(())
             }
@@ -248,6 +278,13 @@ mod tests {
         w.write(KR, KEY_START, t).unwrap();
     }
 
+    /// A watchdog whose LSI has been running since power-on (as if software set LSION).
+    fn running() -> Iwdg {
+        let mut w = Iwdg::new();
+        w.set_lsi(Some(0));
+        w
+    }
+
     #[test]
     fn reset_values_match_the_svd() {
         let mut w = Iwdg::new();
@@ -265,7 +302,7 @@ mod tests {
 
     #[test]
     fn writes_without_unlock_are_ignored() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(PR, 3, 0).unwrap();
         w.write(RLR, 10, 0).unwrap();
         assert_eq!(w.ignored_writes(), 2);
@@ -278,7 +315,7 @@ mod tests {
 
     #[test]
     fn pvu_and_rvu_are_busy_for_five_lsi_cycles() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(KR, KEY_UNLOCK, 0).unwrap();
         w.write(PR, 4, 0).unwrap();
         w.write(RLR, 100, 0).unwrap();
@@ -292,7 +329,7 @@ mod tests {
 
     #[test]
     fn first_period_after_start_counts_from_0xfff() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(KR, KEY_UNLOCK, 0).unwrap();
         w.write(PR, 0, 0).unwrap();
         w.write(RLR, 9, 0).unwrap();
@@ -309,7 +346,7 @@ mod tests {
 
     #[test]
     fn minimum_timeout_is_one_tick() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(KR, KEY_UNLOCK, 0).unwrap();
         w.write(RLR, 0, 0).unwrap();
         w.write(KR, KEY_START, UPDATE_TIME).unwrap();
@@ -320,7 +357,7 @@ mod tests {
 
     #[test]
     fn hal_50ms_setup_gives_56ms_after_the_first_feed() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         start_like_the_hal(&mut w, 0);
         // Until the prescaler update lands the counter runs at /4, then at /256 from 0xFFF - 1.
         let first = w.next_event().unwrap();
@@ -334,7 +371,7 @@ mod tests {
 
     #[test]
     fn the_watchdog_cannot_be_stopped() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(KR, KEY_START, 0).unwrap();
         for key in [KEY_UNLOCK, 0, KEY_START, 0xFFFF] {
             w.write(KR, key, 10).unwrap();
@@ -346,7 +383,7 @@ mod tests {
 
     #[test]
     fn advance_applies_a_prescaler_change_to_the_running_counter() {
-        let mut w = Iwdg::new();
+        let mut w = running();
         w.write(KR, KEY_START, 0).unwrap();
         w.write(KR, KEY_UNLOCK, 0).unwrap();
         w.write(PR, 1, 0).unwrap();
@@ -355,5 +392,53 @@ mod tests {
         assert_eq!(w.next_event(), Some(predicted), "prediction and lazy update agree");
         // 5 LSI cycles at /4 is one whole tick: 0xFFE left, then /8.
         assert_eq!(predicted, UPDATE_TIME + 0xFFF * 8 * LSI_CYCLE);
+    }
+
+    /// Rule (RM0368 §17.3.2 and the IWDG_SR note; libopencm3 and MicroPython hit it): with the
+    /// LSI off, as after reset, PR/RLR never land, so waiting for SR = 0 before the start key
+    /// spins for ever. The wrong sequence, played for a whole second.
+    #[test]
+    fn waiting_for_pvu_before_the_start_key_hangs_with_the_lsi_off() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(PR, 1, 0).unwrap();
+        w.write(RLR, 199, 0).unwrap();
+        let one_second = TIME_HZ;
+        for t in (0..one_second).step_by(LSI_CYCLE as usize) {
+            assert_eq!(w.read(SR, t), Ok(0b11), "PVU/RVU cleared at {t} with no LSI");
+        }
+        assert!(!w.is_started());
+        assert_eq!(w.read(PR, one_second), Ok(0), "the old prescaler stays");
+    }
+
+    /// ST's order (`HAL_IWDG_Init`): start key (the LSI starts), unlock, PR, RLR, then poll SR:
+    /// the values land 5 LSI cycles after the LSI is stable, and the counter only counts once
+    /// it runs.
+    #[test]
+    fn the_start_key_first_lets_the_values_land_once_the_lsi_runs() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_START, 0).unwrap();
+        // What the board does on the start key: the RCC forces the LSI on (40 µs start-up).
+        let lsi = TIME_HZ / 25_000;
+        w.set_lsi(Some(lsi));
+        w.write(KR, KEY_UNLOCK, 0).unwrap();
+        w.write(PR, 1, 0).unwrap();
+        w.write(RLR, 199, 0).unwrap();
+        assert_eq!(w.read(SR, lsi + UPDATE_TIME - 1), Ok(0b11));
+        assert_eq!(w.read(SR, lsi + UPDATE_TIME), Ok(0));
+        w.write(KR, KEY_RELOAD, lsi + UPDATE_TIME).unwrap();
+        assert_eq!(w.next_event(), Some(lsi + UPDATE_TIME + 200 * 8 * LSI_CYCLE), "50 ms after the reload");
+        assert!((w.timeout_s().unwrap() - 0.050).abs() < 1e-12);
+    }
+
+    /// The counter does not move while the LSI starts: the first period is counted from the
+    /// oscillator's start, not from the key.
+    #[test]
+    fn the_counter_waits_for_the_lsi() {
+        let mut w = Iwdg::new();
+        w.write(KR, KEY_START, 0).unwrap();
+        assert_eq!(w.next_event(), None, "no LSI yet: no expiry");
+        w.set_lsi(Some(1000));
+        assert_eq!(w.next_event(), Some(1000 + 4096 * 4 * LSI_CYCLE));
     }
 }

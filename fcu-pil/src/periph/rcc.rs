@@ -35,6 +35,9 @@ pub const HSI_STARTUP: Time = TIME_HZ / 250_000;
 /// Time from LSION to LSIRDY: the datasheet's maximum LSI start-up time, 40 µs.
 pub const LSI_STARTUP: Time = TIME_HZ / 25_000;
 
+/// A ready time that never comes (an oscillator that does not start).
+const NEVER: Time = Time::MAX / 4;
+
 /// Datasheet limits of the F401 (STM32F401xB/C datasheet, general operating conditions).
 pub const SYSCLK_MAX_HZ: u64 = 84_000_000;
 pub const PCLK1_MAX_HZ: u64 = 42_000_000;
@@ -155,6 +158,12 @@ pub struct Rcc {
     pll_on_at: Option<Time>,
     /// Time LSIRDY sets (None: LSI off).
     lsi_ready_at: Option<Time>,
+    /// CSR.LSION as software wrote it.
+    lsion: bool,
+    /// The IWDG has forced the LSI on (its start key): software can no longer stop it.
+    lsi_forced: bool,
+    /// A board whose HSE crystal never oscillates (a fault to inject): HSERDY never sets.
+    hse_dead: bool,
     pllcfgr: u32,
     /// CFGR without SWS.
     cfgr: u32,
@@ -186,6 +195,9 @@ impl Rcc {
             hse_ready_at: None,
             pll_on_at: None,
             lsi_ready_at: None,
+            lsion: false,
+            lsi_forced: false,
+            hse_dead: false,
             pllcfgr: PLLCFGR_RESET,
             cfgr: 0,
             sws: Source::Hsi,
@@ -205,9 +217,11 @@ impl Rcc {
     pub fn system_reset(&mut self) {
         let flags = self.reset_flags;
         let last = self.last;
+        let hse_dead = self.hse_dead;
         *self = Rcc::new();
         self.reset_flags = flags;
         self.last = last;
+        self.hse_dead = hse_dead;
         // The oscillator restarts at reset; the CPU only runs once HSI is ready.
         self.hsi_ready_at = Some(last);
     }
@@ -223,6 +237,33 @@ impl Rcc {
     /// Records a software reset (SYSRESETREQ) in CSR: SFTRSTF, and PINRSTF as for the watchdog.
     pub fn note_software_reset(&mut self) {
         self.reset_flags |= CSR_SFTRSTF | CSR_PINRSTF;
+    }
+
+    /// Makes the HSE crystal dead (a fault injected on the board): HSEON is accepted and
+    /// HSERDY never sets, as with a cracked crystal or a missing load capacitor. Survives
+    /// resets: it is the board's, not the chip's.
+    pub fn set_hse_dead(&mut self, dead: bool) {
+        self.hse_dead = dead;
+    }
+
+    /// When the LSI is (or will be) running and stable; `None` while it is off. The IWDG
+    /// counts on it and moves PR/RLR into its domain with it.
+    pub fn lsi_ready_at(&self) -> Option<Time> {
+        self.lsi_ready_at
+    }
+
+    /// The IWDG's start key forces the LSI on (RM0368 §17.3.2, "when the independent watchdog
+    /// is started by writing 0xCCCC in the key register, the LSI oscillator is forced on and
+    /// cannot be disabled"). LSION keeps what software wrote; LSIRDY follows the oscillator.
+    pub fn force_lsi_on(&mut self, now: Time) {
+        self.lsi_forced = true;
+        self.start_lsi(now);
+    }
+
+    fn start_lsi(&mut self, now: Time) {
+        if self.lsi_ready_at.is_none() {
+            self.lsi_ready_at = Some(now + LSI_STARTUP);
+        }
     }
 
     /// The reset flags of CSR (bits 31:25, in place).
@@ -255,7 +296,7 @@ impl Rcc {
         [self.hsi_ready_at, self.hse_ready_at, self.pll_ready_at(), self.lsi_ready_at]
             .into_iter()
             .flatten()
-            .filter(|&t| t > self.last)
+            .filter(|&t| t > self.last && t < NEVER)
             .min()
     }
 
@@ -335,7 +376,7 @@ impl Rcc {
             BDCR => 0,
             CSR => {
                 let mut v = self.reset_flags;
-                if self.lsi_ready_at.is_some() {
+                if self.lsion {
                     v |= CSR_LSION;
                 }
                 if self.lsi_ready_at.is_some_and(|t| t <= now) {
@@ -390,10 +431,11 @@ impl Rcc {
             BDCR => check_reset("RCC.BDCR", value, 1 << 1, 0)?,
             CSR => {
                 check_reset("RCC.CSR", value, CSR_FLAGS | CSR_RMVF | CSR_LSIRDY | CSR_LSION, 0)?;
-                if value & CSR_LSION == 0 {
+                self.lsion = value & CSR_LSION != 0;
+                if self.lsion || self.lsi_forced {
+                    self.start_lsi(now);
+                } else {
                     self.lsi_ready_at = None;
-                } else if self.lsi_ready_at.is_none() {
-                    self.lsi_ready_at = Some(now + LSI_STARTUP);
                 }
                 if value & CSR_RMVF != 0 {
                     self.reset_flags = 0;
@@ -489,7 +531,7 @@ impl Rcc {
                 self.hse_ready_at = None;
             }
         } else if value & CR_HSEON != 0 && self.hse_ready_at.is_none() {
-            self.hse_ready_at = Some(now + HSE_STARTUP);
+            self.hse_ready_at = Some(if self.hse_dead { NEVER } else { now + HSE_STARTUP });
         }
 
         if value & CR_PLLON != 0 && self.pll_on_at.is_none() {
@@ -800,6 +842,44 @@ mod tests {
         rcc.write(CSR, CSR_LSION, 100 * US).unwrap();
         assert_eq!(read(&mut rcc, CSR, 100 * US) & 0b11, CSR_LSION);
         assert_eq!(read(&mut rcc, CSR, 100 * US + LSI_STARTUP) & 0b11, CSR_LSION | CSR_LSIRDY);
+    }
+
+    /// Rule: the LSI is off after reset (CSR reset value 0x0E00_0000, LSION = 0); only LSION or
+    /// the IWDG's start key turn it on (RM0368 §6.2.5, §17.3.2).
+    #[test]
+    fn the_lsi_is_off_after_reset_and_the_watchdog_start_forces_it_on() {
+        let mut rcc = Rcc::new();
+        assert_eq!(read(&mut rcc, CSR, 10 * US) & 0b11, 0, "LSI off at power-on");
+        assert_eq!(rcc.lsi_ready_at(), None);
+        rcc.force_lsi_on(20 * US);
+        assert_eq!(rcc.lsi_ready_at(), Some(20 * US + LSI_STARTUP));
+        assert_eq!(read(&mut rcc, CSR, 20 * US + LSI_STARTUP) & 0b11, CSR_LSIRDY, "LSION keeps software's value");
+        // Software cannot stop a forced LSI.
+        rcc.write(CSR, 0, 30 * US + LSI_STARTUP).unwrap();
+        assert_eq!(rcc.lsi_ready_at(), Some(20 * US + LSI_STARTUP));
+        // A system reset stops it (the IWDG is reset too).
+        rcc.system_reset();
+        assert_eq!(rcc.lsi_ready_at(), None);
+        // Without the force, clearing LSION stops it.
+        rcc.write(CSR, CSR_LSION, 40 * US).unwrap();
+        rcc.write(CSR, 0, 50 * US).unwrap();
+        assert_eq!(rcc.lsi_ready_at(), None);
+    }
+
+    /// A dead crystal: HSEON is taken, HSERDY never comes, and neither does a PLL fed by it;
+    /// the HSI keeps the chip running.
+    #[test]
+    fn a_dead_crystal_never_sets_hserdy() {
+        let mut rcc = Rcc::new();
+        rcc.set_hse_dead(true);
+        rcc.write(CR, CR_RESET | CR_HSEON, 0).unwrap();
+        let much_later = 1000 * HSE_STARTUP;
+        assert_eq!(read(&mut rcc, CR, much_later) & (CR_HSEON | CR_HSERDY), CR_HSEON);
+        assert_eq!(rcc.next_event(), None, "no oscillator event ever comes");
+        rcc.system_reset();
+        rcc.write(CR, CR_RESET | CR_HSEON, much_later).unwrap();
+        assert_eq!(read(&mut rcc, CR, 2 * much_later) & CR_HSERDY, 0, "still dead after a reset");
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
     }
 
     #[test]

@@ -12,10 +12,17 @@
 //! - Receive-only master (BIDIMODE = 1 with BIDIOE = 0, or RXONLY = 1): "the master starts the
 //!   sequence immediately when both SPI is enabled and receive-only mode is activated. The clock
 //!   signal is provided by the master and it does not stop until either SPI or receive-only mode is
-//!   disabled" — it receives one frame every 8 SCK periods. Disabling (SPE = 0) stops the clock at
-//!   the end of the frame in flight, which is still received (the RM's "bidirectional receive-only"
-//!   disable procedure: wait for the second-to-last RXNE, then one SCK, then SPE = 0, then the last
-//!   RXNE).
+//!   disabled" — it receives one frame every 8 SCK periods. The RM's disable procedure for it
+//!   (RM0090 §28.3.8 "Disabling the SPI", the same block as the F401's): wait for the
+//!   second-to-last RXNE, then one SCK period, then SPE = 0, then the last RXNE. The window is
+//!   enforced at both ends:
+//!   - SPE cleared one SCK period or more into a frame: the clock stops at that frame's end, and
+//!     the frame is received (the last byte);
+//!   - SPE cleared less than one SCK period into a frame: the clock stops before that frame
+//!     starts: the last byte never comes ([`Spi2::early_stops`]), and a read waiting for its
+//!     RXNE times out;
+//!   - SPE cleared after the last wanted frame ended: the next frame has begun and is clocked
+//!     whole, an extra byte, overrunning the unread last one (OVR, [`Spi2::overruns`]).
 //! - OVR: "an overrun condition occurs when the master … completes the reception of the next data
 //!   frame while the read operation of the previous frame from the Rx buffer has not completed
 //!   (RXNE set). The Rx buffer is not updated … All other subsequently transmitted data are lost."
@@ -149,6 +156,8 @@ pub struct Spi2 {
     contentions: u32,
     i2c_exposures: [u32; 3],
     overruns: u32,
+    early_stops: u32,
+    cut_frames: u32,
     mode_errors: u32,
     truncated_writes: u32,
     frames: u64,
@@ -193,6 +202,8 @@ impl Spi2 {
             contentions: 0,
             i2c_exposures: [0; 3],
             overruns: 0,
+            early_stops: 0,
+            cut_frames: 0,
             mode_errors: 0,
             truncated_writes: 0,
             frames: 0,
@@ -216,6 +227,8 @@ impl Spi2 {
             contentions: self.contentions,
             i2c_exposures: self.i2c_exposures,
             overruns: self.overruns,
+            early_stops: self.early_stops,
+            cut_frames: self.cut_frames,
             mode_errors: self.mode_errors,
             truncated_writes: self.truncated_writes,
             frames: self.frames,
@@ -288,6 +301,10 @@ impl Spi2 {
         for (i, &low) in cs_low.iter().enumerate() {
             if low == self.cs_low[i] {
                 continue;
+            }
+            if !low && self.frame.is_some_and(|f| f.dir == Dir::Rx && f.epochs[i] == self.cs_epoch[i]) {
+                // Deselected while the receive clock still runs: a byte past the last one read.
+                self.cut_frames += 1;
             }
             self.cs_low[i] = low;
             self.cs_epoch[i] += 1;
@@ -593,6 +610,14 @@ impl Spi2 {
         }
 
         let old = self.cr1;
+        if Self::rx_clocking(old) && !Self::rx_clocking(value) {
+            let sck = self.sck_units();
+            if self.frame.is_some_and(|f| f.dir == Dir::Rx && now.saturating_sub(f.start) < sck) {
+                // Stopped within the frame's first SCK period: it is never clocked.
+                self.frame = None;
+                self.early_stops += 1;
+            }
+        }
         let drove = Self::mcu_drives(old);
         self.cr1 = value;
         let drives = Self::mcu_drives(value);
@@ -630,6 +655,19 @@ impl Spi2 {
     /// Received frames lost because RXNE or OVR was still set.
     pub fn overruns(&self) -> u32 {
         self.overruns
+    }
+
+    /// Receive-only clocking stopped less than one SCK period into a frame: a last byte that
+    /// never came (the end-of-read window's early side).
+    pub fn early_stops(&self) -> u32 {
+        self.early_stops
+    }
+
+    /// Receive frames still being clocked when their sensor's chip select went high: SPE was
+    /// cleared late, and an extra byte was clocked past the last one read (the end-of-read
+    /// window's late side, as a firmware that deselects right after its last byte shows it).
+    pub fn cut_frames(&self) -> u32 {
+        self.cut_frames
     }
 
     /// Frames exchanged with a selected sensor in SPI mode 1 or 2 (the sensors need 0 or 3).
@@ -876,6 +914,91 @@ mod tests {
         assert_eq!(fw.spi.read(DR, t + BYTE + 1, PLL).unwrap(), 0x6A);
         fw.spi.advance_to(t + 10 * BYTE);
         assert_eq!(fw.spi.frames(), 4, "0x12, 0x0C, the address, one received byte, no more");
+    }
+
+    /// A 12-byte receive (the IMU burst after its address) as the firmware does it: SPE
+    /// cleared `after` time units after the 11th RXNE is seen, then the last RXNE awaited and
+    /// read `read_delay` later. (bytes received, frames clocked in the receive, early stops,
+    /// overruns).
+    fn burst_stopped(after: Time, read_delay: Time) -> (Vec<u8>, u64, u32, u32) {
+        let mut fw = Fw::new();
+        fw.write_reg(0, 0x12, &[0x0C]);
+        fw.cs(0, true);
+        fw.send(&[0x22 | 0x80]);
+        let frames_before = fw.spi.frames();
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 & !CR1_BIDIOE);
+        let mut out = Vec::new();
+        for _ in 0..11 {
+            fw.wait(SR_RXNE, true);
+            out.push(fw.r(DR) as u8);
+        }
+        let seen = fw.t;
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, seen + after, PLL).unwrap();
+        fw.t = seen + after + read_delay;
+        for _ in 0..1000 {
+            if fw.r(SR) & SR_RXNE != 0 {
+                out.push(fw.r(DR) as u8);
+                break;
+            }
+        }
+        fw.spi.advance_to(fw.t + 10 * BYTE);
+        (out, fw.spi.frames() - frames_before, fw.spi.early_stops(), fw.spi.overruns())
+    }
+
+    /// Deselects right after reading the 12th byte of a burst whose SPE was cleared a byte
+    /// late: how many frames the chip select cut.
+    fn fw_cut_after_late_stop() -> u32 {
+        let mut fw = Fw::new();
+        fw.cs(0, true);
+        fw.send(&[0x22 | 0x80]);
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 & !CR1_BIDIOE);
+        for _ in 0..11 {
+            fw.wait(SR_RXNE, true);
+            fw.r(DR);
+        }
+        fw.t += BYTE + 200;
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 & !CR1_SPE);
+        fw.wait(SR_RXNE, true);
+        fw.r(DR);
+        fw.cs(0, false);
+        fw.spi.cut_frames()
+    }
+
+    /// Rule (RM0090 §28.3.8): after the second-to-last RXNE, wait one SCK period before
+    /// clearing SPE. The wrong sequence, clearing it at once, loses the last byte.
+    #[test]
+    fn clearing_spe_within_one_sck_of_the_second_to_last_rxne_loses_the_last_byte() {
+        let (bytes, frames, early, overruns) = burst_stopped(0, 0);
+        assert_eq!(bytes.len(), 11, "the 12th byte never comes");
+        assert_eq!((frames, early, overruns), (11, 1, 0));
+    }
+
+    /// Inside the window (one SCK period up to the end of the last byte) the read is whole
+    /// and the clock stops on its last byte.
+    #[test]
+    fn clearing_spe_inside_the_window_ends_the_read_on_its_last_byte() {
+        // The RXNE was seen up to one poll (8 units) after it rose: the window measured from
+        // the observation is [1 SCK, 1 byte - 1 poll).
+        for after in [128, 200, 600, BYTE - 16] {
+            let (bytes, frames, early, overruns) = burst_stopped(after, 0);
+            assert_eq!(bytes.len(), 12, "cleared {after} units after the 11th RXNE");
+            assert_eq!((frames, early, overruns), (12, 0, 0), "cleared {after} units after the 11th RXNE");
+        }
+    }
+
+    /// Cleared after the last byte ended: a 13th byte is clocked; read after it lands, the
+    /// 12th is overrun.
+    #[test]
+    fn clearing_spe_after_the_last_byte_clocks_an_extra_byte_and_overruns() {
+        let (bytes, frames, early, overruns) = burst_stopped(BYTE + 200, 0);
+        assert_eq!(bytes.len(), 12);
+        assert_eq!(fw_cut_after_late_stop(), 1, "deselected with the 13th byte in flight");
+        assert_eq!((frames, early, overruns), (13, 0, 0), "an extra byte clocked");
+        let (_, frames, _, overruns) = burst_stopped(BYTE + 200, BYTE);
+        assert_eq!((frames, overruns), (13, 1), "the extra byte overruns the unread last one");
     }
 
     #[test]
