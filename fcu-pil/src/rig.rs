@@ -34,6 +34,8 @@ pub struct BoardSetup {
     pub boot_timeout_s: Option<f64>,
     /// The drone's battery voltage during boot.
     pub boot_battery_v: f64,
+    /// The HSE crystal never starts (a cracked crystal).
+    pub hse_dead: bool,
 }
 
 /// A parsed UART line with the time its last byte left the UART.
@@ -101,6 +103,7 @@ impl EmulatedBoard {
         }
         board.spi2.sensors_mut().lsm6dsl.set_output(imu_at_rest.gyro, imu_at_rest.accel);
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
+        board.rcc.set_hse_dead(setup.hse_dead);
         let machine = Machine::new(image, board)?;
         let mut b = EmulatedBoard {
             machine,

@@ -191,6 +191,31 @@ fn a_wrong_who_am_i_keeps_the_drone_on_the_ground() {
     assert!(dark_blinks >= 2, "LED1 never blinked the sensor's count: {leds:?}");
 }
 
+/// A dead HSE crystal: the boot's wait for it is bounded, the board runs on the HSI, says so
+/// on the UART and with its LED code (4 blinks), and never starts the control tick: not a
+/// dark, silent board.
+#[test]
+fn a_dead_crystal_keeps_the_drone_on_the_ground_and_says_so() {
+    let setup = BoardSetup { hse_dead: true, boot_timeout_s: Some(7.0), ..BoardSetup::default() };
+    let b = boot(&setup);
+    assert!(!b.flying(), "the control timer started without the crystal");
+    let fatal: Vec<_> = b.lines.iter().filter(|l| matches!(l.line, Line::Fatal(_))).collect();
+    assert!(fatal.len() >= 2, "the FATAL line should repeat; UART:\n{}", b.uart_text());
+    assert!(fatal[0].text.starts_with("FATAL clock HSE crystal did not start"), "{}", fatal[0].text);
+    let board = b.machine.board();
+    assert_eq!(board.rcc.clocks().unwrap().sysclk_hz, 84_000_000, "the PLL runs from the HSI");
+    let leds = &board.records.leds;
+    // One whole fault cycle, once the pattern runs: a periodic pattern has its count in it.
+    let cycle_s = f64::from(fcu_core::telemetry::FAULT_CYCLE_MS) / 1000.0;
+    let last_cycle: Vec<_> =
+        leds.iter().filter(|&&(t, _, _)| (7.0 - cycle_s - 0.01..7.0 - 0.01).contains(&fcu_pil::periph::time_to_s(t))).collect();
+    let dark_blinks = last_cycle.iter().filter(|&&&(_, led1, _)| !led1).count();
+    assert_eq!(dark_blinks, 4, "LED1 should go dark 4 times per fault cycle: {last_cycle:?}");
+    let mut b = b;
+    let now = b.machine.now();
+    assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4]);
+}
+
 fn fly_and_inject(
     name: &str,
     at_s: f64,
@@ -498,4 +523,20 @@ fn the_esc_build_sends_the_idle_pulse_from_boot() {
     let now = b.machine.now();
     assert_eq!(b.machine.board_mut().motor_compares(now), [850; 4], "idle pulse during boot");
     assert_eq!(b.machine.board().tim4.period_counts(), 2076, "TIM4 at 400 Hz (ARR 2075)");
+}
+
+/// The model holds the line against the boot hang it was written to catch: an image built
+/// before the watchdog fix (commit 1d0c6b4, debug info stripped), which waits for PVU/RVU
+/// before writing the start key, never reaches the control tick, and the report names the
+/// register it spins on.
+#[test]
+fn an_image_that_waits_for_pvu_before_starting_the_watchdog_hangs_at_iwdg_sr() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/watchdog-pvu-before-start.elf");
+    let image = Image::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let setup = BoardSetup { boot_timeout_s: Some(1.2), ..BoardSetup::default() };
+    let b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap_or_else(|e| panic!("boot: {e}"));
+    assert!(!b.flying(), "the old image started its control tick");
+    let stall = b.boot_stall();
+    assert!(stall.contains("IWDG.SR = 0x00000003") && stall.contains("__rtic_init_resources"), "{stall}");
+    assert!(!b.machine.board().iwdg.is_started(), "{stall}");
 }
