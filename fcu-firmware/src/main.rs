@@ -97,7 +97,7 @@ mod app {
     use stm32f4xx_hal::adc::{config::AdcConfig, config::SampleTime, Adc};
     use stm32f4xx_hal::gpio::{Analog, Output, PB1, PB4, PB5};
     use stm32f4xx_hal::pac::{ADC1, USART1};
-    use stm32f4xx_hal::serial::{Tx, TxListen};
+    use stm32f4xx_hal::serial::{Tx, TxISR, TxListen};
 
     /// Bytes of telemetry waiting for the UART: about 90 ms of output at 115200 baud, enough
     /// for a status line and a debug line together.
@@ -145,10 +145,17 @@ mod app {
         }
 
         fn on_tx_empty(&mut self) {
+            // The interrupt may come back with TXE already clear (a late-cleared pending bit,
+            // or a queue refilled meanwhile): a byte is taken from the queue only when the
+            // data register can hold it, so none is lost uncounted.
+            if !self.tx.is_tx_empty() {
+                return;
+            }
             match self.queue.pop_front() {
                 Some(b) => {
-                    // TXE is set (this is its interrupt), so the write cannot block.
-                    let _accepted = embedded_hal_nb::serial::Write::write(&mut self.tx, b);
+                    if embedded_hal_nb::serial::Write::write(&mut self.tx, b).is_err() {
+                        self.dropped_bytes = self.dropped_bytes.saturating_add(1);
+                    }
                 }
                 None => self.tx.unlisten(),
             }
