@@ -83,7 +83,7 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
-    use crate::sensor_bus::SensorBus;
+    use crate::sensor_bus::{BusError, SensorBus, BURST_BYTES};
     use crate::timers::{Motors, RcCapture, TickTimer};
     use crate::watchdog::Watchdog;
     use crate::Mono;
@@ -108,8 +108,9 @@ mod app {
     const BATTERY_EVERY_PERIODS: u32 = 10;
     /// How often a fatal boot fault is repeated on the UART.
     const FAULT_REPEAT_MS: u32 = 2000;
-    /// SPI2 clock: 42 MHz / 16, the reference's 2.625 MHz.
-    const SENSOR_SPI_HZ: u32 = 2_625_000;
+    /// How long the control tick waits for the IMU burst (20 µs at 5.25 MHz) before it
+    /// ticks without a sample: 100 µs of the 84 MHz cycle counter.
+    const BURST_WAIT_CYCLES: u32 = 8_400;
     const UART_BAUD: u32 = 115_200;
     const SYSCLK_HZ: u32 = 84_000_000;
     const HSE_HZ: u32 = 16_000_000;
@@ -184,13 +185,16 @@ mod app {
         battery_mv: u32,
         /// Radio pins muted for an edge storm since boot (`RcCapture::take_edges`).
         radio_mutes: u32,
+        /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
+        bus: SensorBus,
+        /// The IMU burst the SPI2 interrupt finished, for the control tick to take.
+        burst: Option<Result<[u8; BURST_BYTES], BusError>>,
     }
 
     #[local]
     struct Local {
         capture: RcCapture,
         tick_timer: TickTimer,
-        bus: SensorBus,
         inner: ControlTick,
         outer: OuterStep,
         motors: Motors,
@@ -262,7 +266,7 @@ mod app {
             dp.SPI2,
             (Some(sck), Some(sda)),
             spi::Mode { polarity: spi::Polarity::IdleHigh, phase: spi::Phase::CaptureOnSecondTransition },
-            SENSOR_SPI_HZ.Hz(),
+            crate::sensor_bus::SPI_HZ.Hz(),
             &mut rcc,
         );
         let (spi2, _sensor_pins) = spi2.release();
@@ -311,8 +315,8 @@ mod app {
         }
 
         (
-            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0 },
-            Local { capture, tick_timer, bus, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
+            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus, burst: None },
+            Local { capture, tick_timer, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
         )
     }
 
@@ -418,25 +422,53 @@ mod app {
         }
     }
 
+    /// The IMU burst, one byte per interrupt, at the highest priority: the 3-wire end-of-read
+    /// window is met from this entry, and nothing polls the bus with interrupts masked.
+    #[task(binds = SPI2, priority = 5, shared = [bus, burst])]
+    fn sensor_rx(mut cx: sensor_rx::Context) {
+        if let Some(done) = cx.shared.bus.lock(SensorBus::on_rx_not_empty) {
+            cx.shared.burst.lock(|slot| *slot = Some(done));
+        }
+    }
+
+    /// Waits for the burst the SPI2 interrupt receives (the radio's and the bus's interrupts
+    /// run meanwhile); a burst that does not come in time is abandoned.
+    fn wait_for_burst(
+        bus: &mut impl rtic::Mutex<T = SensorBus>,
+        burst: &mut impl rtic::Mutex<T = Option<Result<[u8; BURST_BYTES], BusError>>>,
+    ) -> Result<[u8; BURST_BYTES], BusError> {
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        loop {
+            if let Some(done) = burst.lock(Option::take) {
+                return done;
+            }
+            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > BURST_WAIT_CYCLES {
+                bus.lock(SensorBus::abandon_burst);
+                return Err(BusError::Timeout);
+            }
+        }
+    }
+
     /// The control tick: IMU burst → `ControlTick::tick` → TIM4; the outer step when due.
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [decoder, outer_result],
-        local = [tick_timer, bus, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
+        shared = [decoder, outer_result, bus, burst],
+        local = [tick_timer, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
     )]
     fn control(mut cx: control::Context) {
         cx.local.tick_timer.clear_update();
         let inner = cx.local.inner;
 
+        let started = cx.shared.bus.lock(|bus| bus.start_burst(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G));
         if let Some(result) = cx.shared.outer_result.lock(Option::take) {
             inner.apply_outer(&result);
         }
         let pulses = cx.shared.decoder.lock(|decoder| decoder.take());
 
-        let mut burst = [0u8; lsm6dsl::BURST_LEN];
-        let out = match cx.local.bus.read(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G, &mut burst) {
-            Ok(()) => inner.tick(registers::decode_lsm6dsl_burst(&burst), &pulses),
+        let sample = started.and_then(|()| wait_for_burst(&mut cx.shared.bus, &mut cx.shared.burst));
+        let out = match sample {
+            Ok(burst) => inner.tick(registers::decode_lsm6dsl_burst(&burst), &pulses),
             Err(_) => {
                 // The core decides what a missing sample means (a short gap is bridged, a dead
                 // bus latches a fault and stops the motors).

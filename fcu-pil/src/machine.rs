@@ -916,6 +916,15 @@ fn mmio_read<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u3
     }
 }
 
+/// Brings the emulation's deadline forward to the models' next event, if an access made it
+/// sooner.
+fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
+    let now = st.now;
+    if let Some(t) = [st.board.next_event(), st.scs.next_event(now)].into_iter().flatten().filter(|&t| t > now).min() {
+        st.deadline = st.deadline.min(t);
+    }
+}
+
 fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32, value: u32) {
     let st = uc.get_data_mut();
     let now = st.now;
@@ -937,6 +946,10 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     };
     match result {
         Ok(()) => {
+            // A write may bring a model's next event closer (an interrupt enable set while a
+            // byte is shifting): the emulation must stop for it, not at the deadline set
+            // before the write.
+            pull_deadline(st);
             // A write may raise an interrupt line (an enable bit set while its flag is up):
             // sample the lines now; the next block hook takes the interrupt if it can.
             let mut lines = Vec::new();
