@@ -92,6 +92,8 @@ mod app {
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::EdgeDecoder;
     use fcu_core::telemetry::{self as tlm, FirmwareCounters, LedPattern, LineBuf, Reporter};
+    use crate::timers::Edge;
+    use heapless::spsc::{Consumer, Producer, Queue};
     use heapless::Deque;
     use rtic_monotonics::systick::prelude::*;
     use stm32f4xx_hal::adc::{config::AdcConfig, config::SampleTime, Adc};
@@ -178,7 +180,6 @@ mod app {
 
     #[shared]
     struct Shared {
-        decoder: EdgeDecoder,
         outer_result: Option<OuterResult>,
         uart: UartOut,
         led_pattern: LedPattern,
@@ -187,13 +188,15 @@ mod app {
         radio_mutes: u32,
         /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
         bus: SensorBus,
-        /// The IMU burst the SPI2 interrupt finished, for the control tick to take.
-        burst: Option<Result<[u8; BURST_BYTES], BusError>>,
     }
 
     #[local]
     struct Local {
         capture: RcCapture,
+        /// Captured edges, from the capture interrupt to the control tick's decoder.
+        edges_out: Producer<'static, Edge>,
+        edges_in: Consumer<'static, Edge>,
+        decoder: EdgeDecoder,
         tick_timer: TickTimer,
         inner: ControlTick,
         outer: OuterStep,
@@ -205,7 +208,11 @@ mod app {
         reporter: Reporter,
     }
 
-    #[init]
+    /// Edges the capture may queue between two control ticks: its budget allows 4 × 16 per
+    /// 8.192 ms capture wrap, all of which could fall in one 1.25 ms tick; the queue holds 127.
+    const EDGE_QUEUE: usize = 128;
+
+    #[init(local = [edge_queue: Queue<Edge, EDGE_QUEUE> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         // The HAL prelude lives only here: its fugit 0.3 `.millis()` clashes with the
         // monotonic's fugit 0.6 used by the tasks.
@@ -292,6 +299,7 @@ mod app {
             Err(e) => halt(&mut leds, Some(&mut uart.tx), e.field()),
         };
         let decoder = fc.edge_decoder();
+        let (edges_out, edges_in) = cx.local.edge_queue.split();
         let (inner, outer) = fc.into_parts();
 
         // Armed only once the sensors answered: from here a control tick that does not
@@ -315,8 +323,8 @@ mod app {
         }
 
         (
-            Shared { decoder, outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus, burst: None },
-            Local { capture, tick_timer, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
+            Shared { outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus },
+            Local { capture, edges_out, edges_in, decoder, tick_timer, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
         )
     }
 
@@ -407,16 +415,22 @@ mod app {
         who_am_i
     }
 
-    /// Radio capture: timestamps and pin levels into the core's decoder, nothing else (and a
-    /// count of the pins the capture muted for an edge storm, for the status line).
-    #[task(binds = TIM2, priority = 4, shared = [decoder, radio_mutes], local = [capture])]
+    /// Radio capture: timestamps and pin levels queued for the control tick's decoder,
+    /// nothing else (and a count of the pins the capture muted for an edge storm, for the
+    /// status line). Kept short, as it outranks the tick: an edge that comes while it runs
+    /// waits for it (the hardware has latched its time meanwhile).
+    #[task(binds = TIM2, priority = 4, shared = [radio_mutes], local = [capture, edges_out])]
     fn rc_capture(mut cx: rc_capture::Context) {
-        let (edges, muted) = cx.local.capture.take_edges();
-        cx.shared.decoder.lock(|decoder| {
-            for edge in edges.into_iter().flatten() {
-                decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
+        let edges_out = cx.local.edges_out;
+        let mut lost = 0u32;
+        let mut muted = cx.local.capture.take_edges(|edge| {
+            if edges_out.enqueue(edge).is_err() {
+                lost += 1;
             }
         });
+        // A full queue is not reachable within the capture's edge budget; an edge lost there
+        // is the same to the core as a muted pin's, and counted with them.
+        muted = muted.saturating_add(lost);
         if muted > 0 {
             cx.shared.radio_mutes.lock(|n| *n = n.saturating_add(muted));
         }
@@ -424,22 +438,17 @@ mod app {
 
     /// The IMU burst, one byte per interrupt, at the highest priority: the 3-wire end-of-read
     /// window is met from this entry, and nothing polls the bus with interrupts masked.
-    #[task(binds = SPI2, priority = 5, shared = [bus, burst])]
+    #[task(binds = SPI2, priority = 5, shared = [bus])]
     fn sensor_rx(mut cx: sensor_rx::Context) {
-        if let Some(done) = cx.shared.bus.lock(SensorBus::on_rx_not_empty) {
-            cx.shared.burst.lock(|slot| *slot = Some(done));
-        }
+        cx.shared.bus.lock(SensorBus::on_rx_not_empty);
     }
 
     /// Waits for the burst the SPI2 interrupt receives (the radio's and the bus's interrupts
     /// run meanwhile); a burst that does not come in time is abandoned.
-    fn wait_for_burst(
-        bus: &mut impl rtic::Mutex<T = SensorBus>,
-        burst: &mut impl rtic::Mutex<T = Option<Result<[u8; BURST_BYTES], BusError>>>,
-    ) -> Result<[u8; BURST_BYTES], BusError> {
+    fn wait_for_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<[u8; BURST_BYTES], BusError> {
         let start = cortex_m::peripheral::DWT::cycle_count();
         loop {
-            if let Some(done) = burst.lock(Option::take) {
+            if let Some(done) = bus.lock(SensorBus::take_burst) {
                 return done;
             }
             if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > BURST_WAIT_CYCLES {
@@ -453,20 +462,34 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [decoder, outer_result, bus, burst],
-        local = [tick_timer, inner, motors, watchdog, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
+        shared = [outer_result, bus],
+        local = [tick_timer, edges_in, decoder, inner, motors, watchdog, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
     )]
     fn control(mut cx: control::Context) {
-        cx.local.tick_timer.clear_update();
+        let events = cx.local.tick_timer.take_events();
+        if events.read_due {
+            // A lead before the tick: the burst's bytes arrive by interrupt meanwhile.
+            *cx.local.burst_started = cx.shared.bus.lock(|bus| bus.start_burst(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G)).is_ok();
+        }
+        if !events.tick_due {
+            return;
+        }
         let inner = cx.local.inner;
 
-        let started = cx.shared.bus.lock(|bus| bus.start_burst(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G));
         if let Some(result) = cx.shared.outer_result.lock(Option::take) {
             inner.apply_outer(&result);
         }
-        let pulses = cx.shared.decoder.lock(|decoder| decoder.take());
+        let decoder = cx.local.decoder;
+        while let Some(edge) = cx.local.edges_in.dequeue() {
+            decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
+        }
+        let pulses = decoder.take();
 
-        let sample = started.and_then(|()| wait_for_burst(&mut cx.shared.bus, &mut cx.shared.burst));
+        let sample = if core::mem::take(cx.local.burst_started) {
+            wait_for_burst(&mut cx.shared.bus)
+        } else {
+            Err(BusError::Timeout)
+        };
         let out = match sample {
             Ok(burst) => inner.tick(registers::decode_lsm6dsl_burst(&burst), &pulses),
             Err(_) => {

@@ -46,7 +46,7 @@ pub struct SensorBus {
     spi: SPI2,
     /// Chip selects in `Sensor::ALL` order (PA8 LSM6DSL, PB12 LIS2MDL, PC13 LPS22HB), idle high.
     cs: [AnyPin<Output>; 3],
-    /// The burst being received byte by byte by the SPI2 interrupt, if any.
+    /// The burst being received byte by byte by the SPI2 interrupt, until taken.
     burst: Option<Burst>,
 }
 
@@ -181,6 +181,11 @@ impl SensorBus {
         if self.burst.is_some() {
             self.abandon_burst();
         }
+        if self.spi.cr1().read().bidioe().bit_is_clear() {
+            // The last burst left the line in receive: the MCU drives it again, the sensor
+            // having let go when it was deselected.
+            self.back_to_tx()?;
+        }
         self.select(sensor, true);
         if let Err(e) = self.send(read_address(addr)).and_then(|()| self.finish_tx()) {
             self.select(sensor, false);
@@ -197,16 +202,17 @@ impl SensorBus {
         Ok(())
     }
 
-    /// The SPI2 receive interrupt: takes one byte of the burst. Returns the burst once its
-    /// last byte is in (the bus is then back to transmitting, the sensor deselected). Runs
-    /// at the highest priority, so the end-of-read window (see [`STOP_AFTER_CYCLES`]) is met
-    /// from its entry without masking anything.
-    pub fn on_rx_not_empty(&mut self) -> Option<Result<[u8; BURST_BYTES], BusError>> {
+    /// The SPI2 receive interrupt: takes one byte of the burst. Runs at the highest priority,
+    /// so the end-of-read window (see [`STOP_AFTER_CYCLES`]) is met from its entry without
+    /// masking anything; kept short, as it delays the radio's capture interrupt. After the
+    /// last byte the burst waits, its sensor still selected with the clock stopped, for
+    /// [`SensorBus::take_burst`].
+    pub fn on_rx_not_empty(&mut self) {
         let seen = cortex_m::peripheral::DWT::cycle_count();
         let byte = self.spi.dr().read().dr().bits() as u8;
         let Some(burst) = self.burst.as_mut() else {
             // A byte clocked past a burst's end: nothing waits for it.
-            return None;
+            return;
         };
         if let Some(slot) = burst.bytes.get_mut(burst.received) {
             *slot = byte;
@@ -216,17 +222,19 @@ impl SensorBus {
             // The last byte started with this RXNE: stop the clock during it.
             while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(seen) < STOP_AFTER_CYCLES {}
             self.spi.cr1().modify(|_, w| w.spe().clear_bit());
-            return None;
+        } else if burst.received == BURST_BYTES {
+            self.spi.cr2().modify(|_, w| w.rxneie().clear_bit());
         }
-        if burst.received < BURST_BYTES {
-            return None;
-        }
-        let done = self.burst.take()?;
+    }
+
+    /// The burst the interrupt finished (once), its sensor deselected; `None` while it runs.
+    pub fn take_burst(&mut self) -> Option<Result<[u8; BURST_BYTES], BusError>> {
+        let done = self.burst.as_ref().filter(|b| b.received >= BURST_BYTES)?;
+        let (sensor, bytes) = (done.sensor, done.bytes);
+        self.burst = None;
         let overrun = self.spi.sr().read().ovr().bit_is_set();
-        self.select(done.sensor, false);
-        self.spi.cr2().modify(|_, w| w.rxneie().clear_bit());
-        let turned = self.back_to_tx();
-        Some(if overrun { Err(BusError::Overrun) } else { turned.map(|()| done.bytes) })
+        self.select(sensor, false);
+        Some(if overrun { Err(BusError::Overrun) } else { Ok(bytes) })
     }
 
     /// Stops a burst that did not finish: clock off, sensor deselected, bus back to transmit.

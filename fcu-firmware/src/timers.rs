@@ -82,14 +82,16 @@ impl RcCapture {
         RcCapture { tim, pins, edges_in_window: [0; CHANNELS] }
     }
 
-    /// The edges captured since the last call, one per channel at most. Reading CCRx clears
-    /// its flag. An over-capture (a second edge before the first was read) cannot happen
-    /// with RC pulses of 0.8 ms or more, and would only lose one width that the core rejects.
+    /// Hands each edge captured since the last call to `sink`, one per channel at most.
+    /// Reading CCRx clears its flag. An over-capture (a second edge before the first was
+    /// read) cannot happen with RC pulses of 0.8 ms or more, and would only lose one width
+    /// that the core rejects.
     ///
     /// A channel that has used its [`EDGE_BUDGET_PER_WRAP`] has its interrupt turned off here
-    /// (the second value: how many were, this time); the next wrap (this same interrupt, UIF)
-    /// turns it back on, dropping what it captured meanwhile.
-    pub fn take_edges(&mut self) -> ([Option<Edge>; CHANNELS], u32) {
+    /// (returned: how many were, this time); the next wrap (this same interrupt, UIF) turns it
+    /// back on, dropping what it captured meanwhile. Runs in the capture interrupt, which
+    /// outranks the control tick: short and straight.
+    pub fn take_edges(&mut self, mut sink: impl FnMut(Edge)) -> u32 {
         let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
@@ -97,27 +99,38 @@ impl RcCapture {
             sr = self.tim.sr().read();
         }
         let enabled = self.capture_interrupts();
-        let levels = [self.pins.0.is_high(), self.pins.1.is_high(), self.pins.2.is_high(), self.pins.3.is_high()];
-        let mut edges = [None; CHANNELS];
-        let mut muted = [false; CHANNELS];
-        for (channel, (edge, level_high)) in edges.iter_mut().zip(levels).enumerate() {
-            if enabled[channel] && sr.ccif(channel as u8).bit_is_set() {
-                let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
-                *edge = Some(Edge { channel, capture_counts, level_high });
-                let count = &mut self.edges_in_window[channel];
+        let mut muting = false;
+        let mut muted = 0;
+        for channel in 0..CHANNELS {
+            if !(enabled[channel] && sr.ccif(channel as u8).bit_is_set()) {
+                continue;
+            }
+            let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
+            let level_high = match channel {
+                0 => self.pins.0.is_high(),
+                1 => self.pins.1.is_high(),
+                2 => self.pins.2.is_high(),
+                _ => self.pins.3.is_high(),
+            };
+            sink(Edge { channel, capture_counts, level_high });
+            if let Some(count) = self.edges_in_window.get_mut(channel) {
                 *count = count.saturating_add(1);
-                muted[channel] = *count >= EDGE_BUDGET_PER_WRAP;
+                if *count == EDGE_BUDGET_PER_WRAP {
+                    muting = true;
+                    muted += 1;
+                }
             }
         }
-        if muted.contains(&true) {
+        if muting {
             // DIER is written by this interrupt alone after init: no other writer to race.
             // (Each channel's bit by name: the indexed accessor carries a bounds check.)
-            let on = |n: usize| enabled[n] && !muted[n];
-            self.tim.dier().modify(|_, w| w.cc1ie().bit(on(0)).cc2ie().bit(on(1)).cc3ie().bit(on(2)).cc4ie().bit(on(3)));
+            let on = |n: usize| self.edges_in_window.get(n).is_some_and(|&c| c < EDGE_BUDGET_PER_WRAP) && enabled[n];
+            let (on0, on1, on2, on3) = (on(0), on(1), on(2), on(3));
+            self.tim.dier().modify(|_, w| w.cc1ie().bit(on0).cc2ie().bit(on1).cc3ie().bit(on2).cc4ie().bit(on3));
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
-        (edges, muted.iter().map(|&m| u32::from(m)).sum())
+        muted
     }
 
     /// A new capture wrap: every channel gets its budget back. A channel that was muted
@@ -184,7 +197,22 @@ impl Motors {
     }
 }
 
-/// TIM9 update interrupt: the control tick.
+/// How long before each control tick the IMU burst starts: the burst takes about 22 µs
+/// (address and 12 bytes at 5.25 MHz, with its interrupts), so its sample is in when the tick
+/// starts, 18 µs old, and the tick goes straight to the control law.
+pub const SENSOR_READ_LEAD_CYCLES: u32 = 40 * 84;
+
+/// What a TIM9 interrupt is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TickEvents {
+    /// CC1: the IMU burst for the coming tick is due.
+    pub read_due: bool,
+    /// Update: the control tick.
+    pub tick_due: bool,
+}
+
+/// TIM9: its update interrupt is the control tick; its channel 1 compare, a fixed lead
+/// before each update, starts the tick's sensor read.
 pub struct TickTimer {
     tim: TIM9,
 }
@@ -196,11 +224,16 @@ impl TickTimer {
         TIM9::reset(rcc);
         tim.psc().write(|w| w.psc().set(psc));
         tim.arr().write(|w| w.arr().set(arr));
+        // Channel 1 frozen (an output compare driving no pin), matching the lead before the
+        // update; preload off: the value is written once, before the timer runs.
+        let lead_counts = SENSOR_READ_LEAD_CYCLES.div_ceil(u32::from(psc) + 1);
+        let read_at = (u32::from(arr) + 1).saturating_sub(lead_counts);
+        tim.ccr1().write(|w| w.ccr().set(read_at as u16));
         // Load PSC/ARR now; URS keeps this forced update from raising the interrupt.
         tim.cr1().write(|w| w.urs().set_bit());
         tim.egr().write(|w| w.ug().set_bit());
-        tim.sr().write(|w| w.uif().clear_bit());
-        tim.dier().write(|w| w.uie().set_bit());
+        tim.sr().write(|w| w.uif().clear_bit().cc1if().clear_bit());
+        tim.dier().write(|w| w.uie().set_bit().cc1ie().set_bit());
         TickTimer { tim }
     }
 
@@ -208,7 +241,12 @@ impl TickTimer {
         self.tim.cr1().modify(|_, w| w.cen().set_bit());
     }
 
-    pub fn clear_update(&mut self) {
-        self.tim.sr().write(|w| w.uif().clear_bit());
+    /// Which of the interrupt's events are pending, each cleared (rc_w0: a 0 clears, a 1
+    /// leaves the flag alone, so a flag rising meanwhile is not lost).
+    pub fn take_events(&mut self) -> TickEvents {
+        let sr = self.tim.sr().read();
+        let events = TickEvents { read_due: sr.cc1if().bit_is_set(), tick_due: sr.uif().bit_is_set() };
+        self.tim.sr().write(|w| w.uif().bit(!events.tick_due).cc1if().bit(!events.read_due));
+        events
     }
 }

@@ -311,6 +311,48 @@ impl Timer {
         }
     }
 
+    /// Output compare (RM0368 §13.3.8, §14.3.9): the counter reaching CCRx sets CCxIF,
+    /// whatever OCxM says (frozen included). Counts from `from` (exclusive) to `to`
+    /// (inclusive) within one period.
+    fn note_compare_matches(&mut self, from: u32, to: u32) {
+        for c in 0..self.kind.channels() {
+            let ccr = self.ccr_active[c];
+            if self.is_output(c) && ccr > from && ccr <= to {
+                self.sr |= sr_ccif(c);
+            }
+        }
+    }
+
+    /// The counter wrapped to 0: a compare value of 0 matches there.
+    fn note_compare_match_at_zero(&mut self) {
+        for c in 0..self.kind.channels() {
+            if self.is_output(c) && self.ccr_active[c] == 0 {
+                self.sr |= sr_ccif(c);
+            }
+        }
+    }
+
+    /// The next compare match that can raise the interrupt line (CCxIE set, CCxIF clear, an
+    /// output channel whose compare value the counter reaches).
+    fn next_compare_event(&self) -> Option<Time> {
+        let div = u64::from(self.psc_active) + 1;
+        (0..self.kind.channels())
+            .filter(|&c| self.is_output(c) && self.dier & sr_ccif(c) != 0 && self.sr & sr_ccif(c) == 0)
+            .filter_map(|c| {
+                let ccr = self.ccr_active[c];
+                let to_update = self.steps_to_update();
+                let steps = if ccr > self.cnt && u64::from(ccr - self.cnt) < to_update {
+                    u64::from(ccr - self.cnt)
+                } else if ccr <= self.arr_active {
+                    to_update + u64::from(ccr)
+                } else {
+                    return None;
+                };
+                Some(self.anchor.saturating_add((steps * div - self.psc_cnt).saturating_mul(self.units_per_tick)))
+            })
+            .min()
+    }
+
     /// Bring counter, prescaler counter and flags up to `now`.
     fn sync(&mut self, now: Time) {
         if !self.running() || now <= self.anchor {
@@ -325,6 +367,7 @@ impl Timer {
             let steps = total / div;
             if steps < to_update {
                 // steps < to_update ≤ mask − cnt + 1: no overflow of the counter field.
+                self.note_compare_matches(self.cnt, self.cnt + steps as u32);
                 self.cnt += steps as u32;
                 self.psc_cnt = total % div;
                 self.anchor += ticks * upt;
@@ -333,9 +376,12 @@ impl Timer {
             let used = to_update * div - self.psc_cnt;
             ticks -= used;
             self.anchor += used * upt;
+            let top = self.cnt.wrapping_add((to_update - 1) as u32);
+            self.note_compare_matches(self.cnt, top);
             self.cnt = 0;
             self.psc_cnt = 0;
             self.overflow(self.anchor);
+            self.note_compare_match_at_zero();
             if !self.running() {
                 return; // one-pulse mode stopped it
             }
@@ -345,6 +391,9 @@ impl Timer {
                 if n > 0 {
                     ticks -= n * period;
                     self.anchor += n * period * upt;
+                    // Whole periods: every compare value the counter reaches matched.
+                    self.note_compare_matches(0, self.arr_active);
+                    self.note_compare_match_at_zero();
                     if self.cr1 & CR1_UDIS == 0 {
                         self.sr |= SR_UIF;
                         self.last_update = Some(self.anchor);
@@ -360,15 +409,21 @@ impl Timer {
         self.sync(now);
     }
 
-    /// The next update event, when it can raise the interrupt line (UIE set, UIF clear, counting,
-    /// UDIS clear). Computed from the last synchronised state.
+    /// The next update event or compare match that can raise the interrupt line (UIE set,
+    /// UIF clear, counting, UDIS clear; or CCxIE set and CCxIF clear). Computed from the last
+    /// synchronised state.
     pub fn next_event(&self) -> Option<Time> {
-        if !self.running() || self.dier & DIER_UIE == 0 || self.sr & SR_UIF != 0 || self.cr1 & CR1_UDIS != 0 {
+        if !self.running() {
             return None;
         }
-        let div = u64::from(self.psc_active) + 1;
-        let ticks = self.steps_to_update() * div - self.psc_cnt;
-        Some(self.anchor.saturating_add(ticks.saturating_mul(self.units_per_tick)))
+        let update = if self.dier & DIER_UIE == 0 || self.sr & SR_UIF != 0 || self.cr1 & CR1_UDIS != 0 {
+            None
+        } else {
+            let div = u64::from(self.psc_active) + 1;
+            let ticks = self.steps_to_update() * div - self.psc_cnt;
+            Some(self.anchor.saturating_add(ticks.saturating_mul(self.units_per_tick)))
+        };
+        [update, self.next_compare_event()].into_iter().flatten().min()
     }
 
     /// Level of the interrupt line: SR flags (UIF, CCxIF, TIF) AND their DIER enables.
@@ -808,6 +863,31 @@ mod tests {
         t.write(SR, !SR_UIF, 100 + period + 10).unwrap();
         assert!(!t.irq_line());
         assert_eq!(t.next_event(), Some(100 + 2 * period));
+    }
+
+    /// Output compare on a frozen channel: the counter reaching CCR1 sets CC1IF every period
+    /// (the firmware's early sensor read, a fixed time before each update).
+    #[test]
+    fn a_frozen_compare_channel_flags_its_match_every_period() {
+        let mut t = timer(TimerKind::Tim9);
+        t.write(CCR1, 1900, 0).unwrap();
+        t.write(DIER, DIER_UIE | sr_ccif(0), 0).unwrap();
+        start(&mut t, 51, 1999, 100);
+        let tick = 52 * UPT;
+        assert_eq!(t.next_event(), Some(100 + 1900 * tick), "the match comes before the update");
+        t.advance(100 + 1900 * tick - 1);
+        assert!(!t.irq_line());
+        t.advance(100 + 1900 * tick);
+        assert_eq!(t.read(SR, 100 + 1900 * tick).unwrap(), sr_ccif(0));
+        t.write(SR, !sr_ccif(0), 100 + 1900 * tick).unwrap();
+        let period = 2000 * tick;
+        assert_eq!(t.next_event(), Some(100 + period), "then the update");
+        t.advance(100 + period);
+        t.write(SR, !SR_UIF, 100 + period).unwrap();
+        assert_eq!(t.next_event(), Some(100 + period + 1900 * tick), "and the next period's match");
+        // Ten periods later in closed form: the flag is set, UIF too, and so is CC2IF: CH2 is
+        // an output with CCR2 = 0, which the counter reaches at every wrap.
+        assert_eq!(t.read(SR, 100 + 12 * period).unwrap(), SR_UIF | sr_ccif(0) | sr_ccif(1));
     }
 
     #[test]
