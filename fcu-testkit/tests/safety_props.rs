@@ -594,13 +594,13 @@ fn monitor_rejects_running_motors_while_disarmed_and_out_of_range_compares() {
 #[test]
 fn monitor_rejects_motors_with_the_throttle_low_while_armed() {
     let mut rig = start(Start::Flying);
-    let rc = Config::default().rc;
-    let out = rig.tick_frame(&RadioFrame::from_sticks(&rc, sticks::NEUTRAL), 0).unwrap_or_else(|v| panic!("{v}"));
     // The receiver needs a few ticks for all four channels to read the low throttle.
-    let _ = out;
-    rig.sticks(sticks::NEUTRAL, 40).unwrap_or_else(|v| panic!("{v}"));
+    rig.sticks(sticks::NEUTRAL, 41).unwrap_or_else(|v| panic!("{v}"));
     let (mut out, mut st) = next_tick(&mut rig);
     assert_eq!(st.state, FlightState::Armed);
+    // Untouched, the core has the motors off: only the tampering below runs them.
+    let off = Config::default().mixer.off_compare();
+    assert_eq!(out.compare, [off; 4], "the core itself runs the motors with the throttle low");
     out.compare = [700; 4];
     st.compare = out.compare;
     let v = rig.monitor.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("must object");
