@@ -1,7 +1,7 @@
 //! What the board does once its sensors' boot tables are played: fly, or stay on the ground
-//! with the missing sensor named on the LEDs and the UART (product.md §4: "WHO_AM_I wrong at
-//! boot: no flight, LED error code, message on UART, never a silent hang"). The firmware
-//! collects the answers and acts on the verdict; the rule is here.
+//! with the missing sensor named on the LEDs and the UART (`docs/safety.md#boot`: a WHO_AM_I
+//! wrong at boot means no flight, an LED code, a message on the UART, never a silent hang). The
+//! firmware collects the answers and acts on the verdict; the rule is here.
 
 use crate::imu::registers::{first_missing, Sensor};
 use crate::telemetry::{write_sensor_missing_line, LedPattern, LineBuf};

@@ -342,9 +342,10 @@ fn a_hard_fault_stops_the_motors_at_once() {
     }
 }
 
-/// The LED codes of product.md §5 on the image, through a flight with a lost link: calibrating
-/// (the two alternating at 2 Hz), ready (LED2 at 10 Hz), armed (LED2 solid), failsafe (LED1 at
-/// 10 Hz, LED2 off). Each state's stretch is dated by the control tick its STATUS line carries.
+/// The LED codes of `docs/safety.md#leds` on the image, through a flight with a lost link:
+/// calibrating (the two alternating at 2 Hz), ready (LED2 at 10 Hz), armed (LED2 solid), failsafe
+/// (LED1 at 10 Hz, LED2 off). Each state's stretch is dated by the control tick its STATUS line
+/// carries.
 #[test]
 fn the_leds_show_each_flight_state_on_the_image() {
     let sc = scenario("link-short");

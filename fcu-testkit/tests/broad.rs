@@ -1,6 +1,6 @@
-//! Attitude estimation on real data (spec §8): both profiles' estimators over the four BROAD
-//! trials in `data/broad`, scored by inclination RMSE. `cargo test -p fcu-testkit --test broad
-//! -- --nocapture` prints the table.
+//! Attitude estimation on real data (`docs/estimator.md`): both profiles' estimators over the four
+//! BROAD trials in `data/broad`, scored by inclination RMSE. `cargo test -p fcu-testkit --test
+//! broad -- --nocapture` prints the table.
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -22,7 +22,7 @@ pub const NAME: &str = "RCC";
 
 /// HSI RC oscillator frequency (RM0368 §6.2.2).
 pub const HSI_HZ: u64 = 16_000_000;
-/// HSE crystal frequency on this board (`../shared/spec/reference-firmware.md`: HSE_VALUE).
+/// HSE crystal frequency on this board (`docs/reference.md#clock-and-timers`).
 pub const HSE_HZ: u64 = 16_000_000;
 /// Time from HSEON to HSERDY. Assumption: the F401 datasheet's typical crystal start-up time
 /// t_SU(HSE) = 2 ms (it depends on the crystal; the datasheet gives no maximum).
