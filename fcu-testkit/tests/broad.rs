@@ -9,7 +9,8 @@ use fcu_core::ahrs::{EstimatorConfig, MahonyConfig};
 use fcu_core::math::InvSqrt;
 use fcu_testkit::broad::{self, Profile, Recording};
 
-/// Trial, VQF 6D's figure and the README's Mahony (kP 0.4, kI 0.1) figure, degrees.
+/// Trial, VQF 6D's figure and the textbook Mahony's (kP 0.4, kI 0.1), degrees, as published
+/// (`data/broad/README.md`).
 const TRIALS: [(&str, f64, f64); 4] = [
     ("02_undisturbed_slow_rotation_B", 0.43, 0.38),
     ("07_undisturbed_fast_rotation_B", 1.02, 3.67),
