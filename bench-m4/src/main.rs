@@ -1,5 +1,5 @@
 //! Instructions per control tick and per outer step of the real `fcu_core::FlightController`,
-//! on a Cortex-M4 under QEMU (product.md §8).
+//! on a Cortex-M4 under QEMU (`docs/performance.md#budgets`).
 //!
 //! QEMU with `-icount shift=N` advances virtual time by exactly 2^N ns per executed instruction,
 //! and SysTick (core clock) counts virtual time, so a SysTick difference is an instruction count
@@ -347,8 +347,8 @@ fn bench() -> Result<(), &'static str> {
             s.disarmed.1
         );
     }
-    // The budgets of product.md §8 (default profile, medians of the armed window). A run over
-    // budget fails: CI runs this binary, and a regression must stop it.
+    // The budgets of `docs/performance.md#budgets` (default profile, medians of the armed window).
+    // A run over budget fails: CI runs this binary, and a regression must stop it.
     let tick_ok = default.tick.0 <= TICK_BUDGET;
     let outer_ok = default.outer.0 <= OUTER_BUDGET;
     hprintln!(

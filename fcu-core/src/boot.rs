@@ -1,8 +1,9 @@
 //! What the board does once its boot checks are done: fly, or stay on the ground with what
-//! failed named on the LEDs and the UART, never a silent hang. The checks: every sensor's
-//! `WHO_AM_I`, the HSE crystal (the clock the radio's pulse widths and the control tick are
-//! timed by), and the independent watchdog taking its timeout (its LSI clock running). The
-//! firmware collects the answers and acts on the verdict; the rule is here.
+//! failed named on the LEDs and the UART, never a silent hang (`docs/safety.md#boot`). The
+//! checks: every sensor's `WHO_AM_I`, the HSE crystal (the clock the radio's pulse widths and
+//! the control tick are timed by), and the independent watchdog taking its timeout (its LSI
+//! clock running). The firmware collects the answers and acts on the verdict; the rule is
+//! here.
 
 use crate::imu::registers::{first_missing, Sensor};
 use crate::telemetry::{write_sensor_missing_line, LedPattern, LineBuf};

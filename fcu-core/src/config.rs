@@ -4,9 +4,9 @@
 //!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
 //!   reference's golden vectors bit for bit.
 //! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
-//!   and stick mapping, with the documented differences D1–D12 of product.md §3 and D13–D17
-//!   (yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns,
-//!   thrust linearisation; README), each a field here so a test can switch it on its own.
+//!   and stick mapping, with the documented differences D1–D17 of `docs/profiles.md` (D13–D17:
+//!   yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns,
+//!   thrust linearisation), each a field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
@@ -236,7 +236,8 @@ impl Default for Config {
                 motion_check: Some(MotionCheck { gyro_max_dev_mdps: 2000.0, accel_norm_tol_mg: 100.0, timeout_ticks: 8000 }),
                 ..r.calibration
             },
-            // §4: non-finite, impossible or stuck (100 ms) sensor values are faults.
+            // docs/safety.md#sensor-faults: non-finite, impossible or stuck (100 ms) sensor values
+            // are faults.
             health: Some(HealthConfig { stuck_ticks: 80, accel_limit_mg: 4100, gyro_limit_mdps: 2_300_000 }),
             // D15: the gyro low-pass at 150 Hz instead of 100 Hz: phase for the faster loop.
             gyro_filter: BiquadCoeffs::GYRO_150_HZ_AT_800_HZ,

@@ -581,7 +581,7 @@ mod tests {
 
     #[test]
     fn inner_d_filter_matches_the_reference_worked_example() {
-        // reference-firmware.md §13.8: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
+        // docs/reference.md#examples: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
         let cfg = ControlConfig::REFERENCE;
         let mut r = RateLoop::default();
         let none = Saturation::NONE;

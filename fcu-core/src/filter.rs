@@ -218,7 +218,7 @@ mod tests {
 
     #[test]
     fn step_response_matches_the_reference_worked_example() {
-        // reference-firmware.md §13.9
+        // docs/reference.md#examples: the gyro filter's step response.
         let mut f = Biquad::new(BiquadCoeffs::REFERENCE_GYRO);
         let want = [97.6311, 384.9407, 720.9061, 941.8876, 1038.2424, 1055.4261, 1039.5088, 1018.7738];
         for w in want {

@@ -1,6 +1,6 @@
 //! Throttle mapping, quad-X mixing and the compare-value clamp.
 //!
-//! Motor numbering and signs are the reference's (reference-firmware.md §7.3), with
+//! Motor numbering and signs are the reference's (`docs/reference.md#motors`), with
 //! `s = [x, y, z]` = pitch, roll and yaw commands:
 //!
 //! | motor | position | spin | mix |

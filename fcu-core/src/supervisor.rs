@@ -4,7 +4,7 @@
 //! - [`SupervisorConfig::Reference`]: the ST reference's behaviour (B8–B11, B16): the arm
 //!   gesture latches "armed" for ever, motors run while armed and any edge arrived in the
 //!   last 31 ms, no failsafe, calibration on the gesture at any time.
-//! - [`SupervisorConfig::Safe`]: the product's safety layer (product.md §4), a state machine
+//! - [`SupervisorConfig::Safe`]: the product's safety layer (`docs/safety.md`), a state machine
 //!   whose table is `Supervisor::decide_by_table` (entered through [`Supervisor::decide`]). Every number is a field of [`SafetyConfig`], in
 //!   control ticks.
 
@@ -622,7 +622,7 @@ fn without(b: Blockers, x: Blocker) -> Blockers {
 
 #[cfg(test)]
 mod tests {
-    //! One test per rule of product.md §4, named after it.
+    //! One test per rule of `docs/safety.md`, named after it.
     use super::*;
 
     const CFG: SafetyConfig = SafetyConfig::DEFAULT;

@@ -2,7 +2,7 @@
 //! two LEDs, decided here so the firmware only moves the bytes and drives the pins.
 //!
 //! Two lines:
-//! * the reference's TAB-separated debug line (reference-firmware.md §9.4): gELE, gAIL, gRUD,
+//! * the reference's TAB-separated debug line (`docs/reference.md#telemetry`): gELE, gAIL, gRUD,
 //!   gTHR as integers, motor 1 command, then pitch, roll, pitch target and roll target in
 //!   degrees (×57.3, as the reference), each with six decimals like C's `%f`, ending in LF;
 //! * a status line, printed on every change of flight state, naming the state, the arming
@@ -285,7 +285,7 @@ pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<
     out.finish_line();
 }
 
-/// The fatal boot message for a sensor that did not answer `WHO_AM_I` (product.md §4).
+/// The fatal boot message for a sensor that did not answer `WHO_AM_I` (`docs/safety.md#boot`).
 pub fn write_sensor_missing_line<const N: usize>(out: &mut LineBuf<N>, sensor: &str, who_am_i: u8, expected: u8) {
     out.clear();
     out.push_str("FATAL sensor ");
@@ -322,7 +322,7 @@ pub fn battery_mv(adc_counts: u16) -> u32 {
     (counts * BATTERY_ADC_REF_MV * BATTERY_DIVIDER_NUM + den / 2) / den
 }
 
-/// The LED codes of product.md §5.
+/// The LED codes of `docs/safety.md#leds`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LedPattern {
     /// Both off (before the first status is known).
@@ -397,7 +397,7 @@ pub mod words {
         }
     }
 
-    /// Failsafe stage of product.md §4: 1 = level and hold throttle, 2 = motors off.
+    /// Failsafe stage of `docs/safety.md#failsafe`: 1 = level and hold throttle, 2 = motors off.
     pub fn failsafe(state: FlightState) -> &'static str {
         match state {
             FlightState::FailsafeLevel => "stage1",
@@ -475,8 +475,8 @@ pub fn write_status<const N: usize>(out: &mut LineBuf<N>, status: &Status, count
     write_status_line(out, &fields);
 }
 
-/// The LED code for a flight status (product.md §5). An in-flight sensor fault is the IMU's,
-/// so it blinks the LSM6DSL's count.
+/// The LED code for a flight status (`docs/safety.md#leds`). An in-flight sensor fault is the
+/// IMU's, so it blinks the LSM6DSL's count.
 pub fn led_pattern(status: &Status) -> LedPattern {
     let calibrating = matches!(status.calibration, CalibrationPhase::Settling | CalibrationPhase::Averaging { .. });
     match status.state {

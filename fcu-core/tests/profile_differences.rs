@@ -1,4 +1,4 @@
-//! The default profile's deliberate differences from the reference (product.md §3, D1–D8,
+//! The default profile's deliberate differences from the reference (`docs/profiles.md`, D1–D8,
 //! D12–D14, D16), one test each, showing what each changes. D9–D11 are the safety layer's
 //! (`fcu-testkit/tests/flight_safety.rs`, `supervisor.rs`); D15, the retuned gains, is flown
 //! (`fcu-testkit/tests/control_quality.rs`, `fcu-testkit/tests/margins.rs`).

@@ -597,7 +597,7 @@ mod app {
         }
     }
 
-    /// A fatal boot fault, repeated on the UART until reset (product.md §4: never a silent
+    /// A fatal boot fault, repeated on the UART until reset (`docs/safety.md#boot`: never a silent
     /// hang).
     #[task(priority = 1, shared = [uart])]
     async fn fault_report(mut cx: fault_report::Context, verdict: BootVerdict) {

@@ -3,12 +3,12 @@
 //!
 //! The order is ST's (`HAL_IWDG_Init`): start first, then the values, then a bounded wait.
 //! The watchdog counts on the LSI, which is off after reset (RCC_CSR.LSION = 0); the start key
-//! turns it on (RM0368 §17.3.2). New PR/RLR values cross into the LSI's domain only while it
+//! turns it on (RM0368 §15.3.2). New PR/RLR values cross into the LSI's domain only while it
 //! runs, so waiting for SR.PVU/RVU to clear before the start key never ends on silicon.
 
 use stm32f4xx_hal::pac::{DBGMCU, IWDG};
 
-/// Prescaler /8 (PR = 1) of the 32 kHz LSI: 4 kHz, 0.25 ms per count (RM0368 §17.3).
+/// Prescaler /8 (PR = 1) of the 32 kHz LSI: 4 kHz, 0.25 ms per count (RM0368 §15.3).
 const PRESCALER_DIV8: u8 = 1;
 /// 200 counts of 0.25 ms: 50 ms at the LSI's nominal 32 kHz. The LSI varies from 17 to 47 kHz
 /// over parts and temperature (datasheet), so the real timeout lies between about 34 and

@@ -1,4 +1,4 @@
-//! Host speed (product.md §8): one 10 s simulated flight, and one `FlightController::tick`.
+//! Host speed (`docs/performance.md`): one 10 s simulated flight, and one `FlightController::tick`.
 //! Run: `cargo bench -p fcu-testkit --bench sim`.
 
 use fcu_core::imu::RawImu;

@@ -1,6 +1,6 @@
 //! Scoring attitude estimators on BROAD recordings (real IMU data with optical ground truth).
 //!
-//! The format is the one of `shared/data/broad` (see its README): a header
+//! The format is the one of `fcu-testkit/data/broad/README.md`: a header
 //! `t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,ref_qw,ref_qx,ref_qy,ref_qz,movement`, gyroscope in
 //! rad/s, accelerometer in m/s², the ground truth a unit quaternion rotating IMU-frame vectors
 //! into an east-north-up frame (`nan` where the cameras lost the markers), `movement` 1 for the

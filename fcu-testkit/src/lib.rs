@@ -1,6 +1,7 @@
 //! fcu-testkit: the flight core on a laptop.
 //!
-//! - [`replay`]: the golden replay format of `shared/golden` (reference profile oracle);
+//! - [`replay`]: the golden replay format of `fcu-testkit/data/golden/README.md` (reference profile
+//!   oracle);
 //! - [`sim`]: a simulated STEVAL-DRONE01 (plant, IMU, radio) flown in closed loop;
 //! - [`broad`]: attitude estimation scored on real BROAD recordings;
 //! - [`cli`]: the `fcu-sim` command line.

@@ -1,5 +1,5 @@
-//! The golden replay format (`shared/golden/README.md` §4): one input row per control tick
-//! (raw LSM6DSL words in sensor axes, pulse widths, link/armed/calibration flags), one output
+//! The golden replay format (`fcu-testkit/data/golden/README.md` §4): one input row per control
+//! tick (raw LSM6DSL words in sensor axes, pulse widths, link/armed/calibration flags), one output
 //! row per tick (compare values, quaternion, Euler, yaw, rate demands).
 //!
 //! The replay drives [`FlightController::tick_forced`]: the radio state comes from the row,
@@ -164,7 +164,7 @@ pub fn parse_output(text: &str) -> Result<Vec<OutputRow>, CsvError> {
     Ok(rows)
 }
 
-/// How two replays differ, against the tolerances of product.md §7.
+/// How two replays differ, against the tolerances of `docs/golden.md#tolerances`.
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Comparison {
     pub rows: usize,

@@ -3,7 +3,7 @@
 //!
 //! - [`SafetyMonitor`] observes a [`FlightController`] tick by tick (what was fed: the raw IMU
 //!   words and the [`PulseBatch`]; what came out: the compare values, the outer job and
-//!   [`Status`]) and checks the rules of product.md §4 that can be seen from outside. It keeps
+//!   [`Status`]) and checks the rules of `docs/safety.md` that can be seen from outside. It keeps
 //!   its own model of the radio (capture edges to pulses, per-channel validity, sticks,
 //!   gestures), the calibration, the lost-time budget of the failsafe and the arming
 //!   procedure; it never reads the supervisor's memory. A violation names the [`Invariant`]
@@ -28,7 +28,7 @@ use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, Supervis
 use crate::sim::rng::Rng;
 
 /// Motors must be off once the link has been gone this long in total, each loss counted from
-/// the last pulse of the channel that fell silent first (product.md §4).
+/// the last pulse of the channel that fell silent first (`docs/safety.md#failsafe`).
 pub const LINK_LOSS_OFF_S: f64 = 1.0;
 /// Slack on [`LINK_LOSS_OFF_S`] for tick rounding.
 pub const LINK_LOSS_MARGIN_S: f64 = 0.010;
@@ -119,7 +119,7 @@ impl fmt::Display for Violation {
 
 impl std::error::Error for Violation {}
 
-/// The gestures as product.md §4 and the reference define them, written out again here so
+/// The gestures as `docs/safety.md` and the reference define them, written out again here so
 /// the monitor does not trust `RcConfig::gesture`.
 pub fn classify_gesture(rc: &RcConfig, s: &Sticks) -> Option<Gesture> {
     let th = i32::from(rc.gesture_threshold);

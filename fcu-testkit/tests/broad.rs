@@ -1,6 +1,6 @@
-//! Attitude estimation on real data (spec §8): both profiles' estimators over the four BROAD
-//! trials in `data/broad`, scored by inclination RMSE. `cargo test -p fcu-testkit --test broad
-//! -- --nocapture` prints the table.
+//! Attitude estimation on real data (`docs/estimator.md`): both profiles' estimators over the four
+//! BROAD trials in `data/broad`, scored by inclination RMSE. `cargo test -p fcu-testkit --test
+//! broad -- --nocapture` prints the table.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -9,7 +9,8 @@ use fcu_core::ahrs::{EstimatorConfig, MahonyConfig};
 use fcu_core::math::InvSqrt;
 use fcu_testkit::broad::{self, Profile, Recording};
 
-/// Trial, VQF 6D's figure and the README's Mahony (kP 0.4, kI 0.1) figure, degrees.
+/// Trial, VQF 6D's figure and the textbook Mahony's (kP 0.4, kI 0.1), degrees, as published
+/// (`data/broad/README.md`).
 const TRIALS: [(&str, f64, f64); 4] = [
     ("02_undisturbed_slow_rotation_B", 0.43, 0.38),
     ("07_undisturbed_fast_rotation_B", 1.02, 3.67),

@@ -1,7 +1,7 @@
 //! The safety layer through the whole pipeline, driven the way the firmware drives it: raw
 //! LSM6DSL words and radio capture edges on the 15-bit TIM2 counter, one control tick at a time
 //! (from the testkit's one PWM receiver and one level IMU, `fcu_testkit::safety`). Each test is
-//! a rule of product.md §4; several show the reference's accident beside ours.
+//! a rule of `docs/safety.md`; several show the reference's accident beside ours.
 
 use fcu_core::flight::TickOutput;
 use fcu_core::rc::{EdgeDecoder, StickCounts, CAPTURE_WRAP};

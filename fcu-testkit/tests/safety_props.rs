@@ -1,4 +1,4 @@
-//! Property tests of the safety layer (product.md §4) with the invariant monitor of
+//! Property tests of the safety layer (`docs/safety.md`) with the invariant monitor of
 //! `fcu_testkit::safety`: arbitrary stick timelines, raw capture-edge streams and sensor
 //! words through the whole default `FlightController`, and arbitrary input sequences through
 //! the bare `Supervisor`. Every case starts from a controller that has already booted (or
@@ -594,13 +594,13 @@ fn monitor_rejects_running_motors_while_disarmed_and_out_of_range_compares() {
 #[test]
 fn monitor_rejects_motors_with_the_throttle_low_while_armed() {
     let mut rig = start(Start::Flying);
-    let rc = Config::default().rc;
-    let out = rig.tick_frame(&RadioFrame::from_sticks(&rc, sticks::NEUTRAL), 0).unwrap_or_else(|v| panic!("{v}"));
     // The receiver needs a few ticks for all four channels to read the low throttle.
-    let _ = out;
-    rig.sticks(sticks::NEUTRAL, 40).unwrap_or_else(|v| panic!("{v}"));
+    rig.sticks(sticks::NEUTRAL, 41).unwrap_or_else(|v| panic!("{v}"));
     let (mut out, mut st) = next_tick(&mut rig);
     assert_eq!(st.state, FlightState::Armed);
+    // Untouched, the core has the motors off: only the tampering below runs them.
+    let off = Config::default().mixer.off_compare();
+    assert_eq!(out.compare, [off; 4], "the core itself runs the motors with the throttle low");
     out.compare = [700; 4];
     st.compare = out.compare;
     let v = rig.monitor.observe(&Observation { imu: None, batch: None, edges: None, out: &out, status: &st }).expect_err("must object");
@@ -790,9 +790,9 @@ fn timeline_generator_reaches_every_safety_state() {
 /// F1 (found by `supervisor_any_config_…` and `raw_edge_streams_…`): armed, the pilot holds
 /// the arm gesture (throttle at 0, so the motors are stopped and the drone looks disarmed);
 /// after 5 s the automatic disarm fires; the gesture is still held for 1 s more and let go:
-/// the supervisor arms again, although §4 blocks arming until the gesture has been released
-/// since the last disarm. Fails until `Supervisor::decide` clears `released` on the automatic
-/// disarm (as it does on the gesture disarm and on stage 2).
+/// the supervisor arms again, although `docs/safety.md#disarming` blocks arming until the gesture
+/// has been released since the last disarm. Fails until `Supervisor::decide` clears `released` on
+/// the automatic disarm (as it does on the gesture disarm and on stage 2).
 #[test]
 fn f1_arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
     let mut rig = Rig::booted(Config::default(), 7).unwrap_or_else(|e| panic!("{e}"));

@@ -42,7 +42,60 @@ fn fly_hover_writes_csv_and_svg_and_passes() {
     }
     assert!(csv.lines().count() > 20_000);
     let svg = std::fs::read_to_string(dir.join("flight.svg")).unwrap_or_default();
-    assert!(svg.starts_with("<svg") && svg.contains("armed"), "svg");
+    assert!(svg.starts_with("<svg"), "not an SVG: {}", svg.get(..80).unwrap_or_default());
+    // The state panel labels every state whatever the flight did; the state line is what must
+    // show this one: calibrated, disarmed, through arming to armed, and disarmed at the end.
+    let trace = state_trace(&svg);
+    let mut wanted = ["calibrating", "disarmed", "arming", "armed", "disarmed"].into_iter().peekable();
+    for state in &trace {
+        if wanted.peek() == Some(&state.as_str()) {
+            wanted.next();
+        }
+    }
+    assert!(wanted.peek().is_none(), "the plotted state line went {trace:?}");
+    assert_eq!(trace.last().map(String::as_str), Some("disarmed"), "the plotted state line went {trace:?}");
+}
+
+/// The states the SVG's state line passes through, in order (repeats merged): each point of
+/// the thick black polyline with the most points, named after the state-axis label at its
+/// height.
+fn state_trace(svg: &str) -> Vec<String> {
+    const STATES: [&str; 7] = ["fault", "calibrating", "disarmed", "arming", "failsafe2", "failsafe1", "armed"];
+    let attr = |tag: &str, name: &str| -> Option<String> {
+        let from = tag.find(&format!(" {name}=\""))? + name.len() + 3;
+        let len = tag.get(from..)?.find('"')?;
+        tag.get(from..from + len).map(str::to_string)
+    };
+    // Axis labels: <text ... y="Y" ...>\nNAME\n</text>.
+    let labels: Vec<(f64, &str)> = svg
+        .split("<text ")
+        .skip(1)
+        .filter_map(|t| {
+            let (tag, rest) = t.split_once('>')?;
+            let name = rest.split("</text>").next()?.trim();
+            let state = STATES.into_iter().find(|s| *s == name)?;
+            Some((attr(tag, "y")?.parse().ok()?, state))
+        })
+        .collect();
+    assert_eq!(labels.len(), STATES.len(), "state axis labels: {labels:?}");
+    let line = svg
+        .split("<polyline ")
+        .skip(1)
+        .filter_map(|p| p.split_once("/>").map(|(tag, _)| tag))
+        .filter(|tag| tag.contains("stroke=\"#000000\"") && tag.contains("stroke-width=\"2\""))
+        .filter_map(|tag| attr(tag, "points"))
+        .max_by_key(|points| points.split_whitespace().count())
+        .unwrap_or_default();
+    let mut trace: Vec<String> = Vec::new();
+    for point in line.split_whitespace() {
+        let y: f64 = point.split_once(',').and_then(|(_, y)| y.parse().ok()).unwrap_or(f64::NAN);
+        let (label_y, state) = labels.iter().copied().min_by(|a, b| (a.0 - y).abs().total_cmp(&(b.0 - y).abs())).unwrap_or((0.0, "?"));
+        assert!((label_y - y).abs() <= 2.0, "state line point {point} is at no state's level: {labels:?}");
+        if trace.last().map(String::as_str) != Some(state) {
+            trace.push(state.to_string());
+        }
+    }
+    trace
 }
 
 #[test]

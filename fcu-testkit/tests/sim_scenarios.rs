@@ -1,5 +1,5 @@
 //! Every scenario flies with the default profile and passes its criteria, for several seeds
-//! and with the airframe randomised ±30 % (product.md §6).
+//! and with the airframe randomised ±30 % (`docs/simulation.md#the-drone`).
 
 use fcu_testkit::sim::{self, metrics, scenario, Profile, RunOptions};
 

@@ -154,7 +154,7 @@ mod tests {
 
     #[test]
     fn big_gain_levels_to_a_static_tilt() {
-        // reference-firmware.md §13.10: 200 updates at kp 10 with a 10° tilt about X.
+        // docs/reference.md#examples: 200 updates at kp 10 with a 10° tilt about X.
         let mut m = Mahony::new(MahonyConfig::REFERENCE);
         let t = 10f32.to_radians();
         for _ in 0..200 {

@@ -15,7 +15,7 @@
 //! | candidate | 02 | 07 | 11 | 15 |
 //! |---|---|---|---|---|
 //! | reference Mahony (kP 0.4, kI 0.1, sequential update, fast 1/√x) | 0.391 | 5.803 | 1.467 | 23.358 |
-//! | textbook Mahony, same gains (the README's row) | 0.378 | 3.667 | 1.471 | 23.355 |
+//! | textbook Mahony, same gains (the published row of `fcu-testkit/data/broad/README.md`) | 0.378 | 3.667 | 1.471 | 23.355 |
 //! | Mahony-style gating: low-pass input weighted by 1/(1 + ((‖a‖ − 1 g)/tol)²), tol 50–400 mg | 0.38–0.48 | 1.95–3.6 | 0.45–0.95 | 10–31 |
 //! | `vqf-rs` 0.3, f64, defaults (VQF 6D) | 0.429 | 1.023 | 0.420 | 0.470 |
 //! | `vqf-rs`, rest bias only / no bias | 0.443 / 0.947 | 1.032 / 1.415 | 0.441 / 1.109 | 0.471 / 0.442 |

@@ -383,7 +383,7 @@ impl Calibrator {
     }
 }
 
-/// In-flight sensor health (safety layer, §4 of the product spec).
+/// In-flight sensor health (`docs/safety.md#sensor-faults`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HealthConfig {
     /// Identical raw accel and gyro words for this many ticks = stuck sensor (100 ms).

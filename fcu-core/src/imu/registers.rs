@@ -1,7 +1,7 @@
 //! Sensor register tables and burst decoding (LSM6DSL, LIS2MDL, LPS22HB): pure data and
 //! byte handling, so the firmware only moves bytes.
 //!
-//! Every value written at boot is the reference's (reference-firmware.md §3). Each table is an
+//! Every value written at boot is the reference's (`docs/reference.md#sensors`). Each table is an
 //! ordered list of `(register, value)` writes; the firmware plays it over the 3-wire SPI bus and
 //! checks `WHO_AM_I` between the interface write (which switches the sensor to 3-wire SPI, so
 //! it can answer on the shared data line at all) and the rest of the configuration.
@@ -132,7 +132,7 @@ pub const WHO_AM_I_ATTEMPTS: u32 = 3;
 pub const WHO_AM_I_RETRY_MS: u32 = 10;
 
 /// The first sensor whose `WHO_AM_I` answer was wrong, in bus order. The product flies only
-/// with all three answering (product.md §4: "WHO_AM_I wrong at boot: no flight").
+/// with all three answering (`docs/safety.md#boot`: a WHO_AM_I wrong at boot means no flight).
 pub fn first_missing(answers: [u8; 3]) -> Option<Sensor> {
     Sensor::ALL.into_iter().zip(answers).find(|&(s, a)| !s.identifies(a)).map(|(s, _)| s)
 }

@@ -22,14 +22,14 @@
 //! Analog values: the board sets each channel's voltage with [`Adc::set_channel_volts`]; a
 //! conversion of a channel never set is an error (the harness forgot an input). The result is
 //! round(V / VDDA · (2^bits − 1)), clamped. Assumptions: VDDA = VREF+ = 3.3 V ([`VDDA_VOLTS`];
-//! `../shared/spec/reference-firmware.md` converts with 3.3/4095), VREFINT = 1.21 V (datasheet
+//! the reference converts with 3.3/4095, `docs/reference.md#battery`), VREFINT = 1.21 V (datasheet
 //! typical), temperature sensor at 0.76 V (datasheet V25 typical: 25 °C). Channels: 0..=15
 //! external (the machine should check the pin is in analog mode), 17 = VREFINT and 18 = the
 //! temperature sensor, both only with CCR.TSVREFE = 1 (RM0368 §11.9/§11.10: on the F401 the
 //! temperature sensor is on ADC1_IN18, shared with VBAT; IN16 is not connected, so a conversion
 //! of channel 16 is an error).
 //!
-//! The battery (`reference-firmware.md`: PB1 = ADC1_IN9, divider 10 kΩ top, 20 kΩ bottom) is
+//! The battery (`docs/reference.md#pins`: PB1 = ADC1_IN9, divider 10 kΩ top, 20 kΩ bottom) is
 //! seen at V_bat · 20/30: [`battery_pin_volts`].
 //!
 //! Diagnostics (not errors, see [`AdcDiagnostics`]): a conversion started less than

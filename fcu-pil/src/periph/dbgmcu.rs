@@ -5,9 +5,9 @@
 //! are stored and read back only. IDCODE is read-only.
 //!
 //! Field positions from the `stm32f4` 0.16 PAC (`stm32f401/dbgmcu/*.rs`). The SVD's IDCODE reset
-//! value (0x1000_6411) is the F40x's DEV_ID; the F401xB/C (this board: `reference-firmware.md`,
-//! "built for STM32F401xC") has DEV_ID 0x423 (RM0368 DBGMCU_IDCODE), REV_ID 0x1000 for revision A and
-//! 0x1001 for revision Z. Assumption: revision Z.
+//! value (0x1000_6411) is the F40x's DEV_ID; the F401xB/C (this board:
+//! `docs/reference.md#versions`, built for the STM32F401xC) has DEV_ID 0x423 (RM0368
+//! DBGMCU_IDCODE), REV_ID 0x1000 for revision A and 0x1001 for revision Z. Assumption: revision Z.
 
 use super::{Time, Unmodelled};
 

@@ -25,9 +25,9 @@ const ACR_ICRST: u32 = 1 << 11;
 const ACR_DCRST: u32 = 1 << 12;
 const ACR_FIELDS: u32 = ACR_LATENCY | ACR_PRFTEN | ACR_ICEN | ACR_DCEN | ACR_ICRST | ACR_DCRST;
 
-/// Assumption: VDD = 3.3 V (the board's regulator; `../shared/spec/reference-firmware.md` uses a
-/// 3.3 V ADC reference), so the 2.7–3.6 V row of RM0368's wait-state table applies: one wait state per
-/// started 30 MHz of HCLK, up to 84 MHz.
+/// Assumption: VDD = 3.3 V (the board's regulator; the reference firmware uses a 3.3 V ADC
+/// reference, `docs/reference.md#battery`), so the 2.7–3.6 V row of RM0368's wait-state table
+/// applies: one wait state per started 30 MHz of HCLK, up to 84 MHz.
 pub const HCLK_PER_WAIT_STATE_HZ: u64 = 30_000_000;
 /// The F401's maximum HCLK.
 pub const HCLK_MAX_HZ: u64 = 84_000_000;

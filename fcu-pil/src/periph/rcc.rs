@@ -22,7 +22,7 @@ pub const NAME: &str = "RCC";
 
 /// HSI RC oscillator frequency (RM0368 §6.2.2).
 pub const HSI_HZ: u64 = 16_000_000;
-/// HSE crystal frequency on this board (`../shared/spec/reference-firmware.md`: HSE_VALUE).
+/// HSE crystal frequency on this board (`docs/reference.md#clock-and-timers`).
 pub const HSE_HZ: u64 = 16_000_000;
 /// Time from HSEON to HSERDY. Assumption: the F401 datasheet's typical crystal start-up time
 /// t_SU(HSE) = 2 ms (it depends on the crystal; the datasheet gives no maximum).
@@ -252,7 +252,7 @@ impl Rcc {
         self.lsi_ready_at
     }
 
-    /// The IWDG's start key forces the LSI on (RM0368 §17.3.2, "when the independent watchdog
+    /// The IWDG's start key forces the LSI on (RM0368 §15.3.2, "when the independent watchdog
     /// is started by writing 0xCCCC in the key register, the LSI oscillator is forced on and
     /// cannot be disabled"). LSION keeps what software wrote; LSIRDY follows the oscillator.
     pub fn force_lsi_on(&mut self, now: Time) {

@@ -4,7 +4,7 @@
 //! switched off.
 //!
 //! Facts are the datasheets' as summarised in `fcu-core/src/imu/registers.rs` and
-//! `shared/spec/reference-firmware.md` §3; register maps and reset values are the datasheets'
+//! `docs/reference.md#sensors`; register maps and reset values are the datasheets'
 //! (LSM6DSL DocID030071 §9, LIS2MDL DocID027955 §8, LPS22HB DocID027083 §9).
 //!
 //! # The ST SPI protocol, as modelled

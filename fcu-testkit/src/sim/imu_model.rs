@@ -1,7 +1,7 @@
-//! The simulated LSM6DSL in the reference configuration (reference §3.2): accelerometer ±4 g
-//! at 0.122 mg/LSB behind its 16.65 Hz low-pass (LPF2, ODR/400), gyroscope ±2000 dps at
-//! 70 mdps/LSB sampled at 416 Hz and held between samples, each with bias and noise, motor
-//! vibration on the accelerometer, and the board's mount: the words come out in **sensor**
+//! The simulated LSM6DSL in the reference configuration (`docs/reference.md#sensors`):
+//! accelerometer ±4 g at 0.122 mg/LSB behind its 16.65 Hz low-pass (LPF2, ODR/400), gyroscope
+//! ±2000 dps at 70 mdps/LSB sampled at 416 Hz and held between samples, each with bias and noise,
+//! motor vibration on the accelerometer, and the board's mount: the words come out in **sensor**
 //! axes, exactly what the core reads off the SPI bus.
 
 use fcu_core::imu::{Mount, RawImu};

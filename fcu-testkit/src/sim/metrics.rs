@@ -1,5 +1,5 @@
-//! Control-quality numbers of product.md §8 and the scenario pass criteria, both computed
-//! from a [`FlightLog`] only (so they can be recomputed from any recorded flight).
+//! Control-quality numbers of `docs/simulation.md#metrics` and the scenario pass criteria, both
+//! computed from a [`FlightLog`] only (so they can be recomputed from any recorded flight).
 
 use super::scenario::{describe, Axis, Criterion, Scenario};
 use super::{FlightLog, LogRow};
@@ -7,7 +7,8 @@ use super::{FlightLog, LogRow};
 /// Within this many degrees of level counts as "level" after a link loss.
 pub const LEVEL_TOLERANCE_DEG: f64 = 3.0;
 
-/// The §8 metrics of one flight. `None` where the scenario does not exercise it.
+/// The metrics of one flight (`docs/simulation.md#metrics`). `None` where the scenario does not
+/// exercise it.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Metrics {
     /// RMS of (true − target) roll and pitch over the scenario's hover window, degrees.

@@ -1,8 +1,8 @@
 //! The simulated STEVAL-DRONE01 airframe: a rigid quad X with four brushed DC motors.
 //!
-//! Frames and signs are the core's (reference §0): body +X right, +Y forward, +Z up; the
-//! attitude quaternion rotates body vectors into the earth frame (earth +Z up). Motor numbering
-//! and spin follow the reference mixer (reference §7.3):
+//! Frames and signs are the core's (`docs/reference.md#frames`): body +X right, +Y forward, +Z up;
+//! the attitude quaternion rotates body vectors into the earth frame (earth +Z up). Motor numbering
+//! and spin follow the reference mixer (`docs/reference.md#motors`):
 //!
 //! ```text
 //!            front (+Y)
@@ -27,7 +27,8 @@ pub type V3 = [f64; 3];
 pub const GRAVITY_M_S2: f64 = 9.80665;
 
 /// Every physical constant of the simulated drone, in one place. Nominal values are the
-/// estimates of product.md §6; [`PlantParams::randomized`] spreads them for robustness tests.
+/// estimates of `docs/simulation.md#the-drone`; [`PlantParams::randomized`] spreads them for
+/// robustness tests.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlantParams {
     pub mass_kg: f64,
@@ -94,7 +95,7 @@ impl Default for PlantParams {
 
 impl PlantParams {
     /// The nominal drone with each physical estimate scaled by an independent factor in
-    /// `1 ± spread` (product.md §6 asks for ±30 %). Same seed, same drone.
+    /// `1 ± spread` (the tests use ±30 %, `docs/simulation.md#the-drone`). Same seed, same drone.
     ///
     /// One guard: a drone that cannot hover on a sagging battery with 30 % margin tests the
     /// airframe, not the controller, so the motors' maximum thrust is raised until it can.
@@ -560,9 +561,10 @@ mod tests {
         assert!((frac - 0.632).abs() < 0.03, "fraction after τ: {frac}");
     }
 
-    /// Reference §7.3 mixer: positive roll demand raises M3/M4 and must roll right side down
-    /// (positive about body Y); positive pitch raises M2/M3 → nose up (positive about X);
-    /// positive yaw raises M1/M3 (CW props) → counter-clockwise (positive about Z).
+    /// The reference mixer (`docs/reference.md#motors`): positive roll demand raises M3/M4 and
+    /// must roll right side down (positive about body Y); positive pitch raises M2/M3 → nose up
+    /// (positive about X); positive yaw raises M1/M3 (CW props) → counter-clockwise (positive
+    /// about Z).
     #[test]
     fn motor_numbering_and_spin_match_the_reference_mixer() {
         let base = 900.0;

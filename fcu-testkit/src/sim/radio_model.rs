@@ -1,4 +1,4 @@
-//! The simulated PWM receiver and the TIM2 capture unit behind it (reference §6.1).
+//! The simulated PWM receiver and the TIM2 capture unit behind it (`docs/reference.md#radio`).
 //!
 //! Every 20 ms frame the receiver drives its four outputs one after the other (AIL, ELE, THR,
 //! RUD: each channel rises when the previous one falls), each pulse 800..2200 µs wide. The MCU
@@ -152,7 +152,8 @@ impl RadioModel {
     }
 }
 
-/// Stick width (µs) for a stick value `g` in RC counts around a centre in counts (reference §6.4).
+/// Stick width (µs) for a stick value `g` in RC counts around a centre in counts
+/// (`docs/reference.md#radio`).
 pub fn width_us_for(centre_counts: f64, g_counts: f64) -> f64 {
     (centre_counts + g_counts) / 4.0
 }

@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use super::plant::Disturbance;
 use super::radio_model::RadioParams;
 
-/// Reference radio constants in TIM2 counts (reference §6.4).
+/// Reference radio constants in TIM2 counts (`docs/reference.md#radio`).
 pub const AIL_CENTRE_COUNTS: f64 = 5862.0;
 pub const ELE_CENTRE_COUNTS: f64 = 6151.0;
 pub const RUD_CENTRE_COUNTS: f64 = 6397.0;
@@ -150,7 +150,7 @@ impl Timeline {
 /// The latest time a stick file may name, s: `fly --duration`'s own cap.
 pub const MAX_STICK_TIME_S: f64 = 3600.0;
 
-/// Aileron pulse for a roll target (right side down positive), reference §6.6.
+/// Aileron pulse for a roll target (right side down positive), `docs/reference.md#targets`.
 pub fn ail_us_for_roll_deg(deg: f64) -> f64 {
     (AIL_CENTRE_COUNTS - deg / MAX_TILT_DEG * FULL_SCALE_COUNTS) / 4.0
 }
