@@ -3,7 +3,7 @@
 //!
 //! The order is ST's (`HAL_IWDG_Init`): start first, then the values, then a bounded wait.
 //! The watchdog counts on the LSI, which is off after reset (RCC_CSR.LSION = 0); the start key
-//! turns it on (RM0368 §15.3.2). New PR/RLR values cross into the LSI's domain only while it
+//! turns it on (RM0368 §15.3). New PR/RLR values cross into the LSI's domain only while it
 //! runs, so waiting for SR.PVU/RVU to clear before the start key never ends on silicon.
 
 use stm32f4xx_hal::pac::{DBGMCU, IWDG};

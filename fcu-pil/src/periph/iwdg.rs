@@ -15,7 +15,7 @@
 //!   timeout table: RL = 0 gives the minimum timeout of one tick, 0.125 ms at /4).
 //!
 //! - The watchdog runs on the LSI, which is off after reset (RCC_CSR.LSION = 0). The start key
-//!   forces the LSI on (RM0368 §15.3.2); the board tells the model when the oscillator is stable
+//!   forces the LSI on (RM0368 §15.3); the board tells the model when the oscillator is stable
 //!   ([`Iwdg::set_lsi`], from the RCC model's LSION/LSIRDY and its start-up time). While the LSI
 //!   is off nothing crosses into the watchdog's domain: PVU/RVU stay set and the counter does
 //!   not move. So a set-up that waits for SR = 0 before writing the start key, with the LSI not
@@ -394,7 +394,7 @@ mod tests {
         assert_eq!(predicted, UPDATE_TIME + 0xFFF * 8 * LSI_CYCLE);
     }
 
-    /// Rule (RM0368 §15.3.2 and the IWDG_SR note; libopencm3 and MicroPython hit it): with the
+    /// Rule (RM0368 §15.3 and the IWDG_SR note; libopencm3 and MicroPython hit it): with the
     /// LSI off, as after reset, PR/RLR never land, so waiting for SR = 0 before the start key
     /// spins for ever. The wrong sequence, played for a whole second.
     #[test]

@@ -252,9 +252,10 @@ impl Rcc {
         self.lsi_ready_at
     }
 
-    /// The IWDG's start key forces the LSI on (RM0368 §15.3.2, "when the independent watchdog
-    /// is started by writing 0xCCCC in the key register, the LSI oscillator is forced on and
-    /// cannot be disabled"). LSION keeps what software wrote; LSIRDY follows the oscillator.
+    /// The IWDG's start key forces the LSI on: ST's `HAL_IWDG_Init` relies on it ("LSI is
+    /// turned on automatically" by the start key, RM0368 §15.3), and later STM32 manuals say it
+    /// outright (once the watchdog is started the LSI is forced on and cannot be disabled).
+    /// LSION keeps what software wrote; LSIRDY follows the oscillator.
     pub fn force_lsi_on(&mut self, now: Time) {
         self.lsi_forced = true;
         self.start_lsi(now);
