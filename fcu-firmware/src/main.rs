@@ -5,9 +5,13 @@
 //!
 //! | task         | binds / kind            | prio | work                                         |
 //! |--------------|-------------------------|------|----------------------------------------------|
-//! | rc_capture   | TIM2 (both edges, wrap) | 4    | CCRx + pin level → `EdgeDecoder::on_edge`; a |
-//! |              |                         |      | pin past its edge budget muted till the wrap |
-//! | control      | TIM1_BRK_TIM9 (tick)    | 3    | IMU burst → `ControlTick::tick` → TIM4, feed IWDG  |
+//! | sensor_rx    | SPI2 (RXNE)             | 5    | one byte of the IMU burst; stops the clock   |
+//! |              |                         |      | in the 3-wire end-of-read window             |
+//! | rc_capture   | TIM2 (both edges, wrap) | 4    | CCRx + pin level → edge queue; a pin past    |
+//! |              |                         |      | its edge budget muted till the wrap          |
+//! | control      | TIM1_BRK_TIM9 (CC1, tick)| 3   | CC1: start the IMU burst; tick: edges →      |
+//! |              |                         |      | decoder, burst → `ControlTick::tick` → TIM4, |
+//! |              |                         |      | feed IWDG                                    |
 //! | outer_step   | software                | 2    | battery reading + `OuterStep::run` → `control`  |
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
