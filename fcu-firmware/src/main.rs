@@ -91,7 +91,7 @@ mod app {
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::EdgeDecoder;
-    use fcu_core::telemetry::{self as tlm, FirmwareCounters, LedPattern, LineBuf, Reporter};
+    use fcu_core::telemetry::{self as tlm, LedPattern, LineBuf, Reporter, StatusFields};
     use heapless::Deque;
     use rtic_monotonics::systick::prelude::*;
     use stm32f4xx_hal::adc::{config::AdcConfig, config::SampleTime, Adc};
@@ -383,7 +383,7 @@ mod app {
         let (edges, muted) = cx.local.capture.take_edges();
         cx.shared.decoder.lock(|decoder| {
             for edge in edges.into_iter().flatten() {
-                decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
+                decoder.on_edge(edge);
             }
         });
         if muted > 0 {
@@ -470,16 +470,17 @@ mod app {
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             let radio_mutes = cx.shared.radio_mutes.lock(|n| *n);
             cx.shared.uart.lock(|uart| {
-                let counters = FirmwareCounters {
+                let fields = StatusFields {
                     battery_mv,
                     outer_overruns: snapshot.outer_overruns,
                     bus_errors: snapshot.bus_errors,
                     uart_dropped_bytes: uart.dropped_bytes,
                     radio_mutes,
                     tick: snapshot.tick,
+                    ..StatusFields::of(status)
                 };
                 let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();
-                tlm::write_status(&mut line, status, counters);
+                tlm::write_status_line(&mut line, &fields);
                 uart.send(line.as_bytes());
             });
         }

@@ -2,7 +2,7 @@
 //! input capture on both edges nor raw PSC/ARR values from a run-time configuration:
 //! TIM2 captures the radio, TIM4 drives the motors, TIM9 paces the control tick.
 
-use fcu_core::rc::CHANNELS;
+use fcu_core::rc::{CaptureEdge, CHANNELS};
 use stm32f4xx_hal::gpio::{Alternate, PA0, PA1, PA2, PA3};
 use stm32f4xx_hal::pac::{TIM2, TIM4, TIM9};
 use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
@@ -11,14 +11,6 @@ use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
 pub const RC_CAPTURE_PSC: u16 = 20;
 /// TIM2 auto-reload: the core's 15-bit capture wrap (32768 counts, 8.192 ms) on a 32-bit timer.
 pub const RC_CAPTURE_ARR: u32 = fcu_core::rc::CAPTURE_WRAP - 1;
-
-/// One captured radio edge.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Edge {
-    pub channel: usize,
-    pub capture_counts: u16,
-    pub level_high: bool,
-}
 
 /// PA0..PA3 (AIL, ELE, THR, RUD) in TIM2's alternate function.
 pub type CapturePins = (PA0<Alternate<1>>, PA1<Alternate<1>>, PA2<Alternate<1>>, PA3<Alternate<1>>);
@@ -89,7 +81,7 @@ impl RcCapture {
     /// A channel that has used its [`EDGE_BUDGET_PER_WRAP`] has its interrupt turned off here
     /// (the second value: how many were, this time); the next wrap (this same interrupt, UIF)
     /// turns it back on, dropping what it captured meanwhile.
-    pub fn take_edges(&mut self) -> ([Option<Edge>; CHANNELS], u32) {
+    pub fn take_edges(&mut self) -> ([Option<CaptureEdge>; CHANNELS], u32) {
         let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
@@ -103,7 +95,7 @@ impl RcCapture {
         for (channel, (edge, level_high)) in edges.iter_mut().zip(levels).enumerate() {
             if enabled[channel] && sr.ccif(channel as u8).bit_is_set() {
                 let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
-                *edge = Some(Edge { channel, capture_counts, level_high });
+                *edge = Some(CaptureEdge { channel, capture_counts, level_high });
                 let count = &mut self.edges_in_window[channel];
                 *count = count.saturating_add(1);
                 muted[channel] = *count >= EDGE_BUDGET_PER_WRAP;
