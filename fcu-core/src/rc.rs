@@ -203,7 +203,8 @@ impl RcConfig {
 
     /// The yaw rate the sticks ask for, rad/s: one outer step's heading change at `outer_hz`
     /// outer steps a second, none with the throttle low. What the core reports
-    /// (`Status::yaw_rate_target_rad_s`) and what fcu-pil reads from the stick it sends.
+    /// (`Status::yaw_rate_target_rad_s`) and what the host's simulator works out from the
+    /// frames it sends, for its yaw metric.
     pub fn yaw_rate_rad_s(&self, sticks: &Sticks, outer_hz: f32) -> f32 {
         if self.throttle_low(sticks) {
             0.0
@@ -288,6 +289,32 @@ pub enum Gesture {
     Calibrate,
 }
 
+/// One capture event as the capture interrupt reads it: which channel, the captured counter
+/// value and the pin level read in the interrupt. The firmware's capture interrupt makes them
+/// from TIM2, the host's receivers from the frames they send; [`EdgeDecoder::on_edge`] takes
+/// them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CaptureEdge {
+    /// 0 = AIL .. 3 = RUD; the decoder ignores any other (a stray value cannot index past the
+    /// channels).
+    pub channel: usize,
+    /// The captured counter value; only its low 15 bits count (the counter wraps at
+    /// [`CAPTURE_WRAP`]).
+    pub capture_counts: u16,
+    /// The pin's level in the interrupt: high after a rising edge.
+    pub level_high: bool,
+}
+
+impl CaptureEdge {
+    pub const fn rising(channel: usize, capture_counts: u16) -> CaptureEdge {
+        CaptureEdge { channel, capture_counts, level_high: true }
+    }
+
+    pub const fn falling(channel: usize, capture_counts: u16) -> CaptureEdge {
+        CaptureEdge { channel, capture_counts, level_high: false }
+    }
+}
+
 /// What the capture side saw since the last control tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PulseBatch {
@@ -335,9 +362,9 @@ impl EdgeDecoder {
         EdgeDecoder { rules, ch: [EdgeState::default(); CHANNELS], batch: PulseBatch::default(), idle_ticks: 0, ticks: 0 }
     }
 
-    /// One capture event: the channel, the captured counter value and the pin level read in
-    /// the interrupt (high = rising edge). Out-of-range channels are ignored.
-    pub fn on_edge(&mut self, channel: usize, capture_counts: u16, level_high: bool) {
+    /// One capture event (see [`CaptureEdge`]). Out-of-range channels are ignored.
+    pub fn on_edge(&mut self, edge: CaptureEdge) {
+        let CaptureEdge { channel, capture_counts, level_high } = edge;
         let (Some(st), Some(seen), Some(out)) =
             (self.ch.get_mut(channel), self.batch.edge_seen.get_mut(channel), self.batch.width_counts.get_mut(channel))
         else {
@@ -595,27 +622,27 @@ mod tests {
     #[test]
     fn reference_decoder_reports_a_bogus_width_on_the_first_falling_edge() {
         let mut d = EdgeDecoder::new(REF.pulses);
-        d.on_edge(AIL, 1000, false);
+        d.on_edge(CaptureEdge::falling(AIL, 1000));
         assert_eq!(d.take().width_counts[AIL], Some(0));
     }
 
     #[test]
     fn validated_decoder_needs_both_edges_of_one_pulse() {
         let mut d = EdgeDecoder::new(VALID);
-        d.on_edge(AIL, 1000, false);
+        d.on_edge(CaptureEdge::falling(AIL, 1000));
         assert_eq!(d.take().width_counts[AIL], None);
-        d.on_edge(AIL, 30000, true);
-        d.on_edge(AIL, 30000u16.wrapping_add(6000) % 32768, false);
+        d.on_edge(CaptureEdge::rising(AIL, 30000));
+        d.on_edge(CaptureEdge::falling(AIL, 30000u16.wrapping_add(6000) % 32768));
         assert_eq!(d.take().width_counts[AIL], Some(6000));
     }
 
     #[test]
     fn validated_decoder_rejects_out_of_range_widths() {
         let mut d = EdgeDecoder::new(VALID);
-        d.on_edge(THR, 100, true);
-        d.on_edge(THR, 100, false); // fall == rise: 32768 counts
-        d.on_edge(ELE, 100, true);
-        d.on_edge(ELE, 300, false); // 50 µs glitch
+        d.on_edge(CaptureEdge::rising(THR, 100));
+        d.on_edge(CaptureEdge::falling(THR, 100)); // fall == rise: 32768 counts
+        d.on_edge(CaptureEdge::rising(ELE, 100));
+        d.on_edge(CaptureEdge::falling(ELE, 300)); // 50 µs glitch
         let b = d.take();
         assert_eq!(b.width_counts, [None; CHANNELS]);
         assert!(b.edge_seen[THR] && b.edge_seen[ELE]);
@@ -633,11 +660,11 @@ mod tests {
         // 9.5 ms high: the 15-bit clock wraps at 8.192 ms, so the edges' counts are 1.308 ms
         // apart, a valid-looking width. The rise came 7 control ticks before the fall.
         let mut d = EdgeDecoder::new(VALID);
-        d.on_edge(AIL, 1000, true);
+        d.on_edge(CaptureEdge::rising(AIL, 1000));
         for _ in 0..7 {
             assert_eq!(d.take().width_counts[AIL], None);
         }
-        d.on_edge(AIL, (1000 + 38_000 - 32_768) as u16, false);
+        d.on_edge(CaptureEdge::falling(AIL, (1000 + 38_000 - 32_768) as u16));
         assert_eq!(d.take().width_counts[AIL], None, "a 9.5 ms pulse must not read as 1.3 ms");
     }
 
@@ -645,10 +672,10 @@ mod tests {
     fn pulses_across_a_capture_wrap_and_a_tick_boundary_still_count() {
         // A 2.2 ms pulse straddling the wrap, its falling edge two ticks after its rising one.
         let mut d = EdgeDecoder::new(VALID);
-        d.on_edge(THR, 30_000, true);
+        d.on_edge(CaptureEdge::rising(THR, 30_000));
         d.take();
         d.take();
-        d.on_edge(THR, (30_000 + 8800 - 32_768) as u16, false);
+        d.on_edge(CaptureEdge::falling(THR, (30_000 + 8800 - 32_768) as u16));
         assert_eq!(d.take().width_counts[THR], Some(8800));
     }
 
@@ -662,7 +689,7 @@ mod tests {
         for tick in rise_at / TICK..=fall_at / TICK {
             for (at, high) in [(rise_at, true), (fall_at, false)] {
                 if at / TICK == tick {
-                    d.on_edge(THR, (at % u64::from(CAPTURE_WRAP)) as u16, high);
+                    d.on_edge(CaptureEdge { channel: THR, capture_counts: (at % u64::from(CAPTURE_WRAP)) as u16, level_high: high });
                 }
             }
             width = width.or(d.take().width_counts[THR]);
@@ -796,7 +823,7 @@ mod tests {
         ) {
             let mut d = EdgeDecoder::new(VALID);
             for (ch, t, lvl) in edges {
-                d.on_edge(ch, t, lvl);
+                d.on_edge(CaptureEdge { channel: ch, capture_counts: t, level_high: lvl });
             }
             for w in d.take().width_counts.into_iter().flatten() {
                 proptest::prop_assert!((3200..=8800).contains(&w));

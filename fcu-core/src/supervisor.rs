@@ -94,6 +94,22 @@ pub enum FlightState {
 }
 
 impl FlightState {
+    /// Every state, in declaration order.
+    pub const ALL: [FlightState; 7] = [
+        FlightState::Disarmed,
+        FlightState::Arming,
+        FlightState::Armed,
+        FlightState::FailsafeLevel,
+        FlightState::FailsafeOff,
+        FlightState::Calibrating,
+        FlightState::Fault,
+    ];
+
+    /// The state a [`FlightState::name`] names (telemetry and logs print states by name).
+    pub fn from_name(name: &str) -> Option<FlightState> {
+        FlightState::ALL.into_iter().find(|s| s.name() == name)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             FlightState::Disarmed => "disarmed",

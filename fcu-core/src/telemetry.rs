@@ -7,7 +7,8 @@
 //!   degrees (×57.3, as the reference), each with six decimals like C's `%f`, ending in LF;
 //! * a status line, printed on every change of flight state, naming the state, the arming
 //!   blockers, the calibration result, the failsafe stage and any fault, with the battery
-//!   voltage and the outer-loop overrun count.
+//!   voltage and the firmware's counters ([`StatusFields`]; written and read back in
+//!   `status_line`).
 //!
 //! Formatting is fixed-point into a fixed byte buffer: no float formatting machinery, no heap.
 
@@ -16,7 +17,14 @@ use core::fmt::{self, Write};
 use crate::flight::Status;
 use crate::imu::registers::Sensor;
 use crate::imu::CalibrationPhase;
-use crate::supervisor::{Blocker, FlightState};
+use crate::supervisor::FlightState;
+
+mod status_line;
+
+pub use status_line::{
+    failsafe_name, fault_from_name, fault_name, parse_status_line, write_status_line, CalibrationReport, StatusFields, StatusKey,
+    StatusLineError, STATUS_LINE_MAX,
+};
 
 /// A line being built in a fixed buffer. Text that does not fit is dropped and the line is
 /// marked truncated (it still ends in LF, see [`LineBuf::finish_line`]); formatting never fails.
@@ -210,81 +218,6 @@ pub fn write_debug_line<const N: usize>(out: &mut LineBuf<N>, f: &DebugFields) {
     out.finish_line();
 }
 
-/// Longest status line (state, up to nine blockers by name, the rest short).
-pub const STATUS_LINE_MAX: usize = 320;
-
-/// What the status line says, as names ([`write_status`] fills it from the core's status).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StatusFields<'a> {
-    pub state: &'a str,
-    pub armed: bool,
-    /// Names of the arming blockers that hold now (empty = none).
-    pub blockers: &'a [&'a str],
-    pub calibration: &'a str,
-    pub failsafe: &'a str,
-    pub fault: &'a str,
-    pub battery_mv: u32,
-    pub outer_overruns: u32,
-    /// Sensor reads that failed on the bus (the tick ran without a sample).
-    pub bus_errors: u32,
-    /// Telemetry bytes dropped because the UART queue was full.
-    pub uart_dropped_bytes: u32,
-    /// Times a radio pin raised more edges in one capture wrap than a receiver can and was
-    /// muted for the rest of it (interference or a broken wire: the link is then lost for it).
-    pub radio_mutes: u32,
-    /// Control ticks completed since boot when the snapshot was taken: dates the line to the
-    /// tick, however long it waited in the UART queue.
-    pub tick: u32,
-}
-
-/// `STATUS state=… armed=0|1 blockers=a,b|none cal=… failsafe=… fault=… vbat=3.912V overruns=N
-/// bus_errors=N uart_dropped=N rc_muted=N tick=N`.
-pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields<'_>) {
-    out.clear();
-    out.push_str("STATUS state=");
-    out.push_str(f.state);
-    out.push_str(" armed=");
-    out.push_str(if f.armed { "1" } else { "0" });
-    out.push_str(" blockers=");
-    if f.blockers.is_empty() {
-        out.push_str("none");
-    }
-    for (i, name) in f.blockers.iter().enumerate() {
-        if i > 0 {
-            out.push_str(",");
-        }
-        out.push_str(name);
-    }
-    out.push_str(" cal=");
-    out.push_str(f.calibration);
-    out.push_str(" failsafe=");
-    out.push_str(f.failsafe);
-    out.push_str(" fault=");
-    out.push_str(f.fault);
-    out.push_str(" vbat=");
-    out.push_uint(f.battery_mv / 1000);
-    out.push_str(".");
-    let mv = f.battery_mv % 1000;
-    if mv < 100 {
-        out.push_str("0");
-    }
-    if mv < 10 {
-        out.push_str("0");
-    }
-    out.push_uint(mv);
-    out.push_str("V overruns=");
-    out.push_uint(f.outer_overruns);
-    out.push_str(" bus_errors=");
-    out.push_uint(f.bus_errors);
-    out.push_str(" uart_dropped=");
-    out.push_uint(f.uart_dropped_bytes);
-    out.push_str(" rc_muted=");
-    out.push_uint(f.radio_mutes);
-    out.push_str(" tick=");
-    out.push_uint(f.tick);
-    out.finish_line();
-}
-
 /// The fatal boot message for a sensor that did not answer `WHO_AM_I` (`docs/safety.md#boot`).
 pub fn write_sensor_missing_line<const N: usize>(out: &mut LineBuf<N>, sensor: &str, who_am_i: u8, expected: u8) {
     out.clear();
@@ -382,41 +315,6 @@ impl LedPattern {
     }
 }
 
-/// The flight status in telemetry words: state, blockers, calibration, failsafe stage, fault.
-pub mod words {
-    use crate::imu::{CalibrationOutcome, CalibrationPhase, SensorFault};
-    use crate::supervisor::FlightState;
-
-    pub fn calibration(phase: CalibrationPhase) -> &'static str {
-        match phase {
-            CalibrationPhase::Settling => "settling",
-            CalibrationPhase::Averaging { .. } => "running",
-            CalibrationPhase::Idle { last: None } => "none",
-            CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) } => "passed",
-            CalibrationPhase::Idle { last: Some(CalibrationOutcome::FailedMotion) } => "failed-motion",
-        }
-    }
-
-    /// Failsafe stage of `docs/safety.md#failsafe`: 1 = level and hold throttle, 2 = motors off.
-    pub fn failsafe(state: FlightState) -> &'static str {
-        match state {
-            FlightState::FailsafeLevel => "stage1",
-            FlightState::FailsafeOff => "stage2",
-            _ => "none",
-        }
-    }
-
-    pub fn fault(fault: Option<SensorFault>) -> &'static str {
-        match fault {
-            None => "none",
-            Some(SensorFault::NotFinite) => "not-finite",
-            Some(SensorFault::OutOfRange) => "out-of-range",
-            Some(SensorFault::Stuck) => "stuck",
-            Some(SensorFault::NoData) => "no-data",
-        }
-    }
-}
-
 /// The debug line's fields from the core's status.
 pub fn debug_fields(status: &Status) -> DebugFields {
     let [motor1_cmd, ..] = status.motor_command;
@@ -432,47 +330,6 @@ pub fn debug_fields(status: &Status) -> DebugFields {
         pitch_target_rad,
         roll_target_rad,
     }
-}
-
-/// Counters the firmware keeps about itself, printed on the status line.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct FirmwareCounters {
-    pub battery_mv: u32,
-    /// Outer steps that could not start because the previous one was still running.
-    pub outer_overruns: u32,
-    /// Sensor reads that failed on the bus.
-    pub bus_errors: u32,
-    /// Telemetry bytes dropped because the UART queue was full.
-    pub uart_dropped_bytes: u32,
-    /// Radio pins muted for an edge storm (see [`StatusFields::radio_mutes`]).
-    pub radio_mutes: u32,
-    /// Control ticks completed since boot.
-    pub tick: u32,
-}
-
-/// Formats the status line for `status` (blocker names in [`Blocker::ALL`] order).
-pub fn write_status<const N: usize>(out: &mut LineBuf<N>, status: &Status, counters: FirmwareCounters) {
-    let mut names = [""; Blocker::ALL.len()];
-    let mut count = 0;
-    for (slot, blocker) in names.iter_mut().zip(status.blockers.iter()) {
-        *slot = blocker.name();
-        count += 1;
-    }
-    let fields = StatusFields {
-        state: status.state.name(),
-        armed: status.state.motors_may_run(),
-        blockers: names.get(..count).unwrap_or(&[]),
-        calibration: words::calibration(status.calibration),
-        failsafe: words::failsafe(status.state),
-        fault: words::fault(status.fault),
-        battery_mv: counters.battery_mv,
-        outer_overruns: counters.outer_overruns,
-        bus_errors: counters.bus_errors,
-        uart_dropped_bytes: counters.uart_dropped_bytes,
-        radio_mutes: counters.radio_mutes,
-        tick: counters.tick,
-    };
-    write_status_line(out, &fields);
 }
 
 /// The LED code for a flight status (`docs/safety.md#leds`). An in-flight sensor fault is the
@@ -542,6 +399,7 @@ impl Reporter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::supervisor::Blocker;
 
     fn line<const N: usize>(b: &LineBuf<N>) -> &str {
         b.as_str()
@@ -609,52 +467,6 @@ mod tests {
         full.push_str("abcd");
         full.finish_line();
         assert_eq!(line(&full), "abc\n");
-    }
-
-    #[test]
-    fn status_line_names_state_blockers_and_counters() {
-        let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        let f = StatusFields {
-            state: "disarmed",
-            armed: false,
-            blockers: &["not_calibrated", "link_not_good"],
-            calibration: "running",
-            failsafe: "none",
-            fault: "none",
-            battery_mv: 4005,
-            outer_overruns: 2,
-            bus_errors: 3,
-            uart_dropped_bytes: 4,
-            radio_mutes: 5,
-            tick: 1234,
-        };
-        write_status_line(&mut b, &f);
-        assert_eq!(
-            line(&b),
-            "STATUS state=disarmed armed=0 blockers=not_calibrated,link_not_good cal=running failsafe=none fault=none vbat=4.005V overruns=2 \
-             bus_errors=3 uart_dropped=4 rc_muted=5 tick=1234\n"
-        );
-    }
-
-    #[test]
-    fn status_line_without_blockers_says_none() {
-        let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        let f = StatusFields {
-            state: "armed",
-            armed: true,
-            blockers: &[],
-            calibration: "passed",
-            failsafe: "none",
-            fault: "none",
-            battery_mv: 3700,
-            outer_overruns: 0,
-            bus_errors: 0,
-            uart_dropped_bytes: 0,
-            radio_mutes: 0,
-            tick: 0,
-        };
-        write_status_line(&mut b, &f);
-        assert_eq!(line(&b), "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0 bus_errors=0 uart_dropped=0 rc_muted=0 tick=0\n");
     }
 
     #[test]
@@ -729,59 +541,9 @@ mod tests {
         assert_eq!(got, [(true, false), (false, false), (true, true), (false, false), (false, false), (true, true)]);
     }
 
-    #[test]
-    fn calibration_failsafe_and_fault_words() {
-        assert_eq!(words::calibration(CalibrationPhase::Averaging { restarts: 3 }), "running");
-        assert_eq!(
-            words::calibration(CalibrationPhase::Idle { last: Some(crate::imu::CalibrationOutcome::FailedMotion) }),
-            "failed-motion"
-        );
-        assert_eq!(words::failsafe(FlightState::FailsafeLevel), "stage1");
-        assert_eq!(words::failsafe(FlightState::FailsafeOff), "stage2");
-        assert_eq!(words::failsafe(FlightState::Armed), "none");
-        assert_eq!(words::fault(Some(crate::imu::SensorFault::Stuck)), "stuck");
-    }
-
     fn boot_status() -> Status {
         let fc = crate::FlightController::new(crate::Config::default()).expect("default config is valid");
         fc.status()
-    }
-
-    #[test]
-    fn status_line_from_the_core_at_boot() {
-        let st = boot_status();
-        let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        write_status(
-            &mut b,
-            &st,
-            FirmwareCounters { battery_mv: 3950, outer_overruns: 1, bus_errors: 2, uart_dropped_bytes: 3, radio_mutes: 4, tick: u32::MAX },
-        );
-        let text = b.as_str();
-        assert!(text.starts_with("STATUS state="), "{text}");
-        assert!(text.ends_with(" vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 rc_muted=4 tick=4294967295\n"), "{text}");
-        assert!(!b.is_truncated());
-    }
-
-    #[test]
-    fn every_blocker_fits_on_the_status_line() {
-        let mut st = boot_status();
-        for blocker in Blocker::ALL {
-            st.blockers.insert(blocker);
-        }
-        let mut b = LineBuf::<STATUS_LINE_MAX>::new();
-        let most = FirmwareCounters {
-            battery_mv: 99_999,
-            outer_overruns: u32::MAX,
-            bus_errors: u32::MAX,
-            uart_dropped_bytes: u32::MAX,
-            radio_mutes: u32::MAX,
-            tick: u32::MAX,
-        };
-        write_status(&mut b, &st, most);
-        assert!(!b.is_truncated(), "{}", b.as_str());
-        assert!(b.as_str().contains(
-            "not-calibrated,calibrating,link-not-good,throttle-not-low,not-level,failsafe,sensor-fault,boot-settling,gesture-not-released"
-        ));
     }
 
     #[test]

@@ -94,9 +94,9 @@ mod app {
     use fcu_core::boot::BootVerdict;
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
+    use fcu_core::rc::CaptureEdge;
     use fcu_core::rc::EdgeDecoder;
-    use fcu_core::telemetry::{self as tlm, FirmwareCounters, LedPattern, LineBuf, Reporter};
-    use crate::timers::Edge;
+    use fcu_core::telemetry::{self as tlm, LedPattern, LineBuf, Reporter, StatusFields};
     use heapless::spsc::{Consumer, Producer, Queue};
     use heapless::Deque;
     use rtic_monotonics::systick::prelude::*;
@@ -198,8 +198,8 @@ mod app {
     struct Local {
         capture: RcCapture,
         /// Captured edges, from the capture interrupt to the control tick's decoder.
-        edges_out: Producer<'static, Edge>,
-        edges_in: Consumer<'static, Edge>,
+        edges_out: Producer<'static, CaptureEdge>,
+        edges_in: Consumer<'static, CaptureEdge>,
         decoder: EdgeDecoder,
         tick_timer: TickTimer,
         inner: ControlTick,
@@ -216,7 +216,7 @@ mod app {
     /// 8.192 ms capture wrap, all of which could fall in one 1.25 ms tick; the queue holds 127.
     const EDGE_QUEUE: usize = 128;
 
-    #[init(local = [edge_queue: Queue<Edge, EDGE_QUEUE> = Queue::new()])]
+    #[init(local = [edge_queue: Queue<CaptureEdge, EDGE_QUEUE> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         // The HAL prelude lives only here: its fugit 0.3 `.millis()` clashes with the
         // monotonic's fugit 0.6 used by the tasks.
@@ -235,8 +235,7 @@ mod app {
         // 16 MHz HSI (same PLL settings, same clocks), able to say so, never dark.
         let crystal_ready = start_crystal(&dp.RCC);
         let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
-        let mut rcc =
-            dp.RCC.freeze(source.sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()));
+        let mut rcc = dp.RCC.freeze(source.sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()));
         Mono::start(core.SYST, SYSCLK_HZ);
 
         let gpioa = dp.GPIOA.split(&mut rcc);
@@ -328,7 +327,21 @@ mod app {
 
         (
             Shared { outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus },
-            Local { capture, edges_out, edges_in, decoder, tick_timer, inner, outer, motors, watchdog, leds, adc, battery_pin, reporter: Reporter::firmware() },
+            Local {
+                capture,
+                edges_out,
+                edges_in,
+                decoder,
+                tick_timer,
+                inner,
+                outer,
+                motors,
+                watchdog,
+                leds,
+                adc,
+                battery_pin,
+                reporter: Reporter::firmware(),
+            },
         )
     }
 
@@ -485,15 +498,11 @@ mod app {
         }
         let decoder = cx.local.decoder;
         while let Some(edge) = cx.local.edges_in.dequeue() {
-            decoder.on_edge(edge.channel, edge.capture_counts, edge.level_high);
+            decoder.on_edge(edge);
         }
         let pulses = decoder.take();
 
-        let sample = if core::mem::take(cx.local.burst_started) {
-            wait_for_burst(&mut cx.shared.bus)
-        } else {
-            Err(BusError::Timeout)
-        };
+        let sample = if core::mem::take(cx.local.burst_started) { wait_for_burst(&mut cx.shared.bus) } else { Err(BusError::Timeout) };
         let out = match sample {
             Ok(burst) => inner.tick(registers::decode_lsm6dsl_burst(&burst), &pulses),
             Err(_) => {
@@ -556,16 +565,17 @@ mod app {
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             let radio_mutes = cx.shared.radio_mutes.lock(|n| *n);
             cx.shared.uart.lock(|uart| {
-                let counters = FirmwareCounters {
+                let fields = StatusFields {
                     battery_mv,
                     outer_overruns: snapshot.outer_overruns,
                     bus_errors: snapshot.bus_errors,
                     uart_dropped_bytes: uart.dropped_bytes,
                     radio_mutes,
                     tick: snapshot.tick,
+                    ..StatusFields::of(status)
                 };
                 let mut line = LineBuf::<{ tlm::STATUS_LINE_MAX }>::new();
-                tlm::write_status(&mut line, status, counters);
+                tlm::write_status_line(&mut line, &fields);
                 uart.send(line.as_bytes());
             });
         }

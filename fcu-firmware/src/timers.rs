@@ -2,7 +2,7 @@
 //! input capture on both edges nor raw PSC/ARR values from a run-time configuration:
 //! TIM2 captures the radio, TIM4 drives the motors, TIM9 paces the control tick.
 
-use fcu_core::rc::CHANNELS;
+use fcu_core::rc::{CaptureEdge, CHANNELS};
 use stm32f4xx_hal::gpio::{Alternate, PA0, PA1, PA2, PA3};
 use stm32f4xx_hal::pac::{TIM2, TIM4, TIM9};
 use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
@@ -11,14 +11,6 @@ use stm32f4xx_hal::rcc::{Enable, Rcc, Reset};
 pub const RC_CAPTURE_PSC: u16 = 20;
 /// TIM2 auto-reload: the core's 15-bit capture wrap (32768 counts, 8.192 ms) on a 32-bit timer.
 pub const RC_CAPTURE_ARR: u32 = fcu_core::rc::CAPTURE_WRAP - 1;
-
-/// One captured radio edge.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Edge {
-    pub channel: usize,
-    pub capture_counts: u16,
-    pub level_high: bool,
-}
 
 /// PA0..PA3 (AIL, ELE, THR, RUD) in TIM2's alternate function.
 pub type CapturePins = (PA0<Alternate<1>>, PA1<Alternate<1>>, PA2<Alternate<1>>, PA3<Alternate<1>>);
@@ -91,7 +83,7 @@ impl RcCapture {
     /// (returned: how many were, this time); the next wrap (this same interrupt, UIF) turns it
     /// back on, dropping what it captured meanwhile. Runs in the capture interrupt, which
     /// outranks the control tick: short and straight.
-    pub fn take_edges(&mut self, mut sink: impl FnMut(Edge)) -> u32 {
+    pub fn take_edges(&mut self, mut sink: impl FnMut(CaptureEdge)) -> u32 {
         let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
@@ -112,7 +104,7 @@ impl RcCapture {
                 2 => self.pins.2.is_high(),
                 _ => self.pins.3.is_high(),
             };
-            sink(Edge { channel, capture_counts, level_high });
+            sink(CaptureEdge { channel, capture_counts, level_high });
             if let Some(count) = self.edges_in_window.get_mut(channel) {
                 *count = count.saturating_add(1);
                 if *count == EDGE_BUDGET_PER_WRAP {

@@ -12,15 +12,16 @@
 //! loop delay as the in-process core, bounded by a tick either way.
 
 use fcu_core::imu::RawImu;
-use fcu_core::rc::{EdgeDecoder, RcConfig, Receiver};
-use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_core::supervisor::Blocker;
+use fcu_core::telemetry::{CalibrationReport, StatusFields};
+use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
 
 use crate::board::Board;
 use crate::elf::Image;
 use crate::machine::{Fault, Machine};
 use crate::periph::{time_from_s, time_to_s, Time};
-use crate::telemetry::{self, Line, LineSplitter, StatusLine};
+use crate::telemetry::{self, Line, LineSplitter};
 
 /// The control tick the firmware runs (TIM9 at exactly 800 Hz, `Config::default()`).
 pub const TICK_HZ: f64 = 800.0;
@@ -55,42 +56,10 @@ pub struct EmulatedBoard {
     uart_read: usize,
     pub lines: Vec<TimedLine>,
     /// Every STATUS line, in order.
-    pub statuses: Vec<(Time, StatusLine)>,
+    pub statuses: Vec<(Time, StatusFields)>,
     view: ComputerView,
     /// First problem with a UART line (format errors are failures of the image).
     pub line_errors: Vec<String>,
-    stick: StickReader,
-}
-
-/// The pilot's yaw stick as the image's radio rules read it: the same edges, decoded by
-/// fcu-core's own decoder and receiver with the configuration the image flies, give the yaw
-/// rate the stick asks for on each tick. The firmware's telemetry (the reference's debug line)
-/// carries no yaw, and the yaw metric needs the stick's rate, not the computer's opinion of
-/// it: this is the harness reading its own stick, as a pilot would know what they asked for.
-/// (In a failsafe it stays the pilot's stick, where the core in-process reports the failsafe's
-/// centred one; no yaw window lies in a failsafe.)
-struct StickReader {
-    decoder: EdgeDecoder,
-    receiver: Receiver,
-    rc: RcConfig,
-    outer_hz: f32,
-}
-
-impl StickReader {
-    fn new() -> StickReader {
-        let cfg = fcu_core::Config::default();
-        StickReader { decoder: EdgeDecoder::new(cfg.rc.pulses), receiver: Receiver::new(), rc: cfg.rc, outer_hz: cfg.timing.outer_hz() }
-    }
-
-    /// One tick's edges in; the stick's yaw rate out, °/s (0 with the throttle low, as the core
-    /// reports it).
-    fn yaw_rate_dps(&mut self, edges: &[CaptureEdge]) -> f64 {
-        for e in edges {
-            self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
-        }
-        let radio = self.receiver.update(&self.rc, &self.decoder.take(), |_| {});
-        f64::from(self.rc.yaw_rate_rad_s(&radio.sticks, self.outer_hz)).to_degrees()
-    }
 }
 
 impl EmulatedBoard {
@@ -114,7 +83,6 @@ impl EmulatedBoard {
             statuses: Vec::new(),
             view: ComputerView::default(),
             line_errors: Vec::new(),
-            stick: StickReader::new(),
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -197,13 +165,13 @@ impl EmulatedBoard {
         match line {
             Line::Status(s) => {
                 self.view.state = s.state;
-                self.view.armed = s.armed;
-                self.view.link = !s.blockers.iter().any(|b| b == "link-not-good") && s.failsafe == "none";
-                self.view.calibrating = s.cal == "running" || s.cal == "settling";
-                if s.cal == "passed" {
+                self.view.armed = s.armed();
+                self.view.link = !s.blockers.contains(Blocker::LinkNotGood) && s.failsafe_stage().is_none();
+                self.view.calibrating = s.calibration.in_progress();
+                if s.calibration == CalibrationReport::Passed {
                     self.view.calibrated = true;
                 }
-                self.statuses.push((at, s.clone()));
+                self.statuses.push((at, *s));
             }
             Line::Debug(d) => {
                 self.view.est_pitch_deg = d.pitch_deg * DEG_PER_PRINTED_DEG;
@@ -225,17 +193,16 @@ impl FlightComputer for EmulatedBoard {
         TICK_HZ
     }
 
-    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         let t0 = self.t0.ok_or_else(|| SimError::Computer(format!("{} (see uart.log)", self.boot_stall())))?;
         {
             let board = self.machine.board_mut();
             board.spi2.sensors_mut().lsm6dsl.set_output(imu.gyro, imu.accel);
             board.set_battery_volts(battery_v);
             for e in edges {
-                board.schedule_edge(t0 + time_from_s(e.t_s), e.channel, e.level_high);
+                board.schedule_edge(t0 + time_from_s(e.t_s), e.edge.channel, e.edge.level_high);
             }
         }
-        self.view.yaw_rate_cmd_dps = self.stick.yaw_rate_dps(edges);
         let target = t0 + time_from_s(t_end_s);
         self.machine.run_until(target).map_err(|f| SimError::Computer(format!("firmware image: {f}")))?;
         if let Some(hf) = self.machine.state().hard_faults.first() {
@@ -261,15 +228,15 @@ impl FlightComputer for EmulatedBoard {
 
 /// Re-dates the log's state columns from the STATUS lines' tick stamps: the line leaves the
 /// UART some milliseconds after the change, but says at which control tick it was taken.
-pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, StatusLine)]) {
+pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, StatusFields)]) {
     let tick_s = 1.0 / log.tick_hz;
-    let mut changes: Vec<(f64, &StatusLine)> = statuses.iter().filter_map(|(_, s)| s.tick.map(|k| (k as f64 * tick_s, s))).collect();
+    let mut changes: Vec<(f64, &StatusFields)> = statuses.iter().map(|(_, s)| (f64::from(s.tick) * tick_s, s)).collect();
     changes.sort_by(|a, b| a.0.total_cmp(&b.0));
     if changes.is_empty() {
         return;
     }
     let mut i = 0;
-    let mut current: Option<&StatusLine> = None;
+    let mut current: Option<&StatusFields> = None;
     let mut calibrated = false;
     for row in &mut log.rows {
         while i < changes.len() && changes[i].0 <= row.t_s + 1e-9 {
@@ -278,9 +245,9 @@ pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, S
         }
         if let Some(s) = current {
             row.state = s.state;
-            row.armed = s.armed;
-            row.calibrating = s.cal == "running" || s.cal == "settling";
-            calibrated |= s.cal == "passed";
+            row.armed = s.armed();
+            row.calibrating = s.calibration.in_progress();
+            calibrated |= s.calibration == CalibrationReport::Passed;
             row.calibrated = calibrated;
         }
     }
@@ -326,7 +293,7 @@ pub fn fly(
     // Tick stamps count from the firmware's boot: after a reset they start again, so only the
     // lines of the first boot are re-dated.
     let first_reset = board.machine.state().resets.first().map_or(Time::MAX, |&(t, _)| t);
-    let first_boot: Vec<(Time, StatusLine)> = board.statuses.iter().filter(|(at, _)| *at < first_reset).cloned().collect();
+    let first_boot: Vec<(Time, StatusFields)> = board.statuses.iter().filter(|(at, _)| *at < first_reset).copied().collect();
     retime_states(&mut log, &first_boot);
     let uart_log: Vec<u8> = board.machine.board().records.uart.iter().map(|&(_, b)| b).collect();
     let emulated_s = time_to_s(board.machine.now());

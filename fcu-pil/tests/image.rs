@@ -5,13 +5,15 @@
 use std::sync::OnceLock;
 
 use fcu_core::imu::RawImu;
+use fcu_core::supervisor::FlightState;
+use fcu_core::telemetry::StatusFields;
 use fcu_pil::elf::Image;
 use fcu_pil::firmware;
 use fcu_pil::periph::time_from_s;
 use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
 use fcu_pil::telemetry::Line;
 use fcu_testkit::sim::metrics;
-use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::scenario::{self, Scenario};
 use fcu_testkit::sim::{self, ComputerView, FlightComputer, InProcess, RunOptions, SimError};
 use fcu_testkit::Profile;
@@ -44,7 +46,7 @@ impl<F: FnMut(&mut EmulatedBoard)> FlightComputer for Injecting<F> {
     fn tick_hz(&self) -> f64 {
         self.board.tick_hz()
     }
-    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         if t_end_s >= self.at_s {
             if let Some(mut f) = self.action.take() {
                 f(&mut self.board);
@@ -245,9 +247,9 @@ fn a_sensor_that_stops_answering_in_flight_stops_the_motors_and_latches() {
     assert!(log.rows.iter().any(|r| r.t_s < 8.0 && r.motors.iter().all(|&m| m > 0)), "the drone was not flying before the fault");
     let after: Vec<_> = log.rows.iter().filter(|r| r.t_s > 8.2).collect();
     assert!(after.iter().all(|r| r.motors == [0; 4]), "motors ran after the sensor went silent");
-    let last = c.board.statuses.last().map(|(_, s)| s.clone()).unwrap();
-    assert_eq!(last.state, "fault", "{last:?}");
-    assert!(!last.armed);
+    let last = c.board.statuses.last().map(|(_, s)| *s).unwrap();
+    assert_eq!(last.state, FlightState::Fault, "{last:?}");
+    assert!(!last.armed());
 }
 
 /// PA0 toggling every 0.5 µs for 200 ms from `at_s`: a broken wire or an interfering signal
@@ -272,7 +274,7 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
     let (log, c) = fly_and_inject("hover", 8.0, 11.0, |b| edge_storm_on_pa0(b, 8.0));
     let resets = &c.board.machine.state().resets;
     assert!(resets.is_empty(), "the board was reset: {resets:?}");
-    let statuses: Vec<(f64, &fcu_pil::telemetry::StatusLine)> = c.board.statuses.iter().map(|(t, s)| (c.board.scenario_s(*t), s)).collect();
+    let statuses: Vec<(f64, &StatusFields)> = c.board.statuses.iter().map(|(t, s)| (c.board.scenario_s(*t), s)).collect();
     // The control interrupt keeps its pace through the storm: every tick's entry, none missed.
     let control = 16 + fcu_pil::periph::irq::TIM1_BRK_TIM9 as usize;
     let entries: Vec<f64> = c.board.machine.state().exception_stats[&control]
@@ -293,20 +295,19 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
     );
     // The link is declared lost during the storm and the failsafe flies...
     let during: Vec<_> = statuses.iter().filter(|(t, _)| *t > 8.05 && *t < 8.2).collect();
-    assert!(!during.is_empty() && during.iter().all(|(_, s)| s.failsafe != "none"), "no failsafe during the storm: {during:?}");
+    assert!(!during.is_empty() && during.iter().all(|(_, s)| s.failsafe_stage().is_some()), "no failsafe during the storm: {during:?}");
     let airborne = log.rows.iter().filter(|r| r.t_s > 8.0 && r.t_s < 11.0);
     assert!(airborne.clone().all(|r| r.alt_m > 0.3 && r.armed), "the drone came down or disarmed");
     // The status lines say why: the capture muted the pin (none before the storm).
-    let muted = |s: &fcu_pil::telemetry::StatusLine| s.counter("rc_muted").expect("status lines carry rc_muted");
-    assert!(statuses.iter().filter(|(t, _)| *t < 8.0).all(|(_, s)| muted(s) == 0), "rc_muted before the storm");
+    assert!(statuses.iter().filter(|(t, _)| *t < 8.0).all(|(_, s)| s.radio_mutes == 0), "rc_muted before the storm");
     assert!(
-        !during.is_empty() && during.iter().all(|(_, s)| muted(s) > 0),
+        !during.is_empty() && during.iter().all(|(_, s)| s.radio_mutes > 0),
         "the failsafe's status line does not count the muted pin: {during:?}"
     );
     // ...and the radio is back after it.
     let after: Vec<_> = statuses.iter().filter(|(t, _)| *t > 9.0).collect();
     assert!(
-        !after.is_empty() && after.iter().all(|(_, s)| s.failsafe == "none" && s.armed),
+        !after.is_empty() && after.iter().all(|(_, s)| s.failsafe_stage().is_none() && s.armed()),
         "the radio did not come back: {:?}",
         after.first()
     );
@@ -393,8 +394,7 @@ fn the_leds_show_each_flight_state_on_the_image() {
         }
         n
     };
-    let ticks: Vec<(&str, f64)> =
-        b.statuses.iter().map(|(_, s)| (s.state, s.tick.expect("status lines carry the tick") as f64 / rig::TICK_HZ)).collect();
+    let ticks: Vec<(FlightState, f64)> = b.statuses.iter().map(|(_, s)| (s.state, f64::from(s.tick) / rig::TICK_HZ)).collect();
     let mut seen = Vec::new();
     for (k, &(state, start_s)) in ticks.iter().enumerate() {
         let end_s = ticks.get(k + 1).map_or(12.0, |&(_, t)| t);
@@ -407,28 +407,28 @@ fn the_leds_show_each_flight_state_on_the_image() {
         let (t1, t2) = toggles(from, to);
         // Toggles per second of a blink with period P: 2 / P.
         let rate = |n: usize| n as f64 / (to - from);
-        let what = format!("{state} over {from:.2}..{to:.2} s: LED1 {:.1}, LED2 {:.1} changes/s", rate(t1), rate(t2));
+        let what = format!("{} over {from:.2}..{to:.2} s: LED1 {:.1}, LED2 {:.1} changes/s", state.name(), rate(t1), rate(t2));
         match state {
-            "calibrating" => {
+            FlightState::Calibrating => {
                 assert!(samples.iter().all(|&(l1, l2)| l1 != l2), "{what}: not alternating");
                 assert!((rate(t1) - 4.0).abs() < 1.0, "{what}: not at 2 Hz");
             }
-            "disarmed" | "arming" => {
+            FlightState::Disarmed | FlightState::Arming => {
                 assert!(samples.iter().all(|&(l1, _)| !l1), "{what}: LED1 lit");
                 assert!((rate(t2) - 20.0).abs() < 2.0, "{what}: LED2 not at 10 Hz");
             }
-            "armed" => assert!(samples.iter().all(|&l| l == (false, true)) && t1 + t2 == 0, "{what}: LED2 not solid"),
-            "failsafe1" => {
+            FlightState::Armed => assert!(samples.iter().all(|&l| l == (false, true)) && t1 + t2 == 0, "{what}: LED2 not solid"),
+            FlightState::FailsafeLevel => {
                 assert!(samples.iter().all(|&(_, l2)| !l2), "{what}: LED2 lit");
                 assert!((rate(t1) - 20.0).abs() < 2.0, "{what}: LED1 not at 10 Hz");
             }
-            other => panic!("unexpected state {other} in this flight"),
+            other => panic!("unexpected state {} in this flight", other.name()),
         }
         eprintln!("{what}");
         seen.push(state);
     }
-    for state in ["calibrating", "disarmed", "armed", "failsafe1"] {
-        assert!(seen.contains(&state), "no stretch of {state} long enough to read: {ticks:?}");
+    for state in [FlightState::Calibrating, FlightState::Disarmed, FlightState::Armed, FlightState::FailsafeLevel] {
+        assert!(seen.contains(&state), "no stretch of {} long enough to read: {ticks:?}", state.name());
     }
 }
 
@@ -441,8 +441,8 @@ fn status_lines_report_the_cores_states() {
     let host = sim::run(&sc, Profile::Default, &opts).unwrap();
     let flight = rig::fly(elf(), &sc, &opts).unwrap();
     assert!(flight.board.line_errors.is_empty(), "{:?}", flight.board.line_errors);
-    let seq = |states: &mut dyn Iterator<Item = &'static str>| {
-        let mut v: Vec<&'static str> = Vec::new();
+    let seq = |states: &mut dyn Iterator<Item = FlightState>| {
+        let mut v: Vec<FlightState> = Vec::new();
         for s in states {
             if v.last() != Some(&s) {
                 v.push(s);
@@ -477,8 +477,8 @@ fn the_sensor_bus_is_clean_on_the_image() {
     // and the end of the last byte), at both ends.
     assert_eq!(spi.early_stops(), 0, "SPE cleared within one SCK of the second-to-last RXNE: the last byte never came");
     assert_eq!(spi.cut_frames(), 0, "SPE cleared after the last byte: an extra byte clocked as the chip select rose");
-    let bus_errors: Vec<Option<u64>> = b.statuses.iter().map(|(_, s)| s.counter("bus_errors")).collect();
-    assert!(!bus_errors.is_empty() && bus_errors.iter().all(|&n| n == Some(0)), "sensor reads that failed, by status line: {bus_errors:?}");
+    let bus_errors: Vec<u32> = b.statuses.iter().map(|(_, s)| s.bus_errors).collect();
+    assert!(!bus_errors.is_empty() && bus_errors.iter().all(|&n| n == 0), "sensor reads that failed, by status line: {bus_errors:?}");
     let sensors = spi.sensors();
     assert_eq!(sensors.unexpected_writes(), 0, "writes to read-only or reserved sensor registers");
     assert!(sensors.lsm6dsl.reads() >= 4000, "the control task read the IMU {} times in 6 s", sensors.lsm6dsl.reads());

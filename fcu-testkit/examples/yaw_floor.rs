@@ -16,8 +16,9 @@
 //! About 30 s per seed on one core of this machine (two seeds run at once).
 
 use fcu_core::config::Config;
-use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::scenario::{self, Scenario};
+use fcu_testkit::sim::stick_rate::StickRate;
 use fcu_testkit::sim::{self, metrics, ComputerView, FlightComputer, InProcess, RunOptions, SimError};
 use fcu_testkit::Profile;
 
@@ -38,6 +39,8 @@ struct Switches {
 /// The core, with its motor outputs replaced after each stick step per `plan`.
 struct Oracle {
     core: InProcess,
+    /// The stick's yaw rate, from the edges the core is given.
+    stick: StickRate,
     plan: [Switches; 2],
     max_compare: u16,
     last_cmd_dps: f64,
@@ -51,7 +54,7 @@ impl Oracle {
         let cfg = Config::default();
         let max_compare = cfg.mixer.max_compare as u16;
         let core = InProcess::new(cfg).unwrap_or_else(|e| panic!("{e}"));
-        Oracle { core, plan, max_compare, last_cmd_dps: 0.0, step: None, steps_seen: 0 }
+        Oracle { core, stick: StickRate::new(&cfg), plan, max_compare, last_cmd_dps: 0.0, step: None, steps_seen: 0 }
     }
 }
 
@@ -60,9 +63,9 @@ impl FlightComputer for Oracle {
         self.core.tick_hz()
     }
 
-    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         let compare = self.core.step(t_end_s, edges, imu, battery_v)?;
-        let cmd_dps = self.core.view().yaw_rate_cmd_dps;
+        let cmd_dps = self.stick.yaw_rate_dps(edges.iter().map(|e| e.edge));
         // Only the steps inside the metric's window (8.5 s on): the turn's start at 8 s is
         // the core's.
         if t_end_s > 8.5 && (cmd_dps - self.last_cmd_dps).abs() > STEP_DPS && self.steps_seen < self.plan.len() {

@@ -3,12 +3,14 @@
 //! - [`replay`]: the golden replay format of `fcu-testkit/data/golden/README.md` (reference profile
 //!   oracle);
 //! - [`sim`]: a simulated STEVAL-DRONE01 (plant, IMU, radio) flown in closed loop;
+//! - [`harness`]: one control tick of the core as the firmware runs it, for every driver here;
 //! - [`broad`]: attitude estimation scored on real BROAD recordings;
 //! - [`cli`]: the `fcu-sim` command line.
 
 pub mod broad;
 pub mod cli;
 pub mod csv;
+pub mod harness;
 pub mod profile;
 pub mod replay;
 pub mod safety;

@@ -22,7 +22,9 @@ use fcu_core::flight::{FlightController, Status, TickOutput};
 use fcu_core::imu::{CalibrationOutcome, CalibrationPhase, HealthConfig, RawImu};
 use fcu_core::math::Quat;
 use fcu_core::mixer::MixerConfig;
-use fcu_core::rc::{EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, StickCounts, Sticks, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US};
+use fcu_core::rc::{
+    CaptureEdge, EdgeDecoder, Gesture, PulseBatch, PulseRules, RcConfig, StickCounts, Sticks, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US,
+};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, SupervisorConfig};
 
 use crate::sim::rng::Rng;
@@ -316,7 +318,7 @@ pub struct Observation<'a> {
     /// The capture edges fed to the decoder before this tick's `take` (enables the check that
     /// every width comes from one pulse shorter than the capture wrap; with `batch`, every
     /// tick from boot or never).
-    pub edges: Option<&'a [Edge]>,
+    pub edges: Option<&'a [CaptureEdge]>,
     pub out: &'a TickOutput,
     /// `status()` taken after the tick *and* its outer step (as `FlightController::tick_and_run_outer`).
     pub status: &'a Status,
@@ -502,7 +504,7 @@ impl SafetyMonitor {
     /// of its channel, fed at most so many ticks apart that the pulse was shorter than the
     /// capture wrap plus the shortest valid width: then its counts cannot have wrapped into a
     /// valid width. (Independent of the decoder's own window, which is tighter.)
-    fn pulses(&mut self, edges: &[Edge], batch: &PulseBatch) -> Result<(), Violation> {
+    fn pulses(&mut self, edges: &[CaptureEdge], batch: &PulseBatch) -> Result<(), Violation> {
         let PulseRules::Validated { min_counts, .. } = self.rc.pulses else {
             return Ok(());
         };
@@ -512,7 +514,7 @@ impl SafetyMonitor {
             let (Some(rise), Some(made)) = (self.rise.get_mut(e.channel), made.get_mut(e.channel)) else {
                 continue;
             };
-            let counts = e.counts & 0x7FFF;
+            let counts = e.capture_counts & 0x7FFF;
             if e.level_high {
                 *rise = Some((counts, self.tick));
             } else if let Some((r, at)) = rise.take() {
@@ -745,14 +747,6 @@ pub const COUNTS_PER_TICK: u64 = 5_000;
 /// TIM2 counts per receiver frame (20 ms, 50 Hz).
 pub const COUNTS_PER_FRAME: u64 = 80_000;
 
-/// One capture event as the TIM2 interrupt reports it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Edge {
-    pub channel: usize,
-    pub counts: u16,
-    pub level_high: bool,
-}
-
 /// What the transmitter sends for a while: a pulse width per channel, TIM2 counts
 /// (0 = that channel stays low), or nothing at all.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -809,10 +803,11 @@ pub struct PwmReceiver {
     now: u64,
     next_frame: u64,
     layout: ChannelLayout,
-    /// Scheduled edges (absolute counts), in time order.
-    pending: Vec<(u64, Edge)>,
+    /// Scheduled edges at their absolute time in counts (their capture value is set when they
+    /// are delivered), in time order.
+    pending: Vec<(u64, CaptureEdge)>,
     /// Edges for the next tick only, at their offset from its start.
-    injected: Vec<(u64, Edge)>,
+    injected: Vec<(u64, CaptureEdge)>,
     rng: Rng,
 }
 
@@ -844,12 +839,12 @@ impl PwmReceiver {
     /// offset past the tick's end still comes with it, stamped as the counter would show it:
     /// 32 768 counts later reads the same, which is how a glitch as long as the wrap looks).
     pub fn inject(&mut self, channel: usize, offset_counts: u64, level_high: bool) {
-        self.injected.push((offset_counts, Edge { channel, counts: 0, level_high }));
+        self.injected.push((offset_counts, CaptureEdge { channel, capture_counts: 0, level_high }));
     }
 
     /// The edges of the next control tick, appended to `out` oldest first. `frame` is what
     /// frames starting during this tick carry; `glitches` spikes are added to each of them.
-    pub fn tick(&mut self, frame: &RadioFrame, glitches: u8, out: &mut Vec<Edge>) {
+    pub fn tick(&mut self, frame: &RadioFrame, glitches: u8, out: &mut Vec<CaptureEdge>) {
         let end = self.now + COUNTS_PER_TICK;
         while self.next_frame < end {
             let start = self.next_frame;
@@ -861,8 +856,8 @@ impl PwmReceiver {
                         t = start + channel as u64 * offset_counts;
                     }
                     if w > 0 {
-                        self.pending.push((t, Edge { channel, counts: 0, level_high: true }));
-                        self.pending.push((t + u64::from(w), Edge { channel, counts: 0, level_high: false }));
+                        self.pending.push((t, CaptureEdge::rising(channel, 0)));
+                        self.pending.push((t + u64::from(w), CaptureEdge::falling(channel, 0)));
                         t += u64::from(w);
                     }
                 }
@@ -871,17 +866,17 @@ impl PwmReceiver {
                 let channel = (self.rng.next_u64() % CHANNELS as u64) as usize;
                 let at = start + self.rng.next_u64() % COUNTS_PER_FRAME;
                 let len = 8 + self.rng.next_u64() % 113;
-                self.pending.push((at, Edge { channel, counts: 0, level_high: true }));
-                self.pending.push((at + len, Edge { channel, counts: 0, level_high: false }));
+                self.pending.push((at, CaptureEdge::rising(channel, 0)));
+                self.pending.push((at + len, CaptureEdge::falling(channel, 0)));
             }
             self.pending.sort_by_key(|&(t, _)| t);
         }
         let due = self.pending.iter().take_while(|&&(t, _)| t < end).count();
-        let mut now: Vec<(u64, Edge)> = self.pending.drain(..due).collect();
+        let mut now: Vec<(u64, CaptureEdge)> = self.pending.drain(..due).collect();
         now.extend(self.injected.drain(..).map(|(offset, e)| (self.now + offset, e)));
         now.sort_by_key(|&(t, _)| t);
         for (t, e) in now {
-            out.push(Edge { counts: (t % u64::from(CAPTURE_WRAP)) as u16, ..e });
+            out.push(CaptureEdge { capture_counts: (t % u64::from(CAPTURE_WRAP)) as u16, ..e });
         }
         self.now = end;
     }
@@ -927,7 +922,7 @@ pub struct Rig {
     pub decoder: EdgeDecoder,
     pub radio: PwmReceiver,
     pub imu: LevelImu,
-    edges: Vec<Edge>,
+    edges: Vec<CaptureEdge>,
 }
 
 impl Rig {
@@ -947,18 +942,12 @@ impl Rig {
         self.fc.status().state
     }
 
-    /// One tick from given edges and sensor words: edges → decoder → tick → outer step →
+    /// One tick from given edges and sensor words ([`crate::harness::tick`]), then the
     /// monitor.
-    pub fn tick_with(&mut self, imu: RawImu, edges: &[Edge]) -> Result<TickOutput, Violation> {
-        for e in edges {
-            self.decoder.on_edge(e.channel, e.counts, e.level_high);
-        }
-        let batch = self.decoder.take();
-        let out = self.fc.tick(imu, &batch);
-        if let Some(job) = &out.outer_job {
-            self.fc.run_outer(job);
-        }
+    pub fn tick_with(&mut self, imu: RawImu, edges: &[CaptureEdge]) -> Result<TickOutput, Violation> {
+        let ticked = crate::harness::tick(&mut self.fc, &mut self.decoder, imu, edges.iter().copied());
         let status = self.fc.status();
+        let (out, batch) = (ticked.out, ticked.pulses);
         self.monitor.check(&Observation { imu: Some(imu), batch: Some(&batch), edges: Some(edges), out: &out, status: &status })?;
         Ok(out)
     }

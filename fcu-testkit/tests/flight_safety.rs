@@ -4,10 +4,11 @@
 //! a rule of `docs/safety.md`; several show the reference's accident beside ours.
 
 use fcu_core::flight::TickOutput;
-use fcu_core::rc::{EdgeDecoder, StickCounts, CAPTURE_WRAP};
+use fcu_core::rc::{CaptureEdge, EdgeDecoder, StickCounts, CAPTURE_WRAP};
 use fcu_core::supervisor::FlightState;
 use fcu_core::{Config, FlightController};
-use fcu_testkit::safety::{ChannelLayout, Edge, LevelImu, PwmReceiver, RadioFrame, COUNTS_PER_FRAME, COUNTS_PER_TICK};
+use fcu_testkit::harness;
+use fcu_testkit::safety::{ChannelLayout, LevelImu, PwmReceiver, RadioFrame, COUNTS_PER_FRAME, COUNTS_PER_TICK};
 
 /// TIM2 counts (0.25 µs) per control tick at 800 Hz, and per 50 Hz radio frame.
 const TICK_COUNTS: u64 = COUNTS_PER_TICK;
@@ -75,24 +76,17 @@ impl Bench {
         }
         let frame =
             if self.sending { RadioFrame { width_counts: self.sticks_us.map(|w| (w * 4.0) as u16), link: true } } else { RadioFrame::OFF };
-        let mut edges: Vec<Edge> = Vec::new();
+        let mut edges: Vec<CaptureEdge> = Vec::new();
         self.radio.tick(&frame, 0, &mut edges);
-        for e in &edges {
-            self.decoder.on_edge(e.channel, e.counts, e.level_high);
-            if !e.level_high {
-                if let Some(t) = self.last_fall_tick.get_mut(e.channel) {
-                    *t = self.ticks;
-                }
+        for e in edges.iter().filter(|e| !e.level_high) {
+            if let Some(t) = self.last_fall_tick.get_mut(e.channel) {
+                *t = self.ticks;
             }
         }
         self.now_counts = self.radio.now_counts();
-        let pulses = self.decoder.take();
         self.imu.stuck = self.stuck_imu;
         let imu = self.imu.sample();
-        let out = self.fc.tick(imu, &pulses);
-        if let Some(job) = out.outer_job {
-            self.fc.run_outer(&job);
-        }
+        let out = harness::tick(&mut self.fc, &mut self.decoder, imu, edges).out;
         self.last = Some(out);
         out
     }

@@ -15,7 +15,8 @@ use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 
 use fcu_core::imu::RawImu;
-use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_core::rc::CaptureEdge;
+use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::{self, scenario, ComputerView, FlightComputer, InProcess, RunOptions, SimError};
 use fcu_testkit::Profile;
 
@@ -59,7 +60,7 @@ impl FlightComputer for Recorder {
         self.core.tick_hz()
     }
 
-    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         let compare = self.core.step(t_end_s, edges, imu, battery_v)?;
         let g = imu.gyro;
         let a = imu.accel;
@@ -67,7 +68,7 @@ impl FlightComputer for Recorder {
         let battery_mv = (battery_v * 1000.0).round() as u32;
         let _ = write!(self.text, "{},{},{},{},{},{},{},{battery_mv},", self.tick, g[0], g[1], g[2], a[0], a[1], a[2]);
         let edge_field: Vec<String> =
-            edges.iter().map(|e| format!("{}:{}:{}", e.channel, e.capture_counts, u8::from(e.level_high))).collect();
+            edges.iter().map(|e| format!("{}:{}:{}", e.edge.channel, e.edge.capture_counts, u8::from(e.edge.level_high))).collect();
         let _ = write!(self.text, "{},", edge_field.join(";"));
         output_fields(&mut self.text, compare, &self.core);
         self.text.push('\n');
@@ -123,12 +124,13 @@ fn replay(name: &str, seconds: f64) {
         let n = |k: usize| f[k].parse::<i16>().unwrap_or_else(|_| panic!("{name} line {}: field {}", i + 2, k + 1));
         let imu = RawImu { gyro: [n(1), n(2), n(3)], accel: [n(4), n(5), n(6)] };
         let battery_mv: u32 = f[7].parse().unwrap_or_else(|_| panic!("{name} line {}: battery_mv", i + 2));
-        let edges: Vec<CaptureEdge> = f[8]
+        let edges: Vec<TimedEdge> = f[8]
             .split(';')
             .filter(|e| !e.is_empty())
             .map(|e| {
                 let p: Vec<&str> = e.split(':').collect();
-                CaptureEdge { t_s: 0.0, channel: p[0].parse().unwrap(), capture_counts: p[1].parse().unwrap(), level_high: p[2] == "1" }
+                let edge = CaptureEdge { channel: p[0].parse().unwrap(), capture_counts: p[1].parse().unwrap(), level_high: p[2] == "1" };
+                TimedEdge { t_s: 0.0, edge }
             })
             .collect();
         let compare = core.step(0.0, &edges, imu, f64::from(battery_mv) / 1000.0).unwrap();

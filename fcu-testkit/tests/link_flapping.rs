@@ -2,6 +2,7 @@
 //! keep the drone flying (the adversarial review flew 20 s on 4 % of the frames, and climbed
 //! to 85 m on bursts carrying 1400 µs of throttle).
 
+use fcu_core::supervisor::FlightState;
 use fcu_testkit::sim::scenario::{self, StickRow, Throttle, Timeline};
 use fcu_testkit::sim::{self, RunOptions};
 use fcu_testkit::Profile;
@@ -38,12 +39,12 @@ fn a_link_delivering_less_than_half_of_its_frames_ends_in_stage_2_within_3_s() {
     // off 900 / on 40 ms is the review's 4 %.
     for (off, on) in [(150.0, 40.0), (900.0, 40.0), (300.0, 60.0), (120.0, 100.0), (200.0, 180.0)] {
         let log = flap(off, on, 1400.0);
-        let stage2 = log.rows.iter().find(|r| r.state == "failsafe2").map(|r| r.t_s);
+        let stage2 = log.rows.iter().find(|r| r.state == FlightState::FailsafeOff).map(|r| r.t_s);
         let at = stage2.unwrap_or_else(|| panic!("off {off} / on {on} ms: never reached stage 2"));
         eprintln!("off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - FIRST_LOSS_S);
         assert!(at - FIRST_LOSS_S <= 3.0, "off {off} / on {on} ms: stage 2 {:.2} s after the first loss", at - FIRST_LOSS_S);
         assert!(
-            !log.rows.iter().any(|r| r.t_s > FIRST_LOSS_S + 0.2 && r.t_s < at && r.state == "armed"),
+            !log.rows.iter().any(|r| r.t_s > FIRST_LOSS_S + 0.2 && r.t_s < at && r.state == FlightState::Armed),
             "off {off} / on {on} ms: control handed back to the flapping link"
         );
         assert!(log.rows.iter().filter(|r| r.t_s >= at).all(|r| !r.armed && r.motors == [0; 4]), "motors restarted after stage 2");

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use fcu_core::config::Config;
 use fcu_core::flight::{Status, TickOutput};
 use fcu_core::imu::{RawImu, SensorFault};
-use fcu_core::rc::{Gesture, PulseBatch, RcConfig, StickCounts, Sticks};
+use fcu_core::rc::{CaptureEdge, Gesture, PulseBatch, RcConfig, StickCounts, Sticks};
 use fcu_core::supervisor::{Decision, FlightState, Inputs, SafetyConfig, Supervisor};
 use fcu_testkit::safety::*;
 use fcu_testkit::sim::rng::Rng;
@@ -179,10 +179,10 @@ fn background_strategy() -> impl Strategy<Value = Option<Sticks>> {
 fn run_edges(rig: &mut Rig, background: Option<Sticks>, ops: &[EdgeOp]) -> Result<(), Violation> {
     let rc = rig.fc.config().rc;
     let frame = background.map_or(RadioFrame::OFF, |s| RadioFrame::from_sticks(&rc, s));
-    let mut edges: Vec<Edge> = Vec::new();
+    let mut edges: Vec<CaptureEdge> = Vec::new();
     for op in ops {
         match *op {
-            EdgeOp::Edge(channel, counts, level_high) => edges.push(Edge { channel, counts, level_high }),
+            EdgeOp::Edge(channel, capture_counts, level_high) => edges.push(CaptureEdge { channel, capture_counts, level_high }),
             EdgeOp::Ticks(n) => {
                 for _ in 0..n {
                     // The receiver's edges of this tick after the injected ones.
@@ -536,7 +536,7 @@ fn receiver_generator_sends_50_hz_frames_that_decode_to_the_sticks() {
         edges.clear();
         radio.tick(&frame, 0, &mut edges);
         for e in &edges {
-            decoder.on_edge(e.channel, e.counts, e.level_high);
+            decoder.on_edge(*e);
         }
         let b = decoder.take();
         widths += b.width_counts.iter().flatten().count();
@@ -690,27 +690,27 @@ fn monitor_rejects_a_width_from_a_pulse_longer_than_the_capture_wrap() {
     let (out, st) = next_tick(&mut rig);
     let mut m = rig.monitor.clone();
     let empty = PulseBatch::default();
-    let rise = [Edge { channel: 0, counts: 1000, level_high: true }];
-    let mut seen = |edges: &[Edge], batch: &PulseBatch| {
+    let rise = [CaptureEdge::rising(0, 1000)];
+    let mut seen = |edges: &[CaptureEdge], batch: &PulseBatch| {
         m.observe(&Observation { imu: None, batch: Some(batch), edges: Some(edges), out: &out, status: &st })
     };
     seen(&rise, &empty).unwrap_or_else(|v| panic!("{v}"));
     for _ in 0..6 {
         seen(&[], &empty).unwrap_or_else(|v| panic!("{v}"));
     }
-    let fall = [Edge { channel: 0, counts: (1000 + 38_000 - 32_768) as u16, level_high: false }];
+    let fall = [CaptureEdge::falling(0, (1000 + 38_000 - 32_768) as u16)];
     let aliased = PulseBatch { width_counts: [Some(38_000 - 32_768), None, None, None], ..PulseBatch::default() };
     let v = seen(&fall, &aliased).expect_err("must object");
     assert_eq!(v.invariant, Invariant::PulseAliased, "{v}");
 
     // The same width from a pulse whose edges came 2 ticks apart is fine.
     let mut m = rig.monitor.clone();
-    let mut seen = |edges: &[Edge], batch: &PulseBatch| {
+    let mut seen = |edges: &[CaptureEdge], batch: &PulseBatch| {
         m.observe(&Observation { imu: None, batch: Some(batch), edges: Some(edges), out: &out, status: &st })
     };
     seen(&rise, &empty).unwrap_or_else(|v| panic!("{v}"));
     seen(&[], &empty).unwrap_or_else(|v| panic!("{v}"));
-    let fall = [Edge { channel: 0, counts: 1000 + 5232, level_high: false }];
+    let fall = [CaptureEdge::falling(0, 1000 + 5232)];
     seen(&fall, &aliased).unwrap_or_else(|v| panic!("{v}"));
 }
 

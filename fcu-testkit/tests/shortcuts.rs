@@ -10,7 +10,8 @@ use fcu_core::flight::FlightController;
 use fcu_core::imu::RawImu;
 use fcu_core::rc::EdgeDecoder;
 use fcu_core::supervisor::FlightState;
-use fcu_testkit::sim::radio_model::CaptureEdge;
+use fcu_testkit::harness;
+use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::scenario::{self, StickRow, Throttle, Timeline, AIL_CENTRE_US, ELE_CENTRE_US, RUD_CENTRE_US};
 use fcu_testkit::sim::{self, ComputerView, FlightComputer, RunOptions, SimError};
 use fcu_testkit::Profile;
@@ -42,16 +43,10 @@ impl FlightComputer for Lockstep {
         f64::from(self.shipped.0.config().timing.tick_hz())
     }
 
-    fn step(&mut self, _t_end_s: f64, edges: &[CaptureEdge], imu: RawImu, _battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, _t_end_s: f64, edges: &[TimedEdge], imu: RawImu, _battery_v: f64) -> Result<[u16; 4], SimError> {
         let mut outs = Vec::with_capacity(2);
         for (fc, decoder) in [&mut self.shipped, &mut self.table_only] {
-            for e in edges {
-                decoder.on_edge(e.channel, e.capture_counts, e.level_high);
-            }
-            let out = fc.tick(imu, &decoder.take());
-            if let Some(job) = &out.outer_job {
-                fc.run_outer(job);
-            }
+            let out = harness::tick(fc, decoder, imu, edges.iter().map(|e| e.edge)).out;
             outs.push((out, fc.status()));
         }
         self.ticks += 1;
@@ -67,7 +62,7 @@ impl FlightComputer for Lockstep {
     fn view(&self) -> ComputerView {
         let st = self.shipped.0.status();
         ComputerView {
-            state: st.state.name(),
+            state: st.state,
             armed: st.state.motors_may_run(),
             link: st.link,
             calibrated: st.calibrated,

@@ -2,6 +2,8 @@
 
 use std::process::Command;
 
+use fcu_core::supervisor::FlightState;
+
 fn fcu_sim(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_fcu-sim")).args(args).output().unwrap_or_else(|e| panic!("{e}"));
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
@@ -149,7 +151,9 @@ fn sticks_file_errors_name_the_line_and_a_good_file_flies() {
         fcu_sim(&["fly", "--scenario", "hover", "--sticks", good.to_str().unwrap_or_default(), "--out", dir.to_str().unwrap_or_default()]);
     assert_eq!(code, 0, "{out}\n{err}");
     let csv = std::fs::read_to_string(dir.join("flight.csv")).unwrap_or_default();
-    assert!(csv.lines().any(|l| l.contains(",armed,1,")), "never armed from the file's gesture");
+    let states: Vec<Option<FlightState>> = csv.lines().skip(1).map(|l| l.split(',').nth(1).and_then(FlightState::from_name)).collect();
+    assert!(!states.is_empty() && states.iter().all(Option::is_some), "a row without a state the core names");
+    assert!(states.contains(&Some(FlightState::Armed)), "never armed from the file's gesture");
 }
 
 #[test]

@@ -77,7 +77,7 @@ fn reference_profile_has_no_disarm_and_keeps_motors_armed_after_landing() {
     let log = sim::run(&sc, Profile::Reference, &RunOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     assert!(log.rows.iter().any(|r| r.armed), "the reference arms on its gesture");
     let last = log.rows.last().unwrap_or_else(|| panic!("empty log"));
-    assert!(last.armed, "the reference has no disarm, state at end: {}", last.state);
+    assert!(last.armed, "the reference has no disarm, state at end: {}", last.state.name());
     let verdicts = metrics::check_all(&log, &sc);
     assert!(verdicts.iter().any(|v| !v.passed), "reference should fail the disarm criterion");
 }

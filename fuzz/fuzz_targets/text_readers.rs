@@ -1,6 +1,7 @@
 //! Any bytes as the text files the host tools read: a `--sticks` timeline, a replay input, a
-//! replay expectation, a BROAD recording. Each reader must answer with rows or an error (never
-//! a panic), and an error message must stay short and printable.
+//! replay expectation, a BROAD recording, and as a firmware STATUS line. Each reader must
+//! answer with rows or an error (never a panic), and an error message must stay short and
+//! printable; a STATUS line that parses must print back as a line that parses to the same.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -22,5 +23,14 @@ fuzz_target!(|data: &[u8]| {
     }
     if let Err(e) = fcu_testkit::broad::Recording::parse(&text) {
         check(e.to_string());
+    }
+    match fcu_core::telemetry::parse_status_line(&text) {
+        Ok(fields) => {
+            let mut line = fcu_core::telemetry::LineBuf::<{ fcu_core::telemetry::STATUS_LINE_MAX }>::new();
+            fcu_core::telemetry::write_status_line(&mut line, &fields);
+            assert!(!line.is_truncated(), "{}", line.as_str());
+            assert_eq!(fcu_core::telemetry::parse_status_line(line.as_str()), Ok(fields));
+        }
+        Err(e) => check(e.to_string()),
     }
 });

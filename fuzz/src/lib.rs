@@ -20,9 +20,9 @@ use std::sync::OnceLock;
 
 use fcu_core::config::Config;
 use fcu_core::imu::RawImu;
-use fcu_core::rc::Sticks;
+use fcu_core::rc::{CaptureEdge, Sticks};
 use fcu_core::supervisor::FlightState;
-use fcu_testkit::safety::{sticks, Edge, RadioFrame, Rig, Violation};
+use fcu_testkit::safety::{sticks, RadioFrame, Rig, Violation};
 use fcu_testkit::sim::rng::Rng;
 
 /// Ticks per input (1.28 s of flight; the start points sit a few ticks before each
@@ -180,13 +180,13 @@ pub fn run(data: &[u8], target: Target) -> Result<(), Violation> {
     let mut glitches = 0u8;
     let mut sensor = Sensor::Level;
     let mut rng = Rng::new(u64::from(head));
-    let mut edges: Vec<Edge> = Vec::new();
+    let mut edges: Vec<CaptureEdge> = Vec::new();
     let mut ticks = 0u32;
     while let Some(k) = b.u8() {
         let n = match k {
             0x00..=0x7F => {
                 let counts = b.u16();
-                edges.push(Edge { channel: usize::from(k & 7), counts, level_high: k & 8 != 0 });
+                edges.push(CaptureEdge { channel: usize::from(k & 7), capture_counts: counts, level_high: k & 8 != 0 });
                 0
             }
             0x80..=0xBF => u32::from(k & 63) + 1,

@@ -359,7 +359,7 @@ pub fn measure_axis(
     let hover_lost = if rows.len() < n {
         Some(format!("{name}: the flight ended {} ticks early", n - rows.len()))
     } else if let Some(r) = rows.iter().find(|r| !r.armed) {
-        Some(format!("{name}: disarmed ({}) at {:.2} s", r.state, r.t_s))
+        Some(format!("{name}: disarmed ({}) at {:.2} s", r.state.name(), r.t_s))
     } else if let Some(r) = rows.iter().find(|r| r.alt_m < MIN_HOVER_ALT_M) {
         Some(format!("{name}: down to {:.2} m at {:.2} s", r.alt_m, r.t_s))
     } else if max_tilt_deg > MAX_HOVER_TILT_DEG {

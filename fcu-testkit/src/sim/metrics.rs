@@ -91,11 +91,10 @@ pub fn level_after_link_loss_s(log: &FlightLog, t_s: f64) -> Option<f64> {
 }
 
 /// RMS of the commanded yaw rate minus the true yaw rate, each averaged over the same 0.1 s,
-/// °/s. The commanded rate is what the pilot's stick asks for (`LogRow::yaw_rate_cmd_dps`),
-/// not the core's own heading target, so that a controller which smooths or delays its target
-/// is measured against the stick all the same (fcu-pil's emulated board reads the stick's rate
-/// from the edges it sends, through fcu-core's own decoder: the firmware's telemetry carries no
-/// yaw).
+/// °/s. The commanded rate is what the pilot's stick asks for (`LogRow::yaw_rate_cmd_dps`,
+/// which the harness works out from the frames it sends, [`super::stick_rate`]), not the
+/// core's own heading target, so that a controller which smooths or delays its target is
+/// measured against the stick all the same.
 pub fn yaw_rate_rms_dps(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
     let w: Vec<&LogRow> = window(log, from_s, to_s).collect();
     let lag = (0.1 * log.tick_hz).round().max(1.0) as usize;
@@ -225,7 +224,7 @@ pub fn check(log: &FlightLog, c: &Criterion) -> Verdict {
         }
         Criterion::StateHolds { from_s, to_s, state } => {
             let other = window(log, from_s, to_s).find(|r| r.state != state);
-            (other.is_none(), other.map_or_else(|| "held".into(), |r| format!("`{}` at {:.3} s", r.state, r.t_s)))
+            (other.is_none(), other.map_or_else(|| "held".into(), |r| format!("`{}` at {:.3} s", r.state.name(), r.t_s)))
         }
         Criterion::MotorsOffDisarmedFrom { t_s } => {
             let bad = window(log, t_s, f64::INFINITY).find(|r| r.armed || r.motors.iter().any(|&m| m != 0));
@@ -233,7 +232,7 @@ pub fn check(log: &FlightLog, c: &Criterion) -> Verdict {
             (
                 reached && bad.is_none(),
                 match bad {
-                    Some(r) => format!("at {:.3} s: state `{}`, motors {:?}", r.t_s, r.state, r.motors),
+                    Some(r) => format!("at {:.3} s: state `{}`, motors {:?}", r.t_s, r.state.name(), r.motors),
                     None if reached => "motors 0, disarmed".into(),
                     None => format!("flight ended at {end_s:.1} s"),
                 },

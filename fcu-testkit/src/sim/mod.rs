@@ -17,16 +17,19 @@ pub mod plot;
 pub mod radio_model;
 pub mod rng;
 pub mod scenario;
+pub mod stick_rate;
 
 use std::time::{Duration, Instant};
 
 use fcu_core::imu::CalibrationPhase;
+use fcu_core::supervisor::FlightState;
 use fcu_core::{Config, FlightController};
 
 use imu_model::{ImuModel, ImuModelParams, Vibration};
 use plant::{Disturbance, Plant, PlantParams};
-use radio_model::{CaptureEdge, RadioModel, TxFrame};
+use radio_model::{RadioModel, TimedEdge, TxFrame};
 use scenario::{Scenario, Throttle};
+use stick_rate::StickRate;
 
 pub use crate::Profile;
 
@@ -59,8 +62,7 @@ impl Default for RunOptions {
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogRow {
     pub t_s: f64,
-    /// The supervisor's state name (`fcu_core::supervisor::FlightState::name`).
-    pub state: &'static str,
+    pub state: FlightState,
     pub armed: bool,
     /// The transmitter's link flag from the timeline (what the receiver is sending).
     pub link_tx: bool,
@@ -76,7 +78,8 @@ pub struct LogRow {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
-    /// See [`ComputerView::yaw_rate_cmd_dps`] (not written to the CSV).
+    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`]; not written
+    /// to the CSV): what the yaw metric compares the airframe's rate with.
     pub yaw_rate_cmd_dps: f64,
     pub motors: [u16; 4],
     pub alt_m: f64,
@@ -147,11 +150,10 @@ impl Pilot {
 
 /// What a flight computer says about itself after a step: what the log records besides the
 /// plant's truth. The in-process core fills it from its `Status`; an emulated board from what
-/// it reports on its UART (which is why it is a small, textual view).
+/// it reports on its UART (which is why it is a small view).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ComputerView {
-    /// The supervisor's state name (`fcu_core::supervisor::FlightState::name`).
-    pub state: &'static str,
+    pub state: FlightState,
     pub armed: bool,
     /// The computer's own link verdict.
     pub link: bool,
@@ -160,10 +162,6 @@ pub struct ComputerView {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
-    /// The yaw rate the pilot's stick asks for, °/s (the core's
-    /// `Status::yaw_rate_target_rad_s`; fcu-pil decodes it from the edges it sends, as the
-    /// firmware's telemetry has no yaw): what the yaw metric compares the airframe's rate with.
-    pub yaw_rate_cmd_dps: f64,
     /// A calibration has passed since power-on.
     pub calibrated: bool,
     pub calibrating: bool,
@@ -173,7 +171,7 @@ pub struct ComputerView {
 impl Default for ComputerView {
     fn default() -> Self {
         ComputerView {
-            state: fcu_core::supervisor::FlightState::Disarmed.name(),
+            state: FlightState::Disarmed,
             armed: false,
             link: false,
             est_roll_deg: 0.0,
@@ -181,7 +179,6 @@ impl Default for ComputerView {
             roll_target_deg: 0.0,
             pitch_target_deg: 0.0,
             yaw_target_deg: 0.0,
-            yaw_rate_cmd_dps: 0.0,
             calibrated: false,
             calibrating: false,
             calibration_restarts: 0,
@@ -200,13 +197,12 @@ pub trait FlightComputer {
     /// produced during it (in time order, with their times), the IMU's raw words at its end
     /// and the battery voltage. Returns the compare values that drive the motors over the
     /// next period.
-    fn step(&mut self, t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError>;
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError>;
     /// What the computer reports about itself now.
     fn view(&self) -> ComputerView;
 }
 
-/// The flight core in this process: edges into its decoder, one `tick` per step, the outer
-/// step run inline when one is due (as the golden replay does).
+/// The flight core in this process, one [`crate::harness::tick`] per step.
 pub struct InProcess {
     fc: FlightController,
     decoder: fcu_core::rc::EdgeDecoder,
@@ -229,18 +225,11 @@ impl FlightComputer for InProcess {
         f64::from(self.fc.config().timing.tick_hz())
     }
 
-    fn step(&mut self, _t_end_s: f64, edges: &[CaptureEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+    fn step(&mut self, _t_end_s: f64, edges: &[TimedEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
         // What the firmware's ADC reports (every tick here; every 100 ms on the board).
         self.fc.set_battery_mv((battery_v * 1000.0).round().clamp(0.0, f64::from(u32::MAX)) as u32);
-        for e in edges {
-            self.decoder.on_edge(e.channel, e.capture_counts, e.level_high);
-        }
-        let batch = self.decoder.take();
-        let out = self.fc.tick(imu, &batch);
-        if let Some(job) = out.outer_job {
-            self.fc.run_outer(&job);
-        }
-        Ok(out.compare)
+        let ticked = crate::harness::tick(&mut self.fc, &mut self.decoder, imu, edges.iter().map(|e| e.edge));
+        Ok(ticked.out.compare)
     }
 
     fn view(&self) -> ComputerView {
@@ -251,7 +240,7 @@ impl FlightComputer for InProcess {
         };
         let deg = |r: f32| f64::from(r).to_degrees();
         ComputerView {
-            state: st.state.name(),
+            state: st.state,
             armed: st.state.motors_may_run(),
             link: st.link,
             est_roll_deg: deg(st.tilt.roll_rad),
@@ -260,7 +249,6 @@ impl FlightComputer for InProcess {
             roll_target_deg: deg(st.target_rad[1]),
             pitch_target_deg: deg(st.target_rad[0]),
             yaw_target_deg: deg(st.target_rad[2]),
-            yaw_rate_cmd_dps: deg(st.yaw_rate_target_rad_s),
             calibrated: st.calibrated,
             calibrating,
             calibration_restarts: restarts,
@@ -303,6 +291,7 @@ pub fn run_streaming(
     let mut radio = RadioModel::new(scenario.radio.clone(), opts.seed);
     let mut air = Air::new(scenario.turbulence, opts.seed);
     let mut pilot = Pilot::default();
+    let mut stick = StickRate::new(&cfg);
 
     let tick_hz = computer.tick_hz();
     let tick_s = 1.0 / tick_hz;
@@ -316,7 +305,7 @@ pub fn run_streaming(
     let mut rows = Vec::new();
     // Compare values on their way to the plant with `extra_delay_ticks` (motors off before).
     let mut late: std::collections::VecDeque<[u16; 4]> = std::collections::VecDeque::new();
-    let mut edges: Vec<CaptureEdge> = Vec::with_capacity(32);
+    let mut edges: Vec<TimedEdge> = Vec::with_capacity(32);
     let mut last_thr_us = scenario::THR_LOW_US;
     let started = Instant::now();
     let mut next_progress = Duration::from_secs(2);
@@ -340,6 +329,8 @@ pub fn run_streaming(
             },
             &mut edges,
         );
+
+        let yaw_rate_cmd_dps = stick.yaw_rate_dps(edges.iter().map(|e| e.edge));
 
         // 2. Plant and sensor over the tick, motors held.
         for j in 0..substeps {
@@ -398,7 +389,7 @@ pub fn run_streaming(
             roll_target_deg: v.roll_target_deg,
             pitch_target_deg: v.pitch_target_deg,
             yaw_target_deg: v.yaw_target_deg,
-            yaw_rate_cmd_dps: v.yaw_rate_cmd_dps,
+            yaw_rate_cmd_dps,
             motors: compare,
             alt_m: plant.state.pos_earth_m[2],
             battery_v: plant.state.battery_v,
@@ -437,7 +428,7 @@ impl LogRow {
             w,
             "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
             r.t_s,
-            r.state,
+            r.state.name(),
             u8::from(r.armed),
             u8::from(r.link_tx),
             r.roll_deg,

@@ -1,19 +1,32 @@
 //! One SVG page per flight: roll and pitch (true, estimated, target), the four motor compare
 //! values, and the supervisor's state with the altitude, on a shared time axis.
 
+use fcu_core::supervisor::FlightState;
 use plotters::prelude::*;
 
 use super::FlightLog;
 
-/// States in the order they are drawn (bottom to top) on the state panel.
-const STATES: [&str; 7] = ["fault", "calibrating", "disarmed", "arming", "failsafe2", "failsafe1", "armed"];
+/// Where a state is drawn on the state panel, bottom to top: from no flight at all up to the
+/// motors under stick control. The match is exhaustive, so every state has its level.
+fn state_level(state: FlightState) -> usize {
+    match state {
+        FlightState::Fault => 0,
+        FlightState::Calibrating => 1,
+        FlightState::Disarmed => 2,
+        FlightState::Arming => 3,
+        FlightState::FailsafeOff => 4,
+        FlightState::FailsafeLevel => 5,
+        FlightState::Armed => 6,
+    }
+}
+
+/// The state drawn at `level`, if any.
+fn state_at_level(level: usize) -> Option<FlightState> {
+    FlightState::ALL.into_iter().find(|s| state_level(*s) == level)
+}
 
 /// (label, colour, stroke width, which of (true, estimated, target) to draw).
 type Series = (&'static str, RGBColor, u32, fn((f64, f64, f64)) -> f64);
-
-fn state_level(name: &str) -> f64 {
-    STATES.iter().position(|s| *s == name).map_or(-1.0, |i| i as f64)
-}
 
 /// At most this many points per series: a 26 s flight at 800 Hz has 20 800 rows, far more
 /// than a page can show, and the SVG stays small.
@@ -109,15 +122,15 @@ pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(90)
-            .build_cartesian_2d(0.0..t_end, -0.5..(STATES.len() as f64 - 0.5))
+            .build_cartesian_2d(0.0..t_end, -0.5..(FlightState::ALL.len() as f64 - 0.5))
             .map_err(|e| err(&e))?;
         ch.configure_mesh()
             .x_desc("t (s)")
-            .y_labels(STATES.len())
+            .y_labels(FlightState::ALL.len())
             .y_label_formatter(&|v| {
                 let i = v.round();
                 if (v - i).abs() < 0.01 && i >= 0.0 {
-                    STATES.get(i as usize).map_or(String::new(), |s| (*s).to_string())
+                    state_at_level(i as usize).map_or(String::new(), |s| s.name().to_string())
                 } else {
                     String::new()
                 }
@@ -125,7 +138,7 @@ pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result
             .light_line_style(WHITE.mix(0.0))
             .draw()
             .map_err(|e| err(&e))?;
-        ch.draw_series(LineSeries::new(rows.iter().map(|r| (r.t_s, state_level(r.state))), BLACK.stroke_width(2)))
+        ch.draw_series(LineSeries::new(rows.iter().map(|r| (r.t_s, state_level(r.state) as f64)), BLACK.stroke_width(2)))
             .map_err(|e| err(&e))?
             .label("state")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
@@ -147,4 +160,20 @@ pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result
     }
     root.present().map_err(|e| err(&e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_state_has_a_level_of_its_own_on_the_panel() {
+        let mut levels: Vec<usize> = FlightState::ALL.iter().map(|s| state_level(*s)).collect();
+        levels.sort_unstable();
+        assert_eq!(levels, (0..FlightState::ALL.len()).collect::<Vec<_>>());
+        for s in FlightState::ALL {
+            assert_eq!(state_at_level(state_level(s)), Some(s));
+        }
+        assert_eq!(state_at_level(FlightState::ALL.len()), None);
+    }
 }

@@ -8,15 +8,12 @@
 
 use std::collections::VecDeque;
 
+use fcu_core::rc::{CaptureEdge, CAPTURE_WRAP, CHANNELS, COUNTS_PER_US};
+
 use super::rng::Rng;
 
 /// TIM2 counts per second (84 MHz / (PSC 20 + 1)).
-pub const CAPTURE_COUNTS_PER_S: f64 = 4.0e6;
-/// TIM2 wraps at ARR + 1 = 32768 (a 15-bit wrap on a 32-bit timer).
-pub const CAPTURE_WRAP_COUNTS: u32 = 32_768;
-
-/// Number of receiver channels wired to the board: 0 AIL, 1 ELE, 2 THR, 3 RUD.
-pub const CHANNELS: usize = 4;
+pub const CAPTURE_COUNTS_PER_S: f64 = COUNTS_PER_US as f64 * 1e6;
 
 /// What the transmitter sends in one frame: pulse widths in µs and whether the link is up.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -50,16 +47,12 @@ impl RadioParams {
     }
 }
 
-/// One capture event as the TIM2 interrupt sees it.
+/// A capture edge and the simulation time it happens at (the core never sees the time; it
+/// orders the edges, and an emulated board changes its pin then).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CaptureEdge {
-    /// Simulation time of the edge (for ordering and tests; the core never sees it).
+pub struct TimedEdge {
     pub t_s: f64,
-    pub channel: usize,
-    /// The captured TIM2 value, 0..32767.
-    pub capture_counts: u16,
-    /// Pin level read in the interrupt: high = rising edge.
-    pub level_high: bool,
+    pub edge: CaptureEdge,
 }
 
 #[derive(Clone, Debug)]
@@ -68,14 +61,14 @@ pub struct RadioModel {
     rng: Rng,
     next_frame_s: f64,
     /// Edges scheduled but not yet delivered, in time order.
-    pending: VecDeque<CaptureEdge>,
+    pending: VecDeque<TimedEdge>,
     frames_sent: u64,
 }
 
 /// TIM2 value at simulation time `t_s` (the timer starts with the simulation).
 pub fn capture_counts_at(t_s: f64) -> u16 {
     let counts = (t_s.max(0.0) * CAPTURE_COUNTS_PER_S).floor() as u64;
-    (counts % u64::from(CAPTURE_WRAP_COUNTS)) as u16
+    (counts % u64::from(CAPTURE_WRAP)) as u16
 }
 
 impl RadioModel {
@@ -93,7 +86,7 @@ impl RadioModel {
     /// Schedule every frame that starts before `t_end_s` (with the transmitter state `tx`
     /// given by `tx_at(frame_start_s)`), then move the edges that happen before `t_end_s`
     /// into `out`, oldest first.
-    pub fn advance(&mut self, t_end_s: f64, mut tx_at: impl FnMut(f64) -> TxFrame, out: &mut Vec<CaptureEdge>) {
+    pub fn advance(&mut self, t_end_s: f64, mut tx_at: impl FnMut(f64) -> TxFrame, out: &mut Vec<TimedEdge>) {
         while self.next_frame_s < t_end_s {
             let start = self.next_frame_s;
             self.next_frame_s += self.params.frame_period_s.max(1e-3);
@@ -147,8 +140,8 @@ impl RadioModel {
         self.params.jitter_us * 1e-6 * self.rng.gaussian()
     }
 
-    fn edge(&self, t_s: f64, channel: usize, level_high: bool) -> CaptureEdge {
-        CaptureEdge { t_s, channel, capture_counts: capture_counts_at(t_s), level_high }
+    fn edge(&self, t_s: f64, channel: usize, level_high: bool) -> TimedEdge {
+        TimedEdge { t_s, edge: CaptureEdge { channel, capture_counts: capture_counts_at(t_s), level_high } }
     }
 }
 
@@ -168,7 +161,7 @@ mod tests {
 
     /// Wrap-safe width, as the capture decoder computes it.
     fn width_counts(rise: u16, fall: u16) -> u32 {
-        (u32::from(fall) + CAPTURE_WRAP_COUNTS - u32::from(rise)) % CAPTURE_WRAP_COUNTS
+        (u32::from(fall) + CAPTURE_WRAP - u32::from(rise)) % CAPTURE_WRAP
     }
 
     #[test]
@@ -193,7 +186,7 @@ mod tests {
         assert!(edges.windows(2).all(|w| w[0].t_s <= w[1].t_s), "edges out of order");
         let mut rise = [None; 4];
         let mut seen = 0;
-        for e in &edges {
+        for e in edges.iter().map(|e| e.edge) {
             if e.level_high {
                 rise[e.channel] = Some(e.capture_counts);
             } else if let Some(r0) = rise[e.channel] {

@@ -6,6 +6,8 @@
 
 use std::fmt::Write as _;
 
+use fcu_core::supervisor::FlightState;
+
 use super::plant::Disturbance;
 use super::radio_model::RadioParams;
 
@@ -215,10 +217,10 @@ pub enum Criterion {
     AltitudeAbove { from_s: f64, to_s: f64, min_m: f64 },
     /// A 20°-class step on `axis` at `t_s`: rise (10→90 %) within, overshoot below.
     Step { axis: Axis, t_s: f64, target_deg: f64, rise_max_s: f64, overshoot_max_pct: f64 },
-    /// The state name is seen somewhere in the window.
-    StateSeen { from_s: f64, to_s: f64, state: &'static str },
+    /// The state is seen somewhere in the window.
+    StateSeen { from_s: f64, to_s: f64, state: FlightState },
     /// Over the window, the state is always this one.
-    StateHolds { from_s: f64, to_s: f64, state: &'static str },
+    StateHolds { from_s: f64, to_s: f64, state: FlightState },
     /// All four compare values are 0 and the supervisor is not armed from `t_s` to the end.
     MotorsOffDisarmedFrom { t_s: f64 },
     /// After the link drops at `t_s`, roll and pitch come within 3° of level within `max_s`.
@@ -455,11 +457,11 @@ pub fn by_name(name: &str) -> Option<Scenario> {
             s.link_loss_s = Some(8.0);
             s.criteria = flight_criteria((10.0, 15.5), 2.5, 21.5);
             s.criteria.extend([
-                Criterion::StateSeen { from_s: 8.0, to_s: 8.6, state: "failsafe1" },
+                Criterion::StateSeen { from_s: 8.0, to_s: 8.6, state: FlightState::FailsafeLevel },
                 Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
                 // Control comes back once the link has been good for the recovery time
                 // (1.0 s after it returns at 8.5 s).
-                Criterion::StateHolds { from_s: 9.6, to_s: 15.5, state: "armed" },
+                Criterion::StateHolds { from_s: 9.6, to_s: 15.5, state: FlightState::Armed },
                 Criterion::AltitudeAbove { from_s: 6.0, to_s: 15.5, min_m: 0.3 },
             ]);
             s
@@ -476,9 +478,9 @@ pub fn by_name(name: &str) -> Option<Scenario> {
             s.link_loss_s = Some(8.0);
             s.criteria = vec![
                 Criterion::ArmedBy { t_s: ARM_RELEASE_S + 0.2 },
-                Criterion::StateSeen { from_s: 8.0, to_s: 8.9, state: "failsafe1" },
+                Criterion::StateSeen { from_s: 8.0, to_s: 8.9, state: FlightState::FailsafeLevel },
                 Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
-                Criterion::StateSeen { from_s: 8.9, to_s: 9.3, state: "failsafe2" },
+                Criterion::StateSeen { from_s: 8.9, to_s: 9.3, state: FlightState::FailsafeOff },
                 Criterion::MotorsOffDisarmedFrom { t_s: 9.3 },
             ];
             s
@@ -561,8 +563,8 @@ pub fn describe(c: &Criterion) -> String {
         Criterion::Step { axis, t_s, target_deg, rise_max_s, overshoot_max_pct } => {
             format!("{axis:?} step to {target_deg}° at {t_s:.1} s: rise < {rise_max_s} s, overshoot < {overshoot_max_pct} %")
         }
-        Criterion::StateSeen { from_s, to_s, state } => format!("state `{state}` seen in {from_s:.1}–{to_s:.1} s"),
-        Criterion::StateHolds { from_s, to_s, state } => format!("state `{state}` throughout {from_s:.1}–{to_s:.1} s"),
+        Criterion::StateSeen { from_s, to_s, state } => format!("state `{}` seen in {from_s:.1}–{to_s:.1} s", state.name()),
+        Criterion::StateHolds { from_s, to_s, state } => format!("state `{}` throughout {from_s:.1}–{to_s:.1} s", state.name()),
         Criterion::MotorsOffDisarmedFrom { t_s } => format!("motors off and disarmed from {t_s:.1} s to the end"),
         Criterion::LevelAfterLinkLoss { t_s, max_s } => {
             format!("within 3° of level by {max_s} s after the link drops at {t_s:.1} s")
