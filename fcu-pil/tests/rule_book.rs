@@ -357,8 +357,8 @@ fn sensor_write(b: &mut Bench, cs: (usize, u32), addr: u8, value: u8) {
     b.pin_high(cs);
 }
 
-/// A one-byte read as fcu-firmware `SensorBus::read`, the RM's bidirectional receive
-/// (RM0368 §20.3.8, "receive-only procedure (BIDIMODE = 1 and BIDIOE = 0)"): the address sent,
+/// A one-byte read as fcu-firmware `SensorBus::read`, the RM's bidirectional receive (RM0368
+/// §20.3.5, "BIDIMODE = 1 and BIDIOE = 0", and §20.3.8 "Disabling the SPI"): the address sent,
 /// SPE off, BIDIOE off, SPE on (the clock starts), SPE off again within the byte, the byte read
 /// at RXNE, CS high, then the line back to transmit.
 fn sensor_read(b: &mut Bench, cs: (usize, u32), addr: u8) -> u8 {
