@@ -3,6 +3,30 @@
 //! receiver on PA0..PA3 (TIM2 CH1..4), the motors on TIM4 CH1..4, the three sensors' chip
 //! selects on PA8, PB12 and PC13 for SPI2, the LEDs on PB5 and PB4, the battery divider on
 //! PB1 (ADC1 channel 9) and the debug UART on USART1.
+//!
+//! Pins reach their peripherals through GPIO as on the chip (RM0368 §8.3.2, §8.3.7): only in
+//! alternate-function mode with the peripheral's AF number (STM32F401xB/C datasheet, table
+//! "Alternate function mapping"). With any other mode or number:
+//! - a radio edge on PA0..PA3 is not captured by TIM2 (AF1), though IDR still shows the level;
+//! - TIM4's compare does not reach PB6..PB9 (AF2): the MOSFET gates are pulled low;
+//! - SPI2's frames do not reach the sensors unless both SCK (PB13) and the data line (PB15) are
+//!   AF5: the model then deselects every sensor, so none is clocked and the receiver reads an
+//!   undriven line. (On the chip a sensor would keep its transaction open with no clock; the
+//!   model ends it. Frames clocked meanwhile count as I²C exposures, which the chip would not
+//!   have: only wrong firmware gets there.)
+//! - a USART1 frame leaves on PA9 only if the pin was AF7 from its start bit to its stop bits;
+//!   otherwise it is recorded in [`Records::uart_lost`], not in [`Records::uart`]. So is a frame
+//!   the host cannot read: sent at a baud rate more than [`HOST_BAUD_TOLERANCE`] off its
+//!   115 200, or garbled by a BRR write during it.
+//!
+//! The ADC's path is wired to the pad whatever the pin's mode (RM0368 §8.3.12 and the I/O
+//! structure figures of §8.3: the analog connection is taken ahead of the Schmitt trigger and the
+//! output driver), so a conversion of PB1 reads the battery divider unless the port drives the
+//! pin itself (push-pull output, or open-drain driving low). The weak pull-up or pull-down of an
+//! input (about 40 kΩ against the divider's 10/20 kΩ) is not modelled.
+//!
+//! Switching a pin's routing while its input level differs from what the peripheral last saw
+//! would, on the chip, show the peripheral an edge; the model does not produce one.
 
 use std::collections::VecDeque;
 
@@ -13,6 +37,31 @@ use crate::periph::{self, adc, dbgmcu, flash, gpio, iwdg, pwr, rcc, spi, tim, us
 const CS_PINS: [(usize, u8); 3] = [(0, 8), (1, 12), (2, 13)];
 const LED1: (usize, u8) = (1, 5);
 const LED2: (usize, u8) = (1, 4);
+
+/// The alternate functions the board's wiring needs (STM32F401xB/C datasheet, table "Alternate
+/// function mapping"): TIM2_CH1..4 on PA0..PA3, TIM4_CH1..4 on PB6..PB9, SPI2_SCK on PB13 and
+/// SPI2_MOSI (the bidirectional data line) on PB15, USART1_TX on PA9.
+const AF_TIM2: u8 = 1;
+const AF_TIM4: u8 = 2;
+const AF_SPI2: u8 = 5;
+const AF_USART1: u8 = 7;
+/// PA0..PA3: the radio's four channels, in TIM2 channel order.
+const RADIO_PORT: usize = 0;
+/// PB6..PB9: the motors, in TIM4 channel order.
+const MOTOR_PORT: usize = 1;
+const MOTOR_PIN_0: u8 = 6;
+const SPI2_SCK: (usize, u8) = (1, 13);
+const SPI2_DATA: (usize, u8) = (1, 15);
+const USART1_TX: (usize, u8) = (0, 9);
+/// PB1: ADC1_IN9, the battery divider.
+const BATTERY_PIN: (usize, u8) = (1, 1);
+
+/// The host at the other end of the debug UART listens at 115 200 baud, 8N1.
+pub const HOST_BAUD: f64 = 115_200.0;
+/// How far a frame's baud rate may be off [`HOST_BAUD`] and still be read. Assumption: the
+/// host's receiver tolerates what RM0368 §19.3.5 gives the USART's own receiver (3.75 % for
+/// 8-bit frames, 16× oversampling, DIV_Fraction = 0, noise counted as an error).
+pub const HOST_BAUD_TOLERANCE: f64 = 0.0375;
 
 /// What the board recorded for the measurements and the tests.
 #[derive(Clone, Debug, Default)]
@@ -25,6 +74,10 @@ pub struct Records {
     pub leds: Vec<(Time, bool, bool)>,
     /// UART bytes with the time their stop bit ended.
     pub uart: Vec<(Time, u8)>,
+    /// Bytes USART1 sent that the host did not receive, with the time their stop bit ended: PA9
+    /// was not in AF7 for the whole frame, BRR changed during it, or its baud rate was more
+    /// than [`HOST_BAUD_TOLERANCE`] off [`HOST_BAUD`].
+    pub uart_lost: Vec<(Time, u8)>,
     /// Time TIM9 was started (the control tick), each boot.
     pub tick_timer_starts: Vec<Time>,
     /// The last peripheral register read: (time, address, value). A firmware stuck in a
@@ -84,6 +137,10 @@ pub struct Board {
     last_capture: [Option<Time>; 4],
     pub records: Records,
     tim9_was_running: bool,
+    /// Since when PA9 has been USART1_TX (None: it is not now).
+    uart_tx_routed_since: Option<Time>,
+    /// The battery divider's output (None until the harness sets a battery voltage).
+    battery_divider_volts: Option<f64>,
 }
 
 impl Default for Board {
@@ -111,6 +168,8 @@ impl Board {
             last_capture: [None; 4],
             records: Records::default(),
             tim9_was_running: false,
+            uart_tx_routed_since: None,
+            battery_divider_volts: None,
         }
     }
 
@@ -124,9 +183,9 @@ impl Board {
         let mut out = [0u16; 4];
         let running = self.rcc.is_enabled(rcc::Bus::Apb1, 2);
         for (ch, o) in out.iter_mut().enumerate() {
-            // Without its clock (or after a reset) TIM4's outputs are off: the pins fall back
-            // to inputs and the MOSFET gates are pulled low.
-            let driven = running && self.gpio[1].mode(6 + ch as u8) == 2 && self.gpio[1].alternate(6 + ch as u8) == 2;
+            // Without its clock (or after a reset) TIM4's outputs are off, and a pin not routed
+            // to TIM4 does not carry them: the MOSFET gates are pulled low.
+            let driven = running && self.gpio[MOTOR_PORT].routes(MOTOR_PIN_0 + ch as u8, AF_TIM4);
             *o = if driven { self.tim4.pwm_compare(ch, now).min(u32::from(u16::MAX)) as u16 } else { 0 };
         }
         out
@@ -140,7 +199,23 @@ impl Board {
 
     /// Sets the battery voltage the divider feeds to PB1.
     pub fn set_battery_volts(&mut self, volts: f64) {
-        self.adc.set_channel_volts(adc::BATTERY_CHANNEL, adc::battery_pin_volts(volts));
+        self.battery_divider_volts = Some(adc::battery_pin_volts(volts));
+        self.refresh_battery_pin();
+    }
+
+    /// PB1 as ADC1_IN9 sees it: the divider, unless the port drives the pin.
+    fn refresh_battery_pin(&mut self) {
+        let Some(divider) = self.battery_divider_volts else {
+            return;
+        };
+        let (port, pin) = BATTERY_PIN;
+        let g = &self.gpio[port];
+        let volts = match g.output_level(pin) {
+            Some(false) => 0.0,
+            Some(true) if !g.open_drain(pin) => adc::VDDA_VOLTS,
+            _ => divider,
+        };
+        self.adc.set_channel_volts(adc::BATTERY_CHANNEL, volts);
     }
 
     fn clock_check(&self, name: &str, bus: rcc::Bus, bit: u32) -> Result<(), Unmodelled> {
@@ -152,13 +227,22 @@ impl Board {
     }
 
     fn forward_pins(&mut self, now: Time) {
-        let changed = self.gpio.iter_mut().fold(false, |acc, g| g.take_output_changed() | acc);
+        let changed = self.gpio.iter_mut().fold(false, |acc, g| g.take_pins_changed() | acc);
         if !changed {
             return;
         }
-        // A chip select that is not driven low (input, or high) deselects its sensor.
-        let cs_low = CS_PINS.map(|(port, pin)| self.gpio[port].output_level(pin) == Some(false));
+        // A chip select that is not driven low (input, or high) deselects its sensor; without
+        // SCK and the data line on SPI2 no sensor is reached at all.
+        let routed = |(port, pin): (usize, u8)| self.gpio[port].routes(pin, AF_SPI2);
+        let bus_routed = routed(SPI2_SCK) && routed(SPI2_DATA);
+        let cs_low = CS_PINS.map(|(port, pin)| bus_routed && self.gpio[port].output_level(pin) == Some(false));
         self.spi2.set_chip_selects(cs_low, now);
+        let (port, pin) = USART1_TX;
+        self.uart_tx_routed_since = match (self.gpio[port].routes(pin, AF_USART1), self.uart_tx_routed_since) {
+            (true, since) => since.or(Some(now)),
+            (false, _) => None,
+        };
+        self.refresh_battery_pin();
         let (l1, l2) = self.leds();
         if self.records.leds.last().is_none_or(|&(_, a, b)| (a, b) != (l1, l2)) {
             self.records.leds.push((now, l1, l2));
@@ -171,7 +255,11 @@ impl Board {
                 break;
             }
             self.edges.pop_front();
-            self.gpio[0].set_external(channel as u8, Some(level));
+            self.gpio[RADIO_PORT].set_external(channel as u8, Some(level));
+            // TIM2 sees the pin only through AF1, and only with its clock on.
+            if !self.gpio[RADIO_PORT].routes(channel as u8, AF_TIM2) || !self.rcc.is_enabled(rcc::Bus::Apb1, 0) {
+                continue;
+            }
             // The capture unit latches the counter at the edge itself, whenever the firmware
             // looks at it.
             let before = self.tim2.captures(channel);
@@ -294,11 +382,29 @@ impl Board {
         }
     }
 
+    /// Moves the frames USART1 has finished by `now` to the records: on the wire if PA9 was
+    /// USART1_TX all through the frame (the routing last changed before `now`, see
+    /// [`Board::forward_pins`], so this runs before any write that may change it).
+    fn collect_uart(&mut self, now: Time) -> Result<(), Unmodelled> {
+        self.usart1.advance(now, self.rcc.clocks()?);
+        for f in self.usart1.take_output() {
+            let baud = periph::TIME_HZ as f64 / f.bit.max(1) as f64;
+            let readable = f.intact && (baud / HOST_BAUD - 1.0).abs() <= HOST_BAUD_TOLERANCE;
+            let on_wire = self.uart_tx_routed_since.is_some_and(|since| since <= f.start);
+            if readable && on_wire {
+                self.records.uart.push((f.end, f.byte));
+            } else {
+                self.records.uart_lost.push((f.end, f.byte));
+            }
+        }
+        Ok(())
+    }
+
     fn after_access(&mut self, now: Time) -> Result<(), Unmodelled> {
-        self.forward_pins(now);
         for r in self.rcc.take_reset_pulses() {
             self.reset_peripheral(r);
         }
+        self.forward_pins(now);
         let tim9_running = self.tim9.started_at().is_some();
         if tim9_running && !self.tim9_was_running {
             if let Some(t) = self.tim9.started_at() {
@@ -349,6 +455,7 @@ impl Peripherals for Board {
 
     fn write(&mut self, addr: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.deliver_edges(now);
+        self.collect_uart(now)?;
         let word = if size >= 4 {
             value
         } else {
@@ -393,8 +500,7 @@ impl Peripherals for Board {
         self.tim4.advance(now);
         self.tim9.advance(now);
         self.spi2.advance(now, clocks);
-        self.usart1.advance(now, clocks);
-        self.records.uart.extend(self.usart1.take_output());
+        self.collect_uart(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         self.iwdg.advance(now);
         self.adc.advance(now, clocks);
@@ -423,13 +529,21 @@ impl Peripherals for Board {
         let edges = std::mem::take(&mut self.edges);
         let sensors = self.spi2.take_sensors();
         let adc_inputs = self.adc.clone();
+        // DBGMCU_CR, _APB1_FZ and _APB2_FZ are reset by a power-on reset only, not by a system
+        // reset (RM0368 §23, their register descriptions).
+        let dbgmcu = std::mem::take(&mut self.dbgmcu);
+        let battery = self.battery_divider_volts;
         *self = Board::new();
+        self.dbgmcu = dbgmcu;
+        self.battery_divider_volts = battery;
         self.rcc = rcc;
         self.records = records;
         self.edges = edges;
         // The sensors are powered by the board, not reset with the MCU.
         self.spi2.put_sensors(sensors);
         self.adc.copy_inputs_from(&adc_inputs);
+        // The pins are inputs again: PB1 reads the divider.
+        self.refresh_battery_pin();
     }
 
     fn system_memory_page(&self) -> Vec<u8> {

@@ -2,7 +2,9 @@
 //!
 //! No debugger is attached in this model, so the core never halts and the freeze bits
 //! (DBG_xxx_STOP in APB1_FZ / APB2_FZ) and the low-power debug bits in CR have no effect: they
-//! are stored and read back only. IDCODE is read-only.
+//! are stored and read back only. IDCODE is read-only. CR, APB1_FZ and APB2_FZ are reset by a
+//! power-on reset only (RM0368 §23, register descriptions: "not reset by system reset"): the
+//! board keeps this model across a system reset.
 //!
 //! Field positions from the `stm32f4` 0.16 PAC (`stm32f401/dbgmcu/*.rs`). The SVD's IDCODE reset
 //! value (0x1000_6411) is the F40x's DEV_ID; the F401xB/C (this board:

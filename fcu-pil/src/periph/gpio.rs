@@ -11,8 +11,13 @@
 //!   driver is off) as for an input;
 //! - analog mode: 0 ("the Schmitt trigger input is disabled … read access to IDR returns 0").
 //!
-//! Alternate-function outputs (timer PWM, USART TX, SPI) are driven by their peripheral, which
-//! this model does not see: the board should `set_external` such a pin if the firmware reads it.
+//! Alternate functions (RM0368 §8.3.2 "I/O pin multiplexer and mapping", §8.3.7 "I/O alternate
+//! function input/output"): a pin reaches a peripheral only in alternate-function mode (MODER =
+//! 10) with that peripheral's AF number in AFRL/AFRH; the multiplexer connects one alternate
+//! function to a pin at a time, for its input as for its output. [`Gpio::routes`] answers that
+//! question for the board, which connects (or not) each peripheral to its pins. The output a
+//! peripheral drives on a pin is not seen here: the board should `set_external` such a pin if the
+//! firmware reads it.
 //!
 //! Reset values (RM0368 §8.4, register descriptions): MODER A 0xA800_0000 (PA13/14/15 SWD/JTAG), B 0x0000_0280
 //! (PB3/PB4), others 0; OSPEEDR A 0x0C00_0000 (PA13 very high), B 0x0000_00C0 (PB3 very high),
@@ -70,7 +75,7 @@ pub struct Gpio {
     external: [Option<bool>; 16],
     floating_reads: u32,
     floating_pins: u16,
-    output_changed: bool,
+    pins_changed: bool,
 }
 
 impl Gpio {
@@ -96,14 +101,14 @@ impl Gpio {
             external: [None; 16],
             floating_reads: 0,
             floating_pins: 0,
-            output_changed: false,
+            pins_changed: false,
         }
     }
 
     /// Registers back to their reset values (an RCC reset pulse or a system reset). The board's
     /// external levels and the floating-read counters are kept.
     pub fn reset_registers(&mut self) {
-        let before = (self.moder, self.otyper, self.pupdr, self.odr);
+        let before = self.pin_state();
         self.moder = self.reset.0;
         self.otyper = 0;
         self.ospeedr = self.reset.1;
@@ -111,9 +116,14 @@ impl Gpio {
         self.odr = 0;
         self.afrl = 0;
         self.afrh = 0;
-        if before != (self.moder, self.otyper, self.pupdr, self.odr) {
-            self.output_changed = true;
+        if before != self.pin_state() {
+            self.pins_changed = true;
         }
+    }
+
+    /// The registers that decide what the pins do (see [`Gpio::take_pins_changed`]).
+    fn pin_state(&self) -> [u32; 6] {
+        [self.moder, self.otyper, self.pupdr, self.odr, self.afrl, self.afrh]
     }
 
     /// Port name, e.g. `GPIOB`.
@@ -141,6 +151,12 @@ impl Gpio {
             8..=15 => ((self.afrh >> (4 * u32::from(pin - 8))) & 0xF) as u8,
             _ => 0,
         }
+    }
+
+    /// Whether `pin` is connected to alternate function `af`: alternate-function mode with `af`
+    /// selected in AFRL/AFRH. Any other mode or AF number leaves the peripheral cut off from it.
+    pub fn routes(&self, pin: u8, af: u8) -> bool {
+        pin < 16 && self.mode(pin) == MODE_ALTERNATE && self.alternate(pin) == af
     }
 
     /// PUPDR of `pin`: 0 none, 1 pull-up, 2 pull-down.
@@ -175,10 +191,10 @@ impl Gpio {
         }
     }
 
-    /// True once after a write (or reset) that changed ODR, MODER, OTYPER or PUPDR, i.e. the
-    /// levels or modes the board sees.
-    pub fn take_output_changed(&mut self) -> bool {
-        std::mem::take(&mut self.output_changed)
+    /// True once after a write (or reset) that changed ODR, MODER, OTYPER, PUPDR, AFRL or AFRH,
+    /// i.e. the levels, modes or alternate-function routing the board sees.
+    pub fn take_pins_changed(&mut self) -> bool {
+        std::mem::take(&mut self.pins_changed)
     }
 
     /// Number of IDR reads in which at least one pin in input or alternate-function mode was
@@ -252,7 +268,7 @@ impl Gpio {
     }
 
     pub fn write(&mut self, offset: u32, value: u32, _now: Time) -> Result<(), Unmodelled> {
-        let before = (self.moder, self.otyper, self.pupdr, self.odr);
+        let before = self.pin_state();
         match offset {
             MODER => self.moder = value,
             OTYPER => {
@@ -286,8 +302,8 @@ impl Gpio {
             AFRH => self.afrh = value,
             _ => return Err(Unmodelled::offset(&self.name, offset, true)),
         }
-        if before != (self.moder, self.otyper, self.pupdr, self.odr) {
-            self.output_changed = true;
+        if before != self.pin_state() {
+            self.pins_changed = true;
         }
         Ok(())
     }
@@ -339,16 +355,16 @@ mod tests {
     fn push_pull_output_reads_odr_and_reports_its_level() {
         let mut g = Gpio::new('C');
         g.write(MODER, 0b01 << 26, 0).unwrap();
-        assert!(g.take_output_changed());
-        assert!(!g.take_output_changed(), "only once");
+        assert!(g.take_pins_changed());
+        assert!(!g.take_pins_changed(), "only once");
         assert_eq!(g.output_level(13), Some(false));
         g.write(BSRR, 1 << 13, 0).unwrap();
-        assert!(g.take_output_changed());
+        assert!(g.take_pins_changed());
         assert_eq!(g.output_level(13), Some(true));
         g.set_external(13, Some(false));
         assert_eq!(read(&mut g, IDR) & (1 << 13), 1 << 13, "ODR wins on a push-pull output");
         g.write(BSRR, 1 << 13, 0).unwrap();
-        assert!(!g.take_output_changed(), "no change");
+        assert!(!g.take_pins_changed(), "no change");
         assert_eq!(g.output_level(12), None, "input pin");
     }
 
@@ -397,6 +413,24 @@ mod tests {
     }
 
     #[test]
+    fn routing_needs_alternate_mode_and_the_af_number() {
+        let mut g = Gpio::new('A');
+        assert!(!g.routes(9, 7), "input at reset");
+        g.write(AFRH, 7 << 4, 0).unwrap();
+        assert!(g.take_pins_changed(), "an AF change is a routing change");
+        assert!(!g.routes(9, 7), "AF7 selected, but the pin is still an input");
+        g.write(MODER, 0xA800_0000 | (0b10 << 18), 0).unwrap();
+        assert!(g.routes(9, 7));
+        assert!(!g.routes(9, 1), "one alternate function at a time");
+        g.write(AFRH, 8 << 4, 0).unwrap();
+        assert!(g.take_pins_changed());
+        assert!(!g.routes(9, 7));
+        g.write(AFRH, 8 << 4, 0).unwrap();
+        assert!(!g.take_pins_changed(), "no change");
+        assert!(!g.routes(16, 0));
+    }
+
+    #[test]
     fn analog_pin_reads_zero_without_counting_as_floating() {
         let mut g = Gpio::new('C');
         g.write(MODER, 0xFFFF_FFFF, 0).unwrap();
@@ -411,9 +445,9 @@ mod tests {
         g.set_external(1, Some(true));
         g.write(MODER, 0, 0).unwrap();
         g.write(ODR, 0xFF, 0).unwrap();
-        g.take_output_changed();
+        g.take_pins_changed();
         g.reset_registers();
-        assert!(g.take_output_changed());
+        assert!(g.take_pins_changed());
         assert_eq!(read(&mut g, MODER), 0x280);
         assert_eq!(read(&mut g, ODR), 0);
         assert_eq!(read(&mut g, IDR) & 0b10, 0b10);

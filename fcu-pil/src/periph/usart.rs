@@ -20,7 +20,14 @@
 //! (RM0368 §19.3.4: baud = f_PCLK / (8·(2 − OVER8)·USARTDIV)). A frame's length is fixed when its
 //! byte is written to DR (or TE is set), from BRR, CR2 and PCLK2 at that moment. TC sets when a
 //! frame ends with TDR empty; it clears by a read of SR followed by a write to DR, or by writing
-//! 0 to it. Finished bytes go to [`Usart::take_output`] with the time their stop bits end.
+//! 0 to it. Finished frames go to [`Usart::take_output`] with the times their start bit began and
+//! their stop bits ended: the board decides whether the TX pin carried them.
+//!
+//! A BRR write during a frame: RM0368 §19.3.4 says the baud counters take the new value at once
+//! ("the baud rate register value should not be changed during communication"), so the frame in
+//! the shift register goes out partly at one rate and partly at the other. The model reports it
+//! as not intact ([`SentFrame::intact`]), keeping its end time; a byte waiting in TDR is sent at
+//! the new rate.
 //!
 //! A DR write while TXE = 0 overwrites the byte waiting in TDR: that byte is lost, a firmware
 //! defect counted in [`Usart::lost_bytes`]. A DR write with the transmitter disabled (UE or
@@ -61,11 +68,42 @@ const CR1_MODELLED: u32 = CR1_RE | CR1_TE | CR1_TCIE | CR1_TXEIE | CR1_UE | CR1_
 
 const CR2_STOP: u32 = 0b11 << 12;
 
-/// A frame in the shift register: its byte (None for the idle frame after TE) and end time.
+/// A frame in the shift register: its byte (None for the idle frame after TE), when it started
+/// and ends, and whether a BRR write changed the rate during it.
 #[derive(Clone, Copy, Debug)]
 struct Frame {
     byte: Option<u8>,
+    start: Time,
     end: Time,
+    bit: Time,
+    garbled: bool,
+}
+
+/// A frame's length and its bit time, both in [`Time`] units.
+#[derive(Clone, Copy, Debug)]
+struct FrameTiming {
+    length: Time,
+    bit: Time,
+}
+
+/// A data frame the transmitter finished.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SentFrame {
+    /// Start of the start bit.
+    pub start: Time,
+    /// End of the stop bits.
+    pub end: Time,
+    pub byte: u8,
+    /// One bit's duration: the baud rate the frame went out at is `TIME_HZ / bit`.
+    pub bit: Time,
+    /// False if BRR was written while the frame was shifted out: a receiver sees garbage.
+    pub intact: bool,
+}
+
+impl Frame {
+    fn new(byte: Option<u8>, start: Time, timing: FrameTiming) -> Frame {
+        Frame { byte, start, end: start + timing.length, bit: timing.bit, garbled: false }
+    }
 }
 
 /// The USART1 model.
@@ -75,12 +113,12 @@ pub struct Usart {
     cr1: u32,
     cr2: u32,
     brr: u32,
-    /// Byte waiting in TDR with its frame length.
-    tdr: Option<(u8, Time)>,
+    /// Byte waiting in TDR with its frame's timing.
+    tdr: Option<(u8, FrameTiming)>,
     shift: Option<Frame>,
     /// SR was read since the last DR write (first half of the TC clearing sequence).
     sr_read: bool,
-    output: Vec<(Time, u8)>,
+    output: Vec<SentFrame>,
     lost_bytes: u32,
 }
 
@@ -106,8 +144,8 @@ impl Usart {
         self.lost_bytes = lost;
     }
 
-    /// Bytes whose stop bits have ended, with that time, oldest first.
-    pub fn take_output(&mut self) -> Vec<(Time, u8)> {
+    /// Frames whose stop bits have ended, oldest first.
+    pub fn take_output(&mut self) -> Vec<SentFrame> {
         std::mem::take(&mut self.output)
     }
 
@@ -146,11 +184,11 @@ impl Usart {
                 break;
             }
             if let Some(byte) = frame.byte {
-                self.output.push((frame.end, byte));
+                self.output.push(SentFrame { start: frame.start, end: frame.end, byte, bit: frame.bit, intact: !frame.garbled });
             }
             self.shift = match self.tdr.take() {
                 // TDR moves into the shift register: TXE sets, the next frame starts.
-                Some((byte, length)) => Some(Frame { byte: Some(byte), end: frame.end + length }),
+                Some((byte, timing)) => Some(Frame::new(Some(byte), frame.end, timing)),
                 None => {
                     self.tc = true;
                     None
@@ -190,8 +228,9 @@ impl Usart {
         }
     }
 
-    /// Length of one frame (start, 8 data bits, stop bits) with the current settings.
-    fn frame_length(&self, clocks: Clocks) -> Result<Time, Unmodelled> {
+    /// Length of one frame (start, 8 data bits, stop bits) and of one bit with the current
+    /// settings.
+    fn frame_timing(&self, clocks: Clocks) -> Result<FrameTiming, Unmodelled> {
         let Some(units) = units_per_cycle(clocks.pclk2_hz) else {
             return Err(Unmodelled::new(
                 "USART1.BRR",
@@ -206,7 +245,7 @@ impl Usart {
             0b10 => 4,
             _ => 3,
         };
-        Ok(bit * (18 + stop_halves) / 2)
+        Ok(FrameTiming { length: bit * (18 + stop_halves) / 2, bit })
     }
 
     /// `clocks` is not needed for a read; it is taken for a uniform interface with
@@ -249,22 +288,34 @@ impl Usart {
                 }
                 // With M = 0 only DR[7:0] is sent.
                 let byte = (value & 0xFF) as u8;
-                let length = self.frame_length(clocks)?;
+                let timing = self.frame_timing(clocks)?;
                 if std::mem::take(&mut self.sr_read) {
                     self.tc = false;
                 }
                 if self.shift.is_none() {
-                    self.shift = Some(Frame { byte: Some(byte), end: now + length });
+                    self.shift = Some(Frame::new(Some(byte), now, timing));
                 } else {
                     if self.tdr.is_some() {
                         self.lost_bytes = self.lost_bytes.saturating_add(1);
                     }
-                    self.tdr = Some((byte, length));
+                    self.tdr = Some((byte, timing));
                 }
             }
             BRR => {
                 Unmodelled::check_bits("USART1.BRR", value, 0xFFFF)?;
-                self.brr = value;
+                let previous = std::mem::replace(&mut self.brr, value);
+                if let Some((byte, _)) = self.tdr {
+                    match self.frame_timing(clocks) {
+                        Ok(timing) => self.tdr = Some((byte, timing)),
+                        Err(e) => {
+                            self.brr = previous;
+                            return Err(e);
+                        }
+                    }
+                }
+                if let Some(frame) = self.shift.as_mut() {
+                    frame.garbled |= value != previous;
+                }
             }
             CR1 => {
                 Unmodelled::check_bits("USART1.CR1", value, CR1_MODELLED)?;
@@ -280,8 +331,8 @@ impl Usart {
                 if enabled && !was_enabled {
                     // RM0368: "Setting the TE bit drives the USART to send an idle frame before
                     // the first data frame."
-                    match self.frame_length(clocks) {
-                        Ok(length) => self.shift = Some(Frame { byte: None, end: now + length }),
+                    match self.frame_timing(clocks) {
+                        Ok(timing) => self.shift = Some(Frame::new(None, now, timing)),
                         Err(e) => {
                             self.cr1 = previous;
                             return Err(e);
@@ -327,6 +378,17 @@ mod tests {
     const BIT: Time = 729 * 4;
     const FRAME: Time = 10 * BIT;
 
+    /// The finished frames as (end of the stop bits, byte), all intact.
+    fn sent(u: &mut Usart) -> Vec<(Time, u8)> {
+        u.take_output()
+            .into_iter()
+            .map(|f| {
+                assert!(f.intact, "{f:?}");
+                (f.end, f.byte)
+            })
+            .collect()
+    }
+
     fn enabled(t: Time) -> Usart {
         let mut u = Usart::new();
         write(&mut u, BRR, BRR_115200, t);
@@ -368,9 +430,9 @@ mod tests {
         write(&mut u, DR, b'A'.into(), 10);
         assert_eq!(u.read(SR, 10, clocks()).unwrap() & SR_TXE, 0, "waits in TDR behind the idle frame");
         assert_eq!(u.read(SR, FRAME, clocks()).unwrap() & SR_TXE, SR_TXE);
-        assert_eq!(u.take_output(), vec![]);
+        assert_eq!(sent(&mut u), vec![]);
         u.advance(2 * FRAME, clocks());
-        assert_eq!(u.take_output(), vec![(2 * FRAME, b'A')]);
+        assert_eq!(sent(&mut u), vec![(2 * FRAME, b'A')]);
     }
 
     #[test]
@@ -389,7 +451,7 @@ mod tests {
         u.advance(t0 + 2 * FRAME - 1, clocks());
         assert_eq!(u.read(SR, t0 + 2 * FRAME - 1, clocks()).unwrap() & SR_TC, 0);
         assert_eq!(u.read(SR, t0 + 2 * FRAME, clocks()).unwrap() & SR_TC, SR_TC);
-        assert_eq!(u.take_output(), vec![(t0 + FRAME, 0x31), (t0 + 2 * FRAME, 0x32)]);
+        assert_eq!(sent(&mut u), vec![(t0 + FRAME, 0x31), (t0 + 2 * FRAME, 0x32)]);
         assert_eq!(u.next_event(), None);
         // 115200 baud: 10 bits take about 86.8 µs.
         assert!(((FRAME as f64 / TIME_HZ as f64) - 10.0 / 115_226.3).abs() < 1e-9);
@@ -420,7 +482,45 @@ mod tests {
         write(&mut u, DR, 3, t0);
         assert_eq!(u.lost_bytes(), 1);
         u.advance(t0 + 3 * FRAME, clocks());
-        assert_eq!(u.take_output(), vec![(t0 + FRAME, 1), (t0 + 2 * FRAME, 3)]);
+        assert_eq!(sent(&mut u), vec![(t0 + FRAME, 1), (t0 + 2 * FRAME, 3)]);
+    }
+
+    #[test]
+    fn frames_carry_their_start_and_end() {
+        let t0 = 100 * FRAME;
+        let mut u = enabled(0);
+        u.advance(t0, clocks());
+        write(&mut u, DR, 1, t0);
+        write(&mut u, DR, 2, t0 + 5);
+        u.advance(t0 + 2 * FRAME, clocks());
+        let frames = u.take_output();
+        assert_eq!(frames.iter().map(|f| (f.start, f.end)).collect::<Vec<_>>(), vec![(t0, t0 + FRAME), (t0 + FRAME, t0 + 2 * FRAME)]);
+        assert!(frames.iter().all(|f| f.bit == BIT));
+    }
+
+    #[test]
+    fn a_brr_write_during_a_frame_garbles_it_and_the_next_byte_takes_the_new_rate() {
+        let t0 = 100 * FRAME;
+        let mut u = enabled(0);
+        u.advance(t0, clocks());
+        write(&mut u, DR, 1, t0);
+        write(&mut u, DR, 2, t0);
+        // Halve the bit time half-way through the first frame.
+        write(&mut u, BRR, BRR_115200 / 2, t0 + FRAME / 2);
+        u.advance(t0 + FRAME + 10 * (BRR_115200 / 2) as Time * 4, clocks());
+        let frames = u.take_output();
+        assert_eq!(frames.len(), 2, "{frames:?}");
+        assert!(!frames[0].intact, "the frame in the shift register went out at two rates");
+        assert!(frames[1].intact);
+        assert_eq!(frames[1].end - frames[1].start, 10 * (BRR_115200 / 2) as Time * 4, "TDR's byte at the new rate");
+        // The same value again is no change; a BRR of 0 with a byte waiting is refused.
+        write(&mut u, DR, 3, frames[1].end);
+        write(&mut u, DR, 4, frames[1].end);
+        write(&mut u, BRR, BRR_115200 / 2, frames[1].end + 1);
+        assert!(u.write(BRR, 0, frames[1].end + 2, clocks()).is_err());
+        assert_eq!(u.read(BRR, frames[1].end + 2, clocks()), Ok(BRR_115200 / 2), "refused write not applied");
+        u.advance(frames[1].end + 2 * FRAME, clocks());
+        assert!(u.take_output().iter().all(|f| f.intact));
     }
 
     #[test]
@@ -493,6 +593,6 @@ mod tests {
         u.reset_registers();
         assert_eq!(u.read(SR, 2 * FRAME, clocks()), Ok(0xC0));
         assert_eq!(u.lost_bytes(), 1);
-        assert_eq!(u.take_output(), vec![(2 * FRAME, 2)]);
+        assert_eq!(sent(&mut u), vec![(2 * FRAME, 2)]);
     }
 }
