@@ -615,7 +615,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
         let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
         self.set_reg(RegisterARM::PC, vector | 1)?;
-        let extra = self.uc.get_data().timing.fp_entry_cycles(fp_active);
+        let extra = self.uc.get_data().timing.entry_cycles(fp_active);
         self.add_cycles(ENTRY_CYCLES + extra);
         self.uc.get_data_mut().timing.exception_boundary();
 
@@ -706,7 +706,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.rebuild_flags()?;
         let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
         self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
-        let extra = self.uc.get_data().timing.fp_return_cycles(fp_frame);
+        let extra = self.uc.get_data().timing.return_cycles(fp_frame);
         self.add_cycles(RETURN_CYCLES + extra);
         self.uc.get_data_mut().timing.exception_boundary();
         let st = self.uc.get_data_mut();

@@ -17,12 +17,14 @@
 //!
 //! **Optimistic** (`FCU_PIL_TIMING=optimistic`, the default):
 //! - every instruction is one cycle at HCLK (CPI 1), no flash wait states, no refill after a
-//!   taken branch, register accesses free. This is the instruction-count clock: time is exactly
-//!   the instructions executed, as the harness has always measured. (One caveat to "at least as
+//!   taken branch, register accesses free: the instruction-count clock, time exactly the
+//!   instructions executed (and the exceptions' entries and returns). (One caveat to "at least as
 //!   fast": the core may fold an IT instruction into its neighbour, 0 cycles; it is counted as
 //!   one, so the lower bound is off by at most one cycle per IT executed.)
 //! - exception entry 12 cycles, return 10 (Cortex-M4 TRM §5.5, zero-wait-state memory); the
-//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers).
+//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). (A second
+//!   caveat: an exception tail-chained onto a return costs the core 6 cycles, here a return and
+//!   an entry, 22: up to 16 cycles late per tail-chain.)
 //! - a memory-mapped access is time-stamped as early as its block allows: the block's start
 //!   plus one cycle per instruction before the accessing one. The accessing instruction's PC is
 //!   exact: Unicorn's MMIO callbacks alone see a stale PC (QEMU's `io_readx`/`io_writex` do not
@@ -73,7 +75,10 @@
 //!   frame (the lazy save of S0–S15 and FPSCR at the handler's first FP instruction, Arm's
 //!   application note 298 on Cortex-M4F lazy stacking: 29 cycles of latency with the FP state
 //!   stacked against 12 without; charged at entry rather than at that instruction, which is
-//!   earlier, never later) and 17 at a return that unstacks one (assumed the same as the save).
+//!   earlier, never later) and 17 at a return that unstacks one (assumed the same as the save);
+//!   an entry also pays LATENCY for the vector's read from flash (the TRM's 12 cycles assume
+//!   zero-wait-state memory; that the read hides behind the stacking is not counted on). A
+//!   tail-chained exception pays a full return and entry (22 cycles, where the core needs 6).
 //! - a memory-mapped access is time-stamped as late as the profile makes it: the end of its
 //!   block (all the block's cycles charged), plus the stalls of the block's accesses so far,
 //!   its own included. Register effects in the models are immediate at that instant.
@@ -570,18 +575,22 @@ impl Timing {
         }
     }
 
-    /// Cycles added to exception entry (12) when it stacks the extended frame.
-    pub fn fp_entry_cycles(&self, extended_frame: bool) -> u64 {
+    /// Cycles added to exception entry (12): the FP state when it stacks the extended frame,
+    /// and the vector's read from flash.
+    pub fn entry_cycles(&self, extended_frame: bool) -> u64 {
+        if !self.pessimistic() {
+            return 0;
+        }
+        u64::from(self.acr.latency) + if extended_frame { FP_STATE_CYCLES } else { 0 }
+    }
+
+    /// Cycles added to exception return (10) when it unstacks the extended frame.
+    pub fn return_cycles(&self, extended_frame: bool) -> u64 {
         if self.pessimistic() && extended_frame {
             FP_STATE_CYCLES
         } else {
             0
         }
-    }
-
-    /// Cycles added to exception return (10) when it unstacks the extended frame.
-    pub fn fp_return_cycles(&self, extended_frame: bool) -> u64 {
-        self.fp_entry_cycles(extended_frame)
     }
 
     /// Whether `addr`'s line is in the instruction cache model (for tests and diagnostics).
@@ -798,11 +807,13 @@ mod tests {
     }
 
     #[test]
-    fn the_fp_state_costs_only_the_pessimistic_profile() {
+    fn the_fp_state_and_the_vector_fetch_cost_only_the_pessimistic_profile() {
         let p = Timing::new(TimingProfile::Pessimistic);
-        assert_eq!((p.fp_entry_cycles(true), p.fp_return_cycles(true), p.fp_entry_cycles(false)), (17, 17, 0));
+        assert_eq!((p.entry_cycles(true), p.return_cycles(true), p.entry_cycles(false), p.return_cycles(false)), (17, 17, 0, 0));
+        let p = two_wait_states(true, true);
+        assert_eq!((p.entry_cycles(true), p.entry_cycles(false), p.return_cycles(true)), (17 + 2, 2, 17));
         let o = Timing::new(TimingProfile::Optimistic);
-        assert_eq!((o.fp_entry_cycles(true), o.fp_return_cycles(true)), (0, 0));
+        assert_eq!((o.entry_cycles(true), o.return_cycles(true)), (0, 0));
     }
 
     #[test]
