@@ -6,6 +6,7 @@
 //! - [`periph`]: register-level models of the STM32F401 peripherals, from RM0368;
 //! - [`board`]: the STEVAL-FCU001V1's wiring between them (radio, motors, sensors, LEDs, UART);
 //! - [`rig`]: the board as a `fcu_testkit::sim::FlightComputer`, so every scenario flies it;
+//! - [`timing`]: the two timing profiles (optimistic, pessimistic) that bracket the board's;
 //! - [`telemetry`]: the firmware's UART lines read back; [`measure`]: costs on the image.
 
 pub mod board;
@@ -17,3 +18,4 @@ pub mod periph;
 pub mod rig;
 pub mod scs;
 pub mod telemetry;
+pub mod timing;

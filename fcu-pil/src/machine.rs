@@ -3,24 +3,27 @@
 //! (basic and extended FP frames, EXC_RETURN, tail-chaining through the run loop), WFI and the
 //! idle loop, fault detection, and the dispatch of memory-mapped I/O to the models.
 //!
-//! **Time.** Every executed instruction advances the clock by one processor cycle at the
-//! current SYSCLK (CPI = 1: the Cortex-M4 retires most instructions in one cycle; flash wait
-//! states, multi-cycle loads, divides and pipeline refills are not modelled, so the emulated
-//! firmware runs slightly faster than the board, not slower). Exception entry and return cost
-//! 12 and 10 cycles (Cortex-M4 TRM §5.5). The clock advances a whole translation block at a
-//! time (counted at its start): interrupts are taken and timed events seen at block
-//! boundaries, a quantum of a few instructions (a block ends at every branch). A `b .` idle
-//! loop and WFI skip straight to the next event, counting the cycles they would have spun.
-//! The same ELF and the same inputs give the same instruction stream, the same times and the
-//! same outputs, byte for byte.
+//! **Time.** The clock counts processor cycles at the current HCLK, as the machine's
+//! [`TimingProfile`] prices them ([`crate::timing`]: the optimistic profile charges one cycle
+//! per instruction, the pessimistic one each instruction's class, flash wait states, APB stalls
+//! and the FP state's stacking). Exception entry and return cost 12 and 10 cycles (Cortex-M4
+//! TRM §5.5) plus what the profile adds. The clock advances a whole translation block at a
+//! time (charged at its start): interrupts are taken and timed events seen at block
+//! boundaries, a quantum of a few instructions (a block ends at every branch); a register
+//! access inside the block reaches its model at the instant the profile gives it (early in the
+//! block, or at its end). A `b .` idle loop and WFI skip straight to the next event, counting
+//! the cycles they would have spun. The same ELF, the same inputs and the same profile give
+//! the same instruction stream, the same times and the same outputs, byte for byte.
 
 use std::collections::HashMap;
 
 use unicorn_engine::{Arch, ArmCpuModel, HookType, MemType, Mode, Prot, RegisterARM, Unicorn};
 
 use crate::elf::Image;
+use crate::periph::flash::{self, AcrTiming};
 use crate::periph::{Time, Unmodelled};
 use crate::scs::{self, Scs};
+use crate::timing::{self, Timing, TimingProfile};
 
 /// Flash, its boot alias at 0, SRAM, and the system memory page with the factory values.
 pub const FLASH_BASE: u32 = 0x0800_0000;
@@ -73,6 +76,8 @@ pub enum Fault {
     BadReturn { exc_return: u32, pc: u32, at: Time },
     /// Something in the emulator itself failed.
     Emulator(String),
+    /// The harness was set up wrongly (an unknown timing profile in the environment).
+    Setup(String),
 }
 
 impl std::fmt::Display for Fault {
@@ -91,6 +96,7 @@ impl std::fmt::Display for Fault {
                 write!(f, "invalid exception return {exc_return:#010x} at PC {pc:#010x}, {:.6} s", t(at))
             }
             Fault::Emulator(m) => write!(f, "emulator: {m}"),
+            Fault::Setup(m) => write!(f, "setup: {m}"),
         }
     }
 }
@@ -123,7 +129,7 @@ enum Stop {
     },
 }
 
-/// Instruction counts of translation blocks, from the flash image.
+/// Instruction counts and pessimistic cycle counts of translation blocks, from the flash image.
 struct Code {
     flash: Vec<u8>,
     /// Per flash halfword: the block starting there (`None` = not seen yet). A direct table:
@@ -135,6 +141,8 @@ struct Code {
 struct BlockInfo {
     size: u32,
     instructions: u64,
+    /// The block's own cycles in the pessimistic profile ([`timing::block_cycles`]).
+    cycles: u64,
     kind: BlockKind,
 }
 
@@ -167,27 +175,36 @@ impl Code {
         Some(u16::from_le_bytes([b[0], b[1]]))
     }
 
-    /// (instructions, kind) of the block at `addr` of `size` bytes. Thumb-2: a halfword whose
-    /// top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit instruction.
-    fn block(&mut self, addr: u32, size: u32) -> (u64, BlockKind) {
+    /// The block at `addr` of `size` bytes: its instructions, its pessimistic cycles, its kind.
+    fn block(&mut self, addr: u32, size: u32) -> BlockInfo {
         let slot = addr.checked_sub(FLASH_BASE).map(|o| (o / 2) as usize);
         if let Some(Some(info)) = slot.and_then(|i| self.blocks.get(i)) {
             if info.size == size {
-                return (info.instructions, info.kind);
+                return *info;
             }
         }
-        let mut n = 0u64;
-        let mut a = addr;
-        while a < addr.wrapping_add(size) {
-            let hw = self.halfword(a).unwrap_or(0);
-            a = a.wrapping_add(if hw >> 11 >= 0b11101 { 4 } else { 2 });
-            n += 1;
-        }
-        let info = BlockInfo { size, instructions: n.max(1), kind: self.classify(addr, size) };
+        let (cycles, instructions) = timing::block_cycles(size, |i| self.halfword(addr.wrapping_add(2 * i)).unwrap_or(0));
+        let info = BlockInfo { size, instructions, cycles, kind: self.classify(addr, size) };
         if let Some(entry) = slot.and_then(|i| self.blocks.get_mut(i)) {
             *entry = Some(info);
         }
-        (info.instructions, info.kind)
+        info
+    }
+
+    /// Instructions of the block at `block` (`size` bytes) before the one at `pc`, or `None` if
+    /// `pc` is not the start of one of its instructions.
+    fn instructions_before(&self, block: u32, size: u32, pc: u32) -> Option<u64> {
+        let mut n = 0;
+        let mut a = block;
+        while a < block.wrapping_add(size) {
+            if a == pc {
+                return Some(n);
+            }
+            let hw = self.halfword(a).unwrap_or(0);
+            a = a.wrapping_add(if timing::is_32_bit(hw) { 4 } else { 2 });
+            n += 1;
+        }
+        None
     }
 
     fn classify(&self, addr: u32, size: u32) -> BlockKind {
@@ -248,8 +265,16 @@ pub struct State<P: Peripherals> {
     pub idle_time: Time,
     stop: Option<Stop>,
     code: Code,
-    /// Start of the block being executed (for error reports).
+    /// How the clock prices what runs, with the caches and bus state it needs.
+    pub timing: Timing,
+    /// Start of the block being executed (for error reports and access times) and its size.
     block_pc: u32,
+    block_size: u32,
+    /// When the block being executed started its own instructions (after what its start cost).
+    block_started_at: Time,
+    /// The instruction making the current register access (the optimistic profile's memory
+    /// hook records it: exact, see [`crate::timing`]).
+    access_pc: u32,
     /// The exception being served (0 = thread mode), tracked at entry and return.
     current_exception: usize,
     /// Instructions attributed to each active exception (preempted ones keep their count).
@@ -289,8 +314,8 @@ fn emu(e: unicorn_engine::uc_error) -> Fault {
 }
 
 impl<P: Peripherals + 'static> Machine<P> {
-    /// Powers on the board with `image` in flash.
-    pub fn new(image: Image, board: P) -> Result<Self, Fault> {
+    /// Powers on the board with `image` in flash, its time priced by `profile`.
+    pub fn new(image: Image, board: P, profile: TimingProfile) -> Result<Self, Fault> {
         let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
         for seg in &image.segments {
             let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
@@ -314,7 +339,11 @@ impl<P: Peripherals + 'static> Machine<P> {
             idle_time: 0,
             stop: None,
             code: Code::new(flash.clone()),
+            timing: Timing::new(profile),
             block_pc: 0,
+            block_size: 0,
+            block_started_at: 0,
+            access_pc: 0,
             current_exception: 0,
             exc_instructions: vec![0; scs::EXCEPTIONS],
             exc_entered_at: vec![0; scs::EXCEPTIONS],
@@ -358,6 +387,42 @@ impl<P: Peripherals + 'static> Machine<P> {
         }
 
         uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
+        // Any memory hook sends every load and store through Unicorn's slow path (about 30 %
+        // more host time), so each profile installs only the one it needs.
+        match profile {
+            TimingProfile::Optimistic => {
+                // Unicorn restores the PC before calling a memory hook; the MMIO callback that
+                // follows for the same access then knows the accessing instruction.
+                uc.add_mem_hook(
+                    HookType::MEM_READ | HookType::MEM_WRITE,
+                    0x4000_0000,
+                    0xE00F_FFFF,
+                    |uc: &mut Unicorn<'_, State<P>>, _: MemType, _: u64, _: usize, _: i64| {
+                        let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+                        uc.get_data_mut().access_pc = pc;
+                        true
+                    },
+                )
+                .map_err(emu)?;
+            }
+            TimingProfile::Pessimistic => {
+                // Data reads from flash (its alias at 0, the system memory) pay its wait states
+                // through the ART's data cache.
+                for (base, size) in [(0u64, FLASH_SIZE), (u64::from(FLASH_BASE), FLASH_SIZE), (u64::from(SYSMEM_PAGE), 0x1000)] {
+                    uc.add_mem_hook(
+                        HookType::MEM_READ,
+                        base,
+                        base + u64::from(size) - 1,
+                        |uc: &mut Unicorn<'_, State<P>>, _: MemType, addr: u64, _: usize, _: i64| {
+                            let st = uc.get_data_mut();
+                            st.now += st.timing.flash_data_read_cycles(addr as u32) * st.units_per_cycle;
+                            true
+                        },
+                    )
+                    .map_err(emu)?;
+                }
+            }
+        }
         uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
             let st = uc.get_data_mut();
             // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
@@ -467,6 +532,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.set_reg(RegisterARM::PC, pc | 1)?;
         let st = self.uc.get_data_mut();
         st.scs = Scs::new(st.units_per_cycle);
+        st.timing.reset();
         st.current_exception = 0;
         st.exc_stack.clear();
         st.sleeping = false;
@@ -549,7 +615,9 @@ impl<P: Peripherals + 'static> Machine<P> {
         let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
         let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
         self.set_reg(RegisterARM::PC, vector | 1)?;
-        self.add_cycles(ENTRY_CYCLES);
+        let extra = self.uc.get_data().timing.entry_cycles(fp_active);
+        self.add_cycles(ENTRY_CYCLES + extra);
+        self.uc.get_data_mut().timing.exception_boundary();
 
         let st = self.uc.get_data_mut();
         st.scs.activate(exc);
@@ -638,7 +706,9 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.rebuild_flags()?;
         let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
         self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
-        self.add_cycles(RETURN_CYCLES);
+        let extra = self.uc.get_data().timing.return_cycles(fp_frame);
+        self.add_cycles(RETURN_CYCLES + extra);
+        self.uc.get_data_mut().timing.exception_boundary();
         let st = self.uc.get_data_mut();
         if to_thread && st.scs.sleep_on_exit() {
             st.sleeping = true;
@@ -793,40 +863,52 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
         return;
     }
     let st = uc.get_data_mut();
-    let (n, kind) = st.code.block(address as u32, size);
-    st.block_pc = address as u32;
+    let addr = address as u32;
+    let info = st.code.block(addr, size);
+    let (n, kind) = (info.instructions, info.kind);
+    let body = st.timing.body_cycles(n, info.cycles);
+    let entry = st.timing.block_entry_cycles(addr, size);
+    let upc = st.units_per_cycle;
+    st.block_pc = addr;
+    st.block_size = size;
     st.instructions += n;
-    st.now += n * st.units_per_cycle;
+    st.now += (entry + body) * upc;
     st.attribute(n);
     match kind {
         BlockKind::Plain => {}
         BlockKind::IdleSpin => {
             // `b .`: spin until the deadline without translating every lap.
             if st.deadline > st.now {
-                let upc = st.units_per_cycle;
-                let laps = (st.deadline - st.now).div_ceil(upc);
-                st.now += laps * upc;
-                st.idle_time += laps * upc;
-                st.instructions += laps;
+                let lap = st.timing.steady_lap_cycles(addr, size, body) * upc;
+                let laps = (st.deadline - st.now).div_ceil(lap);
+                st.now += laps * lap;
+                st.idle_time += laps * lap;
+                st.instructions += laps * n;
             }
             st.stop = Some(Stop::Deadline);
             let _ = uc.emu_stop();
         }
-        BlockKind::CycleCountWait { addr, start, limit } => {
-            // The lap that exits is the first whose CYCCNT read (at the end of its block, in
-            // this clock) satisfies the test; every lap before it only re-reads the counter.
-            // Skip to that lap (no further than the deadline); the block then runs it.
+        BlockKind::CycleCountWait { addr: reg_addr, start, limit } => {
+            // The lap that exits is the first whose CYCCNT read satisfies the test; every lap
+            // before it only re-reads the counter. Skip to that lap (no further than the
+            // deadline); the block then runs it.
             let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
-            let (a, s0, l) = (reg(uc, addr), reg(uc, start), reg(uc, limit));
+            let (a, s0, l) = (reg(uc, reg_addr), reg(uc, start), reg(uc, limit));
             let st = uc.get_data_mut();
             if a == scs::DWT_BASE + 4 && st.scs.cyccnt_running() {
-                let elapsed = st.scs.cyccnt(st.now).wrapping_sub(s0);
+                // The read is the block's first instruction: at its start under the optimistic
+                // profile, at its end under the pessimistic (as `access_time` stamps it).
+                let read_at = match st.timing.profile {
+                    TimingProfile::Optimistic => st.now - body * upc,
+                    TimingProfile::Pessimistic => st.now,
+                };
+                let elapsed = st.scs.cyccnt(read_at).wrapping_sub(s0);
                 if elapsed < l {
-                    let upc = st.units_per_cycle;
-                    let laps = u64::from(l - elapsed).div_ceil(n);
-                    let affordable = st.deadline.saturating_sub(st.now) / (n * upc);
+                    let lap = st.timing.steady_lap_cycles(addr, size, body);
+                    let laps = u64::from(l - elapsed).div_ceil(lap);
+                    let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
                     let skip = laps.min(affordable);
-                    st.now += skip * n * upc;
+                    st.now += skip * lap * upc;
                     st.instructions += skip * n;
                     st.attribute(skip * n);
                 }
@@ -839,17 +921,19 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
             let r = RegisterARM::R0 as i32 + i32::from(reg);
             let laps_left = uc.reg_read(r).unwrap_or(0);
             let st = uc.get_data_mut();
-            let upc = st.units_per_cycle;
-            let affordable = st.deadline.saturating_sub(st.now) / (2 * upc);
+            let lap = st.timing.steady_lap_cycles(addr, size, body);
+            let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
             let skip = laps_left.saturating_sub(1).min(affordable);
             if skip > 0 {
-                st.now += skip * 2 * upc;
-                st.instructions += skip * 2;
-                st.attribute(skip * 2);
+                st.now += skip * lap * upc;
+                st.instructions += skip * n;
+                st.attribute(skip * n);
                 let _ = uc.reg_write(r, laps_left - skip);
             }
         }
     }
+    let st = uc.get_data_mut();
+    st.block_started_at = st.now - body * st.units_per_cycle;
 }
 
 /// Stops the emulation (before the block about to start) if the deadline has passed or an
@@ -892,9 +976,50 @@ fn bit_band(addr: u32) -> Option<(u32, u32)> {
     })
 }
 
+/// The instant a register access at `addr` (the peripheral's own address for a bit-band alias)
+/// reaches its model, in `transfers` bus transfers. Optimistic: the block's start plus one
+/// cycle per instruction before the accessing one. Pessimistic: the clock, which has charged
+/// the whole block, plus the access's stall.
+fn access_time<P: Peripherals>(st: &mut State<P>, addr: u32, transfers: u64) -> Time {
+    match st.timing.profile {
+        TimingProfile::Optimistic => match st.code.instructions_before(st.block_pc, st.block_size, st.access_pc) {
+            Some(before) => (st.block_started_at + before * st.units_per_cycle).min(st.now),
+            None => st.now,
+        },
+        TimingProfile::Pessimistic => {
+            st.now += st.timing.register_access_cycles(addr, transfers) * st.units_per_cycle;
+            st.now
+        }
+    }
+}
+
+/// RCC_CFGR (RM0368 §6.3.3), whose APB prescalers set the pessimistic profile's bus stalls.
+const RCC_CFGR: u32 = 0x4002_3808;
+
+/// After a write that may have changed FLASH_ACR or RCC_CFGR (`word`, with `written` the bits
+/// the write carried in their register positions): the pessimistic profile reads the register
+/// back through the bus, as the firmware would, to follow its wait states, caches and APB
+/// prescalers.
+fn follow_timing_registers<P: Peripherals>(st: &mut State<P>, word: u32, written: u32, now: Time) {
+    if !st.timing.pessimistic() {
+        return;
+    }
+    if word == flash::BASE {
+        if let Ok(acr) = st.board.read(flash::BASE, 4, now) {
+            let resets = AcrTiming::decode(written);
+            st.timing.set_acr(AcrTiming { icache_reset: resets.icache_reset, dcache_reset: resets.dcache_reset, ..AcrTiming::decode(acr) });
+        }
+    } else if word == RCC_CFGR {
+        if let Ok(cfgr) = st.board.read(RCC_CFGR, 4, now) {
+            st.timing.set_rcc_cfgr(cfgr);
+        }
+    }
+}
+
 fn mmio_read<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32) -> u64 {
     let st = uc.get_data_mut();
-    let now = st.now;
+    let target = bit_band(addr).map_or(addr, |(word, _)| word);
+    let now = access_time(st, target, 1);
     let lane = 8 * (addr & 3);
     let mask = if size >= 4 { u32::MAX } else { (1u32 << (8 * size)) - 1 };
     let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
@@ -927,7 +1052,9 @@ fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
 
 fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32, value: u32) {
     let st = uc.get_data_mut();
-    let now = st.now;
+    let band = bit_band(addr);
+    let (target, transfers) = band.map_or((addr, 1), |(word, _)| (word, 2));
+    let now = access_time(st, target, transfers);
     let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
         match size {
             4 => st.scs.write(addr & 0xFFF, value, now),
@@ -946,6 +1073,12 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     };
     match result {
         Ok(()) => {
+            let written = match band {
+                Some((_, bit)) => (value & 1) << bit,
+                None if size >= 4 => value,
+                None => value << (8 * (addr & 3)),
+            };
+            follow_timing_registers(st, target & !3, written, now);
             // A write may bring a model's next event closer (an interrupt enable set while a
             // byte is shifting): the emulation must stop for it, not at the deadline set
             // before the write.
@@ -969,6 +1102,196 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::elf::Segment;
+
+    /// A board of plain registers that logs every access: (address, time, value written).
+    #[derive(Default)]
+    struct Bench {
+        registers: HashMap<u32, u32>,
+        log: Vec<(u32, Time, Option<u32>)>,
+    }
+
+    /// 84 MHz: 4 time units per cycle.
+    const UPC: u64 = 4;
+
+    impl Peripherals for Bench {
+        fn read(&mut self, addr: u32, _size: u32, now: Time) -> Result<u32, Unmodelled> {
+            self.log.push((addr, now, None));
+            Ok(self.registers.get(&(addr & !3)).copied().unwrap_or(0))
+        }
+        fn write(&mut self, addr: u32, _size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+            self.log.push((addr, now, Some(value)));
+            self.registers.insert(addr & !3, value);
+            Ok(())
+        }
+        fn next_event(&self) -> Option<Time> {
+            None
+        }
+        fn advance(&mut self, _now: Time, _lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled> {
+            Ok(false)
+        }
+        fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
+            Ok(UPC)
+        }
+        fn system_reset(&mut self, _watchdog: bool) {}
+        fn system_memory_page(&self) -> Vec<u8> {
+            vec![0xFF; 0x1000]
+        }
+    }
+
+    /// A flash image: the vector table (SP, reset at 0x100, IRQ0 at 0x140), `code` at 0x100 and
+    /// `handler` at 0x140.
+    fn program(code: &[u16], handler: &[u16]) -> Image {
+        let mut flash = vec![0u8; 0x200];
+        let mut word = |at: usize, w: u32| flash[at..at + 4].copy_from_slice(&w.to_le_bytes());
+        word(0, SRAM_BASE + 0x1000);
+        word(4, FLASH_BASE + 0x101);
+        word(4 * 16, FLASH_BASE + 0x141);
+        for (at, halfwords) in [(0x100, code), (0x140, handler)] {
+            for (i, h) in halfwords.iter().enumerate() {
+                flash[at + 2 * i..at + 2 * i + 2].copy_from_slice(&h.to_le_bytes());
+            }
+        }
+        Image {
+            path: "hand-assembled".into(),
+            segments: vec![Segment { address: FLASH_BASE, data: flash }],
+            initial_sp: SRAM_BASE + 0x1000,
+            symbols: HashMap::new(),
+            functions: Vec::new(),
+            flash_bytes: 0x200,
+            ram_bytes: 0,
+        }
+    }
+
+    fn run(image: Image, profile: TimingProfile, until: Time) -> Machine<Bench> {
+        let mut m = Machine::new(image, Bench::default(), profile).unwrap();
+        m.run_until(until).unwrap();
+        m
+    }
+
+    fn accesses(m: &Machine<Bench>, addr: u32) -> Vec<(Time, Option<u32>)> {
+        m.board().log.iter().filter(|a| a.0 == addr).map(|a| (a.1, a.2)).collect()
+    }
+
+    /// RCC_CFGR = PPRE1 /2, then a read and a write of TIM2 (APB1), then `b .`.
+    const APB_PROGRAM: [u16; 15] = [
+        0xF643, 0x0108, // movw r1, #0x3808
+        0xF2C4, 0x0102, // movt r1, #0x4002
+        0xF44F, 0x5080, // mov.w r0, #0x1000
+        0x6008, // str r0, [r1]           (RCC_CFGR, instruction 3)
+        0x2100, // movs r1, #0
+        0xF2C4, 0x0100, // movt r1, #0x4000
+        0xBF00, // nop
+        0x680A, // ldr r2, [r1]           (TIM2, instruction 7)
+        0x3001, // adds r0, #1
+        0x6048, // str r0, [r1, #4]       (TIM2, instruction 9)
+        0xE7FE, // b .
+    ];
+
+    /// IRQ0 enabled and pended with an FP context active; the handler returns at once.
+    const IRQ_PROGRAM: [u16; 14] = [
+        0xF24E, 0x1100, // movw r1, #0xE100
+        0xF2CE, 0x0100, // movt r1, #0xE000   (NVIC_ISER0)
+        0x2001, // movs r0, #1
+        0x6008, // str r0, [r1]
+        0xEE00, 0x0A10, // vmov s0, r0     (CONTROL.FPCA set)
+        0xF24E, 0x2200, // movw r2, #0xE200
+        0xF2CE, 0x0200, // movt r2, #0xE000   (NVIC_ISPR0)
+        0x6010, // str r0, [r2]
+        0xE7FE, // b .
+    ];
+    const IRQ_HANDLER: [u16; 2] = [0x2307, 0x4770]; // movs r3, #7; bx lr
+
+    #[test]
+    fn the_optimistic_profile_is_the_instruction_count_clock() {
+        // The figures the instruction-count clock has always given these programs: every
+        // instruction 4 units (one cycle at 84 MHz), entry 12 and return 10 cycles.
+        let m = run(program(&APB_PROGRAM, &[]), TimingProfile::Optimistic, 1000);
+        assert_eq!((m.now(), m.state().instructions), (1000, 250));
+        let m = run(program(&IRQ_PROGRAM, &IRQ_HANDLER), TimingProfile::Optimistic, 1000);
+        assert_eq!((m.now(), m.state().instructions), (1000, 228));
+        assert_eq!(m.now(), UPC * (m.state().instructions + ENTRY_CYCLES + RETURN_CYCLES));
+        let irq0 = &m.state().exception_stats[&16];
+        // Entered after the 9 instructions before `b .`; returned after 12 + 2 cycles.
+        assert_eq!(irq0.spans, vec![(36, 36 + UPC * (12 + 2))]);
+        assert_eq!(m.state().fp_frames, 1, "the handler preempted FP code");
+    }
+
+    #[test]
+    fn optimistic_register_accesses_are_stamped_at_their_instruction() {
+        let m = run(program(&APB_PROGRAM, &[]), TimingProfile::Optimistic, 1000);
+        assert_eq!(accesses(&m, 0x4002_3808), vec![(3 * UPC, Some(0x1000))]);
+        assert_eq!(accesses(&m, 0x4000_0000), vec![(7 * UPC, None)]);
+        assert_eq!(accesses(&m, 0x4000_0004), vec![(9 * UPC, Some(0x1001))]);
+    }
+
+    #[test]
+    fn pessimistic_accesses_come_at_the_end_of_their_block_after_the_apb_stall() {
+        let m = run(program(&APB_PROGRAM, &[]), TimingProfile::Pessimistic, 1000);
+        // movw, movt, mov.w 1 each; str 2 + 1 (after data processing); movs, movt, nop 1;
+        // ldr 2; adds 1; str 2 + 1; b 1: 16 cycles.
+        let end = 16 * UPC;
+        assert_eq!(accesses(&m, 0x4002_3808)[0], (end, Some(0x1000)), "RCC is on AHB1: no stall");
+        // APB1 at HCLK/2: 1 (bridge) + 1 (edge) + 2 × 2 (setup, access) = 6 cycles each.
+        assert_eq!(accesses(&m, 0x4000_0000), vec![(end + 6 * UPC, None)]);
+        assert_eq!(accesses(&m, 0x4000_0004), vec![(end + 12 * UPC, Some(0x1001))]);
+        // `b .` after a taken branch: 1 + 3 per lap, from the end of the block to the deadline.
+        let idle_from = end + 12 * UPC + 4 * UPC;
+        assert_eq!(m.now(), idle_from + (1000 - idle_from).div_ceil(4 * UPC) * 4 * UPC);
+    }
+
+    #[test]
+    fn pessimistic_exception_entry_and_return_pay_for_the_fp_state() {
+        let m = run(program(&IRQ_PROGRAM, &IRQ_HANDLER), TimingProfile::Pessimistic, 1000);
+        // The first block: movw, movt, movs 1; str 3; vmov 1; movw, movt 1; str 3; b 1: 13
+        // cycles. The interrupt is taken where the next block would start.
+        let entered = 13 * UPC;
+        let irq0 = &m.state().exception_stats[&16];
+        // Entry 12 + 17 (the FP state), the handler's movs and bx: 2.
+        assert_eq!(irq0.spans, vec![(entered, entered + UPC * (12 + 17 + 2))]);
+        assert_eq!(m.state().fp_frames, 1);
+    }
+
+    /// ACR = `acr`, then a loop of two more laps, each reading ACR back.
+    fn art_program(acr: u16) -> [u16; 12] {
+        [
+            0xF643,
+            0x4100, // movw r1, #0x3C00
+            0xF2C4,
+            0x0102, // movt r1, #0x4002   (FLASH_ACR)
+            0xF240 | ((acr >> 12) & 0xF),
+            ((acr >> 8) & 0x7) << 12 | (acr & 0xFF), // movw r0, #acr
+            0x6008,                                  // str r0, [r1]
+            0x2203,                                  // movs r2, #3
+            0x3A01,                                  // 0x110: subs r2, #1 (a new 128-bit line)
+            0x680B,                                  // ldr r3, [r1]
+            0xD1FC,                                  // bne 0x110
+            0xE7FE,                                  // b .
+        ]
+    }
+
+    fn acr_reads(m: &Machine<Bench>) -> Vec<Time> {
+        let mut reads: Vec<Time> = accesses(m, flash::BASE).into_iter().filter(|a| a.1.is_none()).map(|a| a.0).collect();
+        reads.dedup();
+        reads
+    }
+
+    #[test]
+    fn a_branch_to_an_uncached_line_pays_the_wait_states_and_a_cached_one_does_not() {
+        // LATENCY 2, PRFTEN, ICEN.
+        let m = run(program(&art_program(0x302), &[]), TimingProfile::Pessimistic, 1000);
+        // The first block: movw, movt, movw 1; str 3; movs, subs 1; ldr 3; bne 1 = 12 cycles
+        // (the wait states were 0 when it was fetched). Then the loop's block, twice: refill 3,
+        // its line missing (2) the first time and cached the second, body subs 1, ldr 3, bne 1.
+        let first = 12 * UPC;
+        assert_eq!(acr_reads(&m), vec![first, first + 10 * UPC, first + 10 * UPC + 8 * UPC]);
+        // Without the cache (ICEN = 0) every lap pays the wait states.
+        let m = run(program(&art_program(0x102), &[]), TimingProfile::Pessimistic, 1000);
+        assert_eq!(acr_reads(&m), vec![first, first + 10 * UPC, first + 20 * UPC]);
+        // Under the optimistic profile a lap is its three instructions.
+        let m = run(program(&art_program(0x302), &[]), TimingProfile::Optimistic, 1000);
+        assert_eq!(acr_reads(&m), vec![6 * UPC, 9 * UPC, 12 * UPC]);
+    }
 
     fn code(halfwords: &[u16]) -> Code {
         Code::new(halfwords.iter().flat_map(|h| h.to_le_bytes()).collect())
@@ -978,18 +1301,18 @@ mod tests {
     fn a_32_bit_instruction_counts_once() {
         // push {r7, lr}; bl (32-bit); udf
         let mut c = code(&[0xB580, 0xF000, 0xF800, 0xDE00]);
-        assert_eq!(c.block(FLASH_BASE, 8).0, 3);
+        assert_eq!(c.block(FLASH_BASE, 8).instructions, 3);
     }
 
     #[test]
     fn the_idle_spin_and_the_delay_loops_are_recognised_exactly() {
-        assert_eq!(code(&[0xE7FE]).block(FLASH_BASE, 2).1, BlockKind::IdleSpin);
-        assert_eq!(code(&[0x3801, 0xD1FD]).block(FLASH_BASE, 4).1, BlockKind::Countdown(0));
+        assert_eq!(code(&[0xE7FE]).block(FLASH_BASE, 2).kind, BlockKind::IdleSpin);
+        assert_eq!(code(&[0x3801, 0xD1FD]).block(FLASH_BASE, 4).kind, BlockKind::Countdown(0));
         // ldr r3, [r1]; subs r3, r3, r2; cmp r3, r0; blo .-6 (the firmware's delay_ms)
-        let wait = code(&[0x680B, 0x1A9B, 0x4283, 0xD3FB]).block(FLASH_BASE, 8).1;
+        let wait = code(&[0x680B, 0x1A9B, 0x4283, 0xD3FB]).block(FLASH_BASE, 8).kind;
         assert_eq!(wait, BlockKind::CycleCountWait { addr: 1, start: 2, limit: 0 });
         // The same loop writing its start register is not a pure wait.
-        let writes_start = code(&[0x680A, 0x1A92, 0x4282, 0xD3FB]).block(FLASH_BASE, 8).1;
+        let writes_start = code(&[0x680A, 0x1A92, 0x4282, 0xD3FB]).block(FLASH_BASE, 8).kind;
         assert_eq!(writes_start, BlockKind::Plain);
     }
 }

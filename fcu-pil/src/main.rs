@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use fcu_pil::timing::TimingProfile;
 use fcu_pil::{firmware, measure, rig};
 
 #[derive(Parser, Debug)]
@@ -49,6 +50,27 @@ struct FlyArgs {
     /// Output directory for flight.csv, flight.svg and uart.log (created if missing).
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    timing: TimingArg,
+}
+
+#[derive(clap::Args, Debug)]
+struct TimingArg {
+    /// How the emulator prices time: optimistic (one cycle per instruction, register accesses
+    /// early in their block) or pessimistic (instruction classes, flash wait states, APB
+    /// stalls, accesses at the end of their block). Default: FCU_PIL_TIMING, else optimistic.
+    #[arg(long, value_name = "optimistic|pessimistic")]
+    timing: Option<TimingProfile>,
+}
+
+impl TimingArg {
+    fn setup(&self) -> Result<rig::BoardSetup, String> {
+        let timing = match self.timing {
+            Some(t) => t,
+            None => TimingProfile::from_env()?,
+        };
+        Ok(rig::BoardSetup { timing: Some(timing), ..rig::BoardSetup::default() })
+    }
 }
 
 #[derive(clap::Args, Debug)]
@@ -61,6 +83,8 @@ struct MeasureArgs {
     duration: Option<f64>,
     #[arg(long)]
     elf: Option<PathBuf>,
+    #[command(flatten)]
+    timing: TimingArg,
 }
 
 fn main() -> ExitCode {
@@ -82,21 +106,23 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
     use fcu_testkit::cli::fly as host;
     let spread = host::check_spread(a.spread).map_err(|e| e.0)?;
     let sc = host::prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration).map_err(|e| e.0)?;
+    let setup = a.timing.setup()?;
     let elf = firmware::resolve_elf(a.elf.as_deref())?;
     std::fs::create_dir_all(&a.out).map_err(|e| format!("--out {}: {e}", a.out.display()))?;
     let opts =
         fcu_testkit::sim::RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..Default::default() };
-    let flight = rig::fly(&elf, &sc, &opts)?;
+    let flight = rig::fly_with(&elf, &sc, &opts, &setup)?;
     let uart_path = a.out.join("uart.log");
     std::fs::write(&uart_path, &flight.uart_log).map_err(|e| format!("writing {}: {e}", uart_path.display()))?;
-    let title = format!("fcu-pil fly: {} — firmware image {}, seed {}", sc.name, elf.display(), a.seed);
+    let timing = setup.timing_profile()?;
+    let title = format!("fcu-pil fly: {} — firmware image {}, seed {}, {timing} timing", sc.name, elf.display(), a.seed);
     // The board's rows are retimed from its own tick count once the flight is over: written then.
     let mut csv = host::FlightCsv::create(&a.out).map_err(|e| e.0)?;
     csv.rows(&flight.log).map_err(|e| csv.abandon(e).0)?;
     let code = host::report(&a.out, &title, &sc, &flight.log, csv).map_err(|e| e.0)?;
     println!("wrote {}", uart_path.display());
     println!(
-        "emulated {:.1} s of the board in {:.1} s ({:.1}× real time), {} instructions",
+        "emulated {:.1} s of the board ({timing} timing) in {:.1} s ({:.1}× real time), {} instructions",
         flight.emulated_s,
         flight.wall_s,
         flight.emulated_s / flight.wall_s.max(1e-9),
@@ -106,10 +132,11 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
 }
 
 fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
+    let setup = a.timing.setup()?;
     let elf = firmware::resolve_elf(a.elf.as_deref())?;
     let sc = fcu_testkit::cli::fly::prepare_scenario(&a.scenario, None, a.duration).map_err(|e| e.0)?;
     let opts = fcu_testkit::sim::RunOptions { seed: a.seed, duration_s: a.duration, progress: true, ..Default::default() };
-    let report = measure::measure(&elf, &sc, &opts)?;
+    let report = measure::measure(&elf, &sc, &opts, &setup)?;
     print!("{report}");
     Ok(ExitCode::SUCCESS)
 }

@@ -1,14 +1,16 @@
 //! What the image costs, measured on the image: instructions per control interrupt (with its
 //! SPI read), the time from the TIM9 update to the last motor write, CPU load, stack use, the
 //! radio capture's worst latency while the control task runs, and the harness's own speed.
-//! Numbers in instructions are exact for the emulated core (CPI = 1, see [`crate::machine`]);
-//! times are those instructions at 84 MHz.
+//! Numbers in instructions are exact for the emulated core under either timing profile; times
+//! are the profile's ([`crate::timing`]): under the optimistic one, those instructions at
+//! 84 MHz; under the pessimistic one, as slow as the board can be.
 
 use std::fmt;
 
 use crate::machine::SRAM_BASE;
 use crate::periph::{self, time_to_s, Time};
 use crate::rig;
+use crate::timing::TimingProfile;
 
 /// TIM1_BRK_TIM9 is external interrupt 24: exception 40.
 const CONTROL_EXCEPTION: usize = 16 + periph::irq::TIM1_BRK_TIM9 as usize;
@@ -16,11 +18,16 @@ const CONTROL_EXCEPTION: usize = 16 + periph::irq::TIM1_BRK_TIM9 as usize;
 #[derive(Clone, Debug)]
 pub struct Report {
     pub scenario: String,
+    /// The timing profile the figures were measured under.
+    pub timing: TimingProfile,
     pub emulated_s: f64,
     pub wall_s: f64,
     pub control_interrupts: usize,
     pub control_instructions_median: u64,
     pub control_instructions_max: u64,
+    /// From the control interrupt's entry to its return (nested interrupts included).
+    pub control_duration_us_median: f64,
+    pub control_duration_us_max: f64,
     pub tick_to_last_ccr_us_median: f64,
     pub tick_to_last_ccr_us_max: f64,
     pub cpu_load_pct: f64,
@@ -48,13 +55,16 @@ fn us(t: Time) -> f64 {
     time_to_s(t) * 1e6
 }
 
-/// Flies `scenario` with the image and measures it over the flight (boot excluded).
+/// Flies `scenario` with the image on a board set up as `setup` says (its timing profile
+/// included) and measures it over the flight (boot excluded).
 pub fn measure(
     elf: &std::path::Path,
     scenario: &fcu_testkit::sim::scenario::Scenario,
     opts: &fcu_testkit::sim::RunOptions,
+    setup: &rig::BoardSetup,
 ) -> Result<Report, String> {
-    let flight = rig::fly(elf, scenario, opts)?;
+    let timing = setup.timing_profile()?;
+    let flight = rig::fly_with(elf, scenario, opts, &rig::BoardSetup { timing: Some(timing), ..setup.clone() })?;
     let m = &flight.board.machine;
     let st = m.state();
     let board = m.board();
@@ -65,6 +75,9 @@ pub fn measure(
     instr.sort_unstable();
     let control_instructions_median = instr.get(instr.len() / 2).copied().unwrap_or(0);
     let control_instructions_max = instr.last().copied().unwrap_or(0);
+    let mut durations: Vec<f64> = control.spans.iter().map(|&(entered, returned)| us(returned - entered)).collect();
+    let control_duration_us_max = durations.iter().copied().fold(0.0, f64::max);
+    let control_duration_us_median = median(&mut durations);
 
     // The TIM9 update that started each control interrupt: the last update at or before its
     // entry (updates come every 1.25 ms from the timer's start).
@@ -113,11 +126,14 @@ pub fn measure(
 
     Ok(Report {
         scenario: scenario.name.clone(),
+        timing,
         emulated_s: flight.emulated_s,
         wall_s: flight.wall_s,
         control_interrupts: control.instructions.len(),
         control_instructions_median,
         control_instructions_max,
+        control_duration_us_median,
+        control_duration_us_max,
         tick_to_last_ccr_us_median,
         tick_to_last_ccr_us_max,
         cpu_load_pct,
@@ -135,11 +151,20 @@ pub fn measure(
 
 impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "firmware image measured over `{}` ({:.1} s emulated, boot included)", self.scenario, self.emulated_s)?;
+        writeln!(
+            f,
+            "firmware image measured over `{}` ({:.1} s emulated, boot included), {} timing profile",
+            self.scenario, self.emulated_s, self.timing
+        )?;
         writeln!(
             f,
             "  control interrupt (TIM9, SPI read included), instructions: median {} max {} over {} ticks",
             self.control_instructions_median, self.control_instructions_max, self.control_interrupts
+        )?;
+        writeln!(
+            f,
+            "  control interrupt, entry to return: median {:.1} µs, max {:.1} µs",
+            self.control_duration_us_median, self.control_duration_us_max
         )?;
         writeln!(
             f,

@@ -22,6 +22,7 @@ use crate::elf::Image;
 use crate::machine::{Fault, Machine};
 use crate::periph::{time_from_s, time_to_s, Time};
 use crate::telemetry::{self, Line, LineSplitter};
+use crate::timing::TimingProfile;
 
 /// The control tick the firmware runs (TIM9 at exactly 800 Hz, `Config::default()`).
 pub const TICK_HZ: f64 = 800.0;
@@ -37,6 +38,16 @@ pub struct BoardSetup {
     pub boot_battery_v: f64,
     /// The HSE crystal never starts (a cracked crystal).
     pub hse_dead: bool,
+    /// How the emulator prices time ([`crate::timing`]); `None`: `FCU_PIL_TIMING` from the
+    /// environment, optimistic if it is not set (a value that names no profile is an error).
+    pub timing: Option<TimingProfile>,
+}
+
+impl BoardSetup {
+    /// The timing profile this setup asks for.
+    pub fn timing_profile(&self) -> Result<TimingProfile, String> {
+        self.timing.map_or_else(TimingProfile::from_env, Ok)
+    }
 }
 
 /// A parsed UART line with the time its last byte left the UART.
@@ -73,7 +84,7 @@ impl EmulatedBoard {
         board.spi2.sensors_mut().lsm6dsl.set_output(imu_at_rest.gyro, imu_at_rest.accel);
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
         board.rcc.set_hse_dead(setup.hse_dead);
-        let machine = Machine::new(image, board)?;
+        let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,
             t0: None,
@@ -277,15 +288,26 @@ pub fn imu_at_rest(seed: u64) -> RawImu {
     imu.read()
 }
 
-/// Boots the image and flies `scenario` with it through the simulation's seam.
+/// Boots the image and flies `scenario` with it through the simulation's seam, timed as
+/// `FCU_PIL_TIMING` says ([`BoardSetup::timing`]).
 pub fn fly(
     elf: &std::path::Path,
     scenario: &fcu_testkit::sim::scenario::Scenario,
     opts: &fcu_testkit::sim::RunOptions,
 ) -> Result<Flight, String> {
+    fly_with(elf, scenario, opts, &BoardSetup::default())
+}
+
+/// [`fly`] with the board set up as `setup` says.
+pub fn fly_with(
+    elf: &std::path::Path,
+    scenario: &fcu_testkit::sim::scenario::Scenario,
+    opts: &fcu_testkit::sim::RunOptions,
+    setup: &BoardSetup,
+) -> Result<Flight, String> {
     let started = std::time::Instant::now();
     let image = Image::load(elf)?;
-    let mut board = EmulatedBoard::boot(image, &BoardSetup::default(), imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
+    let mut board = EmulatedBoard::boot(image, setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
     if !board.flying() {
         return Err(format!("the firmware did not start its control timer within the boot timeout; its UART said:\n{}", board.uart_text()));
     }

@@ -25,6 +25,33 @@ const ACR_ICRST: u32 = 1 << 11;
 const ACR_DCRST: u32 = 1 << 12;
 const ACR_FIELDS: u32 = ACR_LATENCY | ACR_PRFTEN | ACR_ICEN | ACR_DCEN | ACR_ICRST | ACR_DCRST;
 
+/// What ACR says about the flash's timing, decoded from a value read from or written to it: the
+/// emulator's timing profiles see the register only through the bus (see `crate::timing`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AcrTiming {
+    /// Wait states (LATENCY).
+    pub latency: u32,
+    pub prefetch: bool,
+    pub icache: bool,
+    pub dcache: bool,
+    /// ICRST / DCRST set in a written value: the cache is emptied.
+    pub icache_reset: bool,
+    pub dcache_reset: bool,
+}
+
+impl AcrTiming {
+    pub fn decode(acr: u32) -> Self {
+        AcrTiming {
+            latency: acr & ACR_LATENCY,
+            prefetch: acr & ACR_PRFTEN != 0,
+            icache: acr & ACR_ICEN != 0,
+            dcache: acr & ACR_DCEN != 0,
+            icache_reset: acr & ACR_ICRST != 0,
+            dcache_reset: acr & ACR_DCRST != 0,
+        }
+    }
+}
+
 /// Assumption: VDD = 3.3 V (the board's regulator; the reference firmware uses a 3.3 V ADC
 /// reference, `docs/reference.md#battery`), so the 2.7–3.6 V row of RM0368's wait-state table
 /// applies: one wait state per started 30 MHz of HCLK, up to 84 MHz.
