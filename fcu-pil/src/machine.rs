@@ -143,6 +143,8 @@ struct BlockInfo {
     instructions: u64,
     /// The block's own cycles in the pessimistic profile ([`timing::block_cycles`]).
     cycles: u64,
+    /// Its PC-relative loads (flash data reads).
+    literal_loads: u64,
     kind: BlockKind,
 }
 
@@ -183,8 +185,14 @@ impl Code {
                 return *info;
             }
         }
-        let (cycles, instructions) = timing::block_cycles(size, |i| self.halfword(addr.wrapping_add(2 * i)).unwrap_or(0));
-        let info = BlockInfo { size, instructions, cycles, kind: self.classify(addr, size) };
+        let cost = timing::block_cycles(size, |i| self.halfword(addr.wrapping_add(2 * i)).unwrap_or(0));
+        let info = BlockInfo {
+            size,
+            instructions: cost.instructions,
+            cycles: cost.cycles,
+            literal_loads: cost.literal_loads,
+            kind: self.classify(addr, size),
+        };
         if let Some(entry) = slot.and_then(|i| self.blocks.get_mut(i)) {
             *entry = Some(info);
         }
@@ -405,23 +413,9 @@ impl<P: Peripherals + 'static> Machine<P> {
                 )
                 .map_err(emu)?;
             }
-            TimingProfile::Pessimistic => {
-                // Data reads from flash (its alias at 0, the system memory) pay its wait states
-                // through the ART's data cache.
-                for (base, size) in [(0u64, FLASH_SIZE), (u64::from(FLASH_BASE), FLASH_SIZE), (u64::from(SYSMEM_PAGE), 0x1000)] {
-                    uc.add_mem_hook(
-                        HookType::MEM_READ,
-                        base,
-                        base + u64::from(size) - 1,
-                        |uc: &mut Unicorn<'_, State<P>>, _: MemType, addr: u64, _: usize, _: i64| {
-                            let st = uc.get_data_mut();
-                            st.now += st.timing.flash_data_read_cycles(addr as u32) * st.units_per_cycle;
-                            true
-                        },
-                    )
-                    .map_err(emu)?;
-                }
-            }
+            // Data reads from flash are priced from the block's literal loads (see `timing`):
+            // a memory hook on flash corrupts registers in Unicorn 2.1.5.
+            TimingProfile::Pessimistic => {}
         }
         uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
             let st = uc.get_data_mut();
@@ -867,7 +861,7 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
     let info = st.code.block(addr, size);
     let (n, kind) = (info.instructions, info.kind);
     let body = st.timing.body_cycles(n, info.cycles);
-    let entry = st.timing.block_entry_cycles(addr, size);
+    let entry = st.timing.block_entry_cycles(addr, size) + st.timing.literal_load_cycles(info.literal_loads);
     let upc = st.units_per_cycle;
     st.block_pc = addr;
     st.block_size = size;

@@ -57,9 +57,11 @@
 //!   next sequential line hides it: a line holds 4 to 8 instructions, at least 4 cycles, and is
 //!   fetched in LATENCY + 1). As in RM0368, a line served by the prefetch buffer is not copied
 //!   into the cache. ICRST empties the model.
-//! - data reads from flash (literal pools, constant tables; seen through a memory hook on
-//!   flash) go through the ART's data cache, 8 lines of 128 bits (RM0368 §3.4), same policy:
-//!   a miss, or any read with DCEN off, costs LATENCY.
+//! - data reads from flash: every PC-relative (literal) load pays LATENCY, as a miss of the
+//!   ART's data cache would (pessimistic: a pool read again soon hits). Constant tables read
+//!   through a register are not seen: watching flash data reads needs a Unicorn memory hook on
+//!   flash, and with one, Unicorn 2.1.5 corrupted a register in the capture interrupt of the
+//!   release image (a literal-loaded base address came out wrong), so the model does without.
 //! - every access to a peripheral register stalls the core for the bridge and the APB
 //!   transfer. ST gives no figure for this; the model's, an assumption from the AMBA APB
 //!   protocol: one HCLK through the AHB/APB bridge, up to one PCLK period less one HCLK to meet
@@ -313,10 +315,20 @@ fn coprocessor_cycles(hw1: u16, hw2: u16) -> (u64, Class) {
     (1, Other)
 }
 
-/// Pessimistic cycles of a straight run of instructions (a block), and how many there are.
-/// `halfword(i)` is the i-th halfword of the block.
-pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> (u64, u64) {
-    let (mut cycles, mut instructions) = (0u64, 0u64);
+/// A straight run of instructions (a block) as the pessimistic profile prices it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlockCost {
+    /// Cycles of its instructions (wait states apart).
+    pub cycles: u64,
+    pub instructions: u64,
+    /// PC-relative (literal) loads: each a data read from flash.
+    pub literal_loads: u64,
+}
+
+/// Pessimistic cycles of a straight run of instructions (a block), how many there are, and how
+/// many read a literal from flash. `halfword(i)` is the i-th halfword of the block.
+pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> BlockCost {
+    let (mut cycles, mut instructions, mut literal_loads) = (0u64, 0u64, 0u64);
     let mut previous = Class::Other;
     let mut i = 0;
     while 2 * i < size_bytes {
@@ -327,10 +339,20 @@ pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> (u64, u64
         let stall = u64::from(class == Class::LoadStore && previous == Class::DataProcessing);
         cycles += c + stall;
         instructions += 1;
+        literal_loads += u64::from(is_literal_load(hw1));
         previous = class;
         i += if wide { 2 } else { 1 };
     }
-    (cycles.max(1), instructions.max(1))
+    BlockCost { cycles: cycles.max(1), instructions: instructions.max(1), literal_loads }
+}
+
+/// LDR (literal), 16- or 32-bit (byte, halfword, word, signed; LDRD and VLDR from the PC apart).
+fn is_literal_load(hw1: u16) -> bool {
+    if !is_32_bit(hw1) {
+        return hw1 >> 11 == 0b01001;
+    }
+    // 1111 1000 U0xx 1111 (LDR/LDRB/LDRH literal) and 1111 1001 U0x1 1111 (LDRSB/LDRSH).
+    hw1 & 0xFE0F == 0xF80F && hw1 & 0x0010 != 0
 }
 
 /// A fully associative cache of 128-bit lines, least recently used line replaced.
@@ -561,17 +583,13 @@ impl Timing {
         transfers * (APB_BRIDGE_CYCLES + (divider - 1) + APB_TRANSFER_PCLKS * divider)
     }
 
-    /// Wait states of a data read from flash at `addr`, through the ART's data cache.
-    pub fn flash_data_read_cycles(&mut self, addr: u32) -> u64 {
-        if !self.pessimistic() {
-            return 0;
-        }
-        let Some(line) = flash_line(addr) else { return 0 };
-        let hit = self.acr.dcache && self.dcache.access(line);
-        if hit {
-            0
+    /// Wait states of a block's literal loads, each charged as a miss of the ART's data cache
+    /// (pessimistic: a literal pool read again soon would hit).
+    pub fn literal_load_cycles(&self, literal_loads: u64) -> u64 {
+        if self.pessimistic() {
+            literal_loads * u64::from(self.acr.latency)
         } else {
-            u64::from(self.acr.latency)
+            0
         }
     }
 
@@ -604,7 +622,7 @@ mod tests {
     use super::*;
 
     fn cost(halfwords: &[u16]) -> u64 {
-        block_cycles(2 * halfwords.len() as u32, |i| halfwords.get(i as usize).copied().unwrap_or(0)).0
+        block_cycles(2 * halfwords.len() as u32, |i| halfwords.get(i as usize).copied().unwrap_or(0)).cycles
     }
 
     #[test]
@@ -774,18 +792,14 @@ mod tests {
     }
 
     #[test]
-    fn flash_data_reads_go_through_the_data_cache() {
-        let mut t = two_wait_states(true, true);
-        assert_eq!(t.flash_data_read_cycles(0x0800_2000), 2);
-        assert_eq!(t.flash_data_read_cycles(0x0800_2004), 0);
-        for i in 1..=8 {
-            t.flash_data_read_cycles(0x0800_2000 + 16 * i);
-        }
-        assert_eq!(t.flash_data_read_cycles(0x0800_2000), 2, "8 lines: evicted");
-        t.set_acr(AcrTiming { latency: 2, dcache: false, ..t.acr() });
-        assert_eq!(t.flash_data_read_cycles(0x0800_2000), 2);
-        assert_eq!(t.flash_data_read_cycles(0x0800_2000), 2, "DCEN off: every read pays");
-        assert_eq!(t.flash_data_read_cycles(0x2000_0000), 0, "SRAM");
+    fn literal_loads_pay_the_flash_wait_states_as_data_cache_misses() {
+        // ldr r0, [pc, #8]; ldr.w r1, [pc, #16]; ldr r2, [r3]; ldr r4, [sp, #4]
+        let block = [0x4802u16, 0xF8DF, 0x1010, 0x681A, 0x9C01];
+        let cost = block_cycles(10, |i| block[i as usize]);
+        assert_eq!(cost.literal_loads, 2);
+        let t = two_wait_states(true, true);
+        assert_eq!(t.literal_load_cycles(cost.literal_loads), 4);
+        assert_eq!(Timing::new(TimingProfile::Optimistic).literal_load_cycles(2), 0);
     }
 
     #[test]
