@@ -12,7 +12,8 @@
 //!
 //! | to change… | look at |
 //! |---|---|
-//! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (numbered stages) and [`flight::OuterStep::run`] |
+//! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (one call per stage; the stages are `flight`'s submodules) and [`flight::OuterStep::run`] |
+//! | what a configuration comes to for the tick, the gains that scale it in flight | [`flight::TickParams`] (worked out in one place, `flight/params.rs`), [`control::Gains`], [`control::GainSchedule`] |
 //! | arming, disarming, failsafe stages, blockers | [`supervisor::Supervisor`] (its `decide_by_table`; every arm has tests named after its rule) and [`supervisor::SafetyConfig`] |
 //! | when the last decision may simply stand | [`supervisor::Supervisor::decide_or_repeat`] |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
