@@ -250,8 +250,8 @@ impl FlightController {
         self.control_tick.status()
     }
 
-    /// Tests only (feature `test-switches`): with `true`, the supervisor runs its full table
-    /// every tick, without the steady-flight shortcut or the repeat of the last decision.
+    /// Tests only (feature `test-switches`): with `true`, the supervisor decides every tick; the
+    /// decision in force never stands in steady flight.
     #[cfg(feature = "test-switches")]
     pub fn set_table_only(&mut self, table_only: bool) {
         self.control_tick.supervision.set_table_only(table_only);
@@ -292,8 +292,7 @@ impl ControlTick {
     /// One control tick: the radio from capture pulses.
     pub fn tick(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
         self.sensors.sample_arrived();
-        let flags = self.supervision.receive(&self.params, pulses);
-        self.run(imu, flags)
+        self.tick_with(imu, pulses)
     }
 
     /// One control tick when the sensor read failed: the last sample is held for up to
@@ -302,6 +301,10 @@ impl ControlTick {
     /// latches, as for any sensor fault.
     pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
         let imu = self.sensors.sample_missing();
+        self.tick_with(imu, pulses)
+    }
+
+    fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
         let flags = self.supervision.receive(&self.params, pulses);
         self.run(imu, flags)
     }

@@ -16,6 +16,7 @@ pub(super) struct MotorsAllowed {
     pub(super) fault: bool,
 }
 
+/// The rate loop's state and what the tick last wrote to the motors.
 #[derive(Clone, Debug)]
 pub(super) struct Output {
     rate_loop: RateLoop,

@@ -14,6 +14,7 @@ pub(super) enum Calibration {
     StopsTheTick,
 }
 
+/// The front end's state: calibration, offsets, health, and the gyro filters.
 #[derive(Clone, Debug)]
 pub(super) struct Sensors {
     calibrator: Calibrator,

@@ -4,8 +4,8 @@
 use super::params::TickParams;
 use super::sensors::Sensors;
 use super::ForcedRadio;
-use crate::rc::{PulseBatch, RadioState, Receiver, StickCounts, Sticks};
-use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
+use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks};
+use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
 
 /// The supervisor's last decision and what follows from it and the sticks, kept until the
 /// supervisor decides again.
@@ -20,8 +20,7 @@ pub(super) struct InForce {
 
 impl InForce {
     /// A new decision, and what follows from it and the radio's sticks: the one writer of all
-    /// three. (Written in place: building a new value and moving it in cost 12 instructions
-    /// on every tick the table runs; docs/performance.md, «in place».)
+    /// three, written in place (docs/performance.md, «in place»).
     #[inline(always)]
     fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams) {
         self.decision = decision;
@@ -45,20 +44,34 @@ pub(super) struct RadioFlags {
     pub(super) calibrate: bool,
 }
 
+/// Which supervisor decides, with its configuration.
+#[derive(Clone, Debug)]
+enum Machine {
+    Reference(ReferenceLatch),
+    Safe { cfg: SafetyConfig, supervisor: Supervisor },
+}
+
+/// The radio, the supervisor that decides, and its decision in force.
 #[derive(Clone, Debug)]
 pub(super) struct Supervision {
-    kind: SupervisorConfig,
     receiver: Receiver,
-    supervisor: Supervisor,
+    machine: Machine,
     in_force: InForce,
+    /// Ticks since boot, this one included: the supervisor's clock.
+    ticks: u32,
+    /// Tests only: the supervisor decides every tick, the decision in force never stands.
+    #[cfg(feature = "test-switches")]
+    table_only: bool,
 }
 
 impl Supervision {
-    pub(super) fn new(kind: SupervisorConfig) -> Supervision {
+    pub(super) fn new(cfg: SupervisorConfig) -> Supervision {
         Supervision {
-            kind,
             receiver: Receiver::new(),
-            supervisor: Supervisor::new(),
+            machine: match cfg {
+                SupervisorConfig::Reference => Machine::Reference(ReferenceLatch::default()),
+                SupervisorConfig::Safe(cfg) => Machine::Safe { cfg, supervisor: Supervisor::new() },
+            },
             in_force: InForce {
                 decision: Decision {
                     state: FlightState::Calibrating,
@@ -70,6 +83,9 @@ impl Supervision {
                 sticks: Sticks::default(),
                 throttle_low: true,
             },
+            ticks: 0,
+            #[cfg(feature = "test-switches")]
+            table_only: false,
         }
     }
 
@@ -77,16 +93,22 @@ impl Supervision {
     #[inline(always)]
     pub(super) fn receive(&mut self, p: &TickParams, pulses: &PulseBatch) -> RadioFlags {
         let rc = &p.rc;
-        let mut cal_gesture = false;
-        match self.kind {
-            SupervisorConfig::Reference => {
-                let supervisor = &mut self.supervisor;
+        match self.machine {
+            Machine::Reference(_) => {
                 // The reference evaluates its gestures after every single-channel update.
-                self.receiver.update(rc, pulses, |s| cal_gesture |= supervisor.reference_gesture(rc.gesture(s)))
+                let (mut arm, mut calibrate) = (false, false);
+                self.receiver.update(rc, pulses, |s| {
+                    let g = rc.gesture(s);
+                    arm |= g == Some(Gesture::Arm);
+                    calibrate |= g == Some(Gesture::Calibrate);
+                });
+                RadioFlags { set_armed: arm.then_some(true), calibrate }
             }
-            SupervisorConfig::Safe(_) => self.receiver.update(rc, pulses, |_| {}),
-        };
-        RadioFlags { set_armed: None, calibrate: cal_gesture }
+            Machine::Safe { .. } => {
+                self.receiver.update(rc, pulses, |_| {});
+                RadioFlags::default()
+            }
+        }
     }
 
     /// The radio state given directly (golden replay).
@@ -95,42 +117,39 @@ impl Supervision {
         RadioFlags { set_armed: Some(forced.armed), calibrate: forced.cal_request }
     }
 
-    /// This tick's decision (or the last one, where it stands); whether it asks for a
-    /// calibration.
+    /// This tick's decision, now in force; whether it asks for a calibration.
     #[inline(always)]
     pub(super) fn decide(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
+        self.ticks = self.ticks.saturating_add(1);
         let radio = self.receiver.state();
-        let (kind, receiver, fault) = (&self.kind, &self.receiver, sensors.fault());
-        // Run only when the last decision cannot simply stand.
-        let decide = |supervisor: &mut Supervisor| {
-            let calibrating = sensors.calibrating();
-            match kind {
-                SupervisorConfig::Reference => supervisor.decide_reference(radio.link, flags.set_armed, calibrating),
-                SupervisorConfig::Safe(safety) => {
-                    let sticks = radio.sticks;
-                    let inputs = Inputs {
-                        link: radio.link,
-                        // Only read without a good link.
-                        silence_ticks: if radio.link { 0 } else { receiver.silence_ticks(&p.rc) },
-                        sticks,
-                        gesture: radio.gesture,
-                        throttle_low: p.rc.throttle_low(&sticks),
-                        calibrated: sensors.calibrated(),
-                        calibrating,
-                        sensor_fault: fault,
-                        tilt_rad,
-                    };
-                    supervisor.decide_inline(safety, inputs)
+        let repeats_allowed = self.repeats_allowed();
+        let decision = match &mut self.machine {
+            Machine::Reference(latch) => latch.decide(radio.link, flags.set_armed, sensors.calibrating()),
+            Machine::Safe { cfg, supervisor } => {
+                // In steady flight, with nothing new from the radio and no sensor fault, the
+                // decision in force stands: the supervisor would decide it again, the same
+                // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
+                if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
+                    return false;
                 }
+                let inputs = Inputs {
+                    tick: self.ticks,
+                    link: radio.link,
+                    // Only read without a good link.
+                    silence_ticks: if radio.link { 0 } else { self.receiver.silence_ticks(&p.rc) },
+                    sticks: radio.sticks,
+                    gesture: radio.gesture,
+                    throttle_low: p.rc.throttle_low(&radio.sticks),
+                    calibrated: sensors.calibrated(),
+                    calibrating: sensors.calibrating(),
+                    sensor_fault: sensors.fault(),
+                    tilt_rad,
+                };
+                supervisor.decide(cfg, &inputs)
             }
         };
-        match self.supervisor.decide_or_repeat(receiver.changed(), fault, decide) {
-            Some(decision) => {
-                self.in_force.decided(decision, radio.sticks, p);
-                decision.request_calibration
-            }
-            None => false,
-        }
+        self.in_force.decided(decision, radio.sticks, p);
+        decision.request_calibration
     }
 
     pub(super) fn in_force(&self) -> &InForce {
@@ -143,6 +162,18 @@ impl Supervision {
 
     #[cfg(feature = "test-switches")]
     pub(super) fn set_table_only(&mut self, table_only: bool) {
-        self.supervisor.set_table_only(table_only);
+        self.table_only = table_only;
+    }
+
+    #[cfg(feature = "test-switches")]
+    #[inline(always)]
+    fn repeats_allowed(&self) -> bool {
+        !self.table_only
+    }
+
+    #[cfg(not(feature = "test-switches"))]
+    #[inline(always)]
+    fn repeats_allowed(&self) -> bool {
+        true
     }
 }
