@@ -209,6 +209,69 @@ impl BatteryFilter {
     }
 }
 
+/// The scaling the outer step works out at run time ([`GainSchedule`]): the throttle map's gain
+/// (the battery compensation's thrust gain, D14) and the rate loop's (the thrust gain times the
+/// thrust curve's factor at the throttle flown, D17). Both 1 without either.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gains {
+    /// The throttle map's: [`BatteryCompensation`].
+    pub thrust: f32,
+    /// The rate loop's: the thrust gain times [`ThrustCurve::gain_at`].
+    pub rate: f32,
+}
+
+impl Gains {
+    /// The configuration as given.
+    pub const UNITY: Gains = Gains { thrust: 1.0, rate: 1.0 };
+}
+
+/// Where the [`Gains`] come from, once per outer step: the battery's filtered voltage (D14) and
+/// the duty the throttle stick flies at (D17).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GainSchedule {
+    battery: Option<BatteryCompensation>,
+    filter: BatteryFilter,
+    /// The thrust curve, with the throttle map and PWM period its operating point (a duty) is
+    /// read through: the configuration's, not the scaled map the tick flies.
+    thrust_curve: Option<(ThrustCurve, crate::mixer::MixerConfig)>,
+    /// The outer step's period, s.
+    dt_s: f32,
+}
+
+impl GainSchedule {
+    /// For outer steps at `outer_hz`; unity until the first valid battery reading.
+    pub fn new(control: &ControlConfig, mixer: &crate::mixer::MixerConfig, outer_hz: f32) -> GainSchedule {
+        GainSchedule {
+            battery: control.battery,
+            filter: BatteryFilter::default(),
+            thrust_curve: control.thrust_curve.map(|c| (c, *mixer)),
+            dt_s: 1.0 / outer_hz,
+        }
+    }
+
+    /// The latest battery reading, mV (ignored without a battery compensation).
+    pub fn set_battery_mv(&mut self, battery_mv: u32) {
+        self.filter.set_reading(battery_mv);
+    }
+
+    /// One outer step with the throttle stick at `throttle`.
+    pub fn update(&mut self, throttle: crate::rc::StickCounts) -> Gains {
+        let thrust = match self.battery {
+            Some(b) => self.filter.update(&b, self.dt_s),
+            None => 1.0,
+        };
+        let rate = match self.thrust_curve {
+            Some((curve, mixer)) => {
+                // The duty the throttle stick flies at, through the map in force.
+                let counts = f32::from(mixer.throttle_counts(throttle).0) * thrust;
+                thrust * curve.gain_at(counts / mixer.period_counts())
+            }
+            None => thrust,
+        };
+        Gains { thrust, rate }
+    }
+}
+
 impl ControlConfig {
     /// This configuration's rate loop for a thrust gain `g` (see [`BatteryCompensation`]).
     pub fn scaled_rate_loop(&self, g: f32) -> ControlConfig {

@@ -2,17 +2,19 @@
 //!
 //! The firmware and the simulator drive this one type. It has two halves so the firmware can
 //! run the outer step in a lower-priority task:
-//! - [`ControlTick`] runs every control tick: radio → supervisor → sensor conditioning → rate loop
-//!   → mixer → guard. Every fifth tick it hands out an [`OuterJob`] (the block's
-//!   accelerometer words and summed gyro, and the sticks).
-//! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler →
-//!   stick targets → angle loop, and returns an [`OuterResult`] that the control tick applies
-//!   at its next tick ([`ControlTick::apply_outer`]).
+//! - [`ControlTick`] runs every control tick, as a chain of stages that each own their state:
+//!   the command stage (radio → supervisor → the decision in force), the sensor front end
+//!   (health, calibration, offsets, gyro low-pass), the block of five samples, the heading
+//!   estimate, and the output (rate loop → mixer → guard). Every fifth tick it hands out an
+//!   [`OuterJob`] (the block's accelerometer words and summed gyro, and the sticks).
+//! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler and
+//!   tilt → stick targets and the heading target → angle loop → the run-time [`Gains`], and
+//!   returns an [`OuterResult`] that the control tick applies at its next tick
+//!   ([`ControlTick::apply_outer`]). The outer step is the only owner of the heading target,
+//!   the tilt and the gains.
 //!
-//! From a tick to the supervisor's rules: [`ControlTick::tick`] → `run` (the numbered stages)
-//! → `supervise` → [`Supervisor::decide_or_repeat`] (the last decision stands in steady
-//! flight with nothing new) → [`Supervisor::decide_inline`] (the steady-flight shortcut) → the
-//! state table, `Supervisor::decide_by_table`.
+//! The configuration is never changed: what both halves read is worked out from it once (the
+//! tick's [`TickParams`]), and the gains scale only the tick's rate loop and throttle map.
 //!
 //! The 800 Hz half is written for a budget of 600 Cortex-M4 instructions (`scripts/bench-m4`):
 //! work that only the outer step needs is left to it, what the configuration settles is
@@ -22,15 +24,30 @@
 //! The simulator and the replay run the outer step inline with
 //! [`FlightController::run_outer`], right after the tick that made the job.
 
+mod block;
+mod heading;
+mod output;
+mod params;
+mod sensors;
+mod supervision;
+
+pub use block::AccelWords;
+pub use params::TickParams;
+
+use self::block::{accumulate_accel_mg, Block};
+use self::heading::{HeadingEstimate, HeadingTarget};
+use self::output::{MotorsAllowed, Output};
+use self::params::{Derived, OuterParams};
+use self::sensors::{Calibration, Sensors};
+use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
-use crate::control::{AngleLoop, BatteryFilter, ControlConfig, RateLoop, Saturation, YawRateShaper};
-use crate::filter::{accumulate, block_mean, BiquadBank, BLOCK};
-use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
+use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
+use crate::filter::block_mean;
+use crate::imu::{CalibrationPhase, Decoder, Offsets, RawImu, SensorFault};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
-use crate::mixer::{CompareRange, MixerConfig};
-use crate::rc::{EdgeDecoder, PulseBatch, RadioState, RcConfig, Receiver, StickCounts, Sticks, CHANNELS};
-use crate::supervisor::{Blockers, Decision, FlightState, Inputs, Supervisor, SupervisorConfig};
+use crate::rc::{EdgeDecoder, PulseBatch, Sticks, CHANNELS};
+use crate::supervisor::{Blockers, FlightState};
 
 /// What one control tick produces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,12 +86,6 @@ pub struct OuterJob {
     pub yaw_target_reset: bool,
 }
 
-/// The accelerometer words of a block, one per slot, aligned to 4 bytes (docs/performance.md,
-/// «aligned words»).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(C, align(4))]
-pub struct AccelWords(pub [[i16; 3]; BLOCK]);
-
 impl OuterJob {
     /// The block's summed accelerometer, corrected mg, body axes.
     pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
@@ -85,29 +96,20 @@ impl OuterJob {
     }
 }
 
-/// Add accelerometer words to a block sum, each converted and corrected as the tick would
-/// have done it, in slot order.
-fn accumulate_accel_mg(sum: &mut [f32; 3], words: &[[i16; 3]], decoder: &Decoder, offsets: &Offsets) {
-    for w in words {
-        accumulate(sum, offsets.accel(decoder.accel_mg(*w)).map(|v| v as f32));
-    }
-}
-
 /// The outer step's result, applied by the inner half.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OuterResult {
     pub quat: Quat,
     pub tilt: Tilt,
+    /// Tilt from level, rad, for the safe supervisor's arming check (0 with the reference's,
+    /// which has none).
+    pub tilt_from_level_rad: f32,
     /// Pitch, roll and (accumulated) yaw targets, rad.
     pub target_rad: [f32; 3],
     /// Rate demands for the inner loop, rad/s (`s1`).
     pub rate_demand_rad_s: [f32; 3],
-    /// The battery compensation's thrust gain (1 without it; see
-    /// [`BatteryCompensation`](crate::control::BatteryCompensation)): the throttle map's.
-    pub thrust_gain: f32,
-    /// The rate loop's gain: the thrust gain times the thrust curve's factor at the throttle
-    /// flown (see [`ThrustCurve`](crate::control::ThrustCurve); the thrust gain without one).
-    pub rate_gain: f32,
+    /// The gains the tick's rate loop and throttle map are to be scaled by.
+    pub gains: Gains,
 }
 
 /// The radio state given directly (golden replay): the reference's `rc_connection_flag`,
@@ -149,129 +151,64 @@ pub struct Status {
     pub yaw_rate_target_rad_s: f32,
 }
 
-/// The per-tick half.
+/// The per-tick half: the stages, in the order its `run` calls them.
 #[derive(Clone, Debug)]
 pub struct ControlTick {
-    /// The configuration, except that its rate loop and throttle map are the ones in force:
-    /// the rate loop scaled by `outer_result.rate_gain` (battery and thrust curve), the throttle
-    /// map by `outer_result.thrust_gain` (battery), each rescaled only when its gain changes
-    /// ([`ControlTick::apply_outer`]; docs/performance.md, «scaled in place»).
-    cfg: Config,
-    /// What the configuration settles, worked out once at construction.
-    derived: Derived,
-    receiver: Receiver,
-    supervisor: Supervisor,
-    /// The last decision and what the tick derives from it, written only by
-    /// [`InForce::decided`], so the three cannot drift apart.
-    in_force: InForce,
-    calibrator: Calibrator,
-    cal_pending: bool,
-    offsets: Offsets,
-    /// `None` when the configuration has no health checks (the reference).
-    health: Option<HealthMonitor>,
-    fault: Option<SensorFault>,
-    /// The last reading the pipeline ran on (`None` before the first).
-    last_raw: Option<RawImu>,
-    missing_samples: u32,
-    gyro_lpf: BiquadBank<3>,
-    /// Samples of the current block written so far.
-    block_len: usize,
-    accel_words: AccelWords,
-    accel_sum_before_mg: [f32; 3],
-    first_raw_slot: u8,
-    gyro_sum_mdps: [f32; 3],
-    yaw_est_rad: f32,
-    /// Tilt from level of the latest estimate, rad: computed once per outer result, not per tick.
-    tilt_rad: f32,
-    yaw_target_rad: f32,
-    yaw_target_reset: bool,
-    rate_loop: RateLoop,
-    saturation: Saturation,
-    outer_result: OuterResult,
-    motor_command: [f32; 4],
-    compare: [u16; 4],
-}
-
-/// The supervisor's last decision and what follows from it and the sticks, kept until the
-/// supervisor decides again (on a repeat, [`Supervisor::decide_or_repeat`], it stands).
-#[derive(Clone, Copy, Debug)]
-struct InForce {
-    decision: Decision,
-    /// The sticks the pipeline flies with: the radio's, or the failsafe's while it holds.
-    sticks: Sticks,
-    /// Whether their throttle is low (motors stopped, integrators and yaw reset).
-    throttle_low: bool,
-}
-
-impl InForce {
-    /// A new decision, and what follows from it and the radio's sticks: the one writer of all
-    /// three. (Written in place: building a new value and moving it in cost 12 instructions
-    /// on every tick the table runs; docs/performance.md, «in place».)
-    #[inline(always)]
-    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, rc: &RcConfig) {
-        self.decision = decision;
-        self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);
-        self.throttle_low = rc.throttle_low(&self.sticks);
-    }
-}
-
-/// What [`ControlTick`] works out from its configuration once, at construction.
-#[derive(Clone, Debug)]
-struct Derived {
-    /// Sensor words to body axes and physical units (mount, sensitivities).
-    decoder: Decoder,
-    /// The compare clamp as integers.
-    compare_range: CompareRange,
-    /// `cfg.timing.tick_dt_s` rounded to f32 once (the f64 → f32 conversion is a library call).
-    tick_dt_s: f32,
-}
-
-impl Derived {
-    fn new(cfg: &Config) -> Derived {
-        Derived { decoder: Decoder::new(&cfg.imu), compare_range: cfg.mixer.compare_range(), tick_dt_s: cfg.timing.tick_dt_s as f32 }
-    }
+    /// What the configuration comes to for the tick, the rate loop and throttle map scaled by
+    /// the gains of `outer`.
+    params: TickParams,
+    /// Radio, supervisor, and the decision in force.
+    supervision: Supervision,
+    /// Health, calibration, offsets, gyro low-pass.
+    sensors: Sensors,
+    /// The five samples of the next outer job.
+    block: Block,
+    /// The gyro-integrated heading.
+    heading: HeadingEstimate,
+    /// The last outer result, in force until the next.
+    outer: OuterResult,
+    /// Rate loop, mixer, compare values.
+    output: Output,
 }
 
 /// The outer-step half.
 #[derive(Clone, Debug)]
 pub struct OuterStep {
-    decoder: Decoder,
+    params: OuterParams,
     estimator: Estimator,
-    rc: RcConfig,
-    control: ControlConfig,
-    reference_arithmetic: bool,
     angle_loop: AngleLoop,
-    yaw_target_rad: f32,
-    /// Outer steps per second (the yaw stick's step per outer step, times this, is its rate).
-    outer_hz: f32,
-    battery: BatteryFilter,
-    /// The throttle map (unscaled), for the thrust curve's operating point (D17).
-    mixer: MixerConfig,
-    /// The stick's yaw rate shaped for the airframe (`None` without D16).
-    yaw_shaper: Option<YawRateShaper>,
+    heading: HeadingTarget,
+    gains: GainSchedule,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
+///
+/// The tick first, at offset 0 (docs/performance.md, «tick first»).
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct FlightController {
     control_tick: ControlTick,
     outer_step: OuterStep,
+    /// The configuration as given.
+    cfg: Config,
 }
 
 impl FlightController {
     /// Build from a configuration; an invalid one is refused with the field that is wrong.
     pub fn new(cfg: Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
-        Ok(FlightController { control_tick: ControlTick::new(cfg), outer_step: OuterStep::new(&cfg) })
+        let derived = Derived::new(&cfg);
+        Ok(FlightController { control_tick: ControlTick::new(&cfg, derived.tick), outer_step: OuterStep::new(&cfg, derived.outer), cfg })
     }
 
+    /// The configuration given to [`new`](Self::new).
     pub fn config(&self) -> &Config {
-        self.control_tick.config()
+        &self.cfg
     }
 
     /// The edge decoder the capture interrupt should feed for this configuration.
     pub fn edge_decoder(&self) -> EdgeDecoder {
-        EdgeDecoder::new(self.control_tick.cfg.rc.pulses)
+        EdgeDecoder::new(self.cfg.rc.pulses)
     }
 
     /// One control tick from a sensor reading and the pulses of that tick.
@@ -306,18 +243,18 @@ impl FlightController {
         if let Some(job) = out.outer_job {
             self.run_outer(&job);
         }
-        self.control_tick.compare
+        out.compare
     }
 
     pub fn status(&self) -> Status {
         self.control_tick.status()
     }
 
-    /// Tests only (feature `test-switches`): with `true`, the supervisor runs its full table
-    /// every tick, without the steady-flight shortcut or the repeat of the last decision.
+    /// Tests only (feature `test-switches`): with `true`, the supervisor decides every tick; the
+    /// decision in force never stands in steady flight.
     #[cfg(feature = "test-switches")]
     pub fn set_table_only(&mut self, table_only: bool) {
-        self.control_tick.supervisor.set_table_only(table_only);
+        self.control_tick.supervision.set_table_only(table_only);
     }
 
     /// Split for a firmware that runs the outer step in its own task.
@@ -326,436 +263,216 @@ impl FlightController {
     }
 }
 
-/// Whether the calibration let the tick go on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Calibration {
-    TickGoesOn,
-    /// Settling or averaging at start-up: motors off, nothing else this tick.
-    StopsTheTick,
-}
-
-/// The sticks the failsafe flies with: centred (level, no yaw) and the held throttle.
-fn failsafe_sticks(throttle: StickCounts) -> Sticks {
-    Sticks { thr: throttle, ..Sticks::default() }
-}
-
 impl ControlTick {
-    fn new(cfg: Config) -> Self {
+    fn new(cfg: &Config, params: TickParams) -> Self {
         ControlTick {
-            cfg,
-            derived: Derived::new(&cfg),
-            receiver: Receiver::new(),
-            supervisor: Supervisor::new(),
-            in_force: InForce {
-                decision: Decision {
-                    state: FlightState::Calibrating,
-                    motors_enabled: false,
-                    failsafe_throttle: None,
-                    request_calibration: false,
-                    blockers: Blockers::default(),
-                },
-                sticks: Sticks::default(),
-                throttle_low: true,
-            },
-            calibrator: Calibrator::new(cfg.calibration),
-            cal_pending: false,
-            offsets: Offsets::UNCALIBRATED,
-            health: cfg.health.map(|h| HealthMonitor::new(h, &cfg.imu)),
-            fault: None,
-            last_raw: None,
-            missing_samples: 0,
-            gyro_lpf: BiquadBank::new(cfg.gyro_filter),
-            block_len: 0,
-            accel_words: AccelWords::default(),
-            accel_sum_before_mg: [0.0; 3],
-            first_raw_slot: 0,
-            gyro_sum_mdps: [0.0; 3],
-            yaw_est_rad: 0.0,
-            tilt_rad: 0.0,
-            yaw_target_rad: 0.0,
-            yaw_target_reset: false,
-            rate_loop: RateLoop::default(),
-            saturation: Saturation::NONE,
-            outer_result: OuterResult {
+            params,
+            supervision: Supervision::new(cfg.supervisor),
+            sensors: Sensors::new(cfg),
+            block: Block::default(),
+            heading: HeadingEstimate::default(),
+            outer: OuterResult {
                 quat: Quat::IDENTITY,
                 tilt: Tilt::default(),
+                tilt_from_level_rad: 0.0,
                 target_rad: [0.0; 3],
                 rate_demand_rad_s: [0.0; 3],
-                thrust_gain: 1.0,
-                rate_gain: 1.0,
+                gains: Gains::UNITY,
             },
-
-            motor_command: [0.0; 4],
-            compare: [0; 4],
+            output: Output::new(),
         }
     }
 
-    /// The configuration in force: its rate loop and throttle map scaled by the gains of the
-    /// last outer result (battery, thrust curve).
-    pub fn config(&self) -> &Config {
-        &self.cfg
+    /// What the tick works with: the configuration's values, the rate loop and throttle map
+    /// scaled by the gains in force.
+    pub fn params(&self) -> &TickParams {
+        &self.params
     }
 
     /// One control tick: the radio from capture pulses.
     pub fn tick(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
-        self.missing_samples = 0;
+        self.sensors.sample_arrived();
         self.tick_with(imu, pulses)
     }
 
     /// One control tick when the sensor read failed: the last sample is held for up to
-    /// [`MAX_MISSING_SAMPLES`] ticks (a single bus glitch must not drop the drone); after that
-    /// the sensor is faulty, the motors stop and the fault latches, as for any sensor fault.
+    /// [`MAX_MISSING_SAMPLES`](crate::imu::MAX_MISSING_SAMPLES) ticks (a single bus glitch must
+    /// not drop the drone); after that the sensor is faulty, the motors stop and the fault
+    /// latches, as for any sensor fault.
     pub fn tick_without_sample(&mut self, pulses: &PulseBatch) -> TickOutput {
-        self.missing_samples = self.missing_samples.saturating_add(1);
-        if self.missing_samples > MAX_MISSING_SAMPLES {
-            self.fault.get_or_insert(SensorFault::NoData);
-        }
-        self.tick_with(self.last_raw.unwrap_or_default(), pulses)
+        let imu = self.sensors.sample_missing();
+        self.tick_with(imu, pulses)
     }
 
     fn tick_with(&mut self, imu: RawImu, pulses: &PulseBatch) -> TickOutput {
-        let rc = &self.cfg.rc;
-        let mut cal_gesture = false;
-        match self.cfg.supervisor {
-            SupervisorConfig::Reference => {
-                let supervisor = &mut self.supervisor;
-                // The reference evaluates its gestures after every single-channel update.
-                self.receiver.update(rc, pulses, |s| cal_gesture |= supervisor.reference_gesture(rc.gesture(s)))
-            }
-            SupervisorConfig::Safe(_) => self.receiver.update(rc, pulses, |_| {}),
-        };
-        self.run(imu, None, cal_gesture)
+        let flags = self.supervision.receive(&self.params, pulses);
+        self.run(imu, flags)
     }
 
     /// One control tick with the radio state given directly (golden replay).
     pub fn tick_forced(&mut self, imu: RawImu, forced: &ForcedRadio) -> TickOutput {
-        self.receiver.force(&self.cfg.rc, forced.width_counts, forced.link);
-        self.run(imu, Some(forced.armed), forced.cal_request)
+        let flags = self.supervision.receive_forced(&self.params, forced);
+        self.run(imu, flags)
     }
 
-    /// Take in an outer step's result (at the start of the next tick in the firmware).
+    /// Take in an outer step's result (at the start of the next tick in the firmware): its
+    /// attitude, targets, rate demands and gains are in force from now on.
     pub fn apply_outer(&mut self, r: &OuterResult) {
-        // Rescaled from what is in force: the ratio of the new gain to the old. Exact enough:
-        // the gains move in steps of 1/512 (battery, `BatteryFilter`) and 1/256 (thrust curve,
-        // `ThrustCurve::gain_at`), only when the battery or the throttle moves that far, and
-        // each rescale rounds by 2^-24 (a thousand of them move a gain by less than 1e-4).
-        if r.rate_gain != self.outer_result.rate_gain {
-            self.cfg.control = self.cfg.control.scaled_rate_loop(r.rate_gain / self.outer_result.rate_gain);
-        }
-        if r.thrust_gain != self.outer_result.thrust_gain {
-            self.cfg.mixer = self.cfg.mixer.scaled_throttle(r.thrust_gain / self.outer_result.thrust_gain);
-        }
-        self.outer_result = *r;
-        // Only the safe supervisor's arming check reads it («tilt once per outer result»).
-        if let SupervisorConfig::Safe(_) = self.cfg.supervisor {
-            self.tilt_rad = tilt_angle_rad(r.quat);
-        }
-        self.yaw_target_rad = r.target_rad[2];
+        self.params.rescale(self.outer.gains, r.gains);
+        self.outer = *r;
+        self.heading.result_applied();
     }
 
-    /// The pipeline, top to bottom. Every decision that touches a motor is in this function.
-    fn run(&mut self, imu: RawImu, armed_override: Option<bool>, cal_request: bool) -> TickOutput {
-        // `self.cfg.…` read in place, never copied (docs/performance.md, «no config copy»).
-        let radio = self.receiver.state();
+    /// The pipeline, top to bottom: one call per stage. Every decision that touches a motor is
+    /// in this function.
+    fn run(&mut self, imu: RawImu, flags: RadioFlags) -> TickOutput {
+        let p = &self.params;
 
-        // 1. Supervise: sensor health, then the state machine decides whether motors may run.
-        let repeated = self.last_raw == Some(imu);
-        self.last_raw = Some(imu);
-        self.check_health(imu, repeated);
-        // Steady flight with nothing new from the radio or the sensor repeats the last decision
-        // and what follows from it (the rule is `Supervisor::decide_or_repeat`'s).
-        if let Some(decision) = self.supervise(&radio, armed_override) {
-            self.cal_pending |= decision.request_calibration;
-            self.in_force.decided(decision, radio.sticks, &self.cfg.rc);
-        }
-        self.cal_pending |= cal_request;
-        let (sticks, throttle_low) = (self.in_force.sticks, self.in_force.throttle_low);
+        // 1. Supervise: sensor health, then the supervisor decides whether the motors may run.
+        self.sensors.check(imu);
+        let asked = self.supervision.decide(p, &self.sensors, self.outer.tilt_from_level_rad, flags);
+        self.sensors.ask_calibration(asked | flags.calibrate);
+        let in_force = *self.supervision.in_force();
 
         // 2. Calibration: start-up (nothing else runs until the first offsets exist) and
         // requested. Idle with nothing asked, it has nothing to do.
-        if (self.cal_pending || !self.calibrator.is_idle()) && self.calibrate(imu) == Calibration::StopsTheTick {
-            return self.motors_off();
+        if self.sensors.calibration_due() && self.sensors.calibrate(imu, &p.decoder, &mut self.block) == Calibration::StopsTheTick {
+            return TickOutput { compare: self.output.off(p), outer_job: None };
         }
 
-        // 3. Condition the sensors: offsets, FIFO, gyro low-pass.
-        let gyro_mdps = self.offsets.gyro(self.derived.decoder.gyro_mdps(imu.gyro));
-        let mut gyro_f = self.gyro_lpf.update(gyro_mdps.map(|g| g as f32));
-        if !(gyro_f[0].is_finite() && gyro_f[1].is_finite() && gyro_f[2].is_finite()) {
-            // Integer inputs cannot make this happen; if it ever did, restart the filters and
-            // (in the product) treat it as the sensor fault it would be.
-            self.gyro_lpf.reset_to(0.0);
-            gyro_f = [0.0; 3];
-            if self.cfg.health.is_some() {
-                self.fault.get_or_insert(SensorFault::NotFinite);
-            }
-        }
-        if let Some(words) = self.accel_words.0.get_mut(self.block_len) {
-            *words = imu.accel;
-        }
-        accumulate(&mut self.gyro_sum_mdps, gyro_f);
-        self.block_len += 1;
-        let job_due = self.block_len >= BLOCK;
+        // 3. Condition the sensors: offsets, gyro low-pass, into the block.
+        let gyro_mdps = self.sensors.gyro_mdps(imu.gyro, &p.decoder);
+        let job_due = self.block.add(imu.accel, gyro_mdps);
         let gyro_rad_s =
-            gyro_f.map(|g| if self.cfg.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
+            gyro_mdps.map(|g| if p.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
-        // 4. Yaw: gyro-integrated heading, reset with the target while the throttle is low.
-        self.yaw_est_rad = if self.cfg.reference_arithmetic {
-            (f64::from(self.yaw_est_rad) + f64::from(gyro_rad_s[2]) * self.cfg.timing.tick_dt_s) as f32
-        } else {
-            self.yaw_est_rad + gyro_rad_s[2] * self.derived.tick_dt_s
+        // 4. Heading: gyro-integrated, restarted with its target while the throttle is low.
+        self.heading.integrate(gyro_rad_s[2], in_force.throttle_low, p);
+
+        // 5. Rate loop, mixer and guard.
+        let allowed = MotorsAllowed {
+            enabled: in_force.decision.motors_enabled,
+            throttle: in_force.sticks.thr,
+            throttle_low: in_force.throttle_low,
+            fault: self.sensors.fault().is_some(),
         };
-        if !self.yaw_est_rad.is_finite() {
-            self.yaw_est_rad = 0.0;
-        }
-        if throttle_low {
-            self.yaw_target_rad = 0.0;
-            self.yaw_est_rad = 0.0;
-            self.yaw_target_reset = true;
-        }
-
-        // 5. Rate loop and mixer, only while the supervisor lets the motors run.
-        if self.in_force.decision.motors_enabled {
-            let rate_commands =
-                self.rate_loop.commands(&self.cfg.control, self.outer_result.rate_demand_rad_s, gyro_rad_s, throttle_low, self.saturation);
-            let (cmd, sat) = self.cfg.mixer.mix(self.cfg.mixer.throttle_counts(sticks.thr), rate_commands);
-            self.motor_command = cmd;
-            self.saturation = sat;
-        } else {
-            self.motor_command = [0.0; 4];
-        }
-        if throttle_low {
-            // The reference's only throttle cut: the motors stop with the stick at the bottom.
-            self.motor_command = [0.0; 4];
-        }
-
-        // 6. Guard, last and unconditional. The one other writer of compare values is
-        // `motors_off`, for a tick that a calibration in progress ends early: off values too.
-        let range = self.derived.compare_range;
-        self.compare = self.motor_command.map(|c| range.to_compare(c));
-        if !self.in_force.decision.motors_enabled || self.fault.is_some() {
-            self.compare = [self.cfg.mixer.off_compare(); 4];
-        }
+        let compare = self.output.run(p, self.outer.rate_demand_rad_s, gyro_rad_s, allowed);
 
         // One output per branch (docs/performance.md, «one output per branch»).
-        let yaw_target_reset = self.yaw_target_reset;
         if job_due {
-            let job = OuterJob {
-                accel_words: self.accel_words,
-                accel_offsets: self.offsets,
-                accel_sum_before_mg: self.accel_sum_before_mg,
-                first_raw_slot: self.first_raw_slot,
-                gyro_sum_mdps: self.gyro_sum_mdps,
-                sticks,
-                throttle_low,
-                yaw_est_rad: self.yaw_est_rad,
-                yaw_target_reset,
-            };
-            self.block_len = 0;
-            self.accel_sum_before_mg = [0.0; 3];
-            self.first_raw_slot = 0;
-            self.gyro_sum_mdps = [0.0; 3];
-            self.yaw_target_reset = false;
-            TickOutput { compare: self.compare, outer_job: Some(job) }
+            let reset = self.heading.take_target_reset();
+            let job =
+                self.block.take_job(self.sensors.offsets(), in_force.sticks, in_force.throttle_low, self.heading.yaw_est_rad(), reset);
+            TickOutput { compare, outer_job: Some(job) }
         } else {
-            TickOutput { compare: self.compare, outer_job: None }
+            TickOutput { compare, outer_job: None }
         }
-    }
-
-    /// Steps 2 and 3 of the calibration: the start-up settling and average (the tick stops
-    /// there until the first offsets exist) and a requested average. Out of line: the 800 Hz
-    /// path only reaches it while a calibration is asked for or running.
-    #[inline(never)]
-    fn calibrate(&mut self, imu: RawImu) -> Calibration {
-        if self.calibrator.in_startup() {
-            if self.calibrator.settle() {
-                return Calibration::StopsTheTick;
-            }
-            match self.calibrator.feed(self.derived.decoder.to_body(imu)) {
-                Some(o) => self.set_offsets(o), // and this tick goes on, as the reference's does
-                None => return Calibration::StopsTheTick,
-            }
-        }
-        if self.cal_pending && !self.calibrator.is_averaging() {
-            self.calibrator.request();
-        }
-        self.cal_pending = false;
-        if self.calibrator.is_averaging() {
-            if let Some(o) = self.calibrator.feed(self.derived.decoder.to_body(imu)) {
-                self.set_offsets(o);
-            }
-        }
-        Calibration::TickGoesOn
-    }
-
-    /// New offsets from a calibration. The samples of the current block taken before it keep
-    /// the offsets they were taken under: they are converted now and join the sum before.
-    fn set_offsets(&mut self, o: Offsets) {
-        let taken = self.accel_words.0.get(usize::from(self.first_raw_slot)..self.block_len).unwrap_or(&[]);
-        accumulate_accel_mg(&mut self.accel_sum_before_mg, taken, &self.derived.decoder, &self.offsets);
-        // `block_len` < BLOCK here (a job resets it), so the cast is exact.
-        self.first_raw_slot = self.block_len.min(BLOCK) as u8;
-        self.offsets = o;
-    }
-
-    fn check_health(&mut self, raw: RawImu, repeated: bool) {
-        if let Some(h) = &mut self.health {
-            if let Some(f) = h.check(raw, repeated) {
-                self.fault.get_or_insert(f);
-            }
-        }
-    }
-
-    /// This tick's decision, or `None` when the last one stands.
-    #[inline(always)]
-    fn supervise(&mut self, radio: &RadioState, armed_override: Option<bool>) -> Option<Decision> {
-        let (cfg, calibrator, receiver, fault, tilt_rad) = (&self.cfg, &self.calibrator, &self.receiver, self.fault, self.tilt_rad);
-        // Run only when the last decision cannot simply stand.
-        let decide = |supervisor: &mut Supervisor| {
-            let calibrating = calibrator.in_startup() || calibrator.is_averaging();
-            match cfg.supervisor {
-                SupervisorConfig::Reference => supervisor.decide_reference(radio.link, armed_override, calibrating),
-                SupervisorConfig::Safe(ref safety) => {
-                    let sticks = radio.sticks;
-                    let inputs = Inputs {
-                        link: radio.link,
-                        // Only read without a good link.
-                        silence_ticks: if radio.link { 0 } else { receiver.silence_ticks(&cfg.rc) },
-                        sticks,
-                        gesture: radio.gesture,
-                        throttle_low: cfg.rc.throttle_low(&sticks),
-                        calibrated: calibrator.has_passed(),
-                        calibrating,
-                        sensor_fault: fault,
-                        tilt_rad,
-                    };
-                    supervisor.decide_inline(safety, inputs)
-                }
-            }
-        };
-        self.supervisor.decide_or_repeat(receiver.changed(), fault, decide)
-    }
-
-    fn motors_off(&mut self) -> TickOutput {
-        self.motor_command = [0.0; 4];
-        self.compare = [self.cfg.mixer.off_compare(); 4];
-        TickOutput { compare: self.compare, outer_job: None }
     }
 
     pub fn status(&self) -> Status {
-        let radio = self.receiver.state();
+        let radio = self.supervision.radio();
+        let in_force = self.supervision.in_force();
+        let [pitch_target, roll_target, yaw_target] = self.outer.target_rad;
         Status {
-            state: self.in_force.decision.state,
-            blockers: self.in_force.decision.blockers,
+            state: in_force.decision.state,
+            blockers: in_force.decision.blockers,
             link: radio.link,
             sticks: radio.sticks,
-            calibration: self.calibrator.phase(),
-            calibrated: self.calibrator.has_passed(),
-            fault: self.fault,
-            quat: self.outer_result.quat,
-            tilt: self.outer_result.tilt,
-            target_rad: [self.outer_result.target_rad[0], self.outer_result.target_rad[1], self.yaw_target_rad],
-            yaw_est_rad: self.yaw_est_rad,
-            rate_demand_rad_s: self.outer_result.rate_demand_rad_s,
-            motor_command: self.motor_command,
-            compare: self.compare,
-            thrust_gain: self.outer_result.thrust_gain,
-            yaw_rate_target_rad_s: self.cfg.rc.yaw_rate_rad_s(&self.in_force.sticks, self.cfg.timing.outer_hz()),
+            calibration: self.sensors.phase(),
+            calibrated: self.sensors.calibrated(),
+            fault: self.sensors.fault(),
+            quat: self.outer.quat,
+            tilt: self.outer.tilt,
+            target_rad: [pitch_target, roll_target, self.heading.target_rad(yaw_target)],
+            yaw_est_rad: self.heading.yaw_est_rad(),
+            rate_demand_rad_s: self.outer.rate_demand_rad_s,
+            motor_command: self.output.motor_command(),
+            compare: self.output.compare(),
+            thrust_gain: self.outer.gains.thrust,
+            yaw_rate_target_rad_s: self.params.rc.yaw_rate_rad_s(&in_force.sticks, self.params.outer_hz),
         }
     }
 }
 
 impl OuterStep {
-    fn new(cfg: &Config) -> Self {
+    fn new(cfg: &Config, params: OuterParams) -> Self {
         OuterStep {
-            decoder: Decoder::new(&cfg.imu),
             estimator: Estimator::new(cfg.estimator),
-            rc: cfg.rc,
-            control: cfg.control,
-            reference_arithmetic: cfg.reference_arithmetic,
             angle_loop: AngleLoop::default(),
-            yaw_target_rad: 0.0,
-            outer_hz: cfg.timing.outer_hz(),
-            battery: BatteryFilter::default(),
-            mixer: cfg.mixer,
-            yaw_shaper: cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s())),
+            heading: HeadingTarget::new(cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s()))),
+            gains: GainSchedule::new(&cfg.control, &cfg.mixer, params.outer_hz),
+            params,
         }
     }
 
-    /// The outer step: block average → estimator → Euler → stick targets → angle loop.
+    /// The outer step: block average → estimator → Euler and tilt → stick targets and the
+    /// heading target → angle loop → gains.
     pub fn run(&mut self, job: &OuterJob) -> OuterResult {
-        let accel = block_mean(job.accel_sum_mg(&self.decoder), self.reference_arithmetic);
-        let gyro = block_mean(job.gyro_sum_mdps, self.reference_arithmetic);
+        let p = &self.params;
+        let accel = block_mean(job.accel_sum_mg(&p.decoder), p.reference_arithmetic);
+        let gyro = block_mean(job.gyro_sum_mdps, p.reference_arithmetic);
         self.estimator.update(accel, gyro, job.throttle_low);
         let quat = self.estimator.quat();
-        let tilt = quat_to_tilt_with(quat, self.reference_arithmetic);
+        let tilt = quat_to_tilt_with(quat, p.reference_arithmetic);
+        // Only the safe supervisor's arming check reads it: sqrt and acos, here at the outer
+        // rate rather than in the tick.
+        let tilt_from_level_rad = if p.arming_tilt { tilt_angle_rad(quat) } else { 0.0 };
 
-        let (pitch_target, roll_target) = self.rc.tilt_targets(&job.sticks);
-        if job.yaw_target_reset {
-            self.yaw_target_rad = 0.0;
-        }
-        let yaw_step = self.rc.yaw_step(&job.sticks);
-        // The heading target moves at the stick's rate, or at its shaped rate (D16), which
-        // starts again from rest whenever the throttle has been low.
-        let shaped = self.yaw_shaper.as_mut().map(|shaper| {
-            if job.yaw_target_reset || job.throttle_low {
-                shaper.reset();
-            }
-            // `RcConfig::yaw_rate_rad_s`, from the yaw step already worked out above.
-            let stick_rate = if job.throttle_low { 0.0 } else { yaw_step * self.outer_hz };
-            shaper.shape(stick_rate)
-        });
-        match shaped {
-            Some(s) => self.yaw_target_rad += s.rate_rad_s / self.outer_hz,
-            None if yaw_step != 0.0 => self.yaw_target_rad += yaw_step,
-            None => {}
-        }
-        if job.throttle_low || !self.yaw_target_rad.is_finite() {
-            self.yaw_target_rad = 0.0;
-        }
-        let target_rad = [pitch_target, roll_target, self.yaw_target_rad];
+        let (pitch_target, roll_target) = p.rc.tilt_targets(&job.sticks);
+        let (yaw_target, yaw_feedforward) = self.heading.step(p, job);
+        let target_rad = [pitch_target, roll_target, yaw_target];
         let estimate = [tilt.pitch_rad, tilt.roll_rad, job.yaw_est_rad];
-        let mut rate_demand_rad_s = self.angle_loop.rate_demands(&self.control, target_rad, estimate, job.throttle_low);
-        let ff = self.control.yaw_rate_feedforward;
-        if !job.throttle_low {
-            match shaped {
-                // The shaped rate and, ahead of it, what gets the torque its acceleration needs.
-                Some(s) => rate_demand_rad_s[2] += ff * s.rate_rad_s + s.lead_rad_s,
-                // The heading loop keeps correcting what the rate loop misses; the stick's
-                // rate itself goes to the rate loop now, not once a heading error has built up.
-                None if ff != 0.0 => rate_demand_rad_s[2] += ff * yaw_step * self.outer_hz,
-                None => {}
-            }
+        let mut rate_demand_rad_s = self.angle_loop.rate_demands(&p.control, target_rad, estimate, job.throttle_low);
+        if let Some(ff) = yaw_feedforward {
+            rate_demand_rad_s[2] += ff;
         }
-        let thrust_gain = match self.control.battery {
-            Some(b) => self.battery.update(&b, 1.0 / self.outer_hz),
-            None => 1.0,
-        };
-        let rate_gain = match self.control.thrust_curve {
-            Some(curve) => {
-                // The duty the throttle stick flies at, through the map in force.
-                let counts = f32::from(self.mixer.throttle_counts(job.sticks.thr).0) * thrust_gain;
-                thrust_gain * curve.gain_at(counts / self.mixer.period_counts())
-            }
-            None => thrust_gain,
-        };
-        OuterResult { quat, tilt, target_rad, rate_demand_rad_s, thrust_gain, rate_gain }
+        let gains = self.gains.update(job.sticks.thr);
+        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains }
     }
 
     /// The latest battery reading, mV (for the battery compensation; ignored without it).
     pub fn set_battery_mv(&mut self, battery_mv: u32) {
-        self.battery.set_reading(battery_mv);
+        self.gains.set_battery_mv(battery_mv);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::{accumulate, BLOCK};
     use crate::imu::ImuConfig;
 
     /// A reading whose accelerometer words change every tick.
     fn sample(k: usize) -> RawImu {
         let w = |m: usize, base: i16| base + (k * m % 211) as i16 - 105;
         RawImu { accel: [w(37, 0), w(53, 0), w(71, 8197)], gyro: [1, 2, 3] }
+    }
+
+    #[test]
+    fn the_configuration_read_back_is_the_one_given_while_the_gains_scale_the_tick() {
+        // A sagged battery: the outer step's first result carries a thrust gain of (4.0/3.4)².
+        let cfg = Config::default();
+        let mut fc = FlightController::new(cfg).unwrap();
+        fc.set_battery_mv(3400);
+        let radio = ForcedRadio { width_counts: [6000, 6000, 8000, 6000], link: true, armed: false, cal_request: false };
+        let mut k = 0;
+        while fc.control_tick.outer.gains == Gains::UNITY {
+            if let Some(job) = fc.tick_forced(sample(k), &radio).outer_job {
+                fc.run_outer(&job);
+            }
+            k += 1;
+            assert!(k < 5000, "no gain after {k} ticks");
+        }
+        let g = fc.control_tick.outer.gains;
+        assert!(g.thrust > 1.3 && g.rate > 1.3, "{g:?}");
+        assert_eq!(fc.config(), &cfg);
+        // The tick flies the scaled rate loop and throttle map; what a parameter change would
+        // derive again, at unity gains, is the configuration's.
+        let params = fc.control_tick.params();
+        assert_eq!(params.rate_loop().roll.inner_kp, cfg.control.roll.inner_kp * g.rate);
+        assert_eq!(params.mixer().throttle_slope, cfg.mixer.throttle_slope * g.thrust);
+        let derived = Derived::new(&cfg).tick;
+        assert_eq!((derived.rate_loop(), derived.mixer()), (&cfg.control, &cfg.mixer));
     }
 
     #[test]
@@ -777,9 +494,10 @@ mod tests {
             let mut job = None;
             for slot in 0..BLOCK {
                 if slot == change_at {
-                    fc.control_tick.set_offsets(Offsets { accel_mg: [5, -7, 1020], gyro_mdps: [0; 3] });
+                    let tick = &mut fc.control_tick;
+                    tick.sensors.set_offsets(Offsets { accel_mg: [5, -7, 1020], gyro_mdps: [0; 3] }, &tick.params.decoder, &mut tick.block);
                 }
-                let offsets = fc.control_tick.offsets;
+                let offsets = fc.control_tick.sensors.offsets();
                 accumulate(&mut expected, offsets.accel(decoder.accel_mg(sample(k).accel)).map(|v| v as f32));
                 job = fc.tick_forced(sample(k), &radio).outer_job;
                 k += 1;

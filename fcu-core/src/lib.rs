@@ -12,9 +12,10 @@
 //!
 //! | to change… | look at |
 //! |---|---|
-//! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (numbered stages) and [`flight::OuterStep::run`] |
-//! | arming, disarming, failsafe stages, blockers | [`supervisor::Supervisor`] (its `decide_by_table`; every arm has tests named after its rule) and [`supervisor::SafetyConfig`] |
-//! | when the last decision may simply stand | [`supervisor::Supervisor::decide_or_repeat`] |
+//! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (one call per stage; the stages are `flight`'s submodules) and [`flight::OuterStep::run`] |
+//! | what a configuration comes to for the tick, the gains that scale it in flight | [`flight::TickParams`] (worked out in one place, `flight/params.rs`), [`control::Gains`], [`control::GainSchedule`] |
+//! | arming, disarming, failsafe stages, blockers | [`supervisor`]: the conditions and the transition's actions in [`supervisor::Supervisor::decide`], the state table in [`supervisor::transitions`] (every rule has tests named after it, the table its own), the numbers in [`supervisor::SafetyConfig`] |
+//! | when the last decision may simply stand | [`supervisor::Supervisor::steady`] (the rule) and the tick's command stage (`flight/supervision.rs`, the cache) |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
 //! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
 //! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |

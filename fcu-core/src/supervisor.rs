@@ -1,12 +1,19 @@
 //! The supervisor: the one place that decides whether the motors may turn.
 //!
 //! Two kinds, chosen by [`SupervisorConfig`]:
-//! - [`SupervisorConfig::Reference`]: the ST reference's behaviour (B8–B11, B16): the arm
-//!   gesture latches "armed" for ever, motors run while armed and any edge arrived in the
-//!   last 31 ms, no failsafe, calibration on the gesture at any time.
-//! - [`SupervisorConfig::Safe`]: the product's safety layer (`docs/safety.md`), a state machine
-//!   whose table is `Supervisor::decide_by_table` (entered through [`Supervisor::decide`]). Every number is a field of [`SafetyConfig`], in
-//!   control ticks.
+//! - [`SupervisorConfig::Reference`]: the ST reference's behaviour (B8–B11, B16), a
+//!   [`ReferenceLatch`]: the arm gesture latches "armed" for ever, motors run while armed and
+//!   any edge arrived in the last 31 ms, no failsafe, calibration on the gesture at any time.
+//! - [`SupervisorConfig::Safe`]: the product's safety layer (`docs/safety.md`), the state machine
+//!   [`Supervisor`]. Every number is a field of [`SafetyConfig`], in control ticks.
+//!
+//! The safety layer decides in three steps, each in one place ([`Supervisor::decide`]):
+//! 1. the inputs and the supervisor's memory become a set of [`Conditions`] (the [`Blocker`]s
+//!    and the holds, timeouts and budgets the memory counts);
+//! 2. the next state is looked up in the state table, [`next_state`]: data
+//!    ([`transitions`]), a pure function of the state and the conditions;
+//! 3. the transition's actions (what starts or ends with a state) are applied, and the
+//!    [`Decision`] follows from the new state.
 
 use crate::imu::SensorFault;
 use crate::rc::{Gesture, StickCounts, Sticks};
@@ -196,6 +203,10 @@ impl Blockers {
 /// What the supervisor sees each tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Inputs {
+    /// This tick's number since boot, the first being 1. The supervisor times the boot
+    /// settling, the good link and the forgetting of lost time from it, so a tick it is not
+    /// asked about (a decision that stands, [`Supervisor::steady`]) loses it nothing.
+    pub tick: u32,
     pub link: bool,
     pub sticks: Sticks,
     /// The gesture the sticks make this tick (only meaningful with a good link).
@@ -216,8 +227,9 @@ pub struct Inputs {
 
 impl Inputs {
     /// On the bench and ready: a good link, sticks centred with the throttle low, calibrated,
-    /// level, no fault, no gesture.
+    /// level, no fault, no gesture (at tick 1: a caller sets each tick's number).
     pub const READY: Inputs = Inputs {
+        tick: 1,
         link: true,
         silence_ticks: 0,
         sticks: Sticks::new(0, 0, 0, 0),
@@ -243,7 +255,170 @@ pub struct Decision {
     pub blockers: Blockers,
 }
 
-/// The supervisor's memory.
+/// A condition the state table reads besides the [`Blocker`]s: a gesture seen on a good link,
+/// or a hold, timeout or budget the supervisor's memory has counted to its limit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Condition {
+    ArmGesture = 1 << 16,
+    DisarmGesture = 1 << 17,
+    CalibrateGesture = 1 << 18,
+    /// The arm gesture has been held [`SafetyConfig::arm_hold_ticks`].
+    ArmHeld = 1 << 19,
+    /// The disarm gesture has been held [`SafetyConfig::disarm_hold_ticks`].
+    DisarmHeld = 1 << 20,
+    /// Aileron, elevator and rudder are centred.
+    SticksCentred = 1 << 21,
+    /// Armed with the throttle low for [`SafetyConfig::auto_disarm_ticks`].
+    ThrottleLowTooLong = 1 << 22,
+    /// The lost time reached [`SafetyConfig::failsafe_off_ticks`].
+    LossBudgetSpent = 1 << 23,
+    /// The link has been good for [`SafetyConfig::recovery_ticks`].
+    Recovered = 1 << 24,
+}
+
+/// A set of conditions: the [`Blocker`]s on their own bits (the low 16) and the other
+/// [`Condition`]s.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Conditions(pub u32);
+
+impl Conditions {
+    pub const NONE: Conditions = Conditions(0);
+
+    /// The set of one blocker.
+    pub const fn blocker(b: Blocker) -> Conditions {
+        Conditions(b as u32)
+    }
+
+    /// The set of one condition.
+    pub const fn of(c: Condition) -> Conditions {
+        Conditions(c as u32)
+    }
+
+    pub const fn and(self, other: Conditions) -> Conditions {
+        Conditions(self.0 | other.0)
+    }
+
+    pub const fn without(self, other: Conditions) -> Conditions {
+        Conditions(self.0 & !other.0)
+    }
+
+    /// Every condition of `all` holds.
+    pub const fn contains(self, all: Conditions) -> bool {
+        self.0 & all.0 == all.0
+    }
+
+    /// Some condition of `any` holds.
+    pub const fn intersects(self, any: Conditions) -> bool {
+        self.0 & any.0 != 0
+    }
+
+    /// The blockers among them.
+    pub const fn blockers(self) -> Blockers {
+        Blockers(self.0 as u16)
+    }
+
+    fn set(&mut self, c: Condition, on: bool) {
+        if on {
+            self.0 |= c as u32;
+        }
+    }
+}
+
+/// One way out of a state: taken when every condition of `all` holds and none of `none`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Transition {
+    pub to: FlightState,
+    pub all: Conditions,
+    pub none: Conditions,
+}
+
+impl Transition {
+    pub const fn applies(&self, c: Conditions) -> bool {
+        c.contains(self.all) && !c.intersects(self.none)
+    }
+}
+
+const fn way(to: FlightState, all: Conditions, none: Conditions) -> Transition {
+    Transition { to, all, none }
+}
+
+const NONE: Conditions = Conditions::NONE;
+const FAULT: Conditions = Conditions::blocker(Blocker::SensorFault);
+const NO_LINK: Conditions = Conditions::blocker(Blocker::LinkNotGood);
+const CALIBRATING: Conditions = Conditions::blocker(Blocker::Calibrating);
+const NOT_RELEASED: Conditions = Conditions::blocker(Blocker::GestureNotReleased);
+/// Every reason to refuse arming: starting the hold needs none of them.
+const ALL_BLOCKERS: Conditions = Conditions(0xFFFF);
+/// Every reason to refuse arming but the release: they end the hold and refuse its end.
+const HOLD_BLOCKERS: Conditions = ALL_BLOCKERS.without(NOT_RELEASED);
+const ARM_GESTURE: Conditions = Conditions::of(Condition::ArmGesture);
+const DISARM_GESTURE: Conditions = Conditions::of(Condition::DisarmGesture);
+const CALIBRATE_GESTURE: Conditions = Conditions::of(Condition::CalibrateGesture);
+const ARM_HELD: Conditions = Conditions::of(Condition::ArmHeld);
+const DISARM_HELD: Conditions = Conditions::of(Condition::DisarmHeld);
+const STICKS_CENTRED: Conditions = Conditions::of(Condition::SticksCentred);
+const THROTTLE_LOW_TOO_LONG: Conditions = Conditions::of(Condition::ThrottleLowTooLong);
+const LOSS_BUDGET_SPENT: Conditions = Conditions::of(Condition::LossBudgetSpent);
+const RECOVERED: Conditions = Conditions::of(Condition::Recovered);
+
+/// The way out of every state, ahead of the state's own: a latched sensor fault ends
+/// everything. (Fault has no other way out.)
+pub const FROM_EVERY_STATE: [Transition; 1] = [way(FlightState::Fault, FAULT, NONE)];
+
+const FROM_CALIBRATING: [Transition; 1] = [way(FlightState::Disarmed, NONE, CALIBRATING)];
+
+const FROM_DISARMED: [Transition; 2] =
+    [way(FlightState::Calibrating, CALIBRATE_GESTURE, NOT_RELEASED), way(FlightState::Arming, ARM_GESTURE, ALL_BLOCKERS)];
+
+const FROM_ARMING: [Transition; 5] = [
+    // Holding the gesture.
+    way(FlightState::Arming, ARM_GESTURE, HOLD_BLOCKERS),
+    // A blocker during the hold aborts it.
+    way(FlightState::Disarmed, ARM_GESTURE, NONE),
+    // Let go after a full hold, nothing against it: armed once every stick is back in a safe
+    // place (the throttle low is a blocker already), and waiting until then: arming with the
+    // sticks still deflected would take off rolled and yawing.
+    way(FlightState::Armed, ARM_HELD.and(STICKS_CENTRED), HOLD_BLOCKERS),
+    way(FlightState::Arming, ARM_HELD, HOLD_BLOCKERS),
+    // Let go too early, or a blocker at the release.
+    way(FlightState::Disarmed, NONE, NONE),
+];
+
+const FROM_ARMED: [Transition; 5] = [
+    way(FlightState::FailsafeOff, NO_LINK.and(LOSS_BUDGET_SPENT), NONE),
+    way(FlightState::FailsafeLevel, NO_LINK, NONE),
+    way(FlightState::Disarmed, DISARM_GESTURE.and(DISARM_HELD), NONE),
+    // The disarm hold goes on: it is not the automatic disarm's to end.
+    way(FlightState::Armed, DISARM_GESTURE, NONE),
+    way(FlightState::Disarmed, THROTTLE_LOW_TOO_LONG, NONE),
+];
+
+const FROM_FAILSAFE_LEVEL: [Transition; 2] =
+    [way(FlightState::Armed, RECOVERED, NO_LINK), way(FlightState::FailsafeOff, LOSS_BUDGET_SPENT, NONE)];
+
+const FROM_FAILSAFE_OFF: [Transition; 1] = [way(FlightState::Disarmed, NONE, NO_LINK)];
+
+/// The state table: a state's own ways out, in order of precedence, after
+/// [`FROM_EVERY_STATE`]. The first that applies is taken; with none, the state stays.
+pub fn transitions(state: FlightState) -> &'static [Transition] {
+    match state {
+        FlightState::Calibrating => &FROM_CALIBRATING,
+        FlightState::Disarmed => &FROM_DISARMED,
+        FlightState::Arming => &FROM_ARMING,
+        FlightState::Armed => &FROM_ARMED,
+        FlightState::FailsafeLevel => &FROM_FAILSAFE_LEVEL,
+        FlightState::FailsafeOff => &FROM_FAILSAFE_OFF,
+        FlightState::Fault => &[],
+    }
+}
+
+/// The next state, from the state table alone.
+pub fn next_state(state: FlightState, c: Conditions) -> FlightState {
+    FROM_EVERY_STATE.iter().chain(transitions(state)).find(|t| t.applies(c)).map_or(state, |t| t.to)
+}
+
+/// The safety layer's memory: what it counts, and the state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Supervisor {
     state: FlightState,
@@ -255,21 +430,16 @@ pub struct Supervisor {
     /// Lost time accumulated since the arming (see [`SafetyConfig::failsafe_off_ticks`] and
     /// [`loss_forget_ticks`](SafetyConfig::loss_forget_ticks)), as of `forgetting_since`.
     lost_ticks: u32,
-    /// Boot tick from which the lost time is being forgotten (the arming or the last hand-back).
+    /// The tick from which the lost time is being forgotten (the arming or the last hand-back).
     forgetting_since: u32,
-    /// Consecutive ticks with a good link, up to this one.
-    good_ticks: u32,
+    /// The last tick without a good link (0: none yet): the link has been good since.
+    last_lost_tick: u32,
+    /// Consecutive ticks armed with the throttle low.
     low_throttle_ticks: u32,
-    boot_ticks: u32,
     last_good_throttle: StickCounts,
     fault: Option<SensorFault>,
-    /// Reference latch (the reference has no disarm).
-    reference_armed: bool,
-    /// The last step was steady flight (see [`decide_in_flight`](Self::decide_in_flight)).
+    /// The last decision was steady flight ([`steady`](Self::steady)).
     steady: bool,
-    /// Tests only: every step runs the full table (no steady-flight shortcut, no repeat).
-    #[cfg(feature = "test-switches")]
-    table_only: bool,
 }
 
 impl Default for Supervisor {
@@ -286,15 +456,11 @@ impl Supervisor {
             released: false,
             lost_ticks: 0,
             forgetting_since: 0,
-            good_ticks: 0,
+            last_lost_tick: 0,
             low_throttle_ticks: 0,
-            boot_ticks: 0,
             last_good_throttle: StickCounts::ZERO,
             fault: None,
-            reference_armed: false,
             steady: false,
-            #[cfg(feature = "test-switches")]
-            table_only: false,
         }
     }
 
@@ -302,34 +468,23 @@ impl Supervisor {
         self.state
     }
 
-    /// The reference's arm latch, set by the arm gesture (after any single-channel update).
-    pub fn reference_gesture(&mut self, g: Option<Gesture>) -> bool {
-        if g == Some(Gesture::Arm) {
-            self.reference_armed = true;
-        }
-        g == Some(Gesture::Calibrate)
+    /// One tick of the safety layer: conditions, the state table, the transition's actions.
+    #[inline(never)]
+    pub fn decide(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
+        let c = self.conditions(cfg, i);
+        let next = next_state(self.state, c);
+        self.act(next, c, i)
     }
 
-    /// The reference's supervisor: armed latch, motors while the link is up.
-    pub fn decide_reference(&mut self, link: bool, armed_override: Option<bool>, calibrating: bool) -> Decision {
-        self.steady = false;
-        if let Some(a) = armed_override {
-            self.reference_armed = a;
-        }
-        self.state = if calibrating && !self.reference_armed {
-            FlightState::Calibrating
-        } else if self.reference_armed {
-            FlightState::Armed
-        } else {
-            FlightState::Disarmed
-        };
-        Decision {
-            state: self.state,
-            motors_enabled: link && self.reference_armed,
-            failsafe_throttle: None,
-            request_calibration: false,
-            blockers: Blockers::default(),
-        }
+    /// The last decision was steady flight: armed, and staying armed, on a good link with the
+    /// throttle up and no gesture. The state table's `Armed` line then reads nothing of the
+    /// inputs but the link, the gestures, the throttle and the sensor fault, and leaves the
+    /// memory as it found it (time is an input, not a count): a tick whose link and sticks are
+    /// the last one's and that brings no sensor fault would be decided the same, with the same
+    /// memory after it. A caller may keep the decision for such a tick instead of asking
+    /// (docs/performance.md, «repeat steady flight»).
+    pub fn steady(&self) -> bool {
+        self.steady
     }
 
     fn blockers(&self, cfg: &SafetyConfig, i: &Inputs) -> Blockers {
@@ -352,10 +507,10 @@ impl Supervisor {
         if matches!(self.state, FlightState::FailsafeLevel | FlightState::FailsafeOff) {
             b.insert(Blocker::Failsafe);
         }
-        if self.fault.is_some() || i.sensor_fault.is_some() {
+        if self.fault.is_some() {
             b.insert(Blocker::SensorFault);
         }
-        if self.boot_ticks < cfg.boot_settle_ticks {
+        if i.tick < cfg.boot_settle_ticks {
             b.insert(Blocker::BootSettling);
         }
         if !self.released {
@@ -364,123 +519,14 @@ impl Supervisor {
         b
     }
 
-    /// One tick of the safety layer. The `match` is the state table; every arm has tests
-    /// named after its rule in `tests::`.
-    pub fn decide(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
-        self.decide_inline(cfg, *i)
-    }
-
-    /// Tests only: with `true`, every step runs the full state table — no steady-flight
-    /// shortcut, no repeat — so that a test can fly two controllers, one without the
-    /// shortcuts, and compare them tick by tick.
-    #[cfg(feature = "test-switches")]
-    pub fn set_table_only(&mut self, table_only: bool) {
-        self.table_only = table_only;
-    }
-
-    #[cfg(feature = "test-switches")]
-    #[inline(always)]
-    fn shortcuts_allowed(&self) -> bool {
-        !self.table_only
-    }
-
-    #[cfg(not(feature = "test-switches"))]
-    #[inline(always)]
-    fn shortcuts_allowed(&self) -> bool {
-        true
-    }
-
-    /// [`decide`](Self::decide) with the inputs by value, for the 800 Hz path: inlined there, the
-    /// steady-flight test reads the few inputs it needs where they are, and the full `Inputs`
-    /// is only assembled in memory when the table has to run.
-    #[inline(always)]
-    pub fn decide_inline(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
-        if self.state == FlightState::Armed
-            && i.link
-            && i.gesture.is_none()
-            && !i.throttle_low
-            && i.sensor_fault.is_none()
-            && self.fault.is_none()
-            && cfg.auto_disarm_ticks > 0
-            && self.shortcuts_allowed()
-        {
-            return self.decide_in_flight(&i);
-        }
-        // By value: the caller assembles the inputs at this call, on the table's path only.
-        self.decide_by_table(cfg, i)
-    }
-
-    /// The 800 Hz path's call: `None` when this tick's decision is the last one's (the caller
-    /// keeps it and everything it derived from it), else the decision `decide` takes (the
-    /// caller's [`decide_inline`](Self::decide_inline) or [`decide_reference`](Self::decide_reference),
-    /// assembling the inputs only then).
-    ///
-    /// Why a repeat is exact: steady flight (`decide_in_flight`, the table's `Armed` line) reads
-    /// only the link, the gesture, the throttle and the sensor fault among the inputs. When the
-    /// last tick was steady flight, `radio_changed` is false (link, sticks and so gesture and
-    /// throttle are the last tick's) and there is no sensor fault, this tick is steady flight
-    /// too with the same decision; only the boot and good-link counters move. The other inputs
-    /// (tilt, calibration flags, silence) may differ: steady flight does not read them. (The
-    /// reference's supervisor never flies steady, so it never repeats.)
-    /// `the_flight_shortcut_decides_exactly_as_the_table` checks this on random input
-    /// sequences, and `fcu-testkit/tests/shortcuts.rs` on whole flights.
-    #[inline(always)]
-    pub fn decide_or_repeat(
-        &mut self,
-        radio_changed: bool,
-        sensor_fault: Option<SensorFault>,
-        decide: impl FnOnce(&mut Supervisor) -> Decision,
-    ) -> Option<Decision> {
-        if self.can_repeat(radio_changed, sensor_fault) {
-            self.boot_ticks = self.boot_ticks.saturating_add(1);
-            self.good_ticks = self.good_ticks.saturating_add(1);
-            None
-        } else {
-            Some(decide(self))
-        }
-    }
-
-    /// [`decide_by_table`](Self::decide_by_table) in the state the 800 Hz path is in almost every tick:
-    /// armed on a good link, throttle up, no gesture, no fault. The table's every line for
-    /// those inputs, and nothing else: the `Armed` arm without its branches (the throttle is
-    /// up, so the auto-disarm count restarts and cannot reach its non-zero limit), no
-    /// transition, the gesture released, the throttle remembered. The test
-    /// `the_flight_shortcut_decides_exactly_as_the_table` compares the two on random input
-    /// sequences.
-    fn decide_in_flight(&mut self, i: &Inputs) -> Decision {
-        self.boot_ticks = self.boot_ticks.saturating_add(1);
-        self.good_ticks = self.good_ticks.saturating_add(1);
-        self.low_throttle_ticks = 0;
-        self.hold_ticks = 0;
-        self.last_good_throttle = i.sticks.thr;
-        self.released = true;
-        self.steady = true;
-        Decision {
-            state: FlightState::Armed,
-            motors_enabled: true,
-            failsafe_throttle: None,
-            request_calibration: false,
-            blockers: Blockers::default(),
-        }
-    }
-
-    /// Whether [`decide_or_repeat`](Self::decide_or_repeat) may repeat the last decision (no side
-    /// effect).
-    #[inline(always)]
-    fn can_repeat(&self, radio_changed: bool, sensor_fault: Option<SensorFault>) -> bool {
-        self.steady && !radio_changed && sensor_fault.is_none() && self.shortcuts_allowed()
-    }
-
-    /// The state table, for any state and inputs.
-    #[inline(never)]
-    fn decide_by_table(&mut self, cfg: &SafetyConfig, i: Inputs) -> Decision {
-        let i = &i;
-        self.steady = false;
-        self.boot_ticks = self.boot_ticks.saturating_add(1);
+    /// Step 1: the conditions of this tick, after counting what the state counts (the holds,
+    /// the throttle low while armed, the lost time).
+    fn conditions(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Conditions {
         if let Some(f) = i.sensor_fault {
             // Latched until reset: motors off, disarmed.
             self.fault.get_or_insert(f);
         }
+        let gesture = if i.link { i.gesture } else { None };
         // Lost time: a loss counts from the last pulse of the channel that fell silent first,
         // and every tick of that silence counts once. A tick without a good link adds the
         // silence up to it, except what an earlier tick without a good link already counted:
@@ -488,157 +534,142 @@ impl Supervisor {
         // loss, if fewer), each further tick one. It adds up over the flight and is forgotten
         // only slowly once control is back: a flapping link cannot keep the motors running.
         let mut lost_now = 0;
-        if i.link {
-            self.good_ticks = self.good_ticks.saturating_add(1);
-        } else {
-            lost_now = i.silence_ticks.min(self.good_ticks.saturating_add(1)).max(1);
-            self.good_ticks = 0;
-            if self.state == FlightState::FailsafeLevel {
-                self.lost_ticks = self.lost_ticks.saturating_add(lost_now);
+        if !i.link {
+            lost_now = i.silence_ticks.min(i.tick.saturating_sub(self.last_lost_tick)).max(1);
+            self.last_lost_tick = i.tick;
+        }
+        // A latched fault ends every count: nothing leaves Fault.
+        if self.fault.is_none() {
+            match self.state {
+                FlightState::Arming if gesture == Some(Gesture::Arm) => self.hold_ticks = self.hold_ticks.saturating_add(1),
+                FlightState::Armed => {
+                    self.low_throttle_ticks = if i.throttle_low { self.low_throttle_ticks.saturating_add(1) } else { 0 };
+                    if !i.link {
+                        // What is left of earlier losses, plus this one so far. (Forgetting is
+                        // counted here, from the ticks flown since the hand-back, not on every
+                        // flying tick.)
+                        let flown = i.tick.wrapping_sub(self.forgetting_since);
+                        let forgotten = flown / cfg.loss_forget_ticks.max(1);
+                        self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(lost_now);
+                    } else if gesture == Some(Gesture::Disarm) {
+                        self.hold_ticks = self.hold_ticks.saturating_add(1);
+                    } else {
+                        self.hold_ticks = 0;
+                    }
+                }
+                FlightState::FailsafeLevel => self.lost_ticks = self.lost_ticks.saturating_add(lost_now),
+                _ => {}
             }
         }
-        let gesture = if i.link { i.gesture } else { None };
-        let mut request_calibration = false;
+        let mut c = Conditions(u32::from(self.blockers(cfg, i).0));
+        c.set(Condition::ArmGesture, gesture == Some(Gesture::Arm));
+        c.set(Condition::DisarmGesture, gesture == Some(Gesture::Disarm));
+        c.set(Condition::CalibrateGesture, gesture == Some(Gesture::Calibrate));
+        c.set(Condition::ArmHeld, self.hold_ticks >= cfg.arm_hold_ticks);
+        c.set(Condition::DisarmHeld, self.hold_ticks >= cfg.disarm_hold_ticks);
+        c.set(Condition::SticksCentred, i.sticks.attitude_sticks_centred());
+        c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
+        c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
+        c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
+        c
+    }
 
-        let next = match self.state {
-            _ if self.fault.is_some() => FlightState::Fault,
-            FlightState::Fault => FlightState::Fault,
-            FlightState::Calibrating => {
-                if i.calibrating {
-                    FlightState::Calibrating
-                } else {
-                    FlightState::Disarmed
-                }
+    /// Step 3: what starts or ends with the transition to `next`, and the decision.
+    fn act(&mut self, next: FlightState, c: Conditions, i: &Inputs) -> Decision {
+        let from = self.state;
+        let link = !c.intersects(NO_LINK);
+        let gesture = c.intersects(ARM_GESTURE.and(DISARM_GESTURE).and(CALIBRATE_GESTURE));
+        match (from, next) {
+            (FlightState::Disarmed, FlightState::Arming) => self.hold_ticks = 1,
+            (FlightState::Arming, FlightState::Armed) => {
+                self.low_throttle_ticks = 0;
+                // A new flight starts with no lost time.
+                self.lost_ticks = 0;
+                self.forgetting_since = i.tick;
             }
-            FlightState::Disarmed => match gesture {
-                Some(Gesture::Calibrate) if self.released => {
-                    self.released = false;
-                    request_calibration = true;
-                    FlightState::Calibrating
-                }
-                Some(Gesture::Arm) if self.released && without(self.blockers(cfg, i), Blocker::GestureNotReleased).is_empty() => {
-                    self.hold_ticks = 1;
-                    FlightState::Arming
-                }
-                _ => FlightState::Disarmed,
-            },
-            FlightState::Arming => {
-                let others = without(self.blockers(cfg, i), Blocker::GestureNotReleased);
-                if gesture == Some(Gesture::Arm) {
-                    self.hold_ticks = self.hold_ticks.saturating_add(1);
-                    if others.is_empty() {
-                        FlightState::Arming
-                    } else {
-                        // A blocker during the hold aborts it; the gesture must be let go.
-                        self.released = false;
-                        FlightState::Disarmed
-                    }
-                } else if self.hold_ticks >= cfg.arm_hold_ticks && others.is_empty() {
-                    // Let go after a full hold, nothing against it: armed once every stick is
-                    // back in a safe place (the throttle low is a blocker already). Until then
-                    // keep waiting: arming with the sticks still deflected would take off
-                    // rolled and yawing (a nudge of the throttle used to count as the release).
-                    if i.sticks.attitude_sticks_centred() {
-                        self.low_throttle_ticks = 0;
-                        // A new flight starts with no lost time.
-                        self.lost_ticks = 0;
-                        self.forgetting_since = self.boot_ticks;
-                        FlightState::Armed
-                    } else {
-                        FlightState::Arming
-                    }
-                } else {
-                    FlightState::Disarmed
-                }
+            (FlightState::FailsafeLevel, FlightState::Armed) => {
+                self.low_throttle_ticks = 0;
+                self.forgetting_since = i.tick;
             }
-            FlightState::Armed => {
-                self.low_throttle_ticks = if i.throttle_low { self.low_throttle_ticks.saturating_add(1) } else { 0 };
-                if !i.link {
-                    self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
-                    // What is left of earlier losses, plus this one so far. (Forgetting is
-                    // counted here, from the ticks flown since the hand-back, not on every
-                    // flying tick.)
-                    let flown = self.boot_ticks.wrapping_sub(self.forgetting_since);
-                    let forgotten = flown / cfg.loss_forget_ticks.max(1);
-                    self.lost_ticks = self.lost_ticks.saturating_sub(forgotten).saturating_add(lost_now);
-                    if self.lost_ticks >= cfg.failsafe_off_ticks {
-                        FlightState::FailsafeOff
-                    } else {
-                        FlightState::FailsafeLevel
-                    }
-                } else if gesture == Some(Gesture::Disarm) {
-                    self.hold_ticks = self.hold_ticks.saturating_add(1);
-                    if self.hold_ticks >= cfg.disarm_hold_ticks {
-                        FlightState::Disarmed
-                    } else {
-                        FlightState::Armed
-                    }
-                } else if self.low_throttle_ticks >= cfg.auto_disarm_ticks {
-                    FlightState::Disarmed
-                } else {
-                    self.hold_ticks = 0;
-                    FlightState::Armed
-                }
+            // The failsafe holds the last throttle flown on a good link, never more.
+            (FlightState::Armed, FlightState::FailsafeLevel | FlightState::FailsafeOff) => {
+                self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
             }
-            FlightState::FailsafeLevel => {
-                if i.link && self.good_ticks >= cfg.recovery_ticks {
-                    self.low_throttle_ticks = 0;
-                    self.forgetting_since = self.boot_ticks;
-                    FlightState::Armed
-                } else if self.lost_ticks >= cfg.failsafe_off_ticks {
-                    FlightState::FailsafeOff
-                } else {
-                    FlightState::FailsafeLevel
-                }
-            }
-            FlightState::FailsafeOff => {
-                if i.link {
-                    FlightState::Disarmed
-                } else {
-                    FlightState::FailsafeOff
-                }
-            }
-        };
-        if self.state.motors_may_run() && !next.motors_may_run() {
-            // Every way out of flight (disarm gesture, automatic disarm, stage 2, fault): a
-            // gesture held through it must be let go before it acts again. One rule here, not
-            // one per branch: the automatic disarm once lacked it, and a gesture held through
-            // it re-armed on release (found by the safety properties).
-            self.released = false;
+            _ => {}
         }
-        if next != self.state && next != FlightState::Arming {
+        if next != from && next != FlightState::Arming {
             self.hold_ticks = 0;
         }
-        if i.link && next == FlightState::Armed {
+        if link && next == FlightState::Armed {
             self.last_good_throttle = i.sticks.thr;
         }
-        // Let go of every gesture on a good link: a gesture only acts from a released start.
-        if i.link && gesture.is_none() {
-            self.released = true;
-        }
-        if !i.link {
-            self.released = false;
-        }
+        // A gesture only acts from a released start: let go of every gesture on a good link.
+        // One that acted (a calibration asked, an arming aborted) or was held through a way out
+        // of flight (disarm gesture, automatic disarm, stage 2, fault) must be let go before it
+        // acts again.
+        let acted = matches!((from, next), (FlightState::Disarmed, FlightState::Calibrating))
+            || (from == FlightState::Arming && next == FlightState::Disarmed && c.intersects(ARM_GESTURE))
+            || (from.motors_may_run() && !next.motors_may_run());
+        self.released = link && (!gesture || (self.released && !acted));
+        self.steady = from == FlightState::Armed && next == FlightState::Armed && link && !gesture && !i.throttle_low;
         self.state = next;
+        // Blockers say why arming is refused; armed, there is nothing to refuse.
+        let blockers = if next == FlightState::Armed {
+            Blockers::default()
+        } else {
+            let mut b = Blockers(c.blockers().0 & !(Blocker::Failsafe as u16 | Blocker::GestureNotReleased as u16));
+            if matches!(next, FlightState::FailsafeLevel | FlightState::FailsafeOff) {
+                b.insert(Blocker::Failsafe);
+            }
+            if !self.released {
+                b.insert(Blocker::GestureNotReleased);
+            }
+            b
+        };
         Decision {
             state: next,
             motors_enabled: next.motors_may_run(),
             failsafe_throttle: (next == FlightState::FailsafeLevel).then_some(self.last_good_throttle),
-            request_calibration,
-            // Blockers say why arming is refused; armed, there is nothing to refuse
-            // (docs/performance.md, «no blockers while armed»).
-            blockers: if next == FlightState::Armed { Blockers::default() } else { self.blockers(cfg, i) },
+            request_calibration: from == FlightState::Disarmed && next == FlightState::Calibrating,
+            blockers,
         }
     }
 }
 
-fn without(b: Blockers, x: Blocker) -> Blockers {
-    Blockers(b.0 & !(x as u16))
+/// The reference's supervisor: an arm latch, the motors on while it is set and the link is up.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReferenceLatch {
+    armed: bool,
+}
+
+impl ReferenceLatch {
+    /// One tick. `set_armed` sets (or, from a replay, clears) the latch: the arm gesture seen
+    /// after any single-channel update, or the replay's flag. The reference has no disarm, and
+    /// its calibration gesture acts directly, not through this decision.
+    pub fn decide(&mut self, link: bool, set_armed: Option<bool>, calibrating: bool) -> Decision {
+        if let Some(a) = set_armed {
+            self.armed = a;
+        }
+        let state = if calibrating && !self.armed {
+            FlightState::Calibrating
+        } else if self.armed {
+            FlightState::Armed
+        } else {
+            FlightState::Disarmed
+        };
+        Decision {
+            state,
+            motors_enabled: link && self.armed,
+            failsafe_throttle: None,
+            request_calibration: false,
+            blockers: Blockers::default(),
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
-    //! One test per rule of `docs/safety.md`, named after it.
+    //! One test per rule of `docs/safety.md`, named after it; the state table has its own.
     use super::*;
 
     const CFG: SafetyConfig = SafetyConfig::DEFAULT;
@@ -660,8 +691,8 @@ mod tests {
 
     impl Rig {
         fn new() -> Rig {
-            let i = Inputs::READY;
-            let mut r = Rig { s: Supervisor::new(), i, last: Supervisor::new().decide_reference(false, None, false) };
+            let i = Inputs { tick: 0, ..Inputs::READY };
+            let mut r = Rig { s: Supervisor::new(), i, last: ReferenceLatch::default().decide(false, None, false) };
             r.run(IDLE, CFG.boot_settle_ticks);
             assert_eq!(r.last.state, FlightState::Disarmed);
             r
@@ -673,10 +704,17 @@ mod tests {
             self.i.gesture = crate::rc::RcConfig::REFERENCE.gesture(&s);
         }
 
+        /// The next tick, with the inputs as they are.
+        fn step(&mut self) -> Decision {
+            self.i.tick += 1;
+            self.last = self.s.decide(&CFG, &self.i);
+            self.last
+        }
+
         fn run(&mut self, s: Sticks, ticks: u32) -> Decision {
             self.sticks(s);
             for _ in 0..ticks {
-                self.last = self.s.decide(&CFG, &self.i);
+                self.step();
             }
             self.last
         }
@@ -693,7 +731,7 @@ mod tests {
             for _ in 0..ticks {
                 self.i.silence_ticks = if self.i.link { TIMEOUT } else { self.i.silence_ticks + 1 };
                 self.i.link = false;
-                self.last = self.s.decide(&CFG, &self.i);
+                self.step();
             }
             self.last
         }
@@ -702,7 +740,7 @@ mod tests {
             self.i.link = true;
             self.i.silence_ticks = 0;
             for _ in 0..ticks {
-                self.last = self.s.decide(&CFG, &self.i);
+                self.step();
             }
             self.last
         }
@@ -712,6 +750,7 @@ mod tests {
     fn boot_starts_calibrating_with_motors_off() {
         let mut s = Supervisor::new();
         let i = Inputs {
+            tick: 1,
             link: true,
             silence_ticks: 0,
             sticks: IDLE,
@@ -824,20 +863,14 @@ mod tests {
 
     #[test]
     fn arm_is_refused_during_the_first_two_seconds() {
-        let mut s = Supervisor::new();
-        let mut i = Rig::new().i;
-        i.sticks = IDLE;
-        s.decide(&CFG, &i);
-        i.sticks = ARM;
-        i.gesture = Some(Gesture::Arm);
-        let mut d = s.decide(&CFG, &i);
-        for _ in 0..CFG.arm_hold_ticks {
-            d = s.decide(&CFG, &i);
-        }
+        // A fresh supervisor, from tick 1.
+        let mut r = Rig::new();
+        r.s = Supervisor::new();
+        r.i.tick = 0;
+        r.run(IDLE, 1);
+        let d = r.run(ARM, CFG.arm_hold_ticks + 1);
         assert!(d.blockers.contains(Blocker::BootSettling));
-        i.sticks = IDLE;
-        i.gesture = None;
-        assert_eq!(s.decide(&CFG, &i).state, FlightState::Disarmed);
+        assert_eq!(r.run(IDLE, 1).state, FlightState::Disarmed);
     }
 
     #[test]
@@ -1032,15 +1065,15 @@ mod tests {
         r.restore_link(5);
         r.i.link = false;
         r.i.silence_ticks = TIMEOUT + 200;
-        let mut d = r.s.decide(&CFG, &r.i); // + 6 = 185
+        let mut d = r.step(); // + 6 = 185
         assert_eq!(d.state, FlightState::FailsafeLevel);
         for _ in 0..CFG.failsafe_off_ticks - 185 - 1 {
             r.i.silence_ticks += 1;
-            d = r.s.decide(&CFG, &r.i);
+            d = r.step();
             assert_eq!(d.state, FlightState::FailsafeLevel);
         }
         r.i.silence_ticks += 1;
-        assert_eq!(r.s.decide(&CFG, &r.i).state, FlightState::FailsafeOff);
+        assert_eq!(r.step().state, FlightState::FailsafeOff);
     }
 
     #[test]
@@ -1200,92 +1233,211 @@ mod tests {
 
     #[test]
     fn reference_latch_never_disarms() {
-        let mut s = Supervisor::new();
-        s.reference_gesture(Some(Gesture::Arm));
-        assert!(s.decide_reference(true, None, false).motors_enabled);
-        s.reference_gesture(Some(Gesture::Disarm));
-        assert!(s.decide_reference(true, None, false).motors_enabled);
+        let mut latch = ReferenceLatch::default();
+        assert!(!latch.decide(true, None, false).motors_enabled);
+        // The arm gesture seen: latched, and nothing but a replay's flag clears it.
+        assert!(latch.decide(true, Some(true), false).motors_enabled);
+        assert!(latch.decide(true, None, false).motors_enabled);
         // Link loss stops the motors but keeps "armed": they resume when edges return (B8).
-        assert!(!s.decide_reference(false, None, false).motors_enabled);
-        assert!(s.decide_reference(true, None, false).motors_enabled);
+        assert!(!latch.decide(false, None, false).motors_enabled);
+        assert!(latch.decide(true, None, false).motors_enabled);
+        assert_eq!(latch.decide(true, None, true).state, FlightState::Armed);
+        assert_eq!(latch.decide(true, Some(false), true).state, FlightState::Calibrating);
+    }
+
+    /// The inputs of a random step: (sticks pattern, link, throttle up, fault, calibrating,
+    /// tilted) for 1 to 40 ticks.
+    type Step = ((u8, bool, bool, bool, bool, bool), u32);
+
+    fn steps() -> impl proptest::strategy::Strategy<Value = proptest::std_facade::Vec<Step>> {
+        use proptest::bool::weighted;
+        let step = (0u8..5, weighted(0.9), weighted(0.2), weighted(0.005), weighted(0.01), weighted(0.02));
+        proptest::collection::vec((step, 1u32..40), 1..60)
+    }
+
+    fn inputs_of(((pattern, link, throttle_up, fault, calibrating, tilted), ticks): Step) -> Inputs {
+        let base = [IDLE, ARM, DISARM, CAL, FLY][usize::from(pattern)];
+        let sticks = Sticks { thr: if throttle_up { StickCounts(1500) } else { base.thr }, ..base };
+        Inputs {
+            tick: 0,
+            link,
+            // Any silence: a repeat must be exact whatever the radio says.
+            silence_ticks: if link { 0 } else { ticks * 7 },
+            sticks,
+            gesture: crate::rc::RcConfig::REFERENCE.gesture(&sticks),
+            throttle_low: sticks.thr < StickCounts(200),
+            calibrated: true,
+            calibrating,
+            sensor_fault: fault.then_some(SensorFault::Stuck),
+            tilt_rad: if tilted { 1.0 } else { 0.0 },
+        }
     }
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
         #[test]
-        fn the_flight_shortcut_decides_exactly_as_the_table(
-            // (sticks pattern, link, throttle up, fault, calibrating, tilted), 1 to 40 ticks each.
-            seq in proptest::collection::vec(((0u8..5, proptest::bool::weighted(0.9), proptest::bool::weighted(0.2), proptest::bool::weighted(0.005), proptest::bool::weighted(0.01), proptest::bool::weighted(0.02)), 1u32..40), 1..60),
-        ) {
+        fn a_steady_decision_kept_is_the_decision_the_supervisor_would_take(seq in steps()) {
             // Short counts so that random sequences arm, fly, fail over and disarm often.
             let cfg = SafetyConfig { arm_hold_ticks: 3, disarm_hold_ticks: 4, auto_disarm_ticks: 20, failsafe_off_ticks: 15, recovery_ticks: 5, boot_settle_ticks: 10, ..SafetyConfig::DEFAULT };
-            let mut fast = Supervisor::new();
-            let mut table = Supervisor::new();
-            // Repeats steady flight whenever the inputs are those of the last tick.
-            let mut lazy = Supervisor::new();
-            let mut lazy_decision = None;
+            // `every` decides every tick; `lazy` keeps its last decision whenever it was steady,
+            // the link and the sticks are the last tick's and there is no sensor fault, as the
+            // control tick does. The other inputs (tilt, calibration) may differ on a kept tick.
+            let (mut every, mut lazy) = (Supervisor::new(), Supervisor::new());
+            let mut kept: Option<Decision> = None;
             let mut previous: Option<Inputs> = None;
-            let mut shortcut_ticks = 0u32;
             let mut repeats = 0u32;
-            // Every sequence starts by arming and flying (pattern, link, throttle up, fault,
-            // calibrating, tilted), then goes its random way.
-            let script = [((0, true, false, false, false, false), 12), ((1, true, false, false, false, false), 5), ((0, true, false, false, false, false), 1), ((4, true, true, false, false, false), 5)];
-            let seq = script.into_iter().chain(seq);
-            for ((pattern, link, throttle_up, fault, calibrating, tilted), ticks) in seq {
-                let base = [IDLE, ARM, DISARM, CAL, FLY][usize::from(pattern)];
-                let sticks = Sticks { thr: if throttle_up { StickCounts(1500) } else { base.thr }, ..base };
-                let i = Inputs {
-                    link,
-                    // Any silence: the table and the shortcut must agree whatever the radio says.
-                    silence_ticks: if link { 0 } else { ticks * 7 },
-                    sticks,
-                    gesture: crate::rc::RcConfig::REFERENCE.gesture(&sticks),
-                    throttle_low: sticks.thr < StickCounts(200),
-                    calibrated: true,
-                    calibrating,
-                    sensor_fault: fault.then_some(SensorFault::Stuck),
-                    tilt_rad: if tilted { 1.0 } else { 0.0 },
-                };
-                for _ in 0..ticks {
-                    let in_flight = fast.state == FlightState::Armed && i.link && i.gesture.is_none() && !i.throttle_low;
-                    shortcut_ticks += u32::from(in_flight);
-                    let a = fast.decide(&cfg, &i);
-                    let b = table.decide_by_table(&cfg, i);
-                    // The radio "changed" whenever link or sticks differ from the last tick's; the
-                    // other inputs may differ on a repeat, as in the pipeline.
+            // Every sequence starts by arming and flying, then goes its random way.
+            let script: [Step; 4] = [((0, true, false, false, false, false), 12), ((1, true, false, false, false, false), 5), ((0, true, false, false, false, false), 1), ((4, true, true, false, false, false), 5)];
+            let mut tick = 0;
+            for step in script.into_iter().chain(seq) {
+                let mut i = inputs_of(step);
+                for _ in 0..step.1 {
+                    tick += 1;
+                    i.tick = tick;
+                    let a = every.decide(&cfg, &i);
                     let radio_changed = previous.is_none_or(|p| p.link != i.link || p.sticks != i.sticks);
-                    let c = match lazy.decide_or_repeat(radio_changed, i.sensor_fault, |s| s.decide(&cfg, &i)) {
-                        Some(d) => d,
-                        None => {
+                    let b = match kept {
+                        Some(d) if lazy.steady() && !radio_changed && i.sensor_fault.is_none() => {
                             repeats += 1;
-                            proptest::prop_assert!(lazy_decision.is_some(), "a repeat before any decision");
-                            lazy_decision.unwrap_or(a)
+                            d
                         }
+                        _ => lazy.decide(&cfg, &i),
                     };
-                    lazy_decision = Some(c);
+                    kept = Some(b);
                     previous = Some(i);
                     proptest::prop_assert_eq!(a, b);
-                    proptest::prop_assert_eq!(a, c);
-                    // The same memory, whichever path ran (`steady` only says which one did).
-                    proptest::prop_assert_eq!(&Supervisor { steady: fast.steady, ..table.clone() }, &fast);
-                    proptest::prop_assert_eq!(&fast, &lazy);
+                    proptest::prop_assert_eq!(&every, &lazy);
                 }
             }
-            // Not a vacuous comparison: the shortcut ran.
-            proptest::prop_assert!(shortcut_ticks >= 5);
+            // Not a vacuous comparison: decisions were kept.
             proptest::prop_assert!(repeats >= 3);
         }
     }
 
     #[test]
-    fn the_flight_shortcut_is_taken_in_steady_flight() {
+    fn steady_flight_is_steady_and_nothing_else_is() {
         let mut r = Rig::new();
         r.arm();
-        r.run(FLY, 10);
-        let before = r.s.clone();
-        let d = r.s.decide_in_flight(&r.i);
-        let mut table = before;
-        assert_eq!(d, table.decide_by_table(&CFG, r.i));
-        assert_eq!(r.s, Supervisor { steady: true, ..table });
+        assert!(!r.s.steady(), "the arming tick");
+        r.run(FLY, 1);
+        assert!(r.s.steady());
+        r.run(IDLE, 1);
+        assert!(!r.s.steady(), "throttle low: the automatic disarm counts");
+        r.run(FLY, 1);
+        assert!(r.s.steady());
+        // A gesture with the throttle up (no stick makes one, but the inputs may say so).
+        r.i.gesture = Some(Gesture::Disarm);
+        r.step();
+        assert!(!r.s.steady(), "a gesture");
+        r.run(FLY, 1);
+        r.lose_link(1);
+        assert!(!r.s.steady(), "stage 1");
+    }
+
+    // The state table alone.
+
+    /// Every set of conditions: the nine blockers and the nine other conditions.
+    fn every_conditions() -> impl Iterator<Item = Conditions> {
+        (0u32..1 << 18).map(|m| Conditions((m & 0x1FF) | (m >> 9) << 16))
+    }
+
+    const STATES: [FlightState; 7] = [
+        FlightState::Disarmed,
+        FlightState::Arming,
+        FlightState::Armed,
+        FlightState::FailsafeLevel,
+        FlightState::FailsafeOff,
+        FlightState::Calibrating,
+        FlightState::Fault,
+    ];
+
+    #[test]
+    fn table_a_sensor_fault_leads_to_fault_from_every_state_and_nothing_leaves_it() {
+        for c in every_conditions() {
+            for s in STATES {
+                let next = next_state(s, c);
+                if c.contains(FAULT) || s == FlightState::Fault {
+                    assert_eq!(next, FlightState::Fault, "{s:?} {c:?}");
+                } else {
+                    assert_ne!(next, FlightState::Fault, "{s:?} {c:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn table_the_motors_come_under_the_sticks_only_by_a_full_arming_or_a_recovery() {
+        for c in every_conditions() {
+            for s in STATES {
+                let next = next_state(s, c);
+                if next == FlightState::Arming && s != FlightState::Arming {
+                    assert!(s == FlightState::Disarmed && c.contains(ARM_GESTURE) && c.blockers().is_empty(), "{s:?} {c:?}");
+                }
+                if next == FlightState::Armed && s != FlightState::Armed {
+                    let armed = s == FlightState::Arming
+                        && c.contains(ARM_HELD.and(STICKS_CENTRED))
+                        && !c.intersects(ARM_GESTURE.and(HOLD_BLOCKERS));
+                    let recovered = s == FlightState::FailsafeLevel && c.contains(RECOVERED) && !c.intersects(NO_LINK);
+                    assert!(armed || recovered, "{s:?} {c:?}");
+                }
+                if c.contains(NO_LINK) {
+                    assert_ne!(next, FlightState::Armed, "{s:?} {c:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn table_without_a_link_flight_goes_to_the_failsafe_and_stage_2_only_on_its_budget() {
+        for c in every_conditions().filter(|c| !c.contains(FAULT)) {
+            let from_armed = next_state(FlightState::Armed, c);
+            if c.contains(NO_LINK) {
+                let stage = if c.contains(LOSS_BUDGET_SPENT) { FlightState::FailsafeOff } else { FlightState::FailsafeLevel };
+                assert_eq!(from_armed, stage, "{c:?}");
+            }
+            for s in STATES {
+                if next_state(s, c) == FlightState::FailsafeOff && s != FlightState::FailsafeOff {
+                    assert!(c.contains(LOSS_BUDGET_SPENT), "{s:?} {c:?}");
+                }
+                if next_state(s, c) == FlightState::FailsafeLevel && s != FlightState::FailsafeLevel {
+                    assert!(s == FlightState::Armed && c.contains(NO_LINK), "{s:?} {c:?}");
+                }
+            }
+            // Stage 2 ends only with the link back, and then disarmed.
+            let from_off = next_state(FlightState::FailsafeOff, c);
+            assert_eq!(from_off, if c.contains(NO_LINK) { FlightState::FailsafeOff } else { FlightState::Disarmed }, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn table_each_blocker_ends_a_hold_and_refuses_its_end() {
+        let blockers = Blocker::ALL.into_iter().filter(|&b| b != Blocker::GestureNotReleased && b != Blocker::SensorFault);
+        for b in blockers {
+            let b = Conditions::blocker(b);
+            assert_eq!(next_state(FlightState::Disarmed, ARM_GESTURE.and(b)), FlightState::Disarmed);
+            assert_eq!(next_state(FlightState::Arming, ARM_GESTURE.and(b)), FlightState::Disarmed);
+            assert_eq!(next_state(FlightState::Arming, ARM_HELD.and(STICKS_CENTRED).and(b)), FlightState::Disarmed);
+        }
+        assert_eq!(next_state(FlightState::Disarmed, ARM_GESTURE.and(NOT_RELEASED)), FlightState::Disarmed);
+        assert_eq!(next_state(FlightState::Disarmed, ARM_GESTURE), FlightState::Arming);
+        assert_eq!(next_state(FlightState::Arming, ARM_GESTURE), FlightState::Arming);
+        assert_eq!(next_state(FlightState::Arming, ARM_HELD), FlightState::Arming, "waiting for the sticks");
+        assert_eq!(next_state(FlightState::Arming, ARM_HELD.and(STICKS_CENTRED)), FlightState::Armed);
+        assert_eq!(next_state(FlightState::Arming, STICKS_CENTRED), FlightState::Disarmed, "let go too early");
+    }
+
+    #[test]
+    fn table_disarming_and_calibrating() {
+        assert_eq!(next_state(FlightState::Armed, DISARM_GESTURE), FlightState::Armed);
+        assert_eq!(next_state(FlightState::Armed, DISARM_GESTURE.and(DISARM_HELD)), FlightState::Disarmed);
+        assert_eq!(next_state(FlightState::Armed, DISARM_GESTURE.and(THROTTLE_LOW_TOO_LONG)), FlightState::Armed);
+        assert_eq!(next_state(FlightState::Armed, THROTTLE_LOW_TOO_LONG), FlightState::Disarmed);
+        assert_eq!(next_state(FlightState::Armed, CALIBRATE_GESTURE), FlightState::Armed);
+        assert_eq!(next_state(FlightState::Disarmed, CALIBRATE_GESTURE), FlightState::Calibrating);
+        assert_eq!(next_state(FlightState::Disarmed, CALIBRATE_GESTURE.and(NOT_RELEASED)), FlightState::Disarmed);
+        assert_eq!(next_state(FlightState::Calibrating, CALIBRATING), FlightState::Calibrating);
+        assert_eq!(next_state(FlightState::Calibrating, NONE), FlightState::Disarmed);
+        assert_eq!(next_state(FlightState::FailsafeLevel, RECOVERED.and(LOSS_BUDGET_SPENT)), FlightState::Armed);
+        assert_eq!(next_state(FlightState::FailsafeLevel, RECOVERED.and(NO_LINK)), FlightState::FailsafeLevel);
     }
 }

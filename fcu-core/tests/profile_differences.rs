@@ -331,7 +331,7 @@ fn d14_the_thrust_gain_follows_the_battery() {
         for &(mv, steps) in readings_mv {
             outer.set_battery_mv(mv);
             for _ in 0..steps {
-                g = outer.run(&job).thrust_gain;
+                g = outer.run(&job).gains.thrust;
             }
         }
         g
@@ -383,7 +383,7 @@ fn d17_a_rate_error_asks_for_the_same_thrust_at_any_throttle() {
     // the thrust gain is 1 and only the thrust curve acts).
     let rate_gain = |cfg: Config, thr: i16| {
         let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
-        outer.run(&level_job(Sticks::new(0, 0, thr, 0), false)).rate_gain
+        outer.run(&level_job(Sticks::new(0, 0, thr, 0), false)).gains.rate
     };
     let d = Config::default();
     let curve = d.control.thrust_curve.expect("the default has a thrust curve");
@@ -414,17 +414,17 @@ fn d17_the_thrust_curve_scales_the_rate_loop_but_not_the_throttle_map() {
     let result = fcu_core::flight::OuterResult {
         quat: fcu_core::math::Quat::IDENTITY,
         tilt: fcu_core::math::Tilt::default(),
+        tilt_from_level_rad: 0.0,
         target_rad: [0.0; 3],
         rate_demand_rad_s: [0.0; 3],
-        thrust_gain: 1.0,
-        rate_gain: 1.25,
+        gains: fcu_core::control::Gains { thrust: 1.0, rate: 1.25 },
     };
     let (mut tick, _) = fc.into_parts();
     tick.apply_outer(&result);
-    let after = tick.config();
-    assert_eq!(after.control.pitch.inner_kp, 1.25 * before.control.pitch.inner_kp);
-    assert_eq!(after.control.yaw.inner_kd, 1.25 * before.control.yaw.inner_kd);
-    assert_eq!(after.mixer, before.mixer);
+    let after = tick.params();
+    assert_eq!(after.rate_loop().pitch.inner_kp, 1.25 * before.control.pitch.inner_kp);
+    assert_eq!(after.rate_loop().yaw.inner_kd, 1.25 * before.control.yaw.inner_kd);
+    assert_eq!(after.mixer(), &before.mixer);
 }
 
 #[test]

@@ -671,6 +671,11 @@ impl SupervisorMonitor {
         SupervisorMonitor { cfg, tick: 0, proc: ProcedureTracker::new(), fault_seen: false }
     }
 
+    /// Steps observed so far.
+    pub fn ticks(&self) -> u64 {
+        self.tick
+    }
+
     fn fail(&self, invariant: Invariant, detail: String) -> Result<(), Violation> {
         Err(Violation { tick: self.tick, invariant, detail })
     }

@@ -297,6 +297,8 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
     let flags = (prop::bool::weighted(0.75), prop::bool::weighted(0.9), prop::bool::weighted(0.1));
     (link, silence, gesture_strategy(), thr, flags, fault, tilt).prop_map(
         |(link, silence_ticks, gesture, thr, (throttle_low, calibrated, calibrating), sensor_fault, tilt_rad)| Inputs {
+            // Set by `run_supervisor`.
+            tick: 0,
             link,
             silence_ticks,
             sticks: Sticks::new(0, 0, thr, 0),
@@ -310,10 +312,13 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
     )
 }
 
+/// Each step's tick is the one after the monitor's last (the supervisor and its monitor see
+/// every step together).
 fn run_supervisor(cfg: &SafetyConfig, s: &mut Supervisor, m: &mut SupervisorMonitor, segs: &[(Inputs, u32)]) -> Result<(), Violation> {
     for (i, n) in segs {
         let mut i = *i;
         for _ in 0..*n {
+            i.tick = u32::try_from(m.ticks() + 1).unwrap_or(u32::MAX);
             let d: Decision = s.decide(cfg, &i);
             m.observe(&i, &d)?;
             // The silence grows while the link stays lost, as a radio reports it.

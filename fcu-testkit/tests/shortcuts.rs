@@ -1,7 +1,7 @@
-//! The pipeline's steady-flight shortcuts, tested where the pipeline takes them: two flight
+//! The pipeline's steady-flight shortcut, tested where the pipeline takes it: two flight
 //! controllers fly the same simulated drone on random stick timelines, one as shipped and one
-//! with `set_table_only(true)` (the supervisor's full table every tick: no steady-flight
-//! shortcut, no repeat of the last decision). Their compare values, outer jobs and `Status`
+//! with `set_table_only(true)` (the supervisor decides every tick: the decision in force never
+//! stands). Their compare values, outer jobs and `Status`
 //! must agree on every tick. The repeat is taken when the radio brought nothing new even
 //! though other inputs (the tilt after each outer step, the calibration flags) have changed,
 //! so this is the test of its rule, not only of the supervisor alone.

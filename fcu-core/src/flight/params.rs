@@ -1,0 +1,118 @@
+//! What a configuration comes to for the two halves of the pipeline, worked out in one place:
+//! [`Derived::new`], at boot (and again when a run-time parameter changes). The configuration
+//! itself is never changed; the scaling that moves in flight is a separate [`Gains`] value,
+//! which only the tick's rate loop and throttle map follow ([`TickParams::rescale`]).
+
+use crate::config::Config;
+use crate::control::{ControlConfig, Gains};
+use crate::imu::Decoder;
+use crate::mixer::{CompareRange, MixerConfig};
+use crate::rc::RcConfig;
+use crate::supervisor::SupervisorConfig;
+
+/// Both halves' values: each half keeps its own, as they may run in different tasks.
+#[derive(Clone, Debug)]
+pub(crate) struct Derived {
+    pub(crate) tick: TickParams,
+    pub(crate) outer: OuterParams,
+}
+
+impl Derived {
+    /// The one place where a configuration becomes the values the pipeline works with, at
+    /// unity gains.
+    pub(crate) fn new(cfg: &Config) -> Derived {
+        let decoder = Decoder::new(&cfg.imu);
+        let outer_hz = cfg.timing.outer_hz();
+        Derived {
+            tick: TickParams {
+                rc: cfg.rc,
+                decoder,
+                reference_arithmetic: cfg.reference_arithmetic,
+                tick_dt_s: cfg.timing.tick_dt_s,
+                tick_dt_s_f32: cfg.timing.tick_dt_s as f32,
+                outer_hz,
+                rate_loop: cfg.control,
+                mixer: cfg.mixer,
+                compare_range: cfg.mixer.compare_range(),
+                off_compare: cfg.mixer.off_compare(),
+            },
+            outer: OuterParams {
+                decoder,
+                rc: cfg.rc,
+                control: cfg.control,
+                reference_arithmetic: cfg.reference_arithmetic,
+                outer_hz,
+                arming_tilt: matches!(cfg.supervisor, SupervisorConfig::Safe(_)),
+            },
+        }
+    }
+}
+
+/// What the control tick works with: the configuration's values it reads every tick, prepared
+/// once (sensor words to units, the compare range in counts, `f64` values rounded), and its rate
+/// loop and throttle map scaled by the [`Gains`] in force.
+#[derive(Clone, Debug)]
+pub struct TickParams {
+    pub(crate) rc: RcConfig,
+    /// Sensor words to body axes and physical units (mount, sensitivities).
+    pub(crate) decoder: Decoder,
+    /// Evaluate the reference's double-precision expressions in `f64`.
+    pub(crate) reference_arithmetic: bool,
+    /// The dt the heading integration assumes, s, and the same rounded to `f32` once (the
+    /// conversion is a library call on the M4).
+    pub(crate) tick_dt_s: f64,
+    pub(crate) tick_dt_s_f32: f32,
+    /// Outer steps per second (for the yaw rate the stick asks for, in `Status`).
+    pub(crate) outer_hz: f32,
+    /// The configuration's control gains, the rate loop's scaled by the rate gain in force.
+    pub(crate) rate_loop: ControlConfig,
+    /// The configuration's mixer, the throttle map scaled by the thrust gain in force.
+    pub(crate) mixer: MixerConfig,
+    /// The compare clamp in whole counts.
+    pub(crate) compare_range: CompareRange,
+    /// The compare value with the motors off.
+    pub(crate) off_compare: u16,
+}
+
+impl TickParams {
+    /// The gains in force go from `from` to `to`: the rate loop and the throttle map are
+    /// rescaled by the ratio, in place, and only the one whose gain moved (docs/performance.md,
+    /// «scaled in place»). Exact enough: the gains move in steps of 1/512 (battery,
+    /// `BatteryFilter`) and 1/256 (thrust curve, `ThrustCurve::gain_at`), only when the battery
+    /// or the throttle moves that far, and each rescale rounds by 2^-24 (a thousand of them move
+    /// a gain by less than 1e-4). From [`Gains::UNITY`] the ratio is the gain itself, exactly.
+    pub(crate) fn rescale(&mut self, from: Gains, to: Gains) {
+        if to.rate != from.rate {
+            self.rate_loop = self.rate_loop.scaled_rate_loop(to.rate / from.rate);
+        }
+        if to.thrust != from.thrust {
+            self.mixer = self.mixer.scaled_throttle(to.thrust / from.thrust);
+        }
+    }
+
+    /// The control gains in force: the configuration's, the rate loop scaled by the rate gain.
+    pub fn rate_loop(&self) -> &ControlConfig {
+        &self.rate_loop
+    }
+
+    /// The mixer in force: the configuration's, the throttle map scaled by the thrust gain.
+    pub fn mixer(&self) -> &MixerConfig {
+        &self.mixer
+    }
+}
+
+/// What the outer step works with, from the configuration.
+#[derive(Clone, Debug)]
+pub(crate) struct OuterParams {
+    /// The accelerometer words of a job to body mg.
+    pub(crate) decoder: Decoder,
+    /// Sticks to attitude targets and heading steps.
+    pub(crate) rc: RcConfig,
+    /// The angle loop's gains and the yaw feedforward (the configuration's: the outer step is
+    /// not scaled).
+    pub(crate) control: ControlConfig,
+    pub(crate) reference_arithmetic: bool,
+    pub(crate) outer_hz: f32,
+    /// The supervisor checks the tilt from level before arming: the outer step works it out.
+    pub(crate) arming_tilt: bool,
+}

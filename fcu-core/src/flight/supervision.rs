@@ -1,0 +1,179 @@
+//! The tick's command stage: the radio, the supervisor and the decision in force, with the
+//! sticks the pipeline flies that follow from it.
+
+use super::params::TickParams;
+use super::sensors::Sensors;
+use super::ForcedRadio;
+use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks};
+use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
+
+/// The supervisor's last decision and what follows from it and the sticks, kept until the
+/// supervisor decides again.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct InForce {
+    pub(super) decision: Decision,
+    /// The sticks the pipeline flies with: the radio's, or the failsafe's while it holds.
+    pub(super) sticks: Sticks,
+    /// Whether their throttle is low (motors stopped, integrators and yaw reset).
+    pub(super) throttle_low: bool,
+}
+
+impl InForce {
+    /// A new decision, and what follows from it and the radio's sticks: the one writer of all
+    /// three, written in place (docs/performance.md, «in place»).
+    #[inline(always)]
+    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams) {
+        self.decision = decision;
+        self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);
+        self.throttle_low = p.rc.throttle_low(&self.sticks);
+    }
+}
+
+/// The sticks the failsafe flies with: centred (level, no yaw) and the held throttle.
+fn failsafe_sticks(throttle: StickCounts) -> Sticks {
+    Sticks { thr: throttle, ..Sticks::default() }
+}
+
+/// What the radio said besides the sticks and the link: the reference's gestures as its
+/// capture evaluates them, or the replay's flags.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct RadioFlags {
+    /// Set (or clear) the reference's arm latch.
+    pub(super) set_armed: Option<bool>,
+    /// A calibration is asked for.
+    pub(super) calibrate: bool,
+}
+
+/// Which supervisor decides, with its configuration.
+#[derive(Clone, Debug)]
+enum Machine {
+    Reference(ReferenceLatch),
+    Safe { cfg: SafetyConfig, supervisor: Supervisor },
+}
+
+/// The radio, the supervisor that decides, and its decision in force.
+#[derive(Clone, Debug)]
+pub(super) struct Supervision {
+    receiver: Receiver,
+    machine: Machine,
+    in_force: InForce,
+    /// Ticks since boot, this one included: the supervisor's clock.
+    ticks: u32,
+    /// Tests only: the supervisor decides every tick, the decision in force never stands.
+    #[cfg(feature = "test-switches")]
+    table_only: bool,
+}
+
+impl Supervision {
+    pub(super) fn new(cfg: SupervisorConfig) -> Supervision {
+        Supervision {
+            receiver: Receiver::new(),
+            machine: match cfg {
+                SupervisorConfig::Reference => Machine::Reference(ReferenceLatch::default()),
+                SupervisorConfig::Safe(cfg) => Machine::Safe { cfg, supervisor: Supervisor::new() },
+            },
+            in_force: InForce {
+                decision: Decision {
+                    state: FlightState::Calibrating,
+                    motors_enabled: false,
+                    failsafe_throttle: None,
+                    request_calibration: false,
+                    blockers: Blockers::default(),
+                },
+                sticks: Sticks::default(),
+                throttle_low: true,
+            },
+            ticks: 0,
+            #[cfg(feature = "test-switches")]
+            table_only: false,
+        }
+    }
+
+    /// One tick's capture pulses.
+    #[inline(always)]
+    pub(super) fn receive(&mut self, p: &TickParams, pulses: &PulseBatch) -> RadioFlags {
+        let rc = &p.rc;
+        match self.machine {
+            Machine::Reference(_) => {
+                // The reference evaluates its gestures after every single-channel update.
+                let (mut arm, mut calibrate) = (false, false);
+                self.receiver.update(rc, pulses, |s| {
+                    let g = rc.gesture(s);
+                    arm |= g == Some(Gesture::Arm);
+                    calibrate |= g == Some(Gesture::Calibrate);
+                });
+                RadioFlags { set_armed: arm.then_some(true), calibrate }
+            }
+            Machine::Safe { .. } => {
+                self.receiver.update(rc, pulses, |_| {});
+                RadioFlags::default()
+            }
+        }
+    }
+
+    /// The radio state given directly (golden replay).
+    pub(super) fn receive_forced(&mut self, p: &TickParams, forced: &ForcedRadio) -> RadioFlags {
+        self.receiver.force(&p.rc, forced.width_counts, forced.link);
+        RadioFlags { set_armed: Some(forced.armed), calibrate: forced.cal_request }
+    }
+
+    /// This tick's decision, now in force; whether it asks for a calibration.
+    #[inline(always)]
+    pub(super) fn decide(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
+        self.ticks = self.ticks.saturating_add(1);
+        let radio = self.receiver.state();
+        let repeats_allowed = self.repeats_allowed();
+        let decision = match &mut self.machine {
+            Machine::Reference(latch) => latch.decide(radio.link, flags.set_armed, sensors.calibrating()),
+            Machine::Safe { cfg, supervisor } => {
+                // In steady flight, with nothing new from the radio and no sensor fault, the
+                // decision in force stands: the supervisor would decide it again, the same
+                // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
+                if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
+                    return false;
+                }
+                let inputs = Inputs {
+                    tick: self.ticks,
+                    link: radio.link,
+                    // Only read without a good link.
+                    silence_ticks: if radio.link { 0 } else { self.receiver.silence_ticks(&p.rc) },
+                    sticks: radio.sticks,
+                    gesture: radio.gesture,
+                    throttle_low: p.rc.throttle_low(&radio.sticks),
+                    calibrated: sensors.calibrated(),
+                    calibrating: sensors.calibrating(),
+                    sensor_fault: sensors.fault(),
+                    tilt_rad,
+                };
+                supervisor.decide(cfg, &inputs)
+            }
+        };
+        self.in_force.decided(decision, radio.sticks, p);
+        decision.request_calibration
+    }
+
+    pub(super) fn in_force(&self) -> &InForce {
+        &self.in_force
+    }
+
+    pub(super) fn radio(&self) -> RadioState {
+        self.receiver.state()
+    }
+
+    #[cfg(feature = "test-switches")]
+    pub(super) fn set_table_only(&mut self, table_only: bool) {
+        self.table_only = table_only;
+    }
+
+    #[cfg(feature = "test-switches")]
+    #[inline(always)]
+    fn repeats_allowed(&self) -> bool {
+        !self.table_only
+    }
+
+    #[cfg(not(feature = "test-switches"))]
+    #[inline(always)]
+    fn repeats_allowed(&self) -> bool {
+        true
+    }
+}
