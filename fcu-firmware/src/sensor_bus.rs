@@ -16,19 +16,20 @@ use stm32f4xx_hal::pac::SPI2;
 /// bound is far above that and only ends a wait on a broken bus.
 const FLAG_WAIT_POLLS: u32 = 2_000;
 
-/// SPI2's clock: PCLK1 42 MHz / 8. The three sensors take up to 10 MHz in 3-wire mode
-/// (LSM6DSL, LIS2MDL, LPS22HB datasheets, SPI slave timing: f_c(SPC) max 10 MHz); the
-/// F401's next step, /4, is 10.5 MHz. Twice the reference's 2.625 MHz: the IMU burst takes
-/// 20 µs instead of 40.
-pub const SPI_HZ: u32 = 5_250_000;
-/// CPU cycles per SPI clock period: 84 MHz / 5.25 MHz.
+/// SPI2's clock: PCLK1 42 MHz / 16, the reference's 2.625 MHz. The sensors would take
+/// 10 MHz (their datasheets' SPI timing: f_c(SPC) max 10 MHz, 3-wire included), but the burst
+/// is received one byte per interrupt: at 5.25 MHz a byte lasts 128 cycles, about what the
+/// interrupt's entry, body and return cost with slow flash and APB accesses (fcu-pil's
+/// pessimistic profile missed the end-of-read window with it); at 2.625 MHz, 256.
+pub const SPI_HZ: u32 = 2_625_000;
+/// CPU cycles per SPI clock period: 84 MHz / 2.625 MHz.
 const SCK_CYCLES: u32 = 84_000_000 / SPI_HZ;
 /// When to clear SPE to end a receive, counted on the cycle counter from the moment the
 /// second-to-last RXNE is seen (or, for one byte, from setting SPE): a period and a half of
 /// the SPI clock. The RM's window (RM0090 §28.3.8, the F401's SPI block) runs from one SCK
 /// period after that RXNE rose, so the last byte has started, to the end of the last byte
-/// (8 periods, 128 cycles), so no byte follows it. Seen up to a poll or an interrupt entry
-/// late, plus the CR1 read-modify-write, the clear lands 24 to about 70 cycles in: clear of
+/// (8 periods, 256 cycles), so no byte follows it. Seen up to a poll or an interrupt entry
+/// late, plus the CR1 read-modify-write, the clear lands 48 to about 120 cycles in: clear of
 /// both ends. (`asm::delay` is not used: its cycles per count depend on the flash wait
 /// states.)
 const STOP_AFTER_CYCLES: u32 = SCK_CYCLES + SCK_CYCLES / 2;

@@ -189,10 +189,10 @@ impl Motors {
     }
 }
 
-/// How long before each control tick the IMU burst starts: the burst takes about 22 µs
-/// (address and 12 bytes at 5.25 MHz, with its interrupts), so its sample is in when the tick
-/// starts, 18 µs old, and the tick goes straight to the control law.
-pub const SENSOR_READ_LEAD_CYCLES: u32 = 40 * 84;
+/// How long before each control tick the IMU burst starts: the burst takes about 41 µs
+/// (address and 12 bytes at 2.625 MHz, with its interrupts), so its sample is in when the
+/// tick starts, about 19 µs old, and the tick goes straight to the control law.
+pub const SENSOR_READ_LEAD_CYCLES: u32 = 60 * 84;
 
 /// What a TIM9 interrupt is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

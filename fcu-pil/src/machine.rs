@@ -145,6 +145,8 @@ struct BlockInfo {
     cycles: u64,
     /// Its PC-relative loads (flash data reads).
     literal_loads: u64,
+    /// It holds an FP instruction (a lazily stacked FP state is saved there).
+    has_fp: bool,
     kind: BlockKind,
 }
 
@@ -191,6 +193,7 @@ impl Code {
             instructions: cost.instructions,
             cycles: cost.cycles,
             literal_loads: cost.literal_loads,
+            has_fp: cost.has_fp,
             kind: self.classify(addr, size),
         };
         if let Some(entry) = slot.and_then(|i| self.blocks.get_mut(i)) {
@@ -297,6 +300,15 @@ pub struct State<P: Peripherals> {
     pub resets: Vec<(Time, &'static str)>,
     /// Exception entries that stacked the extended (FP) frame.
     pub fp_frames: u64,
+    /// Per active exception: whether its extended frame's FP state is still owed (lazy
+    /// stacking) or was saved (and is restored on return).
+    fp_frames_owed: Vec<LazyFp>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct LazyFp {
+    owed: bool,
+    saved: bool,
 }
 
 impl<P: Peripherals> State<P> {
@@ -361,6 +373,7 @@ impl<P: Peripherals + 'static> Machine<P> {
             hard_faults: Vec::new(),
             resets: Vec::new(),
             fp_frames: 0,
+            fp_frames_owed: Vec::new(),
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
@@ -529,6 +542,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         st.timing.reset();
         st.current_exception = 0;
         st.exc_stack.clear();
+        st.fp_frames_owed.clear();
         st.sleeping = false;
         Ok(())
     }
@@ -609,8 +623,9 @@ impl<P: Peripherals + 'static> Machine<P> {
         let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
         let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
         self.set_reg(RegisterARM::PC, vector | 1)?;
-        let extra = self.uc.get_data().timing.entry_cycles(fp_active);
+        let extra = self.uc.get_data().timing.entry_cycles();
         self.add_cycles(ENTRY_CYCLES + extra);
+        self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active, saved: false });
         self.uc.get_data_mut().timing.exception_boundary();
 
         let st = self.uc.get_data_mut();
@@ -700,7 +715,8 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.rebuild_flags()?;
         let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
         self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
-        let extra = self.uc.get_data().timing.return_cycles(fp_frame);
+        let saved = self.uc.get_data_mut().fp_frames_owed.pop().is_some_and(|f| f.saved);
+        let extra = self.uc.get_data().timing.return_cycles(saved);
         self.add_cycles(RETURN_CYCLES + extra);
         self.uc.get_data_mut().timing.exception_boundary();
         let st = self.uc.get_data_mut();
@@ -861,7 +877,14 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
     let info = st.code.block(addr, size);
     let (n, kind) = (info.instructions, info.kind);
     let body = st.timing.body_cycles(n, info.cycles);
-    let entry = st.timing.block_entry_cycles(addr, size) + st.timing.literal_load_cycles(info.literal_loads);
+    let mut entry = st.timing.block_entry_cycles(addr, size) + st.timing.literal_load_cycles(info.literal_loads);
+    if info.has_fp && st.fp_frames_owed.iter().any(|f| f.owed) {
+        // The first FP instruction since an extended frame was stacked saves its FP state.
+        entry += st.timing.lazy_fp_save_cycles();
+        for f in st.fp_frames_owed.iter_mut().filter(|f| f.owed) {
+            *f = LazyFp { owed: false, saved: true };
+        }
+    }
     let upc = st.units_per_cycle;
     st.block_pc = addr;
     st.block_size = size;
@@ -1235,14 +1258,15 @@ mod tests {
     }
 
     #[test]
-    fn pessimistic_exception_entry_and_return_pay_for_the_fp_state() {
+    fn pessimistic_lazy_fp_stacking_costs_nothing_to_a_handler_without_fp() {
         let m = run(program(&IRQ_PROGRAM, &IRQ_HANDLER), TimingProfile::Pessimistic, 1000);
         // The first block: movw, movt, movs 1; str 3; vmov 1; movw, movt 1; str 3; b 1: 13
         // cycles. The interrupt is taken where the next block would start.
         let entered = 13 * UPC;
         let irq0 = &m.state().exception_stats[&16];
-        // Entry 12 + 17 (the FP state), the handler's movs and bx: 2.
-        assert_eq!(irq0.spans, vec![(entered, entered + UPC * (12 + 17 + 2))]);
+        // Entry 12, the handler's movs and bx: 2. The extended frame only reserves the FP
+        // registers' space: the handler runs no FP instruction, so they are never saved.
+        assert_eq!(irq0.spans, vec![(entered, entered + UPC * (12 + 2))]);
         assert_eq!(m.state().fp_frames, 1);
     }
 

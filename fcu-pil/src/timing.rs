@@ -323,12 +323,15 @@ pub struct BlockCost {
     pub instructions: u64,
     /// PC-relative (literal) loads: each a data read from flash.
     pub literal_loads: u64,
+    /// It holds an FP instruction (coprocessor 10 or 11).
+    pub has_fp: bool,
 }
 
 /// Pessimistic cycles of a straight run of instructions (a block), how many there are, and how
 /// many read a literal from flash. `halfword(i)` is the i-th halfword of the block.
 pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> BlockCost {
     let (mut cycles, mut instructions, mut literal_loads) = (0u64, 0u64, 0u64);
+    let mut has_fp = false;
     let mut previous = Class::Other;
     let mut i = 0;
     while 2 * i < size_bytes {
@@ -340,10 +343,11 @@ pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> BlockCost
         cycles += c + stall;
         instructions += 1;
         literal_loads += u64::from(is_literal_load(hw1));
+        has_fp |= wide && hw1 & 0xEC00 == 0xEC00 && (hw2 >> 9) & 7 == 0b101;
         previous = class;
         i += if wide { 2 } else { 1 };
     }
-    BlockCost { cycles: cycles.max(1), instructions: instructions.max(1), literal_loads }
+    BlockCost { cycles: cycles.max(1), instructions: instructions.max(1), literal_loads, has_fp }
 }
 
 /// LDR (literal), 16- or 32-bit (byte, halfword, word, signed; LDRD and VLDR from the PC apart).
@@ -593,18 +597,30 @@ impl Timing {
         }
     }
 
-    /// Cycles added to exception entry (12): the FP state when it stacks the extended frame,
-    /// and the vector's read from flash.
-    pub fn entry_cycles(&self, extended_frame: bool) -> u64 {
+    /// Cycles added to exception entry (12): the vector's read from flash. An extended frame
+    /// only reserves the FP registers' space (lazy stacking, FPCCR.LSPEN = 1 at reset): they
+    /// are saved at the first FP instruction that runs before the return
+    /// ([`Timing::lazy_fp_save_cycles`]).
+    pub fn entry_cycles(&self) -> u64 {
         if !self.pessimistic() {
             return 0;
         }
-        u64::from(self.acr.latency) + if extended_frame { FP_STATE_CYCLES } else { 0 }
+        u64::from(self.acr.latency)
     }
 
-    /// Cycles added to exception return (10) when it unstacks the extended frame.
-    pub fn return_cycles(&self, extended_frame: bool) -> u64 {
-        if self.pessimistic() && extended_frame {
+    /// The deferred save of the FP state, charged at the first FP instruction run while an
+    /// extended frame's state is still owed.
+    pub fn lazy_fp_save_cycles(&self) -> u64 {
+        if self.pessimistic() {
+            FP_STATE_CYCLES
+        } else {
+            0
+        }
+    }
+
+    /// Cycles added to exception return (10) when it restores an FP state that was saved.
+    pub fn return_cycles(&self, fp_state_saved: bool) -> u64 {
+        if self.pessimistic() && fp_state_saved {
             FP_STATE_CYCLES
         } else {
             0
@@ -823,11 +839,18 @@ mod tests {
     #[test]
     fn the_fp_state_and_the_vector_fetch_cost_only_the_pessimistic_profile() {
         let p = Timing::new(TimingProfile::Pessimistic);
-        assert_eq!((p.entry_cycles(true), p.return_cycles(true), p.entry_cycles(false), p.return_cycles(false)), (17, 17, 0, 0));
+        assert_eq!((p.entry_cycles(), p.lazy_fp_save_cycles(), p.return_cycles(true), p.return_cycles(false)), (0, 17, 17, 0));
         let p = two_wait_states(true, true);
-        assert_eq!((p.entry_cycles(true), p.entry_cycles(false), p.return_cycles(true)), (17 + 2, 2, 17));
+        assert_eq!(p.entry_cycles(), 2, "the vector's read");
         let o = Timing::new(TimingProfile::Optimistic);
-        assert_eq!((o.entry_cycles(true), o.return_cycles(true)), (0, 0));
+        assert_eq!((o.entry_cycles(), o.lazy_fp_save_cycles(), o.return_cycles(true)), (0, 0, 0));
+    }
+
+    #[test]
+    fn an_fp_instruction_marks_its_block() {
+        // vadd.f32 s0, s0, s1 (0xEE30 0x0A20) then bx lr; and an integer-only block.
+        assert!(block_cycles(6, |i| [0xEE30u16, 0x0A20, 0x4770][i as usize]).has_fp);
+        assert!(!block_cycles(4, |i| [0x1840u16, 0x4770][i as usize]).has_fp);
     }
 
     #[test]
