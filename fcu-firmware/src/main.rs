@@ -5,8 +5,8 @@
 //!
 //! | task         | binds / kind            | prio | work                                         |
 //! |--------------|-------------------------|------|----------------------------------------------|
-//! | sensor_rx    | SPI2 (RXNE)             | 5    | one byte of the IMU burst; stops the clock   |
-//! |              |                         |      | in the 3-wire end-of-read window             |
+//! | sensor_dma   | DMA1_STREAM3 (TC)       | 5    | the IMU burst's bytes are in memory but the  |
+//! |              |                         |      | last: stop the clock during it               |
 //! | rc_capture   | TIM2 (both edges, wrap) | 4    | CCRx + pin level → edge queue; a pin past    |
 //! |              |                         |      | its edge budget muted till the wrap          |
 //! | control      | TIM1_BRK_TIM9 (CC1, tick)| 3   | CC1: start the IMU burst; tick: edges →      |
@@ -238,6 +238,11 @@ mod app {
         let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
         let mut rcc = dp.RCC.freeze(source.sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()));
         Mono::start(core.SYST, SYSCLK_HZ);
+        // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
+        // so no resource ceiling counts on its priority. At its reset priority, 0, the highest,
+        // its handler would delay the end-of-read interrupt and the radio capture; at the
+        // lowest it delays only the LEDs and the fault line, which await it.
+        unsafe { core.SCB.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, 0xF0) };
 
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
@@ -281,7 +286,11 @@ mod app {
             &mut rcc,
         );
         let (spi2, _sensor_pins) = spi2.release();
-        let mut bus = SensorBus::new(spi2, cs);
+        {
+            use stm32f4xx_hal::rcc::Enable;
+            stm32f4xx_hal::pac::DMA1::enable(&mut rcc);
+        }
+        let mut bus = SensorBus::new(spi2, cs, dp.DMA1);
         let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(crystal_ready);
 
         let capture_pins = (
@@ -454,11 +463,11 @@ mod app {
         }
     }
 
-    /// The IMU burst, one byte per interrupt, at the highest priority: the 3-wire end-of-read
-    /// window is met from this entry, and nothing polls the bus with interrupts masked.
-    #[task(binds = SPI2, priority = 5, shared = [bus])]
-    fn sensor_rx(mut cx: sensor_rx::Context) {
-        cx.shared.bus.lock(SensorBus::on_rx_not_empty);
+    /// The IMU burst's DMA is done but for the last byte: stop the clock during it, at the
+    /// highest priority (the 3-wire end-of-read window is met from this entry).
+    #[task(binds = DMA1_STREAM3, priority = 5, shared = [bus])]
+    fn sensor_dma(mut cx: sensor_dma::Context) {
+        cx.shared.bus.lock(SensorBus::on_dma_complete);
     }
 
     /// Waits for the burst the SPI2 interrupt receives (the radio's and the bus's interrupts
@@ -466,8 +475,10 @@ mod app {
     fn wait_for_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<[u8; BURST_BYTES], BusError> {
         let start = cortex_m::peripheral::DWT::cycle_count();
         loop {
-            if let Some(done) = bus.lock(SensorBus::take_burst) {
-                return done;
+            if crate::sensor_bus::last_byte_started() {
+                if let Some(done) = bus.lock(SensorBus::take_burst) {
+                    return done;
+                }
             }
             if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > BURST_WAIT_CYCLES {
                 bus.lock(SensorBus::abandon_burst);
@@ -488,7 +499,7 @@ mod app {
         let inner = cx.local.inner;
         let decoder = cx.local.decoder;
         if events.read_due {
-            // A lead before the tick: the burst's bytes arrive by interrupt meanwhile, and the
+            // A lead before the tick: the burst's bytes arrive by DMA meanwhile, and the
             // work that does not need them is done now, off the path from the tick to the
             // motors (the tick's state does not change until the tick).
             *cx.local.burst_started = cx.shared.bus.lock(|bus| bus.start_burst(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G)).is_ok();

@@ -6,21 +6,25 @@
 //! leaves BIDIOE set, so reads are done here on the registers with the receive sequence of
 //! the reference manual (RM0368, "bidirectional receive-only procedure"): in 1-line receive
 //! mode the master clocks continuously from the moment SPE is set, so the clock is stopped by
-//! clearing SPE during the last byte.
+//! clearing SPE during the last byte. At boot the reads are polled (interrupts are off in
+//! `init`); in flight the IMU burst's bytes go to memory by DMA1 stream 3 and its
+//! transfer-complete interrupt stops the clock, so nothing polls with interrupts masked.
 
+use core::sync::atomic::{fence, AtomicBool, AtomicU8, Ordering};
 use fcu_core::imu::registers::{read_address, write_address, Sensor};
 use stm32f4xx_hal::gpio::{AnyPin, Output};
-use stm32f4xx_hal::pac::SPI2;
+use stm32f4xx_hal::pac::{DMA1, SPI2};
 
 /// Busy-wait bound for one status flag. One byte at 2.625 MHz is about 260 CPU cycles; the
 /// bound is far above that and only ends a wait on a broken bus.
 const FLAG_WAIT_POLLS: u32 = 2_000;
 
-/// SPI2's clock: PCLK1 42 MHz / 16, the reference's 2.625 MHz. The sensors would take
-/// 10 MHz (their datasheets' SPI timing: f_c(SPC) max 10 MHz, 3-wire included), but the burst
-/// is received one byte per interrupt: at 5.25 MHz a byte lasts 128 cycles, about what the
-/// interrupt's entry, body and return cost with slow flash and APB accesses (fcu-pil's
-/// pessimistic profile missed the end-of-read window with it); at 2.625 MHz, 256.
+/// SPI2's clock: PCLK1 42 MHz / 16, the reference's 2.625 MHz. The sensors would take up to
+/// 10 MHz (their datasheets' SPI timing, f_c(SPC) max 10 MHz, 3-wire included), and with the
+/// burst's bytes moved by DMA the CPU pays nothing per byte; but the end-of-read window is one
+/// byte long, 128 cycles at 5.25 MHz, and the stop's interrupt with slow flash and APB
+/// accesses (fcu-pil's pessimistic profile) landed past it now and then. At 2.625 MHz it has
+/// 256 cycles.
 pub const SPI_HZ: u32 = 2_625_000;
 /// CPU cycles per SPI clock period: 84 MHz / 2.625 MHz.
 const SCK_CYCLES: u32 = 84_000_000 / SPI_HZ;
@@ -33,6 +37,9 @@ const SCK_CYCLES: u32 = 84_000_000 / SPI_HZ;
 /// both ends. (`asm::delay` is not used: its cycles per count depend on the flash wait
 /// states.)
 const STOP_AFTER_CYCLES: u32 = SCK_CYCLES + SCK_CYCLES / 2;
+/// The same stop, timed from the DMA's transfer-complete interrupt entry (see
+/// [`SensorBus::on_dma_complete`]).
+const DMA_STOP_AFTER_ENTRY_CYCLES: u32 = SCK_CYCLES / 2;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
 pub enum BusError {
@@ -47,25 +54,53 @@ pub struct SensorBus {
     spi: SPI2,
     /// Chip selects in `Sensor::ALL` order (PA8 LSM6DSL, PB12 LIS2MDL, PC13 LPS22HB), idle high.
     cs: [AnyPin<Output>; 3],
-    /// The burst being received byte by byte by the SPI2 interrupt, until taken.
+    /// DMA1: its stream 3, channel 0, is SPI2_RX (RM0368 table 27).
+    dma: DMA1,
+    /// The burst in flight, until taken.
     burst: Option<Burst>,
 }
 
 /// Bytes of the one burst read in flight: the IMU's accel + gyro block.
 pub const BURST_BYTES: usize = fcu_core::imu::registers::lsm6dsl::BURST_LEN;
 
-/// A burst read received by [`SensorBus::on_rx_not_empty`], one byte per interrupt.
+/// The DMA stream that receives SPI2's bytes.
+const RX_STREAM: usize = 3;
+
+/// The burst's first bytes, written by the DMA (the last one is read from DR once the clock
+/// has stopped). Atomics: the CPU reads what another bus master wrote, with no `unsafe`.
+static BURST_DMA: [AtomicU8; BURST_BYTES - 1] = [const { AtomicU8::new(0) }; BURST_BYTES - 1];
+
+/// Set once the transfer-complete interrupt has stopped the clock: the control tick polls
+/// this without taking the bus, whose lock would mask that very interrupt and could push it
+/// past the end-of-read window.
+static LAST_BYTE_STARTED: AtomicBool = AtomicBool::new(false);
+
+/// Whether the burst in flight is down to its last byte (see [`SensorBus::take_burst`]).
+pub fn last_byte_started() -> bool {
+    LAST_BYTE_STARTED.load(Ordering::Acquire)
+}
+
+/// A burst read: all but its last byte go to memory by DMA, with no interrupt per byte; the
+/// stream's transfer-complete interrupt stops the clock during the last byte.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// The DMA is moving the first bytes.
+    Streaming,
+    /// The clock stops after the byte in flight, the last one.
+    LastByte,
+}
+
 struct Burst {
     sensor: Sensor,
-    bytes: [u8; BURST_BYTES],
-    received: usize,
+    stage: Stage,
 }
 
 impl SensorBus {
     /// Takes SPI2 already set up by `Spi::new_bidi` (mode 3, ~2.6 MHz, bidirectional,
-    /// transmitting) and the three chip-select outputs, which must already be high.
-    pub fn new(spi: SPI2, cs: [AnyPin<Output>; 3]) -> Self {
-        SensorBus { spi, cs, burst: None }
+    /// transmitting), DMA1 with its clock on, and the three chip-select outputs, which must
+    /// already be high.
+    pub fn new(spi: SPI2, cs: [AnyPin<Output>; 3], dma: DMA1) -> Self {
+        SensorBus { spi, cs, dma, burst: None }
     }
 
     fn cs_index(sensor: Sensor) -> usize {
@@ -175,9 +210,10 @@ impl SensorBus {
         idle
     }
 
-    /// Starts a burst read of [`BURST_BYTES`] from `addr` that the SPI2 interrupt receives
-    /// ([`SensorBus::on_rx_not_empty`]), so nothing polls the bus with interrupts masked. A
-    /// burst still in flight (its waiter gave up without abandoning it) is abandoned first.
+    /// Starts a burst read of [`BURST_BYTES`] from `addr`: the address goes out, then SPI2
+    /// clocks the bytes in and DMA1 stream 3 moves all but the last to memory, so nothing
+    /// polls the bus or takes an interrupt per byte. A burst still in flight (its waiter gave
+    /// up without abandoning it) is abandoned first.
     pub fn start_burst(&mut self, sensor: Sensor, addr: u8) -> Result<(), BusError> {
         if self.burst.is_some() {
             self.abandon_burst();
@@ -196,55 +232,84 @@ impl SensorBus {
         let _status = self.spi.sr().read().bits();
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
-        self.spi.cr2().modify(|_, w| w.rxneie().set_bit());
-        self.burst = Some(Burst { sensor, bytes: [0; BURST_BYTES], received: 0 });
+        // ST's stream configuration procedure (RM0368 §9.3.18): stream off, its flags
+        // cleared, addresses, count, then the configuration and EN.
+        let stream = self.dma.st(RX_STREAM);
+        stream.cr().write(|w| w.en().clear_bit());
+        self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
+        let dr = self.spi.dr().as_ptr() as u32;
+        let memory = BURST_DMA.as_ptr() as u32;
+        // SAFETY: the stream reads SPI2's data register and writes BURST_DMA, a static of
+        // exactly NDTR bytes that only this module reads; nothing else is given to it.
+        unsafe {
+            stream.par().write(|w| w.pa().bits(dr));
+            stream.m0ar().write(|w| w.m0a().bits(memory));
+        }
+        stream.ndtr().write(|w| w.ndt().set((BURST_BYTES - 1) as u16));
+        stream.cr().write(|w| w.chsel().set(0).dir().peripheral_to_memory().minc().set_bit().tcie().set_bit().pl().high());
+        stream.cr().modify(|_, w| w.en().set_bit());
+        self.spi.cr2().modify(|_, w| w.rxdmaen().set_bit());
+        self.burst = Some(Burst { sensor, stage: Stage::Streaming });
+        LAST_BYTE_STARTED.store(false, Ordering::Release);
         // Setting SPE in 1-line receive mode starts the clock.
         self.spi.cr1().modify(|_, w| w.spe().set_bit());
         Ok(())
     }
 
-    /// The SPI2 receive interrupt: takes one byte of the burst. Runs at the highest priority,
-    /// so the end-of-read window (see [`STOP_AFTER_CYCLES`]) is met from its entry without
-    /// masking anything; kept short, as it delays the radio's capture interrupt. After the
-    /// last byte the burst waits, its sensor still selected with the clock stopped, for
-    /// [`SensorBus::take_burst`].
-    pub fn on_rx_not_empty(&mut self) {
+    /// The stream's transfer-complete interrupt: all but the last byte are in memory, and the
+    /// last one started with the RXNE the DMA just served, so the clock is stopped during it
+    /// (the end-of-read window, see [`STOP_AFTER_CYCLES`], met from this entry at the
+    /// highest priority). The last byte then waits in DR for [`SensorBus::take_burst`].
+    pub fn on_dma_complete(&mut self) {
         let seen = cortex_m::peripheral::DWT::cycle_count();
-        let byte = self.spi.dr().read().dr().bits() as u8;
-        let Some(burst) = self.burst.as_mut() else {
-            // A byte clocked past a burst's end: nothing waits for it.
+        self.dma.lifcr().write(|w| w.ctcif3().clear().chtif3().clear());
+        let Some(burst) = self.burst.as_mut().filter(|b| b.stage == Stage::Streaming) else {
             return;
         };
-        if let Some(slot) = burst.bytes.get_mut(burst.received) {
-            *slot = byte;
-        }
-        burst.received += 1;
-        if burst.received + 1 == BURST_BYTES {
-            // The last byte started with this RXNE: stop the clock during it.
-            while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(seen) < STOP_AFTER_CYCLES {}
-            self.spi.cr1().modify(|_, w| w.spe().clear_bit());
-        } else if burst.received == BURST_BYTES {
-            self.spi.cr2().modify(|_, w| w.rxneie().clear_bit());
-        }
-    }
-
-    /// The burst the interrupt finished (once), its sensor deselected; `None` while it runs.
-    pub fn take_burst(&mut self) -> Option<Result<[u8; BURST_BYTES], BusError>> {
-        let done = self.burst.as_ref().filter(|b| b.received >= BURST_BYTES)?;
-        let (sensor, bytes) = (done.sensor, done.bytes);
-        self.burst = None;
-        let overrun = self.spi.sr().read().ovr().bit_is_set();
-        self.select(sensor, false);
-        Some(if overrun { Err(BusError::Overrun) } else { Ok(bytes) })
-    }
-
-    /// Stops a burst that did not finish: clock off, sensor deselected, bus back to transmit.
-    pub fn abandon_burst(&mut self) {
+        // The window opens one SCK period (32 cycles) after the last RXNE the DMA served:
+        // this entry comes at least 12 cycles after the transfer-complete flag, which follows
+        // the DMA's read of that byte, and half a period more makes sure. The window closes
+        // 256 cycles after that RXNE: nothing more is waited for here.
+        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(seen) < DMA_STOP_AFTER_ENTRY_CYCLES {}
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
-        self.spi.cr2().modify(|_, w| w.rxneie().clear_bit());
+        self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
+        burst.stage = Stage::LastByte;
+        LAST_BYTE_STARTED.store(true, Ordering::Release);
+    }
+
+    /// The burst once its last byte is in (once), its sensor deselected; `None` while it runs.
+    pub fn take_burst(&mut self) -> Option<Result<[u8; BURST_BYTES], BusError>> {
+        let sensor = self.burst.as_ref().filter(|b| b.stage == Stage::LastByte)?.sensor;
+        let sr = self.spi.sr().read();
+        if sr.rxne().bit_is_clear() {
+            return None;
+        }
+        let last = self.spi.dr().read().dr().bits() as u8;
+        self.burst = None;
+        self.select(sensor, false);
+        if sr.ovr().bit_is_set() {
+            return Some(Err(BusError::Overrun));
+        }
+        // What the DMA wrote is complete before its flag rose and this read saw the last byte.
+        fence(Ordering::Acquire);
+        let mut bytes = [last; BURST_BYTES];
+        for (b, slot) in bytes.iter_mut().zip(BURST_DMA.iter()) {
+            *b = slot.load(Ordering::Relaxed);
+        }
+        Some(Ok(bytes))
+    }
+
+    /// Stops a burst that did not finish: stream off, clock off, sensor deselected, bus back
+    /// to transmit.
+    pub fn abandon_burst(&mut self) {
+        self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().clear_bit());
+        self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
         if let Some(b) = self.burst.take() {
             self.select(b.sensor, false);
         }
+        LAST_BYTE_STARTED.store(false, Ordering::Release);
         let _turned = self.back_to_tx();
         let _stale = self.spi.dr().read().bits();
         let _status = self.spi.sr().read().bits();

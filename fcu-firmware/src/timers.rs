@@ -84,6 +84,22 @@ impl RcCapture {
     /// back on, dropping what it captured meanwhile. Runs in the capture interrupt, which
     /// outranks the control tick: short and straight.
     pub fn take_edges(&mut self, mut sink: impl FnMut(CaptureEdge)) -> u32 {
+        let mut muted = 0;
+        // A second look before returning: an edge captured while the first was handled (the
+        // next channel's, in a receiver's frame) is read now rather than after a return and
+        // a new entry.
+        for _ in 0..2 {
+            let (found, newly_muted) = self.take_pending(&mut sink);
+            muted += newly_muted;
+            if !found {
+                break;
+            }
+        }
+        muted
+    }
+
+    /// One look at the capture flags: (whether any edge was taken, channels muted).
+    fn take_pending(&mut self, sink: &mut impl FnMut(CaptureEdge)) -> (bool, u32) {
         let mut sr = self.tim.sr().read();
         if sr.uif().bit_is_set() {
             self.reopen_window();
@@ -91,13 +107,17 @@ impl RcCapture {
             sr = self.tim.sr().read();
         }
         let enabled = self.capture_interrupts();
+        let mut found = false;
         let mut muting = false;
         let mut muted = 0;
-        for channel in 0..CHANNELS {
-            if !(enabled[channel] && sr.ccif(channel as u8).bit_is_set()) {
+        for (channel, (&on, ccr)) in enabled.iter().zip(self.tim.ccr_iter()).enumerate() {
+            // CCxIF is SR bit x (bits 1..4), tested on the raw word: the indexed accessor
+            // carries a bounds check.
+            if !(on && sr.bits() & (1 << (channel + 1)) != 0) {
                 continue;
             }
-            let capture_counts = self.tim.ccr(channel).read().ccr().bits() as u16;
+            found = true;
+            let capture_counts = ccr.read().ccr().bits() as u16;
             let level_high = match channel {
                 0 => self.pins.0.is_high(),
                 1 => self.pins.1.is_high(),
@@ -122,7 +142,7 @@ impl RcCapture {
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
-        muted
+        (found, muted)
     }
 
     /// A new capture wrap: every channel gets its budget back. A channel that was muted
@@ -190,8 +210,8 @@ impl Motors {
 }
 
 /// How long before each control tick the IMU burst starts: the burst takes about 41 µs
-/// (address and 12 bytes at 2.625 MHz, with its interrupts), so its sample is in when the
-/// tick starts, about 19 µs old, and the tick goes straight to the control law.
+/// (address and 12 bytes at 2.625 MHz, then the end-of-read interrupt), so its sample is in
+/// when the tick starts, about 19 µs old, and the tick goes straight to the control law.
 pub const SENSOR_READ_LEAD_CYCLES: u32 = 60 * 84;
 
 /// What a TIM9 interrupt is for.

@@ -31,7 +31,7 @@
 use std::collections::VecDeque;
 
 use crate::machine::{Peripherals, SYSMEM_PAGE};
-use crate::periph::{self, adc, dbgmcu, flash, gpio, iwdg, pwr, rcc, spi, tim, usart, Time, Unmodelled};
+use crate::periph::{self, adc, dbgmcu, dma, flash, gpio, iwdg, pwr, rcc, spi, tim, usart, Time, Unmodelled};
 
 /// A chip-select or LED pin: (port index 0 = A, pin).
 const CS_PINS: [(usize, u8); 3] = [(0, 8), (1, 12), (2, 13)];
@@ -88,7 +88,7 @@ pub struct Records {
 /// A peripheral register's name for reports: `IWDG.SR`, `SPI2.SR`, `RCC.CR`, or the
 /// peripheral and offset (`TIM2+0x010`).
 pub fn register_name(addr: u32) -> String {
-    const PERIPHERALS: [(u32, &str, &[&str]); 14] = [
+    const PERIPHERALS: [(u32, &str, &[&str]); 15] = [
         (0x4000_0000, "TIM2", &[]),
         (0x4000_0800, "TIM4", &[]),
         (0x4000_3000, "IWDG", &["KR", "PR", "RLR", "SR"]),
@@ -102,6 +102,7 @@ pub fn register_name(addr: u32) -> String {
         (0x4002_0800, "GPIOC", &[]),
         (0x4002_3800, "RCC", &["CR", "PLLCFGR", "CFGR", "CIR"]),
         (0x4002_3C00, "FLASH", &["ACR", "KEYR", "OPTKEYR", "SR", "CR"]),
+        (0x4002_6000, "DMA1", &["LISR", "HISR", "LIFCR", "HIFCR"]),
         (0xE004_2000, "DBGMCU", &["IDCODE", "CR", "APB1_FZ", "APB2_FZ"]),
     ];
     // RCC's registers past CIR are named only where a report needs them.
@@ -129,6 +130,7 @@ pub struct Board {
     pub spi2: spi::Spi2,
     pub usart1: usart::Usart,
     pub iwdg: iwdg::Iwdg,
+    pub dma1: dma::Dma,
     pub adc: adc::Adc,
     pub dbgmcu: dbgmcu::Dbgmcu,
     /// Radio edges still to happen: (time, channel, level after the edge).
@@ -162,6 +164,7 @@ impl Board {
             spi2: spi::Spi2::new(),
             usart1: usart::Usart::new(),
             iwdg: iwdg::Iwdg::new(),
+            dma1: dma::Dma::new(),
             adc: adc::Adc::new(),
             dbgmcu: dbgmcu::Dbgmcu::new(),
             edges: VecDeque::new(),
@@ -370,6 +373,11 @@ impl Board {
                 Op::Read => self.rcc.read(offset, now),
                 Op::Write(v) => self.rcc.write(offset, v, now).map(|()| 0),
             },
+            0x4002_6000 => {
+                let v = dev!("DMA1", Ahb1, 21, self.dma1)?;
+                self.serve_dma(now);
+                Ok(v)
+            }
             0x4002_3C00 => match op {
                 Op::Read => self.flash.read(offset, now),
                 Op::Write(v) => self.flash.write(offset, v, now).map(|()| 0),
@@ -400,10 +408,21 @@ impl Board {
         Ok(())
     }
 
+    /// SPI2's received bytes that DMA1 stream 3 took go to memory, and SPI2 learns how many
+    /// more the stream takes.
+    fn serve_dma(&mut self, now: Time) {
+        let _ = now;
+        for byte in self.spi2.take_dma_bytes() {
+            self.dma1.spi2_rx(byte);
+        }
+        self.spi2.set_dma_budget(self.dma1.spi2_rx_capacity());
+    }
+
     fn after_access(&mut self, now: Time) -> Result<(), Unmodelled> {
         for r in self.rcc.take_reset_pulses() {
             self.reset_peripheral(r);
         }
+        self.serve_dma(now);
         self.forward_pins(now);
         let tim9_running = self.tim9.started_at().is_some();
         if tim9_running && !self.tim9_was_running {
@@ -431,6 +450,7 @@ impl Board {
             (Apb2, 4) => self.usart1.reset_registers(),
             (Apb2, 8) => self.adc.reset_registers(),
             (Apb2, 16) => self.tim9 = tim::Timer::new(tim::TimerKind::Tim9),
+            (Ahb1, 21) => self.dma1 = dma::Dma::new(),
             _ => {}
         }
     }
@@ -500,6 +520,7 @@ impl Peripherals for Board {
         self.tim4.advance(now);
         self.tim9.advance(now);
         self.spi2.advance(now, clocks);
+        self.serve_dma(now);
         self.collect_uart(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         self.iwdg.advance(now);
@@ -510,7 +531,12 @@ impl Peripherals for Board {
         lines(periph::irq::SPI2, self.spi2.irq_line());
         lines(periph::irq::USART1, self.usart1.irq_line());
         lines(periph::irq::ADC, self.adc.irq_line());
+        lines(periph::irq::DMA1_STREAM3, self.dma1.irq_line(dma::SPI2_RX_STREAM));
         Ok(self.iwdg.expired(now))
+    }
+
+    fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
+        self.dma1.take_memory_writes()
     }
 
     fn units_per_cycle(&self) -> Result<u64, Unmodelled> {

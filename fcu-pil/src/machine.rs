@@ -59,6 +59,11 @@ pub trait Peripherals {
     fn system_reset(&mut self, watchdog: bool);
     /// The bytes of the factory system-memory page at [`SYSMEM_PAGE`] (4 KiB).
     fn system_memory_page(&self) -> Vec<u8>;
+    /// Bytes a bus master other than the core (DMA) wrote to memory since the last call:
+    /// (address, byte), in order. The machine stores them in the guest's RAM.
+    fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
+        Vec::new()
+    }
 }
 
 /// Why a run ended early.
@@ -772,6 +777,11 @@ impl<P: Peripherals + 'static> Machine<P> {
         for (irq, level) in lines {
             st.scs.sample_line(irq, level);
         }
+        let writes = st.board.take_memory_writes();
+        for (addr, byte) in writes {
+            self.uc.mem_write(u64::from(addr), &[byte]).map_err(emu)?;
+        }
+        let st = self.uc.get_data_mut();
         match st.board.units_per_cycle() {
             Ok(u) if u != st.units_per_cycle => {
                 st.units_per_cycle = u;
@@ -1050,7 +1060,10 @@ fn mmio_read<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u3
         st.board.read(addr, size, now)
     };
     match result {
-        Ok(v) => u64::from(v),
+        Ok(v) => {
+            store_memory_writes(uc);
+            u64::from(v)
+        }
         Err(e) => {
             fail(uc, e);
             0
@@ -1064,6 +1077,14 @@ fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
     let now = st.now;
     if let Some(t) = [st.board.next_event(), st.scs.next_event(now)].into_iter().flatten().filter(|&t| t > now).min() {
         st.deadline = st.deadline.min(t);
+    }
+}
+
+/// Stores in RAM what DMA wrote during a peripheral access.
+fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) {
+    let writes = uc.get_data_mut().board.take_memory_writes();
+    for (addr, byte) in writes {
+        let _ = uc.mem_write(u64::from(addr), &[byte]);
     }
 }
 
@@ -1111,6 +1132,7 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
                 }
                 Err(e) => fail(uc, e),
             }
+            store_memory_writes(uc);
         }
         Err(e) => fail(uc, e),
     }

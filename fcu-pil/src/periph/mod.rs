@@ -15,6 +15,7 @@
 
 pub mod adc;
 pub mod dbgmcu;
+pub mod dma;
 pub mod flash;
 pub mod gpio;
 pub mod iwdg;
@@ -118,4 +119,5 @@ pub mod irq {
     pub const SPI2: u32 = 36;
     pub const USART1: u32 = 37;
     pub const ADC: u32 = 18;
+    pub const DMA1_STREAM3: u32 = 14;
 }

@@ -44,7 +44,9 @@
 //! - Changing CPOL, CPHA, MSTR, BR, LSBFIRST or BIDIMODE while a frame is in flight is refused
 //!   (RM: "should not be changed when communication is ongoing").
 //! - DFF = 1, CRC (CRCEN/CRCNEXT), TI frame format (FRF), slave mode, hardware NSS input and I²S
-//!   mode are not modelled. DMA enables are stored only: no DMA request is ever served.
+//!   mode are not modelled. RXDMAEN hands each received byte to the DMA stream the board says is
+//!   ready for it ([`Spi2::set_dma_budget`]), as the request is served at once; TXDMAEN is
+//!   stored only (no transmit request is ever served).
 
 use super::sensors::{Sensors, UNDRIVEN};
 use super::{Clocks, Time, Unmodelled, TIME_HZ};
@@ -157,6 +159,9 @@ pub struct Spi2 {
     i2c_exposures: [u32; 3],
     overruns: u32,
     early_stops: u32,
+    /// Bytes the DMA may still take, and the ones it took not yet handed over.
+    dma_budget: u32,
+    dma_bytes: Vec<u8>,
     cut_frames: u32,
     mode_errors: u32,
     truncated_writes: u32,
@@ -203,6 +208,8 @@ impl Spi2 {
             i2c_exposures: [0; 3],
             overruns: 0,
             early_stops: 0,
+            dma_budget: 0,
+            dma_bytes: Vec::new(),
             cut_frames: 0,
             mode_errors: 0,
             truncated_writes: 0,
@@ -353,6 +360,13 @@ impl Spi2 {
     }
 
     fn push_rx(&mut self, v: u8) {
+        if self.cr2 & CR2_RXDMAEN != 0 && self.dma_budget > 0 && !self.rxne {
+            // RXNE raises a DMA request (RM0368 §20.3.9, "SPI communication using DMA"): the
+            // stream reads DR at once, so RXNE never shows.
+            self.dma_budget -= 1;
+            self.dma_bytes.push(v);
+            return;
+        }
         if self.rxne || self.ovr {
             self.ovr = true;
             self.overruns += 1;
@@ -465,10 +479,22 @@ impl Spi2 {
     /// The end of the frame in flight, when an interrupt is enabled (the line can only change
     /// by itself at a frame's end).
     pub fn next_event(&self) -> Option<Time> {
-        if self.cr2 & (CR2_RXNEIE | CR2_TXEIE | CR2_ERRIE) == 0 {
+        let dma = self.cr2 & CR2_RXDMAEN != 0 && self.dma_budget > 0;
+        if self.cr2 & (CR2_RXNEIE | CR2_TXEIE | CR2_ERRIE) == 0 && !dma {
             return None;
         }
         self.frame.map(|f| f.end)
+    }
+
+    /// How many received bytes a DMA stream takes from now on (its NDTR, 0 when none is
+    /// enabled for SPI2_RX); the board keeps it current.
+    pub fn set_dma_budget(&mut self, bytes: u32) {
+        self.dma_budget = bytes;
+    }
+
+    /// The received bytes the DMA took since the last call, in order.
+    pub fn take_dma_bytes(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.dma_bytes)
     }
 
     fn sr_value(&self) -> u32 {

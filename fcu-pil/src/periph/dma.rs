@@ -1,0 +1,388 @@
+//! DMA1 (0x4002_6000, AHB1, RM0368 §9) as the board uses it: stream 3, channel 0, SPI2_RX
+//! (RM0368 table 27, DMA1 request mapping), peripheral to memory, byte by byte, into SRAM.
+//!
+//! Register layout from the `stm32f4` PAC (`dma2`): LISR 0x00, HISR 0x04 (read-only flags),
+//! LIFCR 0x08, HIFCR 0x0C (write 1 to clear), then per stream x at 0x10 + 0x18·x: SxCR, SxNDTR,
+//! SxPAR, SxM0AR, SxM1AR, SxFCR (reset 0x0000_0021). The flags of streams 0/4, 1/5, 2/6, 3/7
+//! sit at bits 0, 6, 16 and 22 of their register: FEIF, (reserved), DMEIF, TEIF, HTIF, TCIF.
+//!
+//! Behaviour (RM0368 §9.3 and §9.5):
+//! - a stream's configuration (SxCR but EN, SxNDTR, SxPAR, SxM0AR, SxFCR) can be written only
+//!   while EN = 0; a write while it is 1 is ignored (counted in [`Dma::ignored_writes`]);
+//! - before EN is set, the stream's event flags must have been cleared (§9.3.18 "Stream
+//!   configuration procedure", step 9 and the SxCR EN description): setting EN with a flag still
+//!   up is refused here (the RM does not say what the stream then does);
+//! - each request from the peripheral moves one data item; SxNDTR counts down; at 0 the
+//!   transfer is complete: TCIF set, EN cleared (not circular); HTIF at the half;
+//! - EN cleared by software during a transfer stops the stream and sets TCIF (SxCR EN: "when
+//!   cleared by software … the transfer complete flag is set").
+//!
+//! Modelled: stream 3, channel 0 (SPI2_RX), peripheral to memory, PSIZE = MSIZE = byte, direct
+//! mode (FCR.DMDIS = 0), no circular or double-buffer mode, single transfers, the memory in
+//! SRAM with or without increment, the peripheral address fixed at SPI2's DR. Any other stream
+//! or setting is refused when EN is set (an [`Unmodelled`] error names it), so a wrong set-up
+//! cannot pass as a transfer. Memory writes are handed to the machine, which stores them in the
+//! guest's RAM.
+
+use super::{Time, Unmodelled};
+
+pub const BASE: u32 = 0x4002_6000;
+const NAME: &str = "DMA1";
+
+const LISR: u32 = 0x00;
+const HISR: u32 = 0x04;
+const LIFCR: u32 = 0x08;
+const HIFCR: u32 = 0x0C;
+const STREAM0: u32 = 0x10;
+const STREAM_STRIDE: u32 = 0x18;
+
+// SxCR fields.
+pub const CR_EN: u32 = 1 << 0;
+pub const CR_TEIE: u32 = 1 << 2;
+pub const CR_HTIE: u32 = 1 << 3;
+pub const CR_TCIE: u32 = 1 << 4;
+pub const CR_DMEIE: u32 = 1 << 1;
+const CR_PFCTRL: u32 = 1 << 5;
+const CR_DIR: u32 = 0b11 << 6;
+const CR_CIRC: u32 = 1 << 8;
+const CR_PINC: u32 = 1 << 9;
+pub const CR_MINC: u32 = 1 << 10;
+const CR_PSIZE: u32 = 0b11 << 11;
+const CR_MSIZE: u32 = 0b11 << 13;
+const CR_DBM: u32 = 1 << 18;
+const CR_BURSTS: u32 = (0b11 << 21) | (0b11 << 23);
+const CR_CHSEL: u32 = 0b111 << 25;
+/// Every SxCR field (bits 27:0 less reserved bit 20).
+const CR_FIELDS: u32 = 0x0FEF_FFFF;
+const FCR_RESET: u32 = 0x21;
+const FCR_DMDIS: u32 = 1 << 2;
+
+// Flags of a stream, shifted to its position.
+pub const FLAG_FEIF: u32 = 1 << 0;
+pub const FLAG_DMEIF: u32 = 1 << 2;
+pub const FLAG_TEIF: u32 = 1 << 3;
+pub const FLAG_HTIF: u32 = 1 << 4;
+pub const FLAG_TCIF: u32 = 1 << 5;
+const FLAGS: u32 = 0b11_1101;
+
+/// The stream and channel of SPI2_RX.
+pub const SPI2_RX_STREAM: usize = 3;
+const SPI2_RX_CHANNEL: u32 = 0;
+/// SPI2's data register, the only peripheral address modelled.
+pub const SPI2_DR: u32 = 0x4000_380C;
+
+/// Where a stream's flags sit in LISR/HISR: (high register, bit shift).
+fn flag_position(stream: usize) -> (bool, u32) {
+    let shift = [0, 6, 16, 22][stream % 4];
+    (stream >= 4, shift)
+}
+
+#[derive(Clone, Debug, Default)]
+struct Stream {
+    cr: u32,
+    ndtr: u32,
+    par: u32,
+    m0ar: u32,
+    m1ar: u32,
+    fcr: u32,
+    flags: u32,
+    /// Items moved since EN was set (the memory offset with MINC).
+    moved: u32,
+    /// NDTR when EN was set (for the half-transfer flag).
+    started_with: u32,
+}
+
+/// The DMA1 model.
+#[derive(Clone, Debug)]
+pub struct Dma {
+    streams: [Stream; 8],
+    writes: Vec<(u32, u8)>,
+    ignored_writes: u32,
+}
+
+impl Default for Dma {
+    fn default() -> Self {
+        Dma::new()
+    }
+}
+
+impl Dma {
+    pub fn new() -> Dma {
+        let mut d = Dma { streams: Default::default(), writes: Vec::new(), ignored_writes: 0 };
+        for s in &mut d.streams {
+            s.fcr = FCR_RESET;
+        }
+        d
+    }
+
+    /// Configuration writes ignored because their stream was enabled.
+    pub fn ignored_writes(&self) -> u32 {
+        self.ignored_writes
+    }
+
+    /// The memory writes of the transfers since the last call: (address, byte).
+    pub fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
+        std::mem::take(&mut self.writes)
+    }
+
+    /// How many more SPI2_RX requests stream 3 serves now (0 unless it is enabled for them).
+    pub fn spi2_rx_capacity(&self) -> u32 {
+        let s = &self.streams[SPI2_RX_STREAM];
+        if s.cr & CR_EN != 0 && (s.cr & CR_CHSEL) >> 25 == SPI2_RX_CHANNEL {
+            s.ndtr
+        } else {
+            0
+        }
+    }
+
+    /// One SPI2_RX request served: the byte read from SPI2's DR goes to memory.
+    pub fn spi2_rx(&mut self, byte: u8) {
+        let s = &mut self.streams[SPI2_RX_STREAM];
+        if s.cr & CR_EN == 0 || s.ndtr == 0 {
+            return;
+        }
+        let offset = if s.cr & CR_MINC != 0 { s.moved } else { 0 };
+        self.writes.push((s.m0ar.wrapping_add(offset), byte));
+        s.moved += 1;
+        s.ndtr -= 1;
+        if s.started_with >= 2 && s.ndtr == s.started_with / 2 {
+            s.flags |= FLAG_HTIF;
+        }
+        if s.ndtr == 0 {
+            s.flags |= FLAG_TCIF;
+            s.cr &= !CR_EN;
+        }
+    }
+
+    /// The interrupt line of stream `stream`: a flag up with its enable.
+    pub fn irq_line(&self, stream: usize) -> bool {
+        let s = &self.streams[stream % 8];
+        (s.flags & FLAG_TCIF != 0 && s.cr & CR_TCIE != 0)
+            || (s.flags & FLAG_HTIF != 0 && s.cr & CR_HTIE != 0)
+            || (s.flags & FLAG_TEIF != 0 && s.cr & CR_TEIE != 0)
+            || (s.flags & FLAG_DMEIF != 0 && s.cr & CR_DMEIE != 0)
+    }
+
+    fn flags_register(&self, high: bool) -> u32 {
+        (0..4).fold(0, |acc, i| {
+            let stream = if high { i + 4 } else { i };
+            acc | (self.streams[stream].flags << flag_position(stream).1)
+        })
+    }
+
+    pub fn read(&mut self, offset: u32, _now: Time) -> Result<u32, Unmodelled> {
+        match offset {
+            LISR => Ok(self.flags_register(false)),
+            HISR => Ok(self.flags_register(true)),
+            LIFCR | HIFCR => Ok(0),
+            _ => {
+                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(NAME, offset, false))?;
+                let s = &self.streams[stream];
+                Ok(match reg {
+                    0x00 => s.cr,
+                    0x04 => s.ndtr,
+                    0x08 => s.par,
+                    0x0C => s.m0ar,
+                    0x10 => s.m1ar,
+                    _ => s.fcr,
+                })
+            }
+        }
+    }
+
+    pub fn write(&mut self, offset: u32, value: u32, _now: Time) -> Result<(), Unmodelled> {
+        match offset {
+            LISR | HISR => Ok(()),
+            LIFCR | HIFCR => {
+                for i in 0..4 {
+                    let stream = if offset == HIFCR { i + 4 } else { i };
+                    let shift = flag_position(stream).1;
+                    self.streams[stream].flags &= !((value >> shift) & FLAGS);
+                }
+                Ok(())
+            }
+            _ => {
+                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(NAME, offset, true))?;
+                if reg == 0x00 {
+                    return self.write_cr(stream, value);
+                }
+                let s = &mut self.streams[stream];
+                if s.cr & CR_EN != 0 {
+                    self.ignored_writes += 1;
+                    return Ok(());
+                }
+                match reg {
+                    0x04 => s.ndtr = value & 0xFFFF,
+                    0x08 => s.par = value,
+                    0x0C => s.m0ar = value,
+                    0x10 => s.m1ar = value,
+                    _ => {
+                        Unmodelled::check_bits(&format!("DMA1.S{stream}FCR"), value, 0xBF)?;
+                        s.fcr = value & 0xBF;
+                    }
+                }
+                Ok(())
+            }
+        }
+    }
+
+    fn write_cr(&mut self, stream: usize, value: u32) -> Result<(), Unmodelled> {
+        let name = format!("DMA1.S{stream}CR");
+        Unmodelled::check_bits(&name, value, CR_FIELDS)?;
+        let s = &mut self.streams[stream];
+        if s.cr & CR_EN != 0 {
+            // Enabled: only EN can change; clearing it stops the stream (TCIF set).
+            if value & CR_EN == 0 {
+                s.cr &= !CR_EN;
+                s.flags |= FLAG_TCIF;
+            } else if value != s.cr {
+                self.ignored_writes += 1;
+            }
+            return Ok(());
+        }
+        if value & CR_EN == 0 {
+            s.cr = value;
+            return Ok(());
+        }
+        if s.flags != 0 {
+            return Err(Unmodelled::new(
+                name,
+                format!("EN set with the stream's event flags {:#04x} still up (RM0368 §9.3.18: clear them first)", s.flags),
+            ));
+        }
+        let unsupported = [
+            (stream != SPI2_RX_STREAM, "a stream other than 3 (SPI2_RX)"),
+            ((value & CR_CHSEL) >> 25 != SPI2_RX_CHANNEL, "a channel other than 0 on stream 3"),
+            (value & CR_DIR != 0, "a direction other than peripheral to memory"),
+            (value & (CR_PSIZE | CR_MSIZE) != 0, "a data size other than a byte"),
+            (
+                value & (CR_PFCTRL | CR_CIRC | CR_DBM | CR_BURSTS | CR_PINC) != 0,
+                "flow control, circular, double-buffer, bursts or a peripheral increment",
+            ),
+            (s.fcr & FCR_DMDIS != 0, "FIFO mode (FCR.DMDIS = 1)"),
+            (s.par != SPI2_DR, "a peripheral address other than SPI2's DR"),
+            (s.ndtr == 0, "NDTR = 0"),
+        ];
+        if let Some((_, what)) = unsupported.iter().find(|(bad, _)| *bad) {
+            return Err(Unmodelled::new(name, format!("EN set for {what}: not modelled")));
+        }
+        let m0ar = s.m0ar;
+        let span = if value & CR_MINC != 0 { s.ndtr } else { 1 };
+        let in_sram = (0x2000_0000..0x2001_0000).contains(&m0ar) && m0ar.checked_add(span).is_some_and(|end| end <= 0x2001_0000);
+        if !in_sram {
+            return Err(Unmodelled::new(name, format!("EN set with M0AR {m0ar:#010x} for {span} bytes outside SRAM: not modelled")));
+        }
+        s.cr = value;
+        s.moved = 0;
+        s.started_with = s.ndtr;
+        Ok(())
+    }
+}
+
+/// (stream, register offset within the stream) of a register offset.
+fn stream_register(offset: u32) -> Option<(usize, u32)> {
+    let rel = offset.checked_sub(STREAM0)?;
+    let stream = (rel / STREAM_STRIDE) as usize;
+    (stream < 8 && offset % 4 == 0).then_some((stream, rel % STREAM_STRIDE))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S3: u32 = STREAM0 + 3 * STREAM_STRIDE;
+    const BUF: u32 = 0x2000_1000;
+
+    /// ST's stream configuration procedure (RM0368 §9.3.18) for SPI2_RX into `BUF`.
+    fn configure(d: &mut Dma, n: u32) {
+        d.write(S3, 0, 0).unwrap();
+        d.write(LIFCR, 0b11_1101 << 22, 0).unwrap();
+        d.write(S3 + 0x08, SPI2_DR, 0).unwrap();
+        d.write(S3 + 0x0C, BUF, 0).unwrap();
+        d.write(S3 + 0x04, n, 0).unwrap();
+        d.write(S3, CR_MINC | CR_TCIE | (0b10 << 16), 0).unwrap();
+        d.write(S3, CR_MINC | CR_TCIE | (0b10 << 16) | CR_EN, 0).unwrap();
+    }
+
+    #[test]
+    fn reset_values_and_the_flag_positions() {
+        let mut d = Dma::new();
+        assert_eq!(d.read(S3 + 0x14, 0), Ok(FCR_RESET));
+        assert_eq!(d.read(LISR, 0), Ok(0));
+        assert_eq!(flag_position(3), (false, 22));
+        assert_eq!(flag_position(7), (true, 22));
+        assert!(d.read(0x100, 0).is_err());
+    }
+
+    #[test]
+    fn a_transfer_moves_n_bytes_then_completes_and_disables_the_stream() {
+        let mut d = Dma::new();
+        configure(&mut d, 3);
+        assert_eq!(d.spi2_rx_capacity(), 3);
+        for b in [0xA1, 0xB2, 0xC3] {
+            d.spi2_rx(b);
+        }
+        assert_eq!(d.take_memory_writes(), vec![(BUF, 0xA1), (BUF + 1, 0xB2), (BUF + 2, 0xC3)]);
+        assert_eq!(d.read(LISR, 0).unwrap() >> 22 & FLAGS, FLAG_TCIF | FLAG_HTIF);
+        assert_eq!(d.read(S3, 0).unwrap() & CR_EN, 0, "EN cleared at the end");
+        assert!(d.irq_line(3));
+        assert_eq!(d.spi2_rx_capacity(), 0, "the next byte stays in SPI2's DR");
+        d.write(LIFCR, FLAG_TCIF << 22, 0).unwrap();
+        assert!(!d.irq_line(3));
+    }
+
+    /// Rule (RM0368 §9.3.18): the stream's flags must be cleared before EN is set again.
+    #[test]
+    fn enabling_with_the_last_transfers_flags_up_is_refused() {
+        let mut d = Dma::new();
+        configure(&mut d, 1);
+        d.spi2_rx(1);
+        assert!(d.write(S3, CR_MINC | CR_TCIE | CR_EN, 0).is_err());
+    }
+
+    /// Rule (SxCR, SxNDTR, SxMxAR: writable only while EN = 0): a write to a running stream's
+    /// configuration is ignored.
+    #[test]
+    fn configuration_written_while_enabled_is_ignored() {
+        let mut d = Dma::new();
+        configure(&mut d, 4);
+        d.write(S3 + 0x04, 100, 0).unwrap();
+        d.write(S3 + 0x0C, 0x2000_2000, 0).unwrap();
+        assert_eq!(d.read(S3 + 0x04, 0), Ok(4));
+        assert_eq!(d.ignored_writes(), 2);
+    }
+
+    /// Rule (SxCR EN): cleared by software mid-transfer, the stream stops with TCIF set.
+    #[test]
+    fn disabling_mid_transfer_stops_with_tcif() {
+        let mut d = Dma::new();
+        configure(&mut d, 4);
+        d.spi2_rx(1);
+        d.write(S3, CR_MINC | CR_TCIE, 0).unwrap();
+        assert_eq!(d.spi2_rx_capacity(), 0);
+        assert_eq!(d.read(LISR, 0).unwrap() >> 22 & FLAG_TCIF, FLAG_TCIF);
+        assert_eq!(d.read(S3 + 0x04, 0), Ok(3), "NDTR keeps what was left");
+    }
+
+    #[test]
+    fn what_is_not_modelled_is_refused_at_enable() {
+        for (stream_cr, value) in [
+            (STREAM0, CR_EN),           // stream 0
+            (S3, CR_EN | (1 << 25)),    // channel 1
+            (S3, CR_EN | (0b01 << 6)),  // memory to peripheral
+            (S3, CR_EN | (0b01 << 11)), // half-word peripheral
+            (S3, CR_EN | CR_CIRC),      // circular
+        ] {
+            let mut d = Dma::new();
+            d.write(S3 + 0x08, SPI2_DR, 0).unwrap();
+            d.write(S3 + 0x0C, BUF, 0).unwrap();
+            d.write(S3 + 0x04, 4, 0).unwrap();
+            assert!(d.write(stream_cr, value, 0).is_err(), "{value:#x}");
+        }
+        let mut d = Dma::new();
+        d.write(S3 + 0x08, SPI2_DR, 0).unwrap();
+        d.write(S3 + 0x0C, 0x0800_0000, 0).unwrap();
+        d.write(S3 + 0x04, 4, 0).unwrap();
+        assert!(d.write(S3, CR_EN | CR_MINC, 0).is_err(), "memory in flash");
+    }
+}
