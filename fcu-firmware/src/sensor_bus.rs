@@ -84,6 +84,8 @@ pub fn last_byte_started() -> bool {
 /// stream's transfer-complete interrupt stops the clock during the last byte.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Stage {
+    /// The address byte is shifting out.
+    Address,
     /// The DMA is moving the first bytes.
     Streaming,
     /// The clock stops after the byte in flight, the last one.
@@ -210,11 +212,14 @@ impl SensorBus {
         idle
     }
 
-    /// Starts a burst read of [`BURST_BYTES`] from `addr`: the address goes out, then SPI2
-    /// clocks the bytes in and DMA1 stream 3 moves all but the last to memory, so nothing
-    /// polls the bus or takes an interrupt per byte. A burst still in flight (its waiter gave
-    /// up without abandoning it) is abandoned first.
-    pub fn start_burst(&mut self, sensor: Sensor, addr: u8) -> Result<(), BusError> {
+    /// Starts a burst read of [`BURST_BYTES`] from `addr`, in two steps so that no lock is
+    /// held while the address byte shifts out (3 µs): this one selects the sensor, readies the
+    /// DMA stream and writes the address; once [`SensorBus::address_sent`],
+    /// [`SensorBus::receive_burst`] turns the line around and starts the clock. Then SPI2
+    /// clocks the bytes in and DMA1 stream 3 moves all but the last to memory, so nothing polls
+    /// the bus or takes an interrupt per byte. A burst still in flight (its waiter gave up
+    /// without abandoning it) is abandoned first.
+    pub fn send_burst_address(&mut self, sensor: Sensor, addr: u8) -> Result<(), BusError> {
         if self.burst.is_some() {
             self.abandon_burst();
         }
@@ -223,17 +228,9 @@ impl SensorBus {
             // having let go when it was deselected.
             self.back_to_tx()?;
         }
-        self.select(sensor, true);
-        if let Err(e) = self.send(read_address(addr)).and_then(|()| self.finish_tx()) {
-            self.select(sensor, false);
-            return Err(e);
-        }
-        let _stale = self.spi.dr().read().bits();
-        let _status = self.spi.sr().read().bits();
-        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
-        self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
         // ST's stream configuration procedure (RM0368 §9.3.18): stream off, its flags
-        // cleared, addresses, count, then the configuration and EN.
+        // cleared, addresses, count, then the configuration and EN. SPI2 asks for nothing
+        // until RXDMAEN.
         let stream = self.dma.st(RX_STREAM);
         stream.cr().write(|w| w.en().clear_bit());
         self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
@@ -248,9 +245,34 @@ impl SensorBus {
         stream.ndtr().write(|w| w.ndt().set((BURST_BYTES - 1) as u16));
         stream.cr().write(|w| w.chsel().set(0).dir().peripheral_to_memory().minc().set_bit().tcie().set_bit().pl().high());
         stream.cr().modify(|_, w| w.en().set_bit());
-        self.spi.cr2().modify(|_, w| w.rxdmaen().set_bit());
-        self.burst = Some(Burst { sensor, stage: Stage::Streaming });
+        self.select(sensor, true);
+        if let Err(e) = self.send(read_address(addr)) {
+            self.select(sensor, false);
+            self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().clear_bit());
+            return Err(e);
+        }
+        self.burst = Some(Burst { sensor, stage: Stage::Address });
         LAST_BYTE_STARTED.store(false, Ordering::Release);
+        Ok(())
+    }
+
+    /// Whether the burst's address byte has left the shift register.
+    pub fn address_sent(&self) -> bool {
+        let sr = self.spi.sr().read();
+        sr.txe().bit_is_set() && sr.bsy().bit_is_clear()
+    }
+
+    /// Turns the line around and starts the burst's clock (after [`SensorBus::address_sent`]).
+    pub fn receive_burst(&mut self) -> Result<(), BusError> {
+        let Some(burst) = self.burst.as_mut().filter(|b| b.stage == Stage::Address) else {
+            return Err(BusError::Timeout);
+        };
+        burst.stage = Stage::Streaming;
+        let _stale = self.spi.dr().read().bits();
+        let _status = self.spi.sr().read().bits();
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
+        self.spi.cr2().modify(|_, w| w.rxdmaen().set_bit());
         // Setting SPE in 1-line receive mode starts the clock.
         self.spi.cr1().modify(|_, w| w.spe().set_bit());
         Ok(())
