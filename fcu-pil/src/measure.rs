@@ -48,7 +48,8 @@ pub struct Report {
     /// Masked intervals after boot, and the share of the flight they covered.
     pub masked_intervals: u64,
     pub masked_pct: f64,
-    /// The longest wait of the capture interrupt from its line rising to its entry.
+    /// The longest wait of the capture interrupt from its line rising (a capture, or the
+    /// counter's update) to its entry.
     pub capture_pending_us_max: f64,
     pub flash_bytes: u32,
     pub ram_bytes: u32,
@@ -219,7 +220,11 @@ impl fmt::Display for Report {
             )?,
             None => writeln!(f, "  TIM2 masked (PRIMASK, or BASEPRI at or above its priority): never after boot")?,
         }
-        writeln!(f, "  TIM2 interrupt pending, line up to entry: max {:.1} µs", self.capture_pending_us_max)?;
+        writeln!(
+            f,
+            "  TIM2 interrupt pending, from its line rising (a capture or the counter's update) to its entry: max {:.1} µs",
+            self.capture_pending_us_max
+        )?;
         writeln!(f, "  image: flash {} B, static RAM {} B", self.flash_bytes, self.ram_bytes)?;
         writeln!(f, "  exceptions taken: {} ({} with the extended FP frame)", self.exception_entries, self.fp_frames)?;
         writeln!(
