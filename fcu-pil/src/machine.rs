@@ -14,6 +14,15 @@
 //! block, or at its end). A `b .` idle loop and WFI skip straight to the next event, counting
 //! the cycles they would have spun. The same ELF, the same inputs and the same profile give
 //! the same instruction stream, the same times and the same outputs, byte for byte.
+//!
+//! **Faults** are taken as a Cortex-M4 takes them with the configurable faults disabled (as the
+//! firmware leaves them): an undefined instruction, an access to reserved memory (a precise
+//! BusFault) or an exception frame that does not fit in RAM (a BusFault on stacking) escalates
+//! to HardFault and runs the firmware's handler, recorded in [`State::hard_faults`]. A fault
+//! while the HardFault handler runs locks the core up ([`LockupEvent`]): nothing executes and
+//! no interrupt is taken until a reset (the watchdog's), while the peripherals run on. What the
+//! chip does but the model does not know (an access to memory the chip has and the model lacks,
+//! a write to flash, an unstacking failure) ends the run with an error instead.
 
 use std::collections::HashMap;
 
@@ -71,11 +80,13 @@ pub trait Peripherals {
 pub enum Fault {
     /// An access to a register or bit the models do not implement.
     Unmodelled { error: Unmodelled, pc: u32, at: Time },
-    /// An access to unmapped memory (or a write to flash).
+    /// An access to memory the chip has and the model lacks (the SRAM bit-band alias, an
+    /// unmodelled peripheral), a write to flash, an instruction fetch from RAM: what the chip
+    /// does with these is not modelled, so the run stops. (An access to reserved memory is a
+    /// BusFault, taken as silicon takes it.)
     Memory { kind: &'static str, address: u32, pc: u32, at: Time },
-    /// A HardFault was raised while a HardFault (or NMI) handler ran: the core locks up.
-    Lockup { pc: u32, cause: String, at: Time },
-    /// Stacking or unstacking an exception frame failed (stack overflow).
+    /// Unstacking an exception frame failed (a handler moved SP out of RAM): the UNSTKERR
+    /// BusFault on return is not modelled.
     Stacking { address: u32, pc: u32, at: Time },
     /// An EXC_RETURN the architecture does not allow, or a return from a non-active exception.
     BadReturn { exc_return: u32, pc: u32, at: Time },
@@ -91,11 +102,8 @@ impl std::fmt::Display for Fault {
         match self {
             Fault::Unmodelled { error, pc, at } => write!(f, "unmodelled access at {:.6} s, in the block at PC {pc:#010x}: {error}", t(at)),
             Fault::Memory { kind, address, pc, at } => write!(f, "{kind} at address {address:#010x}, PC {pc:#010x}, {:.6} s", t(at)),
-            Fault::Lockup { pc, cause, at } => {
-                write!(f, "lockup (fault in the HardFault handler) at PC {pc:#010x}, {:.6} s: {cause}", t(at))
-            }
             Fault::Stacking { address, pc, at } => {
-                write!(f, "exception frame at {address:#010x} outside RAM (stack overflow?), PC {pc:#010x}, {:.6} s", t(at))
+                write!(f, "exception return with its frame at {address:#010x} outside RAM, PC {pc:#010x}, {:.6} s", t(at))
             }
             Fault::BadReturn { exc_return, pc, at } => {
                 write!(f, "invalid exception return {exc_return:#010x} at PC {pc:#010x}, {:.6} s", t(at))
@@ -117,6 +125,61 @@ pub struct HardFaultEvent {
     pub cause: String,
 }
 
+/// The core locked up (ARMv7-M B1.5.15): a fault it could not take, here a fault while the
+/// HardFault handler ran. It executes nothing more and takes no interrupt; the peripherals
+/// run on, and only a reset (the independent watchdog's, on this board) ends it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LockupEvent {
+    pub at: Time,
+    /// The instruction that faulted (the core's own PC reads 0xFFFF_FFFE while locked).
+    pub pc: u32,
+    pub cause: String,
+}
+
+/// An interval during which the interrupt masks (PRIMASK, or BASEPRI at or above its
+/// priority) kept the watched exception from being taken, see
+/// [`Machine::measure_masking_against`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaskedInterval {
+    pub from: Time,
+    pub to: Time,
+    /// Start of the translation block whose instructions set the mask.
+    pub pc: u32,
+}
+
+/// Interrupt masking and pending-to-entry waits, measured only when asked (reading the mask
+/// registers at every block costs host time).
+#[derive(Clone, Debug, Default)]
+pub struct MaskingStats {
+    /// The exception whose masking is measured.
+    pub watched: usize,
+    pub longest: Option<MaskedInterval>,
+    /// Completed intervals and their total time.
+    pub intervals: u64,
+    pub total: Time,
+    /// The open interval: since when, and the block that set the mask.
+    open: Option<(Time, u32)>,
+}
+
+impl MaskingStats {
+    fn close(&mut self, to: Time) {
+        if let Some((from, pc)) = self.open.take() {
+            let interval = MaskedInterval { from, to, pc };
+            self.intervals += 1;
+            self.total += to - from;
+            if self.longest.is_none_or(|l| l.to - l.from < to - from) {
+                self.longest = Some(interval);
+            }
+        }
+    }
+}
+
+/// CFSR bits (ARMv7-M B3.2.15): BusFault IBUSERR, PRECISERR, STKERR. (BFAR is not modelled,
+/// so BFARVALID stays clear.)
+const CFSR_IBUSERR: u32 = 1 << 8;
+const CFSR_PRECISERR: u32 = 1 << 9;
+const CFSR_STKERR: u32 = 1 << 12;
+
 #[derive(Clone, Debug)]
 enum Stop {
     /// The deadline (an event, or the end of the run) was reached.
@@ -131,6 +194,8 @@ enum Stop {
     Memory {
         kind: &'static str,
         address: u32,
+        /// The CFSR bits of the BusFault silicon raises for it; `None`: not modelled.
+        bus_fault: Option<u32>,
     },
 }
 
@@ -267,6 +332,9 @@ pub struct ExceptionStats {
     pub instructions: Vec<u64>,
     /// Entry time of each completed activation and its return time.
     pub spans: Vec<(Time, Time)>,
+    /// While measuring ([`Machine::measure_masking_against`]): the longest time from its
+    /// interrupt line rising to its entry, and that entry's time.
+    pub longest_pending: Option<(Time, Time)>,
 }
 
 /// The state the hooks see.
@@ -302,12 +370,21 @@ pub struct State<P: Peripherals> {
     /// Whether the core sleeps (WFI, or SLEEPONEXIT on return to thread mode).
     sleeping: bool,
     pub hard_faults: Vec<HardFaultEvent>,
+    /// Every lockup; the last one holds while `locked_up` is set.
+    pub lockups: Vec<LockupEvent>,
+    locked_up: bool,
     pub resets: Vec<(Time, &'static str)>,
     /// Exception entries that stacked the extended (FP) frame.
     pub fp_frames: u64,
     /// Per active exception: whether its extended frame's FP state is still owed (lazy
     /// stacking) or was saved (and is restored on return).
     fp_frames_owed: Vec<LazyFp>,
+    /// Masking and pending waits, when measured.
+    pub masking: Option<MaskingStats>,
+    /// While measuring: per exception, since when its interrupt line has held it pending.
+    pending_since: Vec<Option<Time>>,
+    /// When the interrupt lines were last sampled.
+    lines_sampled_at: Time,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -321,6 +398,39 @@ impl<P: Peripherals> State<P> {
         if let Some(c) = self.exc_instructions.get_mut(self.current_exception) {
             *c += n;
         }
+    }
+
+    /// Whether the core is locked up.
+    pub fn locked_up(&self) -> bool {
+        self.locked_up
+    }
+
+    /// Hands the interrupt lines' levels, sampled at `now`, to the NVIC. While measuring, a
+    /// line that pends its exception starts that exception's wait: from the earliest instant
+    /// it can have risen, the emulation's deadline (the first model event since the last
+    /// sample) or the last sample, whichever is later. That is exact for the first event
+    /// after the last sample and an upper bound (by less than a block) for a later one.
+    fn sample_lines(&mut self, now: Time, lines: &[(u32, bool)]) {
+        let measuring = self.masking.is_some();
+        let rose_by = self.lines_sampled_at.max(self.deadline.min(now));
+        for &(irq, level) in lines {
+            self.scs.sample_line(irq, level);
+            if !measuring {
+                continue;
+            }
+            let exc = 16 + irq as usize;
+            let Some(since) = self.pending_since.get_mut(exc) else { continue };
+            if level && since.is_none() && !self.scs.is_active(exc) {
+                *since = Some(rose_by);
+            } else if !level && since.is_some() {
+                // Software may have cleared the pending bit (NVIC_ICPR) with the line low.
+                let ispr = self.scs.read(0x200 + 4 * (irq / 32), now, self.current_exception).unwrap_or(u32::MAX);
+                if ispr & (1 << (irq % 32)) == 0 {
+                    *since = None;
+                }
+            }
+        }
+        self.lines_sampled_at = now;
     }
 }
 
@@ -376,9 +486,14 @@ impl<P: Peripherals + 'static> Machine<P> {
             exception_stats: HashMap::new(),
             sleeping: false,
             hard_faults: Vec::new(),
+            lockups: Vec::new(),
+            locked_up: false,
             resets: Vec::new(),
             fp_frames: 0,
             fp_frames_owed: Vec::new(),
+            masking: None,
+            pending_since: vec![None; scs::EXCEPTIONS],
+            lines_sampled_at: 0,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
@@ -455,17 +570,25 @@ impl<P: Peripherals + 'static> Machine<P> {
             1,
             0,
             |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64| {
-                let kind = match kind {
-                    MemType::READ_UNMAPPED => "read of unmapped memory",
-                    MemType::WRITE_UNMAPPED => "write to unmapped memory",
-                    MemType::FETCH_UNMAPPED => "instruction fetch from unmapped memory",
-                    MemType::WRITE_PROT => "write to read-only memory (flash)",
-                    MemType::FETCH_PROT => "instruction fetch from non-executable memory",
-                    _ => "memory access fault",
+                // Nothing answers at a reserved address: the bus returns an error, a BusFault
+                // (precise for a data access, ARMv7-M B3.2.15; an instruction fetch faults when
+                // the instruction would execute). An address where the chip has something the
+                // model lacks, and the rest, are refused.
+                let reserved = !implemented_but_unmodelled(addr as u32);
+                let (kind, bus_fault) = match kind {
+                    MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
+                    MemType::WRITE_UNMAPPED if reserved => ("write to reserved memory", Some(CFSR_PRECISERR)),
+                    MemType::FETCH_UNMAPPED if reserved => ("instruction fetch from reserved memory", Some(CFSR_IBUSERR)),
+                    MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
+                        ("access to memory the chip has and the model does not", None)
+                    }
+                    MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
+                    MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
+                    _ => ("memory access fault", None),
                 };
                 let st = uc.get_data_mut();
-                if st.stop.is_none() {
-                    st.stop = Some(Stop::Memory { kind, address: addr as u32 });
+                if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+                    st.stop = Some(Stop::Memory { kind, address: addr as u32, bus_fault });
                 }
                 false
             },
@@ -549,6 +672,12 @@ impl<P: Peripherals + 'static> Machine<P> {
         st.exc_stack.clear();
         st.fp_frames_owed.clear();
         st.sleeping = false;
+        st.locked_up = false;
+        let now = st.now;
+        if let Some(m) = st.masking.as_mut() {
+            m.close(now);
+        }
+        st.pending_since.iter_mut().for_each(|p| *p = None);
         Ok(())
     }
 
@@ -568,8 +697,25 @@ impl<P: Peripherals + 'static> Machine<P> {
     /// Exception entry (ARMv7-M B1.5.6): push the frame (extended when an FP context is
     /// active, with the FP registers saved at once rather than lazily: the same values), set
     /// LR to EXC_RETURN, IPSR to the exception, and branch to its vector.
+    ///
+    /// A frame that does not fit in RAM (a stack overflow: flip-link puts the stack at the
+    /// bottom of RAM, so it runs off into reserved memory) is a BusFault on stacking, STKERR,
+    /// a derived exception. SP has moved to the frame all the same (the push updates SP before
+    /// it writes). The BusFault is not enabled, so it escalates to HardFault, which preempts
+    /// the exception being entered: the HardFault handler is entered in its place without a
+    /// frame of its own, the other exception staying pending. When the exception being entered
+    /// is HardFault (or NMI) itself, its handler runs anyway: a derived fault of the kind
+    /// being entered cannot preempt it ("the fault handler still executes even though the
+    /// stack pushes for the handler failed", Cortex-M3 TRM §5.12.1, the Cortex-M4 generic
+    /// user guide's "Fault escalation"). Either way the handler starts with SP outside RAM,
+    /// and its first stack access faults in the HardFault handler: a lockup.
     fn enter_exception(&mut self, exc: usize, return_pc: u32) -> Result<(), Fault> {
         let now = self.now();
+        if self.uc.get_data().masking.is_some() {
+            let primask = self.reg(RegisterARM::PRIMASK)? & 1 != 0;
+            let basepri = self.reg(RegisterARM::BASEPRI)?;
+            self.uc.get_data_mut().observe_masks(primask, basepri);
+        }
         let control = self.reg(RegisterARM::CONTROL)?;
         if control & 2 != 0 {
             return Err(Fault::Unmodelled {
@@ -608,11 +754,30 @@ impl<P: Peripherals + 'static> Machine<P> {
             words.push(0);
         }
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        if frame_sp < SRAM_BASE || frame_sp.wrapping_add(bytes.len() as u32) > SRAM_BASE + SRAM_SIZE {
-            return Err(Fault::Stacking { address: frame_sp, pc: return_pc, at: now });
+        let stacked = frame_sp >= SRAM_BASE && frame_sp.wrapping_add(bytes.len() as u32) <= SRAM_BASE + SRAM_SIZE;
+        // A push that faults is abandoned (ARMv7-M B1.5.6, PushStack): which of its words
+        // reached RAM is not specified; none do here.
+        if stacked {
+            self.uc.mem_write(u64::from(frame_sp), &bytes).map_err(emu)?;
         }
-        self.uc.mem_write(u64::from(frame_sp), &bytes).map_err(emu)?;
         self.set_reg(RegisterARM::SP, frame_sp)?;
+        let exc = if stacked {
+            exc
+        } else {
+            let st = self.uc.get_data_mut();
+            let cause = format!(
+                "BusFault on stacking (STKERR) entering exception {exc}: its frame at {frame_sp:#010x} is outside RAM (stack overflow)"
+            );
+            if exc == scs::HARD_FAULT || exc == 2 {
+                st.scs.cfsr |= CFSR_STKERR;
+                st.hard_faults.push(HardFaultEvent { at: now, pc: return_pc, cause });
+                exc
+            } else {
+                st.scs.record_forced_fault(CFSR_STKERR);
+                st.hard_faults.push(HardFaultEvent { at: now, pc: return_pc, cause });
+                scs::HARD_FAULT
+            }
+        };
 
         let in_handler = xpsr & 0x1FF != 0;
         let mut exc_return: u32 = if in_handler { 0xFFFF_FFF1 } else { 0xFFFF_FFF9 };
@@ -630,7 +795,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.set_reg(RegisterARM::PC, vector | 1)?;
         let extra = self.uc.get_data().timing.entry_cycles();
         self.add_cycles(ENTRY_CYCLES + extra);
-        self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active, saved: false });
+        self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active && stacked, saved: false });
         self.uc.get_data_mut().timing.exception_boundary();
 
         let st = self.uc.get_data_mut();
@@ -644,8 +809,16 @@ impl<P: Peripherals + 'static> Machine<P> {
             *t = now;
         }
         st.exception_stats.entry(exc).or_default().entries += 1;
-        st.fp_frames += u64::from(fp_active);
+        st.fp_frames += u64::from(fp_active && stacked);
         st.sleeping = false;
+        if st.masking.is_some() {
+            if let (Some(since), Some(stats)) = (st.pending_since.get_mut(exc).and_then(Option::take), st.exception_stats.get_mut(&exc)) {
+                let wait = now - since;
+                if stats.longest_pending.is_none_or(|(w, _)| w < wait) {
+                    stats.longest_pending = Some((wait, now));
+                }
+            }
+        }
         Ok(())
     }
 
@@ -731,20 +904,61 @@ impl<P: Peripherals + 'static> Machine<P> {
         Ok(())
     }
 
-    /// A synchronous fault in the guest (undefined instruction, bad state): escalated to
-    /// HardFault, since the configurable faults are not enabled by the firmware. A fault in
-    /// the HardFault handler itself is a lockup and ends the run.
+    /// A synchronous fault in the guest (undefined instruction, bad state, a bus error):
+    /// escalated to HardFault, since the configurable faults are not enabled by the firmware.
+    /// A fault while the HardFault (or NMI) handler runs cannot be escalated any further: the
+    /// core locks up (ARMv7-M B1.5.15).
     fn raise_hard_fault(&mut self, pc: u32, cause: String, cfsr_bits: u32) -> Result<(), Fault> {
         let now = self.now();
         let st = self.uc.get_data_mut();
         if st.scs.is_active(scs::HARD_FAULT) || st.scs.is_active(2) {
-            return Err(Fault::Lockup { pc, cause, at: now });
+            return self.lock_up(pc, cause);
         }
         st.scs.record_forced_fault(cfsr_bits);
         st.hard_faults.push(HardFaultEvent { at: now, pc, cause });
         st.scs.set_pending(scs::HARD_FAULT);
         self.enter_exception(scs::HARD_FAULT, pc)?;
         Ok(())
+    }
+
+    /// Lockup (ARMv7-M B1.5.15): the core stops executing, with the PC at 0xFFFF_FFFE and
+    /// the exception state as it was; interrupts stay pending, the peripherals and the
+    /// watchdog run on. A reset ends it.
+    fn lock_up(&mut self, pc: u32, cause: String) -> Result<(), Fault> {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        st.lockups.push(LockupEvent { at: now, pc, cause });
+        st.locked_up = true;
+        st.sleeping = false;
+        if let Some(m) = st.masking.as_mut() {
+            m.close(now);
+        }
+        self.set_reg(RegisterARM::PC, 0xFFFF_FFFE)
+    }
+
+    /// Whether the core is locked up (see [`LockupEvent`]).
+    pub fn locked_up(&self) -> bool {
+        self.uc.get_data().locked_up
+    }
+
+    /// Sets the stack pointer (the main stack): the way to exhaust the stack on the image,
+    /// so that the next exception's frame does not fit.
+    pub fn set_stack_pointer(&mut self, sp: u32) -> Result<(), Fault> {
+        self.set_reg(RegisterARM::SP, sp)
+    }
+
+    /// Measures, from now on, the intervals during which PRIMASK, or BASEPRI at or above the
+    /// priority of exception `exc`, kept `exc` from being taken ([`State::masking`]), and
+    /// every interrupt's longest wait from its line rising to its entry
+    /// ([`ExceptionStats::longest_pending`]). Off by default: it reads two registers at every
+    /// translation block.
+    pub fn measure_masking_against(&mut self, exc: usize) {
+        let st = self.uc.get_data_mut();
+        st.masking = Some(MaskingStats { watched: exc, ..MaskingStats::default() });
+        st.pending_since.iter_mut().for_each(|p| *p = None);
+        for stats in st.exception_stats.values_mut() {
+            stats.longest_pending = None;
+        }
     }
 
     /// Injects an imprecise BusFault (as a failed buffered write would give), escalated to
@@ -774,9 +988,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         let mut lines = Vec::new();
         let watchdog =
             st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
-        for (irq, level) in lines {
-            st.scs.sample_line(irq, level);
-        }
+        st.sample_lines(now, &lines);
         let writes = st.board.take_memory_writes();
         for (addr, byte) in writes {
             self.uc.mem_write(u64::from(addr), &[byte]).map_err(emu)?;
@@ -809,6 +1021,17 @@ impl<P: Peripherals + 'static> Machine<P> {
             if now >= target {
                 return Ok(());
             }
+            let st = self.uc.get_data_mut();
+            if st.locked_up {
+                // Nothing runs and nothing wakes the core: on to the next event (the watchdog's
+                // expiry resets the board in `service`).
+                let next = [st.board.next_event(), st.scs.next_event(now)].into_iter().flatten().filter(|&t| t > now).min();
+                let deadline = next.map_or(target, |t| t.min(target));
+                let upc = st.units_per_cycle;
+                st.deadline = deadline;
+                st.now += (deadline - now).div_ceil(upc) * upc;
+                continue;
+            }
             let basepri = self.reg(RegisterARM::BASEPRI)?;
             let primask = self.reg(RegisterARM::PRIMASK)? & 1 != 0;
             let st = self.uc.get_data_mut();
@@ -827,6 +1050,7 @@ impl<P: Peripherals + 'static> Machine<P> {
                 // WFI: nothing to do until the next event.
                 let upc = st.units_per_cycle;
                 let skip = (deadline - now).div_ceil(upc) * upc;
+                st.deadline = deadline;
                 st.now += skip;
                 st.idle_time += skip;
                 continue;
@@ -840,7 +1064,13 @@ impl<P: Peripherals + 'static> Machine<P> {
             let block_pc = self.uc.get_data().block_pc;
             match (result, stop) {
                 (_, Some(Stop::Unmodelled(error))) => return Err(Fault::Unmodelled { error, pc: block_pc, at: now }),
-                (_, Some(Stop::Memory { kind, address })) => return Err(Fault::Memory { kind, address, pc: self.pc(), at: now }),
+                (_, Some(Stop::Memory { kind, address, bus_fault: Some(bits) })) => {
+                    let pc = self.pc();
+                    self.raise_hard_fault(pc, format!("precise BusFault: {kind} at {address:#010x}"), bits)?;
+                }
+                (_, Some(Stop::Memory { kind, address, bus_fault: None })) => {
+                    return Err(Fault::Memory { kind, address, pc: self.pc(), at: now })
+                }
                 (_, Some(Stop::ExceptionReturn)) => self.return_from_exception()?,
                 (_, Some(Stop::SyncFault(cause))) => {
                     let pc = self.pc();
@@ -881,6 +1111,9 @@ impl<P: Peripherals + 'static> Machine<P> {
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
     if stop_before_block(uc) {
         return;
+    }
+    if uc.get_data().masking.is_some() {
+        track_masking(uc);
     }
     let st = uc.get_data_mut();
     let addr = address as u32;
@@ -963,6 +1196,43 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
     st.block_started_at = st.now - body * st.units_per_cycle;
 }
 
+/// At the start of a block, before it is charged, and at exception entry: whether PRIMASK or
+/// BASEPRI keep the watched exception out (ARMv7-M B1.5.4: BASEPRI, group-masked, boosts the
+/// execution priority when non-zero; the exception is taken only if its group priority is
+/// lower). The masks change only by the instructions of the previous block (MSR and CPS end
+/// their block; exception entry and return leave the masks alone), so an interval starts and
+/// ends where a block does, or where an interrupt is taken between two blocks.
+fn track_masking<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) {
+    let primask = uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) & 1 != 0;
+    let basepri = uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u32;
+    uc.get_data_mut().observe_masks(primask, basepri);
+}
+
+impl<P: Peripherals> State<P> {
+    /// Opens or closes the masked interval with the masks as they are now (see
+    /// [`track_masking`]).
+    fn observe_masks(&mut self, primask: bool, basepri: u32) {
+        // The STM32F401 implements priority bits 7:4 only.
+        let basepri = basepri & 0xF0;
+        let st = self;
+        let (now, pc, current) = (st.now, st.block_pc, st.current_exception);
+        let Some(watched) = st.masking.as_ref().map(|m| m.watched) else { return };
+        let masked = primask
+            || (basepri != 0 && {
+                let prigroup = st.scs.read(0xD0C, now, current).map_or(0, |aircr| (aircr >> 8) & 7);
+                let group_mask = (0xFFu32 << (prigroup + 1)) & 0xFF;
+                (basepri & group_mask) as i32 <= st.scs.group_priority(watched)
+            });
+        if let Some(m) = st.masking.as_mut() {
+            match (masked, m.open) {
+                (true, None) => m.open = Some((now, pc)),
+                (false, Some(_)) => m.close(now),
+                _ => {}
+            }
+        }
+    }
+}
+
 /// Stops the emulation (before the block about to start) if the deadline has passed or an
 /// interrupt can be taken. `run_until` starts the emulation only when neither holds, so the
 /// first block of every start runs.
@@ -993,6 +1263,13 @@ fn fail<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, e: Unmodelled) {
         st.stop = Some(Stop::Unmodelled(e));
     }
     let _ = uc.emu_stop();
+}
+
+/// Address ranges where the STM32F401 answers (RM0368 §2.3, memory map and register
+/// boundary addresses) but the model maps nothing: the rest of system memory and the option
+/// bytes, the SRAM bit-band alias, and the peripheral space outside the modelled buses.
+fn implemented_but_unmodelled(addr: u32) -> bool {
+    (0x1FFF_0000..0x1FFF_C010).contains(&addr) || (0x2200_0000..0x2400_0000).contains(&addr) || (0x4000_0000..0x6000_0000).contains(&addr)
 }
 
 /// Peripheral bit-band alias (0x4200_0000 + 32·offset + 4·bit ↔ bit of 0x4000_0000 + offset).
@@ -1125,11 +1402,7 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
             // sample the lines now; the next block hook takes the interrupt if it can.
             let mut lines = Vec::new();
             match st.board.advance(now, &mut |irq, level| lines.push((irq, level))) {
-                Ok(_) => {
-                    for (irq, level) in lines {
-                        st.scs.sample_line(irq, level);
-                    }
-                }
+                Ok(_) => st.sample_lines(now, &lines),
                 Err(e) => fail(uc, e),
             }
             store_memory_writes(uc);
@@ -1148,6 +1421,12 @@ mod tests {
     struct Bench {
         registers: HashMap<u32, u32>,
         log: Vec<(u32, Time, Option<u32>)>,
+        /// A watchdog that expires once, at this time.
+        watchdog_at: Option<Time>,
+        /// An interrupt line high over `from..to`: (from, to, IRQ number).
+        pulse: Option<(Time, Time, u32)>,
+        /// The time of the last `advance`.
+        advanced_to: Time,
     }
 
     /// 84 MHz: 4 time units per cycle.
@@ -1164,10 +1443,16 @@ mod tests {
             Ok(())
         }
         fn next_event(&self) -> Option<Time> {
-            None
+            let edges = self.pulse.map(|(from, to, _)| [from, to]).unwrap_or_default();
+            let edges = edges.into_iter().filter(|&t| t > self.advanced_to);
+            self.watchdog_at.into_iter().chain(edges).min()
         }
-        fn advance(&mut self, _now: Time, _lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled> {
-            Ok(false)
+        fn advance(&mut self, now: Time, lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled> {
+            if let Some((from, to, irq)) = self.pulse {
+                lines(irq, (from..to).contains(&now));
+            }
+            self.advanced_to = now;
+            Ok(self.watchdog_at.take_if(|&mut t| t <= now).is_some())
         }
         fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
             Ok(UPC)
@@ -1181,12 +1466,23 @@ mod tests {
     /// A flash image: the vector table (SP, reset at 0x100, IRQ0 at 0x140), `code` at 0x100 and
     /// `handler` at 0x140.
     fn program(code: &[u16], handler: &[u16]) -> Image {
-        let mut flash = vec![0u8; 0x200];
+        program_with(code, &[(16, handler)], 0x140)
+    }
+
+    /// A flash image: `code` at 0x100 (the reset vector), and each (exception, handler) from
+    /// `handlers_at` on, 0x40 bytes apart, with its vector.
+    fn program_with(code: &[u16], handlers: &[(usize, &[u16])], handlers_at: usize) -> Image {
+        let mut flash = vec![0u8; 0x400];
         let mut word = |at: usize, w: u32| flash[at..at + 4].copy_from_slice(&w.to_le_bytes());
         word(0, SRAM_BASE + 0x1000);
         word(4, FLASH_BASE + 0x101);
-        word(4 * 16, FLASH_BASE + 0x141);
-        for (at, halfwords) in [(0x100, code), (0x140, handler)] {
+        let mut places = vec![(0x100, code)];
+        for (k, &(exc, handler)) in handlers.iter().enumerate() {
+            let at = handlers_at + 0x40 * k;
+            word(4 * exc, FLASH_BASE + at as u32 + 1);
+            places.push((at, handler));
+        }
+        for (at, halfwords) in places {
             for (i, h) in halfwords.iter().enumerate() {
                 flash[at + 2 * i..at + 2 * i + 2].copy_from_slice(&h.to_le_bytes());
             }
@@ -1197,7 +1493,7 @@ mod tests {
             initial_sp: SRAM_BASE + 0x1000,
             symbols: HashMap::new(),
             functions: Vec::new(),
-            flash_bytes: 0x200,
+            flash_bytes: 0x400,
             ram_bytes: 0,
         }
     }
@@ -1354,5 +1650,161 @@ mod tests {
         // The same loop writing its start register is not a pure wait.
         let writes_start = code(&[0x680A, 0x1A92, 0x4282, 0xD3FB]).block(FLASH_BASE, 8).kind;
         assert_eq!(writes_start, BlockKind::Plain);
+    }
+
+    /// `r1` = 0x6000_0000 (reserved on the STM32F401: no external memory controller), then a
+    /// read from it.
+    const RESERVED_READ: [u16; 3] = [
+        0x2160, // movs r1, #0x60
+        0x0609, // lsls r1, r1, #24
+        0x6808, // ldr r0, [r1]
+    ];
+    /// A HardFault handler that touches no stack: r3 = 7, then `b .`.
+    const STACKLESS_HANDLER: [u16; 2] = [0x2307, 0xE7FE];
+    /// A HardFault handler whose first instruction pushes (as a compiled one does).
+    const PUSHING_HANDLER: [u16; 3] = [0xB580, 0x2307, 0xE7FE]; // push {r7, lr}; movs r3, #7; b .
+    const HANDLERS_AT: usize = 0x300;
+
+    fn r(m: &Machine<Bench>, reg: RegisterARM) -> u32 {
+        m.reg(reg).unwrap()
+    }
+
+    #[test]
+    fn a_read_of_reserved_memory_is_a_precise_bus_fault_escalated_to_hard_fault() {
+        let code = [RESERVED_READ.as_slice(), &[0xE7FE]].concat();
+        let m = run(program_with(&code, &[(scs::HARD_FAULT, &STACKLESS_HANDLER)], HANDLERS_AT), TimingProfile::Optimistic, 400);
+        let st = m.state();
+        assert_eq!(st.hard_faults.len(), 1, "{:?}", st.hard_faults);
+        let hf = &st.hard_faults[0];
+        assert_eq!(hf.pc, FLASH_BASE + 0x104, "the faulting load is the stacked PC");
+        assert!(hf.cause.contains("read of reserved memory at 0x60000000"), "{}", hf.cause);
+        assert_eq!(st.scs.cfsr, CFSR_PRECISERR);
+        assert_eq!(st.scs.hfsr, 1 << 30, "HFSR.FORCED: the BusFault is not enabled");
+        assert_eq!((m.current_exception(), r(&m, RegisterARM::R3)), (scs::HARD_FAULT, 7), "the handler ran");
+        let frame = m.read_memory(r(&m, RegisterARM::SP) + 24, 4).unwrap();
+        assert_eq!(u32::from_le_bytes(frame.try_into().unwrap()), FLASH_BASE + 0x104);
+        assert!(st.lockups.is_empty() && !m.locked_up());
+    }
+
+    #[test]
+    fn a_fault_in_the_hard_fault_handler_locks_up_until_the_watchdog_resets_the_board() {
+        let code = [RESERVED_READ.as_slice(), &[0xE7FE]].concat();
+        let image = program_with(&code, &[(scs::HARD_FAULT, &RESERVED_READ), (16, &STACKLESS_HANDLER)], HANDLERS_AT);
+        let bench = Bench { watchdog_at: Some(4000), ..Bench::default() };
+        let mut m = Machine::new(image, bench, TimingProfile::Optimistic).unwrap();
+        m.run_until(1000).unwrap();
+        let st = m.state();
+        assert_eq!(st.lockups.len(), 1);
+        let lockup = &st.lockups[0];
+        assert_eq!(lockup.pc, FLASH_BASE + HANDLERS_AT as u32 + 4, "the load in the HardFault handler");
+        assert!(lockup.cause.contains("read of reserved memory"), "{}", lockup.cause);
+        assert!(m.locked_up() && m.pc() == 0xFFFF_FFFE);
+        // Locked: no instruction runs and an interrupt does not wake it, for as long as it lasts.
+        let instructions = st.instructions;
+        let now = m.now();
+        m.state_mut().scs.write(0x100, 1, now).unwrap();
+        m.state_mut().scs.set_pending(16);
+        m.run_until(3999).unwrap();
+        assert_eq!((m.now(), m.state().instructions), (4000, instructions), "time passes, nothing runs");
+        assert!(!m.state().exception_stats.contains_key(&16), "IRQ0 was taken while locked up");
+        // The watchdog's reset ends it: the program runs again from the reset vector (and locks
+        // up again).
+        m.run_until(8000).unwrap();
+        let st = m.state();
+        assert_eq!(st.resets, vec![(4000, "watchdog")]);
+        assert!(st.instructions > instructions, "nothing ran after the reset");
+        assert_eq!(st.lockups.len(), 2);
+        assert!(st.lockups[1].at > 4000);
+    }
+
+    #[test]
+    fn a_frame_that_does_not_fit_enters_the_hard_fault_handler_without_one() {
+        // IRQ0 enabled, then `b .`.
+        let code = [0xF24E, 0x1100, 0xF2CE, 0x0100, 0x2001, 0x6008, 0xE7FE];
+        for (handler, locks_up) in [(STACKLESS_HANDLER.as_slice(), false), (PUSHING_HANDLER.as_slice(), true)] {
+            let image = program_with(&code, &[(scs::HARD_FAULT, handler), (16, &[0x2305, 0x4770])], HANDLERS_AT);
+            let mut m = Machine::new(image, Bench::default(), TimingProfile::Optimistic).unwrap();
+            m.run_until(100).unwrap();
+            m.set_stack_pointer(SRAM_BASE + 8).unwrap();
+            m.state_mut().scs.set_pending(16);
+            m.run_until(400).unwrap();
+            let st = m.state();
+            assert_eq!(st.hard_faults.len(), 1, "{:?}", st.hard_faults);
+            assert!(st.hard_faults[0].cause.contains("STKERR") && st.hard_faults[0].cause.contains("exception 16"));
+            assert_eq!((st.scs.cfsr, st.scs.hfsr), (CFSR_STKERR, 1 << 30));
+            assert!(!st.exception_stats.contains_key(&16), "IRQ0's handler ran");
+            assert_eq!(st.scs.clone().read(0x200, m.now(), 0).unwrap() & 1, 1, "IRQ0 stays pending");
+            assert_eq!(r(&m, RegisterARM::SP), SRAM_BASE + 8 - 0x20, "SP moved to the frame that failed");
+            if locks_up {
+                assert_eq!(st.lockups.len(), 1, "the handler's push faulted and locked the core up");
+                assert_eq!(st.lockups[0].pc, FLASH_BASE + HANDLERS_AT as u32);
+                assert!(st.lockups[0].cause.contains("write to reserved memory"), "{}", st.lockups[0].cause);
+                assert_ne!(r(&m, RegisterARM::R3), 7);
+            } else {
+                assert!(st.lockups.is_empty());
+                assert_eq!((m.current_exception(), r(&m, RegisterARM::R3)), (scs::HARD_FAULT, 7), "the handler ran");
+            }
+        }
+    }
+
+    #[test]
+    fn masked_intervals_count_primask_and_basepri_at_or_above_the_watched_priority() {
+        let nops = |n: usize| vec![0xBF00u16; n];
+        let code: Vec<u16> = [
+            // IRQ0 at priority 0x20 (NVIC_IPR0 byte 0).
+            vec![0xF24E, 0x4100, 0xF2CE, 0x0100, 0x2020, 0x7008],
+            // PRIMASK over 10 nops.
+            vec![0xB672],
+            nops(10),
+            vec![0xB662],
+            // BASEPRI 0x30: below IRQ0's priority, it does not mask it.
+            vec![0x2030, 0xF380, 0x8811],
+            nops(5),
+            // BASEPRI 0x20: at IRQ0's priority, it masks it, over 20 nops.
+            vec![0x2020, 0xF380, 0x8811],
+            nops(20),
+            vec![0x2000, 0xF380, 0x8811, 0xE7FE],
+        ]
+        .concat();
+        for profile in [TimingProfile::Optimistic, TimingProfile::Pessimistic] {
+            let mut m = Machine::new(program(&code, &[]), Bench::default(), profile).unwrap();
+            m.measure_masking_against(16);
+            m.run_until(2000).unwrap();
+            let masking = m.state().masking.clone().unwrap();
+            assert_eq!(masking.intervals, 2, "{profile}: {masking:?}");
+            let longest = masking.longest.unwrap();
+            // The BASEPRI interval: from the end of the block with the MSR that set it (an MSR
+            // ends its block: that one starts after the first MSR, at halfword 6 + 1 + 10 + 1 +
+            // 3) to the end of the one that cleared it: 20 nops, movs and msr.
+            let pc_of_set = FLASH_BASE + 0x100 + 2 * (6 + 1 + 10 + 1 + 3);
+            assert_eq!(longest.pc, pc_of_set, "{profile}: {longest:x?}");
+            if profile == TimingProfile::Optimistic {
+                assert_eq!(longest.to - longest.from, 22 * UPC, "{longest:?}");
+                // PRIMASK over 10 nops and the CPSIE.
+                assert_eq!(masking.total, 22 * UPC + 11 * UPC);
+            }
+        }
+    }
+
+    #[test]
+    fn the_pending_wait_runs_from_the_line_rising_to_the_entry() {
+        let code = [
+            0xF24E, 0x1100, 0xF2CE, 0x0100, 0x2001, 0x6008, // IRQ0 enabled
+            0xB672, // cpsid i
+            0x2064, // movs r0, #100
+            0x3801, 0xD1FD, // subs r0, #1; bne .-2
+            0xB662, // cpsie i
+            0xE7FE,
+        ];
+        let bench = Bench { pulse: Some((200, 240, 0)), ..Bench::default() };
+        let mut m = Machine::new(program(&code, &IRQ_HANDLER), bench, TimingProfile::Optimistic).unwrap();
+        m.measure_masking_against(16);
+        m.run_until(2000).unwrap();
+        let st = m.state();
+        let (entry, _) = st.exception_stats[&16].spans[0];
+        // Entered as soon as PRIMASK cleared: 4 + 2 + 2 × 100 + 1 instructions.
+        assert_eq!(entry, 207 * UPC);
+        assert_eq!(st.masking.as_ref().unwrap().longest.unwrap().to, entry);
+        assert_eq!(st.exception_stats[&16].longest_pending, Some((entry - 200, entry)));
     }
 }

@@ -22,7 +22,8 @@ enum Command {
     /// uart.log, prints the metrics and criteria of `fcu-sim fly`.
     Fly(FlyArgs),
     /// Fly a scenario and print what the image costs: instructions per control interrupt,
-    /// latencies, CPU load, stack, and the harness's own speed.
+    /// latencies, the longest stretch with the radio capture interrupt masked, CPU load,
+    /// stack, and the harness's own speed.
     Measure(MeasureArgs),
 }
 

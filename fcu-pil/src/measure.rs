@@ -1,6 +1,7 @@
 //! What the image costs, measured on the image: instructions per control interrupt (with its
 //! SPI read), the time from the TIM9 update to the last motor write, CPU load, stack use, the
-//! radio capture's worst latency while the control task runs, and the harness's own speed.
+//! radio capture's worst latency while the control task runs, the longest stretch with the
+//! capture interrupt masked, and the harness's own speed.
 //! Numbers in instructions are exact for the emulated core under either timing profile; times
 //! are the profile's ([`crate::timing`]): under the optimistic one, those instructions at
 //! 84 MHz; under the pessimistic one, as slow as the board can be.
@@ -14,6 +15,8 @@ use crate::timing::TimingProfile;
 
 /// TIM1_BRK_TIM9 is external interrupt 24: exception 40.
 const CONTROL_EXCEPTION: usize = 16 + periph::irq::TIM1_BRK_TIM9 as usize;
+/// The radio capture, TIM2, is external interrupt 28: exception 44.
+const CAPTURE_EXCEPTION: usize = 16 + periph::irq::TIM2 as usize;
 
 #[derive(Clone, Debug)]
 pub struct Report {
@@ -36,6 +39,18 @@ pub struct Report {
     pub capture_latency_us_median: f64,
     pub capture_latency_us_max: f64,
     pub capture_latency_during_control_us_max: f64,
+    /// The longest interval after boot during which the capture interrupt could not be taken
+    /// because of the masks (PRIMASK, or BASEPRI at or above its priority), and where it began:
+    /// the block that set the mask and its function.
+    pub masked_us_max: f64,
+    pub masked_from_pc: Option<u32>,
+    pub masked_from_function: Option<String>,
+    /// Masked intervals after boot, and the share of the flight they covered.
+    pub masked_intervals: u64,
+    pub masked_pct: f64,
+    /// The longest wait of the capture interrupt from its line rising (a capture, or the
+    /// counter's update) to its entry.
+    pub capture_pending_us_max: f64,
     pub flash_bytes: u32,
     pub ram_bytes: u32,
     /// Exception entries, and how many stacked the extended (FP) frame.
@@ -64,7 +79,12 @@ pub fn measure(
     setup: &rig::BoardSetup,
 ) -> Result<Report, String> {
     let timing = setup.timing_profile()?;
-    let flight = rig::fly_with(elf, scenario, opts, &rig::BoardSetup { timing: Some(timing), ..setup.clone() })?;
+    let flight = rig::fly_with(
+        elf,
+        scenario,
+        opts,
+        &rig::BoardSetup { timing: Some(timing), measure_masking_against: Some(CAPTURE_EXCEPTION), ..setup.clone() },
+    )?;
     let m = &flight.board.machine;
     let st = m.state();
     let board = m.board();
@@ -124,6 +144,11 @@ pub fn measure(
         .map(|&(c, r)| us(r - c))
         .fold(0.0, f64::max);
 
+    let masking = st.masking.clone().unwrap_or_default();
+    let masked = masking.longest;
+    let capture_pending_us_max =
+        st.exception_stats.get(&CAPTURE_EXCEPTION).and_then(|s| s.longest_pending).map_or(0.0, |(wait, _)| us(wait));
+
     Ok(Report {
         scenario: scenario.name.clone(),
         timing,
@@ -142,6 +167,12 @@ pub fn measure(
         capture_latency_us_median,
         capture_latency_us_max,
         capture_latency_during_control_us_max: during,
+        masked_us_max: masked.map_or(0.0, |i| us(i.to - i.from)),
+        masked_from_pc: masked.map(|i| i.pc),
+        masked_from_function: masked.and_then(|i| m.image().function_at(i.pc)),
+        masked_intervals: masking.intervals,
+        masked_pct: 100.0 * time_to_s(masking.total) / time_to_s(flown).max(1e-9),
+        capture_pending_us_max,
         flash_bytes: m.image().flash_bytes,
         ram_bytes: m.image().ram_bytes,
         exception_entries: st.exception_stats.values().map(|e| e.entries).sum(),
@@ -177,6 +208,22 @@ impl fmt::Display for Report {
             f,
             "  TIM2 capture to its read: median {:.1} µs, max {:.1} µs; max {:.1} µs while the control task runs",
             self.capture_latency_us_median, self.capture_latency_us_max, self.capture_latency_during_control_us_max
+        )?;
+        match self.masked_from_pc {
+            Some(pc) => writeln!(
+                f,
+                "  TIM2 masked (PRIMASK, or BASEPRI at or above its priority): longest {:.1} µs, from PC {pc:#010x} in {}; {} intervals, {:.2} % of the time",
+                self.masked_us_max,
+                self.masked_from_function.as_deref().unwrap_or("an unnamed function"),
+                self.masked_intervals,
+                self.masked_pct
+            )?,
+            None => writeln!(f, "  TIM2 masked (PRIMASK, or BASEPRI at or above its priority): never after boot")?,
+        }
+        writeln!(
+            f,
+            "  TIM2 interrupt pending, from its line rising (a capture or the counter's update) to its entry: max {:.1} µs",
+            self.capture_pending_us_max
         )?;
         writeln!(f, "  image: flash {} B, static RAM {} B", self.flash_bytes, self.ram_bytes)?;
         writeln!(f, "  exceptions taken: {} ({} with the extended FP frame)", self.exception_entries, self.fp_frames)?;

@@ -41,6 +41,9 @@ pub struct BoardSetup {
     /// How the emulator prices time ([`crate::timing`]); `None`: `FCU_PIL_TIMING` from the
     /// environment, optimistic if it is not set (a value that names no profile is an error).
     pub timing: Option<TimingProfile>,
+    /// Measure interrupt masking against this exception, and every interrupt's wait from its
+    /// line to its entry, from the end of boot ([`Machine::measure_masking_against`]).
+    pub measure_masking_against: Option<usize>,
 }
 
 impl BoardSetup {
@@ -71,6 +74,9 @@ pub struct EmulatedBoard {
     view: ComputerView,
     /// First problem with a UART line (format errors are failures of the image).
     pub line_errors: Vec<String>,
+    /// A HardFault or a lockup fails the flight ([`FlightComputer::step`]) unless this is set:
+    /// a test that injects one sets it to watch what follows.
+    pub faults_expected: bool,
 }
 
 impl EmulatedBoard {
@@ -94,6 +100,7 @@ impl EmulatedBoard {
             statuses: Vec::new(),
             view: ComputerView::default(),
             line_errors: Vec::new(),
+            faults_expected: false,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -103,6 +110,11 @@ impl EmulatedBoard {
             b.drain_uart();
             if let Some(&t) = b.machine.board().records.tick_timer_starts.first() {
                 b.t0 = Some(t);
+                // From the end of the boot slice: the first control tick is a period after
+                // the timer's start, later than the slice's end.
+                if let Some(exc) = setup.measure_masking_against {
+                    b.machine.measure_masking_against(exc);
+                }
                 break;
             }
         }
@@ -125,10 +137,28 @@ impl EmulatedBoard {
             }
             None => "no register read".into(),
         };
+        let faults = self.fault_report().map_or(String::new(), |f| format!("; {f}"));
         format!(
-            "the firmware never started its control timer: at {:.3} s the CPU is at PC {pc:#010x} in {function}; {register}",
+            "the firmware never started its control timer: at {:.3} s the CPU is at PC {pc:#010x} in {function}; {register}{faults}",
             time_to_s(self.machine.now())
         )
+    }
+
+    /// The first HardFault and the first lockup, if any, in words.
+    pub fn fault_report(&self) -> Option<String> {
+        let st = self.machine.state();
+        let hard_fault = st.hard_faults.first().map(|hf| {
+            let function = self.machine.image().function_at(hf.pc).unwrap_or_else(|| "an unnamed function".into());
+            format!("HardFault at PC {:#010x} in {function}, {:.6} s: {}", hf.pc, time_to_s(hf.at), hf.cause)
+        });
+        let lockup = st.lockups.first().map(|l| {
+            let function = self.machine.image().function_at(l.pc).unwrap_or_else(|| "an unnamed function".into());
+            format!("lockup at PC {:#010x} in {function}, {:.6} s: {}", l.pc, time_to_s(l.at), l.cause)
+        });
+        match (hard_fault, lockup) {
+            (Some(h), Some(l)) => Some(format!("{h}; then {l}")),
+            (h, l) => h.or(l),
+        }
     }
 
     /// Emulated time of a scenario time.
@@ -216,13 +246,10 @@ impl FlightComputer for EmulatedBoard {
         }
         let target = t0 + time_from_s(t_end_s);
         self.machine.run_until(target).map_err(|f| SimError::Computer(format!("firmware image: {f}")))?;
-        if let Some(hf) = self.machine.state().hard_faults.first() {
-            return Err(SimError::Computer(format!(
-                "firmware image: HardFault at PC {:#010x}, {:.6} s: {}",
-                hf.pc,
-                self.scenario_s(hf.at),
-                hf.cause
-            )));
+        if !self.faults_expected {
+            if let Some(report) = self.fault_report() {
+                return Err(SimError::Computer(format!("firmware image: {report} (times since power-on)")));
+            }
         }
         self.drain_uart();
         if let Some(e) = self.line_errors.first() {
@@ -309,7 +336,7 @@ pub fn fly_with(
     let image = Image::load(elf)?;
     let mut board = EmulatedBoard::boot(image, setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
     if !board.flying() {
-        return Err(format!("the firmware did not start its control timer within the boot timeout; its UART said:\n{}", board.uart_text()));
+        return Err(format!("{} (within the boot timeout); its UART said:\n{}", board.boot_stall(), board.uart_text()));
     }
     let mut log = fcu_testkit::sim::run_with(&mut board, scenario, fcu_testkit::Profile::Default, opts).map_err(|e| e.to_string())?;
     // Tick stamps count from the firmware's boot: after a reset they start again, so only the
