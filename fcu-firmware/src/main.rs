@@ -18,9 +18,6 @@
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
 #![no_std]
 #![no_main]
-// RTIC's generated `spawn` hands the message back in `Err` when the task is busy; for the
-// outer step that message is the `OuterJob` (under 200 bytes), by design (it lives in a static slot).
-#![allow(clippy::result_large_err)]
 
 mod sensor_bus;
 mod timers;
@@ -188,6 +185,10 @@ mod app {
     #[shared]
     struct Shared {
         outer_result: Option<OuterResult>,
+        /// The job the control tick hands the outer step. Passed through this slot rather
+        /// than as the spawn's message: RTIC copies a message inside a critical section, and
+        /// this one (376 bytes) held every interrupt off for 4 µs with slow flash.
+        outer_job: Option<OuterJob>,
         uart: UartOut,
         led_pattern: LedPattern,
         battery_mv: u32,
@@ -338,7 +339,7 @@ mod app {
         }
 
         (
-            Shared { outer_result: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus },
+            Shared { outer_result: None, outer_job: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus },
             Local {
                 capture,
                 edges_out,
@@ -493,7 +494,7 @@ mod app {
         loop {
             if crate::sensor_bus::last_byte_started() {
                 if let Some(done) = bus.lock(SensorBus::take_burst) {
-                    return done;
+                    return done.map(crate::sensor_bus::burst_bytes);
                 }
             }
             if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > BURST_WAIT_CYCLES {
@@ -507,7 +508,7 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [outer_result, bus],
+        shared = [outer_result, outer_job, bus],
         local = [tick_timer, edges_in, decoder, inner, motors, watchdog, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
     )]
     fn control(mut cx: control::Context) {
@@ -548,11 +549,13 @@ mod app {
         cx.local.motors.write(out.compare);
 
         if let Some(job) = out.outer_job {
-            if outer_step::spawn(job).is_err() {
-                // The previous outer step is still running: this job is lost; counted and
-                // reported on the status line.
+            if cx.shared.outer_job.lock(|slot| slot.replace(job).is_some()) {
+                // The previous job was never started (the outer step still ran the one
+                // before): it is lost to this one; counted and reported on the status line.
                 *cx.local.outer_overruns = cx.local.outer_overruns.saturating_add(1);
             }
+            // Busy, it takes this job when it is done with its own.
+            let _running = outer_step::spawn();
         }
 
         *cx.local.ticks = cx.local.ticks.wrapping_add(1);
@@ -575,14 +578,16 @@ mod app {
         }
     }
 
-    /// The outer step (estimator + angle loop) on the job's snapshot.
-    #[task(priority = 2, shared = [outer_result, battery_mv], local = [outer])]
-    async fn outer_step(mut cx: outer_step::Context, job: OuterJob) {
-        // The battery compensation's input (the core filters it and decides what it does).
-        let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
-        cx.local.outer.set_battery_mv(battery_mv);
-        let result = cx.local.outer.run(&job);
-        cx.shared.outer_result.lock(|slot| *slot = Some(result));
+    /// The outer step (estimator + angle loop) on each job's snapshot, as long as one waits.
+    #[task(priority = 2, shared = [outer_result, outer_job, battery_mv], local = [outer])]
+    async fn outer_step(mut cx: outer_step::Context) {
+        while let Some(job) = cx.shared.outer_job.lock(Option::take) {
+            // The battery compensation's input (the core filters it and decides what it does).
+            let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
+            cx.local.outer.set_battery_mv(battery_mv);
+            let result = cx.local.outer.run(&job);
+            cx.shared.outer_result.lock(|slot| *slot = Some(result));
+        }
     }
 
     /// Status snapshots → LED code and UART lines (status on every state change, debug line

@@ -75,6 +75,17 @@ static BURST_DMA: [AtomicU8; BURST_BYTES - 1] = [const { AtomicU8::new(0) }; BUR
 /// past the end-of-read window.
 static LAST_BYTE_STARTED: AtomicBool = AtomicBool::new(false);
 
+/// The burst taken by [`SensorBus::take_burst`]: the bytes the DMA wrote, then `last`.
+pub fn burst_bytes(last: u8) -> [u8; BURST_BYTES] {
+    // What the DMA wrote is complete before its flag rose and the last byte was seen.
+    fence(Ordering::Acquire);
+    let mut bytes = [last; BURST_BYTES];
+    for (b, slot) in bytes.iter_mut().zip(BURST_DMA.iter()) {
+        *b = slot.load(Ordering::Relaxed);
+    }
+    bytes
+}
+
 /// Whether the burst in flight is down to its last byte (see [`SensorBus::take_burst`]).
 pub fn last_byte_started() -> bool {
     LAST_BYTE_STARTED.load(Ordering::Acquire)
@@ -299,8 +310,9 @@ impl SensorBus {
         LAST_BYTE_STARTED.store(true, Ordering::Release);
     }
 
-    /// The burst once its last byte is in (once), its sensor deselected; `None` while it runs.
-    pub fn take_burst(&mut self) -> Option<Result<[u8; BURST_BYTES], BusError>> {
+    /// The burst's last byte once it is in (once), its sensor deselected; `None` while it
+    /// runs. The rest is in memory: [`burst_bytes`], with no lock held.
+    pub fn take_burst(&mut self) -> Option<Result<u8, BusError>> {
         let sensor = self.burst.as_ref().filter(|b| b.stage == Stage::LastByte)?.sensor;
         let sr = self.spi.sr().read();
         if sr.rxne().bit_is_clear() {
@@ -309,16 +321,7 @@ impl SensorBus {
         let last = self.spi.dr().read().dr().bits() as u8;
         self.burst = None;
         self.select(sensor, false);
-        if sr.ovr().bit_is_set() {
-            return Some(Err(BusError::Overrun));
-        }
-        // What the DMA wrote is complete before its flag rose and this read saw the last byte.
-        fence(Ordering::Acquire);
-        let mut bytes = [last; BURST_BYTES];
-        for (b, slot) in bytes.iter_mut().zip(BURST_DMA.iter()) {
-            *b = slot.load(Ordering::Relaxed);
-        }
-        Some(Ok(bytes))
+        Some(if sr.ovr().bit_is_set() { Err(BusError::Overrun) } else { Ok(last) })
     }
 
     /// Stops a burst that did not finish: stream off, clock off, sensor deselected, bus back
