@@ -25,8 +25,11 @@ pub struct Timing {
     /// TIM9 prescaler and auto-reload: the tick is 84 MHz / ((psc + 1)(arr + 1)).
     pub tick_timer_psc: u16,
     pub tick_timer_arr: u16,
-    /// The dt every per-tick integration assumes, s (a C double in the reference).
-    pub tick_dt_s: f64,
+    /// The tick rate every per-tick integration assumes, Hz: their dt is its reciprocal. Kept
+    /// as a rate because 800 gives every form of that dt exactly: the reference's C double
+    /// `0.00125` is `1.0 / 800.0` in f64, bit for bit, and the f32 dt, outer rate and outer
+    /// period below are the correctly rounded 1/800, 160 and 1/160.
+    pub integration_hz: f32,
 }
 
 /// The timers' input clock, Hz (APB2 timers at 84 MHz).
@@ -40,16 +43,25 @@ impl Timing {
         TIMER_CLOCK_HZ as f32 / div as f32
     }
 
+    /// The dt every per-tick integration assumes, s.
+    pub fn tick_dt_s(&self) -> f32 {
+        1.0 / self.integration_hz
+    }
+
+    /// The same dt as the reference's C double (its heading integration).
+    pub fn tick_dt_s_f64(&self) -> f64 {
+        1.0 / f64::from(self.integration_hz)
+    }
+
     /// Outer steps per second as the integrations assume them: one per
-    /// [`BLOCK`](crate::filter::BLOCK) ticks of `tick_dt_s`. (f64 arithmetic: worked out at
-    /// construction or for telemetry, never per tick.)
+    /// [`BLOCK`](crate::filter::BLOCK) ticks.
     pub fn outer_hz(&self) -> f32 {
-        (1.0 / (self.tick_dt_s * crate::filter::BLOCK as f64)) as f32
+        self.integration_hz / crate::filter::BLOCK as f32
     }
 
     /// The outer step's period as the integrations assume it, s.
     pub fn outer_dt_s(&self) -> f32 {
-        (self.tick_dt_s * crate::filter::BLOCK as f64) as f32
+        crate::filter::BLOCK as f32 / self.integration_hz
     }
 }
 
@@ -68,14 +80,19 @@ pub struct Config {
     pub control: ControlConfig,
     pub mixer: MixerConfig,
     pub supervisor: SupervisorConfig,
-    /// Evaluate the reference's double-precision expressions in f64 (bit-exact replay).
-    /// Off, everything is f32 (much cheaper on the Cortex-M4, whose FPU is single only).
+    /// Evaluate the reference's double-precision expressions in f64 (bit-exact replay; needs
+    /// the crate's `reference` feature). Off, everything is f32 (much cheaper on the Cortex-M4,
+    /// whose FPU is single only).
     pub reference_arithmetic: bool,
 }
 
 /// A configuration value that cannot fly.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConfigError {
+    /// `reference_arithmetic` without the crate's `reference` feature, which compiles it in.
+    ReferenceArithmetic,
+    /// The reference's Mahony filter without the crate's `reference` feature.
+    ReferenceEstimator,
     Timing,
     ImuSensitivity,
     Mount,
@@ -93,6 +110,8 @@ impl ConfigError {
     /// The offending part of the configuration, for a message.
     pub fn field(self) -> &'static str {
         match self {
+            ConfigError::ReferenceArithmetic => "reference arithmetic (fcu-core built without its `reference` feature)",
+            ConfigError::ReferenceEstimator => "estimator: the reference's Mahony (fcu-core built without its `reference` feature)",
             ConfigError::Timing => "timing (tick timer and dt)",
             ConfigError::ImuSensitivity => "imu sensitivity",
             ConfigError::Mount => "imu mount",
@@ -118,7 +137,9 @@ impl Config {
     /// The ST reference firmware, R release (221117), DC motors, Devo 7E radio.
     pub fn reference() -> Config {
         Config {
-            timing: Timing { tick_timer_psc: 51, tick_timer_arr: 1999, tick_dt_s: 0.00125 },
+            // B2: TIM9 ticks at 807.69 Hz, every integration assumes 800 Hz (its dt is the C
+            // double 0.00125).
+            timing: Timing { tick_timer_psc: 51, tick_timer_arr: 1999, integration_hz: 800.0 },
             imu: ImuConfig::REFERENCE,
             calibration: CalibrationConfig::REFERENCE,
             health: None,
@@ -148,8 +169,20 @@ impl Config {
 
     /// Check every field; the error names the first part that cannot fly.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let t = &self.timing;
-        if !(t.tick_dt_s.is_finite() && t.tick_dt_s > 0.0 && t.tick_dt_s < 0.1) {
+        // Without the `reference` feature the reference's double-precision paths and its Mahony
+        // filter are not compiled in: a configuration that asks for them is refused, never
+        // flown with something else.
+        if !cfg!(feature = "reference") {
+            if self.reference_arithmetic {
+                return Err(ConfigError::ReferenceArithmetic);
+            }
+            if matches!(self.estimator, EstimatorConfig::Mahony(_)) {
+                return Err(ConfigError::ReferenceEstimator);
+            }
+        }
+        // A dt in (0, 0.1) s.
+        let hz = self.timing.integration_hz;
+        if !(hz.is_finite() && hz > 10.0) {
             return Err(ConfigError::Timing);
         }
         let sens = [self.imu.accel_mg_per_lsb, self.imu.gyro_mdps_per_lsb];
@@ -226,10 +259,10 @@ impl Default for Config {
     /// The product: the reference's structure with differences D1–D17.
     fn default() -> Config {
         let r = Config::reference();
-        let tick_hz = 800.0;
+        let tick_hz: f32 = 800.0;
         Config {
             // D1: TIM9 at exactly 800 Hz (84 MHz / 105 / 1000), so dt is the real period.
-            timing: Timing { tick_timer_psc: 104, tick_timer_arr: 999, tick_dt_s: 1.0 / tick_hz },
+            timing: Timing { tick_timer_psc: 104, tick_timer_arr: 999, integration_hz: tick_hz },
             imu: r.imu,
             // D11: calibration with a motion check, retried for 10 s.
             calibration: CalibrationConfig {
@@ -278,8 +311,8 @@ impl Default for Config {
                 // D7: derivative on measurement.
                 derivative: Derivative::OnMeasurement,
                 // D2: the outer integrator steps by the real outer period.
-                outer_integrator_dt_s: 5.0 / tick_hz as f32,
-                inner_dt_s: 1.0 / tick_hz as f32,
+                outer_integrator_dt_s: 5.0 / tick_hz,
+                inner_dt_s: 1.0 / tick_hz,
                 // D6: anti-windup against mixer saturation.
                 anti_windup: true,
                 // D13: the yaw stick's rate straight into the yaw rate demand.
@@ -313,9 +346,36 @@ mod tests {
 
     #[test]
     fn both_profiles_are_valid() {
+        #[cfg(feature = "reference")]
         assert_eq!(Config::reference().validate(), Ok(()));
         assert_eq!(Config::default().validate(), Ok(()));
         assert_eq!(Config::esc().validate(), Ok(()));
+    }
+
+    /// `cargo test -p fcu-core --no-default-features`: the build the firmware ships.
+    #[test]
+    #[cfg(not(feature = "reference"))]
+    fn without_the_reference_feature_its_arithmetic_and_estimator_are_refused() {
+        assert_eq!(Config::reference().validate(), Err(ConfigError::ReferenceArithmetic));
+        let arithmetic = Config { reference_arithmetic: true, ..Config::default() };
+        assert_eq!(arithmetic.validate(), Err(ConfigError::ReferenceArithmetic));
+        let estimator = Config { estimator: Config::reference().estimator, ..Config::default() };
+        assert_eq!(estimator.validate(), Err(ConfigError::ReferenceEstimator));
+        assert!(ConfigError::ReferenceEstimator.field().contains("`reference` feature"));
+        assert!(matches!(crate::FlightController::new(estimator), Err(ConfigError::ReferenceEstimator)));
+    }
+
+    #[test]
+    fn the_integration_rate_gives_the_reference_dt_and_its_f32_forms_bit_for_bit() {
+        // What the reference computes from its C double dt (0.00125) and what the pipeline
+        // uses: the double itself, and its f32 roundings.
+        let dt = 0.00125f64;
+        for t in [Config::reference().timing, Config::default().timing] {
+            assert_eq!(t.tick_dt_s_f64().to_bits(), dt.to_bits());
+            assert_eq!(t.tick_dt_s().to_bits(), (dt as f32).to_bits());
+            assert_eq!(t.outer_dt_s().to_bits(), ((dt * 5.0) as f32).to_bits());
+            assert_eq!(t.outer_hz().to_bits(), ((1.0 / (dt * 5.0)) as f32).to_bits());
+        }
     }
 
     #[test]
@@ -379,9 +439,11 @@ mod tests {
 
     #[test]
     fn a_zero_sample_time_is_an_error() {
-        let mut c = Config::reference();
-        c.timing.tick_dt_s = 0.0;
-        assert_eq!(c.validate(), Err(ConfigError::Timing));
+        for hz in [f32::INFINITY, 0.0, 10.0, -800.0, f32::NAN] {
+            let mut c = Config::default();
+            c.timing.integration_hz = hz;
+            assert_eq!(c.validate(), Err(ConfigError::Timing), "{hz}");
+        }
         let mut c = Config::default();
         c.control.inner_dt_s = 0.0;
         assert_eq!(c.validate(), Err(ConfigError::Control));
@@ -421,7 +483,7 @@ mod tests {
 
     #[test]
     fn the_tick_rate_of_the_largest_timer_settings_does_not_overflow() {
-        let t = Timing { tick_timer_psc: u16::MAX, tick_timer_arr: u16::MAX, tick_dt_s: 1.0 };
+        let t = Timing { tick_timer_psc: u16::MAX, tick_timer_arr: u16::MAX, integration_hz: 1.0 };
         let hz = t.tick_hz();
         assert!(hz.is_finite() && hz > 0.0 && hz < 0.02, "{hz}");
     }

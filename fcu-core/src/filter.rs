@@ -186,7 +186,9 @@ pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
 }
 
 /// The mean of a block from its sum: `sum · 0.2`, in f64 as the reference (reference
-/// arithmetic) or in f32.
+/// arithmetic) or in f32. Always inlined, so that a caller's constant `false` leaves no f64
+/// code behind (the firmware, built without the `reference` feature).
+#[inline(always)]
 pub fn block_mean(sum: [f32; 3], reference_arithmetic: bool) -> [f32; 3] {
     sum.map(|s| if reference_arithmetic { (f64::from(s) * 0.2) as f32 } else { s * 0.2 })
 }

@@ -198,7 +198,8 @@ impl FlightController {
     pub fn new(cfg: Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
         let derived = Derived::new(&cfg);
-        Ok(FlightController { control_tick: ControlTick::new(&cfg, derived.tick), outer_step: OuterStep::new(&cfg, derived.outer), cfg })
+        let outer_step = OuterStep::new(&cfg, derived.outer)?;
+        Ok(FlightController { control_tick: ControlTick::new(&cfg, derived.tick), outer_step, cfg })
     }
 
     /// The configuration given to [`new`](Self::new).
@@ -344,7 +345,7 @@ impl ControlTick {
         let gyro_mdps = self.sensors.gyro_mdps(imu.gyro, &p.decoder);
         let job_due = self.block.add(imu.accel, gyro_mdps);
         let gyro_rad_s =
-            gyro_mdps.map(|g| if p.reference_arithmetic { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
+            gyro_mdps.map(|g| if p.reference_arithmetic() { (f64::from(g) * MDPS_TO_RAD_S) as f32 } else { g * (MDPS_TO_RAD_S as f32) });
 
         // 4. Heading: gyro-integrated, restarted with its target while the throttle is low.
         self.heading.integrate(gyro_rad_s[2], in_force.throttle_low, p);
@@ -395,25 +396,25 @@ impl ControlTick {
 }
 
 impl OuterStep {
-    fn new(cfg: &Config, params: OuterParams) -> Self {
-        OuterStep {
-            estimator: Estimator::new(cfg.estimator),
+    fn new(cfg: &Config, params: OuterParams) -> Result<Self, ConfigError> {
+        Ok(OuterStep {
+            estimator: Estimator::new(cfg.estimator)?,
             angle_loop: AngleLoop::default(),
             heading: HeadingTarget::new(cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s()))),
             gains: GainSchedule::new(&cfg.control, &cfg.mixer, params.outer_hz),
             params,
-        }
+        })
     }
 
     /// The outer step: block average → estimator → Euler and tilt → stick targets and the
     /// heading target → angle loop → gains.
     pub fn run(&mut self, job: &OuterJob) -> OuterResult {
         let p = &self.params;
-        let accel = block_mean(job.accel_sum_mg(&p.decoder), p.reference_arithmetic);
-        let gyro = block_mean(job.gyro_sum_mdps, p.reference_arithmetic);
+        let accel = block_mean(job.accel_sum_mg(&p.decoder), p.reference_arithmetic());
+        let gyro = block_mean(job.gyro_sum_mdps, p.reference_arithmetic());
         self.estimator.update(accel, gyro, job.throttle_low);
         let quat = self.estimator.quat();
-        let tilt = quat_to_tilt_with(quat, p.reference_arithmetic);
+        let tilt = quat_to_tilt_with(quat, p.reference_arithmetic());
         // Only the safe supervisor's arming check reads it: sqrt and acos, here at the outer
         // rate rather than in the tick.
         let tilt_from_level_rad = if p.arming_tilt { tilt_angle_rad(quat) } else { 0.0 };
@@ -439,8 +440,6 @@ impl OuterStep {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::{accumulate, BLOCK};
-    use crate::imu::ImuConfig;
 
     /// A reading whose accelerometer words change every tick.
     fn sample(k: usize) -> RawImu {
@@ -476,7 +475,10 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "reference")]
     fn a_block_spanning_new_offsets_keeps_each_sample_under_its_own_offsets() {
+        use crate::filter::{accumulate, BLOCK};
+        use crate::imu::ImuConfig;
         // What the reference does tick by tick: convert, correct with the offsets in force,
         // store, and average the five slots. The job's sum must be that, bit for bit, wherever
         // in the block the offsets change.

@@ -16,6 +16,7 @@ use std::path::Path;
 
 use fcu_core::ahrs::{Estimator, EstimatorConfig, MahonyConfig, VqfConfig};
 use fcu_core::math::Quat;
+use fcu_core::ConfigError;
 
 /// The header every BROAD CSV starts with.
 pub const HEADER: &str = "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,ref_qw,ref_qx,ref_qy,ref_qz,movement";
@@ -211,20 +212,22 @@ impl Profile {
     }
 }
 
-/// Run an estimator from its initial state over every sample; one estimate per sample.
-pub fn run(rec: &Recording, cfg: EstimatorConfig) -> Vec<Quat> {
+/// Run an estimator from its initial state over every sample; one estimate per sample. An
+/// estimator fcu-core was built without is refused.
+pub fn run(rec: &Recording, cfg: EstimatorConfig) -> Result<Vec<Quat>, ConfigError> {
     let throttle_low = match cfg {
         EstimatorConfig::Mahony(_) => Profile::Reference.throttle_low(),
         EstimatorConfig::Vqf(_) => Profile::Default.throttle_low(),
     };
-    let mut est = Estimator::new(cfg);
-    rec.samples
+    let mut est = Estimator::new(cfg)?;
+    Ok(rec
+        .samples
         .iter()
         .map(|s| {
             est.update(s.accel_mg(), s.gyro_mdps(), throttle_low);
             est.quat()
         })
-        .collect()
+        .collect())
 }
 
 /// Inclination error of one estimate against the ground truth, rad (README: q_err = q_est ⊗

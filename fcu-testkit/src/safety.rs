@@ -354,7 +354,8 @@ pub struct SafetyMonitor {
 impl SafetyMonitor {
     /// A monitor for a controller built from `cfg`, to be fed from that controller's first tick.
     pub fn new(cfg: &Config) -> Self {
-        let dt = if cfg.timing.tick_dt_s.is_finite() && cfg.timing.tick_dt_s > 0.0 { cfg.timing.tick_dt_s } else { 1.0 / 800.0 };
+        let dt = cfg.timing.tick_dt_s_f64();
+        let dt = if dt.is_finite() && dt > 0.0 { dt } else { 1.0 / 800.0 };
         SafetyMonitor {
             mode: match cfg.supervisor {
                 SupervisorConfig::Safe(s) => Mode::Safe(s),

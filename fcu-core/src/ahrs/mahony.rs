@@ -1,7 +1,10 @@
 //! The reference's Mahony complementary filter (`ahrs_fusion_ag`), with switches for its
 //! quirks so the same code serves the bit-exact reference profile and a cleaner variant.
+//! The filter is compiled in by the crate's `reference` feature; its configuration always is.
 
-use crate::math::{InvSqrt, Quat, Vec3};
+use crate::math::InvSqrt;
+#[cfg(feature = "reference")]
+use crate::math::{Quat, Vec3};
 
 /// The reference's mdps → rad/s factor (a C double constant).
 pub const MDPS_TO_RAD_S: f64 = 1.745_329_252e-5;
@@ -44,6 +47,7 @@ impl MahonyConfig {
 
 /// Mahony filter state: attitude and the integral of the correction (never reset, never
 /// clamped in the reference).
+#[cfg(feature = "reference")]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mahony {
     cfg: MahonyConfig,
@@ -52,6 +56,7 @@ pub struct Mahony {
     half_dt: f32,
 }
 
+#[cfg(feature = "reference")]
 impl Mahony {
     pub fn new(cfg: MahonyConfig) -> Self {
         Mahony { cfg, q: Quat::IDENTITY, integral: Vec3::ZERO, half_dt: (0.5 * cfg.dt_s) as f32 }
@@ -140,7 +145,7 @@ impl Mahony {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "reference"))]
 mod tests {
     use super::*;
     use crate::math::quat_to_tilt;

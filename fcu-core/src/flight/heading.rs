@@ -22,10 +22,10 @@ impl HeadingEstimate {
     /// One tick of yaw rate, rad/s.
     #[inline(always)]
     pub(super) fn integrate(&mut self, yaw_rate_rad_s: f32, throttle_low: bool, p: &TickParams) {
-        self.yaw_est_rad = if p.reference_arithmetic {
-            (f64::from(self.yaw_est_rad) + f64::from(yaw_rate_rad_s) * p.tick_dt_s) as f32
-        } else {
-            self.yaw_est_rad + yaw_rate_rad_s * p.tick_dt_s_f32
+        self.yaw_est_rad = match p.reference_dt_s() {
+            // The reference integrates in double (its dt is a C double).
+            Some(dt_s) => (f64::from(self.yaw_est_rad) + f64::from(yaw_rate_rad_s) * dt_s) as f32,
+            None => self.yaw_est_rad + yaw_rate_rad_s * p.tick_dt_s,
         };
         if !self.yaw_est_rad.is_finite() {
             self.yaw_est_rad = 0.0;

@@ -28,8 +28,9 @@ impl Derived {
                 rc: cfg.rc,
                 decoder,
                 reference_arithmetic: cfg.reference_arithmetic,
-                tick_dt_s: cfg.timing.tick_dt_s,
-                tick_dt_s_f32: cfg.timing.tick_dt_s as f32,
+                #[cfg(feature = "reference")]
+                tick_dt_s_f64: cfg.timing.tick_dt_s_f64(),
+                tick_dt_s: cfg.timing.tick_dt_s(),
                 outer_hz,
                 rate_loop: cfg.control,
                 mixer: cfg.mixer,
@@ -56,12 +57,14 @@ pub struct TickParams {
     pub(crate) rc: RcConfig,
     /// Sensor words to body axes and physical units (mount, sensitivities).
     pub(crate) decoder: Decoder,
-    /// Evaluate the reference's double-precision expressions in `f64`.
-    pub(crate) reference_arithmetic: bool,
-    /// The dt the heading integration assumes, s, and the same rounded to `f32` once (the
-    /// conversion is a library call on the M4).
-    pub(crate) tick_dt_s: f64,
-    pub(crate) tick_dt_s_f32: f32,
+    /// Evaluate the reference's double-precision expressions in `f64`: read it through
+    /// [`reference_arithmetic`](Self::reference_arithmetic).
+    reference_arithmetic: bool,
+    /// The dt the heading integration assumes, s, as the reference's double (read through
+    /// [`reference_dt_s`](Self::reference_dt_s)) and in f32.
+    #[cfg(feature = "reference")]
+    tick_dt_s_f64: f64,
+    pub(crate) tick_dt_s: f32,
     /// Outer steps per second (for the yaw rate the stick asks for, in `Status`).
     pub(crate) outer_hz: f32,
     /// The configuration's control gains, the rate loop's scaled by the rate gain in force.
@@ -90,6 +93,25 @@ impl TickParams {
         }
     }
 
+    /// Evaluate the reference's double-precision expressions in `f64`. A constant `false`
+    /// without the `reference` feature, so its `f64` branches are not compiled into the image
+    /// (`Config::validate` refuses the flag there).
+    #[inline(always)]
+    pub(crate) fn reference_arithmetic(&self) -> bool {
+        cfg!(feature = "reference") && self.reference_arithmetic
+    }
+
+    /// The reference's double dt when its arithmetic is on; always `None` without the
+    /// `reference` feature.
+    #[inline(always)]
+    pub(crate) fn reference_dt_s(&self) -> Option<f64> {
+        #[cfg(feature = "reference")]
+        if self.reference_arithmetic {
+            return Some(self.tick_dt_s_f64);
+        }
+        None
+    }
+
     /// The control gains in force: the configuration's, the rate loop scaled by the rate gain.
     pub fn rate_loop(&self) -> &ControlConfig {
         &self.rate_loop
@@ -111,8 +133,18 @@ pub(crate) struct OuterParams {
     /// The angle loop's gains and the yaw feedforward (the configuration's: the outer step is
     /// not scaled).
     pub(crate) control: ControlConfig,
-    pub(crate) reference_arithmetic: bool,
+    /// Read through [`reference_arithmetic`](Self::reference_arithmetic).
+    reference_arithmetic: bool,
     pub(crate) outer_hz: f32,
     /// The supervisor checks the tilt from level before arming: the outer step works it out.
     pub(crate) arming_tilt: bool,
+}
+
+impl OuterParams {
+    /// As [`TickParams::reference_arithmetic`]: a constant `false` without the `reference`
+    /// feature.
+    #[inline(always)]
+    pub(crate) fn reference_arithmetic(&self) -> bool {
+        cfg!(feature = "reference") && self.reference_arithmetic
+    }
 }

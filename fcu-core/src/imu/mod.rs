@@ -358,10 +358,8 @@ impl Calibrator {
         if self.count < self.cfg.samples {
             return None;
         }
-        // The reference multiplies the int32 sum by 0.00125 (= 1/800) in double and truncates.
-        let factor = 1.0 / f64::from(self.cfg.samples.max(1));
-        let mean = |sum: i64| -> i32 { (sum as f64 * factor) as i32 };
-        let [a0, a1, a2, g0, g1, g2] = self.sums.map(mean);
+        let n = self.cfg.samples;
+        let [a0, a1, a2, g0, g1, g2] = self.sums.map(|sum| truncated_mean(sum, n));
         self.clear_sums();
         self.passed_once = true;
         self.phase = CalibrationPhase::Idle { last: Some(CalibrationOutcome::Passed) };
@@ -381,6 +379,21 @@ impl Calibrator {
         let gyro_sums = [self.sums[3], self.sums[4], self.sums[5]];
         s.gyro_mdps.iter().zip(gyro_sums).any(|(&g, sum)| (g as f32 - sum as f32 / n).abs() > check.gyro_max_dev_mdps)
     }
+}
+
+/// The mean of `n` samples from their sum, truncated toward zero: the reference's offset.
+///
+/// The reference multiplies its sum by the double 0.00125 and truncates. For its 800 samples
+/// (both profiles' count) that is this quotient, in integers rather than emulated doubles on
+/// the M4: the double nearest 1/800 lies above it (by 2e-17 relative), so for
+/// `sum = 800·q + r` (0 ≤ r < 800, |q| < 2^31 for i32 samples) the product is at least
+/// `q` and exceeds `q + r/800` by under 2e-7 with its rounding, far short of `q + 1`;
+/// both truncate toward zero, so negative sums mirror. For any other count the quotient is
+/// the exact truncated mean.
+fn truncated_mean(sum: i64, n: u32) -> i32 {
+    let mean = sum / i64::from(n.max(1));
+    // The mean of i32 samples is an i32: the clamp only keeps the cast honest.
+    mean.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }
 
 /// In-flight sensor health (`docs/safety.md#sensor-faults`).
@@ -604,5 +617,56 @@ mod tests {
             assert!(b.accel_mg.iter().all(|v| v.unsigned_abs() <= 3997), "{w}: {b:?}");
             assert!(b.gyro_mdps.iter().all(|v| v.unsigned_abs() <= 2_293_760), "{w}: {b:?}");
         }
+    }
+
+    /// The reference's calibration mean: the sum times the double 0.00125, truncated.
+    fn reference_mean(sum: i64) -> i32 {
+        (sum as f64 * 0.00125) as i32
+    }
+
+    #[test]
+    fn the_double_nearest_1_over_800_is_above_it() {
+        // 0.00125 = m · 2^e exactly; above 1/800 means 800 · m > 2^−e.
+        let bits = 0.00125f64.to_bits();
+        let m = u128::from(bits & ((1 << 52) - 1) | (1 << 52));
+        let e = ((bits >> 52) & 0x7ff) as i32 - 1075;
+        assert!(800 * m > 1u128 << -e, "{m} {e}");
+    }
+
+    #[test]
+    fn the_integer_mean_of_800_samples_is_the_references_double_product() {
+        // Either side of every multiple of 800 (where a double below 1/800 would truncate to
+        // one less) over the whole range of 800 i32 samples, and both signs.
+        let q_max = i64::from(i32::MAX);
+        let qs = (0..=4096).chain((0..=31).map(|k| 1 << k)).chain([q_max - 1, q_max, 12_345_678, 1_000_003]);
+        for q in qs {
+            for r in [0, 1, 399, 400, 401, 798, 799] {
+                for sum in [800 * q + r, -(800 * q + r)] {
+                    assert_eq!(truncated_mean(sum, 800), reference_mean(sum), "sum {sum}");
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_integer_mean_is_the_references_for_any_sum_of_800_samples(sum in -800 * i64::from(i32::MAX)..=800 * i64::from(i32::MAX)) {
+            proptest::prop_assert_eq!(truncated_mean(sum, 800), reference_mean(sum));
+        }
+    }
+
+    #[test]
+    fn a_completed_calibration_gives_the_truncated_means() {
+        let mut c = Calibrator::new(CalibrationConfig { settle_ticks: 0, samples: 800, motion_check: None });
+        c.settle();
+        let mut out = None;
+        for k in 0..800 {
+            // Sums 800·7 + 799 (→ 7), −800·3 (→ −3), 800·2 − 1 (→ 1, not 2).
+            let a0 = if k == 0 { 7 * 800 + 799 } else { 0 };
+            let a1 = if k == 0 { -3 * 800 } else { 0 };
+            let g2 = if k == 0 { 2 * 800 - 1 } else { 0 };
+            out = c.feed(BodyImu { accel_mg: [a0, a1, 1000], gyro_mdps: [0, 0, g2] });
+        }
+        assert_eq!(out, Some(Offsets { accel_mg: [7, -3, 1000], gyro_mdps: [0, 0, 1] }));
     }
 }

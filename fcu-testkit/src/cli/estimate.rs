@@ -26,7 +26,7 @@ pub fn run(a: &EstimateArgs) -> Result<ExitCode, CliError> {
     let dt_s =
         rec.sample_period_s().ok_or_else(|| CliError(format!("{}: need at least two samples with increasing t_s", a.input.display())))?;
     let profile = a.profile;
-    let est = broad::run(&rec, profile.estimator_config(dt_s));
+    let est = broad::run(&rec, profile.estimator_config(dt_s)).map_err(|e| CliError(e.to_string()))?;
     let mut bytes = Vec::new();
     broad::write_estimates(BufWriter::new(&mut bytes), &rec, &est)?;
     super::write_output(a.out.as_deref(), &bytes)?;
