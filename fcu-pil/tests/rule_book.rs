@@ -358,7 +358,7 @@ fn sensor_write(b: &mut Bench, cs: (usize, u32), addr: u8, value: u8) {
 }
 
 /// A one-byte read as fcu-firmware `SensorBus::read`, the RM's bidirectional receive (RM0368
-/// §20.3.5, "BIDIMODE = 1 and BIDIOE = 0", and §20.3.8 "Disabling the SPI"): the address sent,
+/// RM0368 §20.3.5, "BIDIMODE = 1 and BIDIOE = 0", and §20.3.8 "Disabling the SPI"): the address sent,
 /// SPE off, BIDIOE off, SPE on (the clock starts), SPE off again within the byte, the byte read
 /// at RXNE, CS high, then the line back to transmit.
 fn sensor_read(b: &mut Bench, cs: (usize, u32), addr: u8) -> u8 {
@@ -612,7 +612,7 @@ mod tim2 {
 }
 
 /// TIM4's compare preload (RM0368 §13.4.7 TIMx_CCMR1 OCxPE: "0: … the new value is taken in
-/// account immediately; 1: … loaded in the active register at each update event"; §13.3.9 PWM
+/// account immediately; 1: … loaded in the active register at each update event"; RM0368 §13.3.9 PWM
 /// mode: "the corresponding preload register must be enabled by setting the OCxPE bit").
 mod tim4 {
     use super::*;
@@ -704,9 +704,9 @@ mod tim4 {
 }
 
 /// TIM9, the control tick (RM0368 §14.4.1 TIMx_CR1 URS: "1: only counter overflow generates an
-/// update interrupt"; §14.4.5 TIMx_EGR UG: re-initialises the counter and updates the
-/// registers; §14.4.9 TIMx_PSC: "the new prescaler ratio is taken into account at the next
-/// update event"; §14.4.4 TIMx_SR UIF: rc_w0). Vendor sequence: fcu-firmware `TickTimer::new`:
+/// update interrupt"; RM0368 §14.4.5 TIMx_EGR UG: re-initialises the counter and updates the
+/// registers; RM0368 §14.4.9 TIMx_PSC: "the new prescaler ratio is taken into account at the next
+/// update event"; RM0368 §14.4.4 TIMx_SR UIF: rc_w0). Vendor sequence: fcu-firmware `TickTimer::new`:
 /// PSC, ARR, CR1 = URS, EGR = UG, SR = UIF cleared, DIER = UIE; `start`: CEN.
 mod tim9 {
     use super::*;
@@ -953,8 +953,8 @@ mod flash_latency {
 }
 
 /// USART1 (RM0368 §19.3.2 "Transmitter", character transmission procedure: UE, M, STOP, BRR,
-/// then TE, then DR at TXE; §19.3.4 "the baud rate register value should not be changed during
-/// communication"; §19.6.1 USART_SR: TC rc_w0, cleared by an SR read then a DR write; TXE
+/// then TE, then DR at TXE; RM0368 §19.3.4 "the baud rate register value should not be changed during
+/// communication"; RM0368 §19.6.1 USART_SR: TC rc_w0, cleared by an SR read then a DR write; TXE
 /// cleared by the DR write). Vendor sequence: stm32f4xx-hal `Serial::tx` (BRR, CR2, CR3, then
 /// one CR1 write with UE | TE | RE) and fcu-firmware's one byte per TXE interrupt.
 mod usart1 {
@@ -1081,7 +1081,7 @@ mod dbgmcu {
 }
 
 /// The GPIO rules the firmware relies on (RM0368 §8.3.9 input, §8.3.10 output, §8.3.11
-/// alternate-function configuration; §8.4.7 GPIOx_BSRR).
+/// alternate-function configuration; RM0368 §8.4.7 GPIOx_BSRR).
 mod gpio {
     use super::*;
 

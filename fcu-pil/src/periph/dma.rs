@@ -9,7 +9,7 @@
 //! Behaviour (RM0368 §9.3 and §9.5):
 //! - a stream's configuration (SxCR but EN, SxNDTR, SxPAR, SxM0AR, SxFCR) can be written only
 //!   while EN = 0; a write while it is 1 is ignored (counted in [`Dma::ignored_writes`]);
-//! - before EN is set, the stream's event flags must have been cleared (§9.3.18 "Stream
+//! - before EN is set, the stream's event flags must have been cleared (RM0368 §9.3.18 "Stream
 //!   configuration procedure", step 9 and the SxCR EN description): setting EN with a flag still
 //!   up is refused here (the RM does not say what the stream then does);
 //! - each request from the peripheral moves one data item; SxNDTR counts down; at 0 the
