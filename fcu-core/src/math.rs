@@ -1,7 +1,11 @@
-//! Vectors, quaternions and the two inverse square roots.
+//! Vectors, quaternions, the two inverse square roots and an arcsine in single precision.
 //!
 //! Quaternions are Hamilton, `w + xi + yj + zk`, and rotate **body** vectors into the **earth**
 //! frame (z up): `v_earth = q ⊗ v_body ⊗ q*`. Kinematics: `q̇ = ½ q ⊗ (0, ω_body)`.
+
+mod asin;
+
+pub use asin::asinf;
 
 /// A 3-vector of f32.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -206,7 +210,7 @@ pub fn quat_to_tilt_with(q: Quat, reference_arithmetic: bool) -> Tilt {
     let dq1q3 = dq1 * q3;
     if !reference_arithmetic {
         let pitch = libm::atan2f(dq0q1 + dq2q3, ((q0q0 + q3q3) - q1q1) - q2q2);
-        return Tilt { pitch_rad: pitch, roll_rad: libm::asinf((dq0q2 - dq1q3).clamp(-1.0, 1.0)) };
+        return Tilt { pitch_rad: pitch, roll_rad: asinf((dq0q2 - dq1q3).clamp(-1.0, 1.0)) };
     }
     let pitch = libm::atan2(f64::from(dq0q1 + dq2q3), f64::from(((q0q0 + q3q3) - q1q1) - q2q2));
     let s = f64::from(dq0q2 - dq1q3).clamp(-1.0, 1.0);
