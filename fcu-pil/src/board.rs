@@ -88,32 +88,31 @@ pub struct Records {
 /// A peripheral register's name for reports: `IWDG.SR`, `SPI2.SR`, `RCC.CR`, or the
 /// peripheral and offset (`TIM2+0x010`).
 pub fn register_name(addr: u32) -> String {
-    const PERIPHERALS: [(u32, &str, &[&str]); 15] = [
-        (0x4000_0000, "TIM2", &[]),
-        (0x4000_0800, "TIM4", &[]),
-        (0x4000_3000, "IWDG", &["KR", "PR", "RLR", "SR"]),
-        (0x4000_3800, "SPI2", &["CR1", "CR2", "SR", "DR"]),
-        (0x4000_7000, "PWR", &["CR", "CSR"]),
-        (0x4001_1000, "USART1", &["SR", "DR", "BRR", "CR1", "CR2", "CR3"]),
-        (0x4001_2000, "ADC1", &["SR", "CR1", "CR2"]),
-        (0x4001_4000, "TIM9", &[]),
+    /// The registers a report names in a peripheral: (offset, name).
+    type Registers = &'static [(u32, &'static str)];
+    /// (base, peripheral, its named registers).
+    const PERIPHERALS: [(u32, &str, Registers); 15] = [
+        (tim::TimerKind::Tim2.base(), "TIM2", &[]),
+        (tim::TimerKind::Tim4.base(), "TIM4", &[]),
+        (iwdg::BASE, "IWDG", &[(0x0, "KR"), (0x4, "PR"), (0x8, "RLR"), (0xC, "SR")]),
+        (0x4000_3800, "SPI2", &[(0x0, "CR1"), (0x4, "CR2"), (0x8, "SR"), (0xC, "DR")]),
+        (pwr::BASE, "PWR", &[(0x0, "CR"), (0x4, "CSR")]),
+        (usart::BASE, "USART1", &[(0x0, "SR"), (0x4, "DR"), (0x8, "BRR"), (0xC, "CR1"), (0x10, "CR2"), (0x14, "CR3")]),
+        (adc::BASE, "ADC1", &[(0x0, "SR"), (0x4, "CR1"), (0x8, "CR2")]),
+        (tim::TimerKind::Tim9.base(), "TIM9", &[]),
         (0x4002_0000, "GPIOA", &[]),
         (0x4002_0400, "GPIOB", &[]),
         (0x4002_0800, "GPIOC", &[]),
-        (0x4002_3800, "RCC", &["CR", "PLLCFGR", "CFGR", "CIR"]),
-        (0x4002_3C00, "FLASH", &["ACR", "KEYR", "OPTKEYR", "SR", "CR"]),
-        (0x4002_6000, "DMA1", &["LISR", "HISR", "LIFCR", "HIFCR"]),
-        (0xE004_2000, "DBGMCU", &["IDCODE", "CR", "APB1_FZ", "APB2_FZ"]),
+        (rcc::BASE, "RCC", &[(0x0, "CR"), (0x4, "PLLCFGR"), (0x8, "CFGR"), (0xC, "CIR"), (0x74, "CSR")]),
+        (flash::BASE, "FLASH", &[(0x0, "ACR"), (0x4, "KEYR"), (0x8, "OPTKEYR"), (0xC, "SR"), (0x10, "CR")]),
+        (dma::BASE, "DMA1", &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")]),
+        (dbgmcu::BASE, "DBGMCU", &[(0x0, "IDCODE"), (0x4, "CR"), (0x8, "APB1_FZ"), (0xC, "APB2_FZ")]),
     ];
-    // RCC's registers past CIR are named only where a report needs them.
-    if addr == 0x4002_3874 {
-        return "RCC.CSR".into();
-    }
     let (base, offset) = (addr & !0x3FF, addr & 0x3FF);
     match PERIPHERALS.iter().find(|(b, _, _)| *b == base) {
-        Some((_, name, regs)) => match regs.get((offset / 4) as usize) {
-            Some(reg) if offset % 4 == 0 => format!("{name}.{reg}"),
-            _ => format!("{name}+{offset:#05x}"),
+        Some((_, name, regs)) => match regs.iter().find(|(o, _)| *o == offset) {
+            Some((_, reg)) => format!("{name}.{reg}"),
+            None => format!("{name}+{offset:#05x}"),
         },
         None => format!("{addr:#010x}"),
     }
@@ -373,11 +372,7 @@ impl Board {
                 Op::Read => self.rcc.read(offset, now),
                 Op::Write(v) => self.rcc.write(offset, v, now).map(|()| 0),
             },
-            0x4002_6000 => {
-                let v = dev!("DMA1", Ahb1, 21, self.dma1)?;
-                self.serve_dma(now);
-                Ok(v)
-            }
+            0x4002_6000 => dev!("DMA1", Ahb1, 21, self.dma1),
             0x4002_3C00 => match op {
                 Op::Read => self.flash.read(offset, now),
                 Op::Write(v) => self.flash.write(offset, v, now).map(|()| 0),
@@ -409,9 +404,9 @@ impl Board {
     }
 
     /// SPI2's received bytes that DMA1 stream 3 took go to memory, and SPI2 learns how many
-    /// more the stream takes.
-    fn serve_dma(&mut self, now: Time) {
-        let _ = now;
+    /// more the stream takes. After every access (a DMA register write may enable the stream)
+    /// and every advance.
+    fn serve_dma(&mut self) {
         for byte in self.spi2.take_dma_bytes() {
             self.dma1.spi2_rx(byte);
         }
@@ -422,7 +417,7 @@ impl Board {
         for r in self.rcc.take_reset_pulses() {
             self.reset_peripheral(r);
         }
-        self.serve_dma(now);
+        self.serve_dma();
         self.forward_pins(now);
         let tim9_running = self.tim9.started_at().is_some();
         if tim9_running && !self.tim9_was_running {
@@ -520,7 +515,7 @@ impl Peripherals for Board {
         self.tim4.advance(now);
         self.tim9.advance(now);
         self.spi2.advance(now, clocks);
-        self.serve_dma(now);
+        self.serve_dma();
         self.collect_uart(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         self.iwdg.advance(now);

@@ -989,10 +989,7 @@ impl<P: Peripherals + 'static> Machine<P> {
         let watchdog =
             st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         st.sample_lines(now, &lines);
-        let writes = st.board.take_memory_writes();
-        for (addr, byte) in writes {
-            self.uc.mem_write(u64::from(addr), &[byte]).map_err(emu)?;
-        }
+        store_memory_writes(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         let st = self.uc.get_data_mut();
         match st.board.units_per_cycle() {
             Ok(u) if u != st.units_per_cycle => {
@@ -1338,7 +1335,9 @@ fn mmio_read<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u3
     };
     match result {
         Ok(v) => {
-            store_memory_writes(uc);
+            if let Err(e) = store_memory_writes(uc) {
+                fail(uc, e);
+            }
             u64::from(v)
         }
         Err(e) => {
@@ -1357,12 +1356,14 @@ fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
     }
 }
 
-/// Stores in RAM what DMA wrote during a peripheral access.
-fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) {
+/// Stores in the guest's RAM what another bus master (DMA) wrote since the last call.
+fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
     let writes = uc.get_data_mut().board.take_memory_writes();
     for (addr, byte) in writes {
-        let _ = uc.mem_write(u64::from(addr), &[byte]);
+        uc.mem_write(u64::from(addr), &[byte])
+            .map_err(|e| Unmodelled::new("DMA", format!("a write to {addr:#010x} failed in the emulator: {e:?}")))?;
     }
+    Ok(())
 }
 
 fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u32, value: u32) {
@@ -1405,7 +1406,9 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
                 Ok(_) => st.sample_lines(now, &lines),
                 Err(e) => fail(uc, e),
             }
-            store_memory_writes(uc);
+            if let Err(e) = store_memory_writes(uc) {
+                fail(uc, e);
+            }
         }
         Err(e) => fail(uc, e),
     }
