@@ -19,6 +19,7 @@
 #![no_std]
 #![no_main]
 
+mod cycles;
 mod sensor_bus;
 mod timers;
 mod watchdog;
@@ -381,21 +382,17 @@ mod app {
         const HSI_HZ: u32 = 16_000_000;
         const STARTUP_BOUND_CYCLES: u32 = HSI_HZ / 10;
         rcc.cr().modify(|_, w| w.hseon().set_bit());
-        let start = cortex_m::peripheral::DWT::cycle_count();
-        while rcc.cr().read().hserdy().bit_is_clear() {
-            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > STARTUP_BOUND_CYCLES {
-                rcc.cr().modify(|_, w| w.hseon().clear_bit());
-                return false;
-            }
+        let ready = crate::cycles::poll(STARTUP_BOUND_CYCLES, || rcc.cr().read().hserdy().bit_is_set().then_some(()));
+        if ready.is_none() {
+            rcc.cr().modify(|_, w| w.hseon().clear_bit());
         }
-        true
+        ready.is_some()
     }
 
     /// Waits `ms` milliseconds on the cycle counter (boot only: the control tick is not running).
     fn delay_ms(ms: u32) {
         let cycles = ms.saturating_mul(SYSCLK_HZ / 1000);
-        let start = cortex_m::peripheral::DWT::cycle_count();
-        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < cycles {}
+        crate::cycles::wait_since(crate::cycles::now(), cycles);
     }
 
     /// Plays each sensor's boot table from `fcu_core::imu::registers` and collects the
@@ -477,29 +474,25 @@ mod app {
     /// looks (the radio's capture interrupt is never held off for the byte's 3 µs).
     fn start_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<(), BusError> {
         bus.lock(|bus| bus.send_burst_address(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G))?;
-        let start = cortex_m::peripheral::DWT::cycle_count();
-        while !bus.lock(|bus| bus.address_sent()) {
-            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > ADDRESS_WAIT_CYCLES {
-                bus.lock(SensorBus::abandon_burst);
-                return Err(BusError::Timeout);
-            }
+        if crate::cycles::poll(ADDRESS_WAIT_CYCLES, || bus.lock(|bus| bus.address_sent()).then_some(())).is_none() {
+            bus.lock(SensorBus::abandon_burst);
+            return Err(BusError::Timeout);
         }
         bus.lock(SensorBus::receive_burst)
     }
 
-    /// Waits for the burst the SPI2 interrupt receives (the radio's and the bus's interrupts
-    /// run meanwhile); a burst that does not come in time is abandoned.
+    /// Waits for the burst the DMA receives (the radio's and the DMA's interrupts run
+    /// meanwhile); a burst that does not come in time is abandoned.
     fn wait_for_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<[u8; BURST_BYTES], BusError> {
-        let start = cortex_m::peripheral::DWT::cycle_count();
-        loop {
-            if crate::sensor_bus::last_byte_started() {
-                if let Some(done) = bus.lock(SensorBus::take_burst) {
-                    return done.map(crate::sensor_bus::burst_bytes);
-                }
-            }
-            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) > BURST_WAIT_CYCLES {
+        let taken = crate::cycles::poll(BURST_WAIT_CYCLES, || {
+            // The flag first: the bus's lock would hold off the very interrupt that sets it.
+            crate::sensor_bus::last_byte_started().then(|| bus.lock(SensorBus::take_burst)).flatten()
+        });
+        match taken {
+            Some(done) => done.map(crate::sensor_bus::burst_bytes),
+            None => {
                 bus.lock(SensorBus::abandon_burst);
-                return Err(BusError::Timeout);
+                Err(BusError::Timeout)
             }
         }
     }

@@ -194,7 +194,7 @@ impl SensorBus {
         };
         // Setting SPE in 1-line receive mode starts the clock: the first byte starts now.
         self.spi.cr1().modify(|_, w| w.spe().set_bit());
-        let mut last_byte_started = cortex_m::peripheral::DWT::cycle_count();
+        let mut last_byte_started = crate::cycles::now();
         let mut result = Ok(());
         for byte in head.iter_mut() {
             result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
@@ -202,10 +202,10 @@ impl SensorBus {
                 break;
             }
             // Each RXNE is the start of the next byte: after the second-to-last, the last one.
-            last_byte_started = cortex_m::peripheral::DWT::cycle_count();
+            last_byte_started = crate::cycles::now();
             *byte = self.spi.dr().read().dr().bits() as u8;
         }
-        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(last_byte_started) < STOP_AFTER_CYCLES {}
+        crate::cycles::wait_since(last_byte_started, STOP_AFTER_CYCLES);
         // Clearing SPE now stops the clock at the end of the byte in flight: the last one.
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         if result.is_ok() {
@@ -244,7 +244,7 @@ impl SensorBus {
         // until RXDMAEN.
         let stream = self.dma.st(RX_STREAM);
         stream.cr().write(|w| w.en().clear_bit());
-        self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
+        self.clear_stream_flags();
         let dr = self.spi.dr().as_ptr() as u32;
         let memory = BURST_DMA.as_ptr() as u32;
         // SAFETY: the stream reads SPI2's data register and writes BURST_DMA, a static of
@@ -294,7 +294,7 @@ impl SensorBus {
     /// (the end-of-read window, see [`STOP_AFTER_CYCLES`], met from this entry at the
     /// highest priority). The last byte then waits in DR for [`SensorBus::take_burst`].
     pub fn on_dma_complete(&mut self) {
-        let seen = cortex_m::peripheral::DWT::cycle_count();
+        let seen = crate::cycles::now();
         self.dma.lifcr().write(|w| w.ctcif3().clear().chtif3().clear());
         let Some(burst) = self.burst.as_mut().filter(|b| b.stage == Stage::Streaming) else {
             return;
@@ -303,7 +303,7 @@ impl SensorBus {
         // this entry comes at least 12 cycles after the transfer-complete flag, which follows
         // the DMA's read of that byte, and half a period more makes sure. The window closes
         // 256 cycles after that RXNE: nothing more is waited for here.
-        while cortex_m::peripheral::DWT::cycle_count().wrapping_sub(seen) < DMA_STOP_AFTER_ENTRY_CYCLES {}
+        crate::cycles::wait_since(seen, DMA_STOP_AFTER_ENTRY_CYCLES);
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
         burst.stage = Stage::LastByte;
@@ -324,11 +324,16 @@ impl SensorBus {
         Some(if sr.ovr().bit_is_set() { Err(BusError::Overrun) } else { Ok(last) })
     }
 
+    /// Every event flag of the receive stream (LIFCR: write 1 to clear).
+    fn clear_stream_flags(&self) {
+        self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
+    }
+
     /// Stops a burst that did not finish: stream off, clock off, sensor deselected, bus back
     /// to transmit.
     pub fn abandon_burst(&mut self) {
         self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().clear_bit());
-        self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
+        self.clear_stream_flags();
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
         if let Some(b) = self.burst.take() {

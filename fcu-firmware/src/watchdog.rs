@@ -38,12 +38,7 @@ impl Watchdog {
         iwdg.kr().write(|w| w.key().unlock());
         iwdg.pr().write(|w| w.pr().set(PRESCALER_DIV8));
         iwdg.rlr().write(|w| w.rl().set(RELOAD));
-        let started = cortex_m::peripheral::DWT::cycle_count();
-        while iwdg.sr().read().bits() != 0 {
-            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(started) > UPDATE_BOUND_CYCLES {
-                return Err(LsiNotRunning);
-            }
-        }
+        crate::cycles::poll(UPDATE_BOUND_CYCLES, || (iwdg.sr().read().bits() == 0).then_some(())).ok_or(LsiNotRunning)?;
         // The first reload after the values land: from here the timeout is 50 ms.
         iwdg.kr().write(|w| w.key().feed());
         Ok(Watchdog { iwdg })
