@@ -30,6 +30,9 @@ pub struct RcCapture {
     pins: CapturePins,
     /// Edges taken from each channel since TIM2's last update (one capture wrap, 8.192 ms).
     edges_in_window: [u8; CHANNELS],
+    /// The channels whose capture interrupt is on, as DIER's CCxIE bits: DIER is written by
+    /// the capture alone, so its copy here saves a bus read per look.
+    enabled_mask: u8,
 }
 
 /// Edges one channel may raise interrupts for in one capture wrap (8.192 ms). A receiver's
@@ -68,10 +71,11 @@ impl RcCapture {
             }
             w
         });
+        let capture = RcCapture { tim, pins, edges_in_window: [0; CHANNELS], enabled_mask: ALL_CAPTURES };
         // The capture interrupts and the wrap's, which reopens the edge budget.
-        enable_all_interrupts(&tim);
-        tim.cr1().write(|w| w.cen().set_bit());
-        RcCapture { tim, pins, edges_in_window: [0; CHANNELS] }
+        capture.write_interrupts();
+        capture.tim.cr1().write(|w| w.cen().set_bit());
+        capture
     }
 
     /// Hands each edge captured since the last call to `sink`, one per channel at most.
@@ -99,25 +103,33 @@ impl RcCapture {
     }
 
     /// One look at the capture flags: (whether any edge was taken, channels muted).
+    ///
+    /// The flagged channels' CCRs are read first, back to back, and only then handed on: the
+    /// latency the radio is measured by ends at the read, and an edge arriving on another
+    /// channel meanwhile is latched by the timer and read at the next look.
     fn take_pending(&mut self, sink: &mut impl FnMut(CaptureEdge)) -> (bool, u32) {
-        let mut sr = self.tim.sr().read();
-        if sr.uif().bit_is_set() {
+        let mut sr = self.tim.sr().read().bits();
+        if sr & 1 != 0 {
             self.reopen_window();
             // Again: a reopened channel's flag was cleared with its stale capture.
-            sr = self.tim.sr().read();
+            sr = self.tim.sr().read().bits();
         }
-        let enabled = self.capture_interrupts();
-        let mut found = false;
-        let mut muting = false;
+        // CCxIF is SR bit x (bits 1..4); DIER's CCxIE sit at the same bits.
+        let pending = sr & u32::from(self.enabled_mask);
+        if pending == 0 {
+            return (false, 0);
+        }
+        let mut captures = [0u16; CHANNELS];
+        for (channel, (slot, ccr)) in captures.iter_mut().zip(self.tim.ccr_iter()).enumerate() {
+            if pending & (2 << channel) != 0 {
+                *slot = ccr.read().ccr().bits() as u16;
+            }
+        }
         let mut muted = 0;
-        for (channel, (&on, ccr)) in enabled.iter().zip(self.tim.ccr_iter()).enumerate() {
-            // CCxIF is SR bit x (bits 1..4), tested on the raw word: the indexed accessor
-            // carries a bounds check.
-            if !(on && sr.bits() & (1 << (channel + 1)) != 0) {
+        for (channel, &capture_counts) in captures.iter().enumerate() {
+            if pending & (2 << channel) == 0 {
                 continue;
             }
-            found = true;
-            let capture_counts = ccr.read().ccr().bits() as u16;
             let level_high = match channel {
                 0 => self.pins.0.is_high(),
                 1 => self.pins.1.is_high(),
@@ -128,21 +140,18 @@ impl RcCapture {
             if let Some(count) = self.edges_in_window.get_mut(channel) {
                 *count = count.saturating_add(1);
                 if *count == EDGE_BUDGET_PER_WRAP {
-                    muting = true;
+                    self.enabled_mask &= !(2 << channel);
                     muted += 1;
                 }
             }
         }
-        if muting {
+        if muted > 0 {
             // DIER is written by this interrupt alone after init: no other writer to race.
-            // (Each channel's bit by name: the indexed accessor carries a bounds check.)
-            let on = |n: usize| self.edges_in_window.get(n).is_some_and(|&c| c < EDGE_BUDGET_PER_WRAP) && enabled[n];
-            let (on0, on1, on2, on3) = (on(0), on(1), on(2), on(3));
-            self.tim.dier().modify(|_, w| w.cc1ie().bit(on0).cc2ie().bit(on1).cc3ie().bit(on2).cc4ie().bit(on3));
+            self.write_interrupts();
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
-        (found, muted)
+        (true, muted)
     }
 
     /// A new capture wrap: every channel gets its budget back. A channel that was muted
@@ -150,31 +159,27 @@ impl RcCapture {
     /// of a storm pairs with nothing), then raises interrupts again.
     fn reopen_window(&mut self) {
         self.tim.sr().write(|w| w.uif().clear());
-        let enabled = self.capture_interrupts();
-        let mut any_muted = false;
         for (channel, count) in self.edges_in_window.iter_mut().enumerate() {
-            if !enabled[channel] {
+            if self.enabled_mask & (2 << channel) == 0 {
                 let _stale = self.tim.ccr(channel).read();
-                any_muted = true;
             }
             *count = 0;
         }
-        if any_muted {
-            enable_all_interrupts(&self.tim);
+        if self.enabled_mask != ALL_CAPTURES {
+            self.enabled_mask = ALL_CAPTURES;
+            self.write_interrupts();
         }
     }
 
-    /// Which channels' capture interrupts are on (CC1IE..CC4IE).
-    fn capture_interrupts(&self) -> [bool; CHANNELS] {
-        let dier = self.tim.dier().read();
-        [dier.cc1ie().bit(), dier.cc2ie().bit(), dier.cc3ie().bit(), dier.cc4ie().bit()]
+    /// DIER from the channels' mask, with the update interrupt always on.
+    fn write_interrupts(&self) {
+        let on = |channel: u8| self.enabled_mask & (2 << channel) != 0;
+        self.tim.dier().write(|w| w.cc1ie().bit(on(0)).cc2ie().bit(on(1)).cc3ie().bit(on(2)).cc4ie().bit(on(3)).uie().set_bit());
     }
 }
 
-/// TIM2's capture interrupts (CC1IE..CC4IE) and its update interrupt (UIE), nothing else.
-fn enable_all_interrupts(tim: &TIM2) {
-    tim.dier().write(|w| w.cc1ie().set_bit().cc2ie().set_bit().cc3ie().set_bit().cc4ie().set_bit().uie().set_bit());
-}
+/// CC1IE..CC4IE (the same bits as CC1IF..CC4IF in SR).
+const ALL_CAPTURES: u8 = 0b1_1110;
 
 /// TIM4 CH1..CH4 on PB6..PB9: PWM mode 1, active high, at the off compare (0 on the DC
 /// board, the idle pulse for ESCs) from the first period on.

@@ -86,6 +86,10 @@ struct MeasureArgs {
     elf: Option<PathBuf>,
     #[command(flatten)]
     timing: TimingArg,
+    /// Exit 1 if the image misses a latency target (TIM9 update to the last motor compare
+    /// write ≤ 25 µs median, TIM2 capture to its read ≤ 5 µs max, TIM2 masked ≤ 5 µs).
+    #[arg(long)]
+    check: bool,
 }
 
 fn main() -> ExitCode {
@@ -139,5 +143,17 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
     let opts = fcu_testkit::sim::RunOptions { seed: a.seed, duration_s: a.duration, progress: true, ..Default::default() };
     let report = measure::measure(&elf, &sc, &opts, &setup)?;
     print!("{report}");
-    Ok(ExitCode::SUCCESS)
+    if !a.check {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let missed = report.missed_targets();
+    for line in &missed {
+        eprintln!("fcu-pil: target missed: {line}");
+    }
+    if missed.is_empty() {
+        println!("  targets: all {} met", measure::TARGETS.len());
+        Ok(ExitCode::SUCCESS)
+    } else {
+        Ok(ExitCode::from(1))
+    }
 }

@@ -18,7 +18,7 @@ const CONTROL_EXCEPTION: usize = 16 + periph::irq::TIM1_BRK_TIM9 as usize;
 /// The radio capture, TIM2, is external interrupt 28: exception 44.
 const CAPTURE_EXCEPTION: usize = 16 + periph::irq::TIM2 as usize;
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct Report {
     pub scenario: String,
     /// The timing profile the figures were measured under.
@@ -180,6 +180,27 @@ pub fn measure(
     })
 }
 
+/// The control interrupt's latency targets on the board, which the image must meet under
+/// either timing profile: (what, measured, limit), limits in µs.
+pub const TARGETS: [(&str, fn(&Report) -> f64, f64); 3] = [
+    ("TIM9 update to the last TIM4 compare write, median", |r| r.tick_to_last_ccr_us_median, 25.0),
+    ("TIM2 capture to its read, max", |r| r.capture_latency_us_max, 5.0),
+    ("longest interval with TIM2 masked, after boot", |r| r.masked_us_max, 5.0),
+];
+
+impl Report {
+    /// The targets the report misses, each as a line naming the figure, its value and its limit.
+    pub fn missed_targets(&self) -> Vec<String> {
+        TARGETS
+            .iter()
+            .filter_map(|&(what, value, limit_us)| {
+                let v = value(self);
+                (v.is_nan() || v > limit_us).then(|| format!("{what}: {v:.1} µs, over its target of {limit_us:.0} µs"))
+            })
+            .collect()
+    }
+}
+
 impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
@@ -234,5 +255,27 @@ impl fmt::Display for Report {
             self.wall_s,
             self.emulated_s / self.wall_s.max(1e-9)
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn within_targets() -> Report {
+        Report { tick_to_last_ccr_us_median: 24.9, capture_latency_us_max: 4.9, masked_us_max: 4.9, ..Report::default() }
+    }
+
+    #[test]
+    fn a_report_within_every_target_misses_none() {
+        assert!(within_targets().missed_targets().is_empty());
+    }
+
+    #[test]
+    fn each_target_missed_is_named_with_its_value() {
+        let late = Report { capture_latency_us_max: 5.6, ..within_targets() };
+        assert_eq!(late.missed_targets(), vec!["TIM2 capture to its read, max: 5.6 µs, over its target of 5 µs".to_string()]);
+        let slow = Report { tick_to_last_ccr_us_median: 25.1, masked_us_max: f64::NAN, ..within_targets() };
+        assert_eq!(slow.missed_targets().len(), 2);
     }
 }

@@ -25,15 +25,14 @@
 //!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). (A second
 //!   caveat: an exception tail-chained onto a return costs the core 6 cycles, here a return and
 //!   an entry, 22: up to 16 cycles late per tail-chain.)
-//! - a memory-mapped access is time-stamped as early as its block allows: the block's start
-//!   plus one cycle per instruction before the accessing one. The accessing instruction's PC is
-//!   exact: Unicorn's MMIO callbacks alone see a stale PC (QEMU's `io_readx`/`io_writex` do not
-//!   restore the CPU state), but a memory hook bound to the peripheral ranges makes Unicorn
-//!   restore the PC from the translation block's instruction table before the access
-//!   (`cpu_restore_state` in `load_helper`/`store_helper`). The price: with any memory hook
-//!   installed, Unicorn sends every guest load and store through its slow path, about 30 % more
-//!   host time for the whole run.
-//!
+//! - a memory-mapped access is time-stamped at the start of its block, the earliest instant
+//!   the block allows. Unicorn's MMIO callbacks see a stale PC (QEMU's `io_readx`/`io_writex`
+//!   do not restore the CPU state), so the accessing instruction is not known. A memory hook
+//!   bound to the peripheral range would make Unicorn restore it, but with one installed
+//!   Unicorn 2.1.5 misexecuted the release image's capture interrupt (a TIM2 CCR read inside an
+//!   IT block landed 0x400 past the timer: an unmodelled access the run stopped at), so the
+//!   profile does without, at the price of a bound looser by up to a block's instructions.
+
 //! **Pessimistic** (`FCU_PIL_TIMING=pessimistic`):
 //! - each instruction costs its class's cycles, decoded from the Thumb-2 encoding and cached
 //!   per translation block (Cortex-M4 TRM table 3-1 and, for the FPU, table 7-1; where the TRM
