@@ -182,11 +182,14 @@ pub fn measure(
 
 /// The control interrupt's latency targets on the board, which the image must meet under
 /// either timing profile: (what, measured, limit), limits in µs.
-pub const TARGETS: [(&str, fn(&Report) -> f64, f64); 3] = [
+pub const TARGETS: [Target; 3] = [
     ("TIM9 update to the last TIM4 compare write, median", |r| r.tick_to_last_ccr_us_median, 25.0),
     ("TIM2 capture to its read, max", |r| r.capture_latency_us_max, 5.0),
     ("longest interval with TIM2 masked, after boot", |r| r.masked_us_max, 5.0),
 ];
+
+/// A latency target: what it bounds, how to read it from a report, its limit in µs.
+pub type Target = (&'static str, fn(&Report) -> f64, f64);
 
 impl Report {
     /// The targets the report misses, each as a line naming the figure, its value and its limit.

@@ -32,7 +32,7 @@
 //!   Unicorn 2.1.5 misexecuted the release image's capture interrupt (a TIM2 CCR read inside an
 //!   IT block landed 0x400 past the timer: an unmodelled access the run stopped at), so the
 //!   profile does without, at the price of a bound looser by up to a block's instructions.
-
+//!
 //! **Pessimistic** (`FCU_PIL_TIMING=pessimistic`):
 //! - each instruction costs its class's cycles, decoded from the Thumb-2 encoding and cached
 //!   per translation block (Cortex-M4 TRM table 3-1 and, for the FPU, table 7-1; where the TRM
