@@ -63,10 +63,31 @@ fn motors_off_now() {
     tim4.egr().write(|w| w.ug().set_bit());
 }
 
-/// A fault (bus error, undefined instruction, a panic's `udf`): motors off first, then wait
-/// for the watchdog to reset the board (at most its 50 ms timeout).
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+// The HardFault vector. A stack overflow faults while the core stacks an exception frame
+// (flip-link puts the stack at the bottom of RAM, so it runs off into reserved memory), and the
+// core then enters HardFault with SP still outside RAM: a handler whose first instruction is a
+// push would fault again and lock the core up, the motors holding their duty until the
+// watchdog resets the board. So the entry takes the reset SP from the vector table (VTOR, word
+// 0) before anything is pushed; the handler never returns, so the frame it abandons is not
+// needed. ARMv7-M: a fault in the HardFault handler escalates to lockup.
+core::arch::global_asm!(
+    ".section .HardFault.user, \"ax\"",
+    ".global HardFault",
+    ".type HardFault, %function",
+    ".thumb_func",
+    "HardFault:",
+    "    ldr r0, =0xE000ED08",
+    "    ldr r0, [r0]",
+    "    ldr r0, [r0]",
+    "    msr msp, r0",
+    "    b {handler}",
+    handler = sym hard_fault_with_a_stack,
+);
+
+/// A fault (bus error, undefined instruction, a stack overflow, a panic's `udf`), on a stack
+/// the HardFault entry made sound: motors off first, then wait for the watchdog to reset the
+/// board (at most its 50 ms timeout).
+extern "C" fn hard_fault_with_a_stack() -> ! {
     motors_off_now();
     loop {
         cortex_m::asm::nop();
