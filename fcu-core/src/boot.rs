@@ -30,6 +30,9 @@ pub enum ClockFault {
     /// The independent watchdog never took its timeout: its LSI clock is not running, so
     /// nothing would reset a stalled control loop.
     WatchdogClock,
+    /// The PLL never locked: the board runs at its 16 MHz input, a fifth of the speed every
+    /// timing of the control loop assumes.
+    Pll,
 }
 
 impl ClockFault {
@@ -38,6 +41,7 @@ impl ClockFault {
         match self {
             ClockFault::Crystal => 4,
             ClockFault::WatchdogClock => 5,
+            ClockFault::Pll => 6,
         }
     }
 
@@ -45,6 +49,7 @@ impl ClockFault {
         match self {
             ClockFault::Crystal => "HSE crystal did not start (running on HSI)",
             ClockFault::WatchdogClock => "watchdog did not take its timeout (LSI not running)",
+            ClockFault::Pll => "PLL did not lock (running at 16 MHz)",
         }
     }
 }
@@ -69,6 +74,16 @@ impl BootVerdict {
             self
         } else {
             BootVerdict::ClockFault(ClockFault::Crystal)
+        }
+    }
+
+    /// The verdict once the PLL has been tried: a board whose PLL does not lock stays on the
+    /// ground whatever the sensors said; a crystal fault, found before, is the one reported.
+    pub fn with_pll(self, locked: bool) -> BootVerdict {
+        match self {
+            _ if locked => self,
+            BootVerdict::ClockFault(_) => self,
+            _ => BootVerdict::ClockFault(ClockFault::Pll),
         }
     }
 
@@ -160,6 +175,11 @@ mod tests {
         assert!(line.as_str().starts_with("FATAL clock HSE crystal did not start"), "{}", line.as_str());
 
         assert_eq!(fly.with_crystal(true).with_watchdog(true), BootVerdict::Fly);
+        assert_eq!(fly.with_crystal(true).with_pll(true), BootVerdict::Fly);
+        assert_eq!(fly.with_pll(false), BootVerdict::ClockFault(ClockFault::Pll));
+        assert_eq!(no_crystal.with_pll(false), no_crystal, "the crystal's fault, found first, is the one reported");
+        let sensor_missing = BootVerdict::from_answers([0, 0, 0]);
+        assert_eq!(sensor_missing.with_pll(false), BootVerdict::ClockFault(ClockFault::Pll));
         let no_watchdog = fly.with_crystal(true).with_watchdog(false);
         assert_eq!(no_watchdog, BootVerdict::ClockFault(ClockFault::WatchdogClock));
         assert_eq!(no_watchdog.led_pattern(), LedPattern::SensorFault { blinks: 5 });

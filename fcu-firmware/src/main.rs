@@ -142,6 +142,8 @@ mod app {
     const UART_BAUD: u32 = 115_200;
     const SYSCLK_HZ: u32 = 84_000_000;
     const HSE_HZ: u32 = 16_000_000;
+    /// The PLL's input, the HSE crystal or the HSI: both 16 MHz on this board.
+    const INPUT_HZ: u32 = 16_000_000;
 
     /// What the control task hands to telemetry.
     #[derive(Clone, Copy)]
@@ -260,9 +262,14 @@ mod app {
         // the crystal is started and checked here first: a dead one leaves the board on the
         // 16 MHz HSI (same PLL settings, same clocks), able to say so, never dark.
         let crystal_ready = start_crystal(&dp.RCC);
+        // The HAL's PLL wait has no bound either: the PLL is tried first, and one that does not
+        // lock leaves the board at its 16 MHz input, on the ground, saying so.
+        let pll_locked = pll_locks(&dp.RCC, crystal_ready);
         let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
-        let mut rcc = dp.RCC.freeze(source.sysclk(SYSCLK_HZ.Hz()).hclk(SYSCLK_HZ.Hz()).pclk1((SYSCLK_HZ / 2).Hz()).pclk2(SYSCLK_HZ.Hz()));
-        Mono::start(core.SYST, SYSCLK_HZ);
+        let sysclk_hz = if pll_locked { SYSCLK_HZ } else { INPUT_HZ };
+        let mut rcc = dp.RCC.freeze(source.sysclk(sysclk_hz.Hz()).hclk(sysclk_hz.Hz()).pclk1((sysclk_hz / 2).Hz()).pclk2(sysclk_hz.Hz()));
+        // The LED codes and the fault line keep their pace at either clock.
+        Mono::start(core.SYST, rcc.clocks.sysclk().raw());
         // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
         // so no resource ceiling counts on its priority. At its reset priority, 0, the highest,
         // its handler would delay the end-of-read interrupt and the radio capture; at the
@@ -316,7 +323,7 @@ mod app {
             stm32f4xx_hal::pac::DMA1::enable(&mut rcc);
         }
         let mut bus = SensorBus::new(spi2, cs, dp.DMA1);
-        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(crystal_ready);
+        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(crystal_ready).with_pll(pll_locked);
 
         let capture_pins = (
             gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
@@ -400,14 +407,33 @@ mod app {
     /// the datasheet's typical start-up is 2 ms). Runs on the reset clock, the 16 MHz HSI, timed
     /// on the cycle counter. A crystal that does not start is turned off again.
     fn start_crystal(rcc: &stm32f4xx_hal::pac::RCC) -> bool {
-        const HSI_HZ: u32 = 16_000_000;
-        const STARTUP_BOUND_CYCLES: u32 = HSI_HZ / 10;
+        const STARTUP_BOUND_CYCLES: u32 = INPUT_HZ / 10;
         rcc.cr().modify(|_, w| w.hseon().set_bit());
         let ready = crate::cycles::poll(STARTUP_BOUND_CYCLES, || rcc.cr().read().hserdy().bit_is_set().then_some(()));
         if ready.is_none() {
             rcc.cr().modify(|_, w| w.hseon().clear_bit());
         }
         ready.is_some()
+    }
+
+    /// Tries the PLL with the settings the HAL will give it for 84 MHz from a 16 MHz input
+    /// (M 8, N 168, P 4, Q 7; HSE if the crystal runs, else HSI), waits for its lock at most
+    /// 1 ms (the datasheet's t_LOCK: 100 µs typical, 200 µs maximum), then turns it off for the
+    /// HAL to set up again. Runs on the 16 MHz input, timed on the cycle counter.
+    fn pll_locks(rcc: &stm32f4xx_hal::pac::RCC, from_hse: bool) -> bool {
+        const LOCK_BOUND_CYCLES: u32 = INPUT_HZ / 1000;
+        rcc.pllcfgr().write(|w| {
+            // SAFETY: M 8, N 168 and Q 7 are inside the fields' ranges (M 2..63, N 50..432,
+            // Q 2..15) and give a 2 MHz input and a 336 MHz VCO, inside RM0368's limits.
+            unsafe { w.pllm().bits(8).plln().bits(168).pllq().bits(7) };
+            w.pllp().div4().pllsrc().bit(from_hse)
+        });
+        rcc.cr().modify(|_, w| w.pllon().set_bit());
+        let locked = crate::cycles::poll(LOCK_BOUND_CYCLES, || rcc.cr().read().pllrdy().bit_is_set().then_some(())).is_some();
+        rcc.cr().modify(|_, w| w.pllon().clear_bit());
+        // PLLRDY falls within a few cycles of the PLL's clock once it is off.
+        let _off = crate::cycles::poll(LOCK_BOUND_CYCLES, || rcc.cr().read().pllrdy().bit_is_clear().then_some(()));
+        locked
     }
 
     /// Waits `ms` milliseconds on the cycle counter (boot only: the control tick is not running).

@@ -38,6 +38,8 @@ pub struct BoardSetup {
     pub boot_battery_v: f64,
     /// The HSE crystal never starts (a cracked crystal).
     pub hse_dead: bool,
+    /// The PLL never locks.
+    pub pll_dead: bool,
     /// How the emulator prices time ([`crate::timing`]); `None`: `FCU_PIL_TIMING` from the
     /// environment, optimistic if it is not set (a value that names no profile is an error).
     pub timing: Option<TimingProfile>,
@@ -90,6 +92,7 @@ impl EmulatedBoard {
         board.spi2.sensors_mut().lsm6dsl.set_output(imu_at_rest.gyro, imu_at_rest.accel);
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
         board.rcc.set_hse_dead(setup.hse_dead);
+        board.rcc.set_pll_dead(setup.pll_dead);
         let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,

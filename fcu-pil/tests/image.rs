@@ -226,6 +226,29 @@ fn a_dead_crystal_keeps_the_drone_on_the_ground_and_says_so() {
     assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4]);
 }
 
+/// A PLL that never locks: the boot's bounded wait gives up after 1 ms instead of the HAL's
+/// endless one, and the board runs at its 16 MHz input, on the ground, saying so.
+#[test]
+fn a_pll_that_does_not_lock_keeps_the_drone_on_the_ground_and_says_so() {
+    let setup = BoardSetup { pll_dead: true, boot_timeout_s: Some(14.0), ..BoardSetup::default() };
+    let b = boot(&setup);
+    assert!(!b.flying(), "the control timer started without the PLL");
+    let fatal: Vec<_> = b.lines.iter().filter(|l| matches!(l.line, Line::Fatal(_))).collect();
+    assert!(!fatal.is_empty(), "no FATAL line; UART:\n{}", b.uart_text());
+    assert!(fatal[0].text.starts_with("FATAL clock PLL did not lock"), "{}", fatal[0].text);
+    let board = b.machine.board();
+    assert_eq!(board.rcc.clocks().unwrap().sysclk_hz, 16_000_000, "on the PLL's input");
+    let leds = &board.records.leds;
+    let cycle_s = f64::from(fcu_core::telemetry::FAULT_CYCLE_MS) / 1000.0;
+    let last_cycle: Vec<_> =
+        leds.iter().filter(|&&(t, _, _)| (14.0 - cycle_s - 0.01..14.0 - 0.01).contains(&fcu_pil::periph::time_to_s(t))).collect();
+    let dark_blinks = last_cycle.iter().filter(|&&&(_, led1, _)| !led1).count();
+    assert_eq!(dark_blinks, 6, "LED1 should go dark 6 times per fault cycle: {last_cycle:?}");
+    let mut b = b;
+    let now = b.machine.now();
+    assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4]);
+}
+
 fn fly_and_inject(
     name: &str,
     at_s: f64,

@@ -164,6 +164,8 @@ pub struct Rcc {
     lsi_forced: bool,
     /// A board whose HSE crystal never oscillates (a fault to inject): HSERDY never sets.
     hse_dead: bool,
+    /// A chip whose PLL never locks (a fault to inject): PLLRDY never sets.
+    pll_dead: bool,
     pllcfgr: u32,
     /// CFGR without SWS.
     cfgr: u32,
@@ -198,6 +200,7 @@ impl Rcc {
             lsion: false,
             lsi_forced: false,
             hse_dead: false,
+            pll_dead: false,
             pllcfgr: PLLCFGR_RESET,
             cfgr: 0,
             sws: Source::Hsi,
@@ -217,11 +220,12 @@ impl Rcc {
     pub fn system_reset(&mut self) {
         let flags = self.reset_flags;
         let last = self.last;
-        let hse_dead = self.hse_dead;
+        let (hse_dead, pll_dead) = (self.hse_dead, self.pll_dead);
         *self = Rcc::new();
         self.reset_flags = flags;
         self.last = last;
         self.hse_dead = hse_dead;
+        self.pll_dead = pll_dead;
         // The oscillator restarts at reset; the CPU only runs once HSI is ready.
         self.hsi_ready_at = Some(last);
     }
@@ -244,6 +248,12 @@ impl Rcc {
     /// resets: it is the board's, not the chip's.
     pub fn set_hse_dead(&mut self, dead: bool) {
         self.hse_dead = dead;
+    }
+
+    /// Makes the PLL dead (a fault injected on the chip): PLLON is accepted and PLLRDY never
+    /// sets. Survives resets.
+    pub fn set_pll_dead(&mut self, dead: bool) {
+        self.pll_dead = dead;
     }
 
     /// When the LSI is (or will be) running and stable; `None` while it is off. The IWDG
@@ -546,6 +556,9 @@ impl Rcc {
 
     fn pll_ready_at(&self) -> Option<Time> {
         let on = self.pll_on_at?;
+        if self.pll_dead {
+            return None;
+        }
         let input = if self.pllcfgr & PLLCFGR_PLLSRC != 0 { self.hse_ready_at? } else { self.hsi_ready_at? };
         Some(on.max(input) + PLL_LOCK)
     }
@@ -880,6 +893,22 @@ mod tests {
         rcc.system_reset();
         rcc.write(CR, CR_RESET | CR_HSEON, much_later).unwrap();
         assert_eq!(read(&mut rcc, CR, 2 * much_later) & CR_HSERDY, 0, "still dead after a reset");
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
+    }
+
+    #[test]
+    fn a_dead_pll_never_sets_pllrdy_and_sysclk_cannot_switch_to_it() {
+        let mut rcc = Rcc::new();
+        rcc.set_pll_dead(true);
+        rcc.write(CR, CR_RESET | CR_PLLON, 0).unwrap();
+        let much_later = 1000 * PLL_LOCK;
+        assert_eq!(read(&mut rcc, CR, much_later) & CR_PLLRDY, 0);
+        rcc.system_reset();
+        rcc.write(CR, CR_RESET | CR_PLLON, much_later).unwrap();
+        assert_eq!(read(&mut rcc, CR, 2 * much_later) & CR_PLLRDY, 0, "still dead after a reset");
+        // SW = PLL is accepted, SWS stays on the HSI: the clock never switches.
+        rcc.write(CFGR, 0b10, 2 * much_later).unwrap();
+        assert_eq!(read(&mut rcc, CFGR, 3 * much_later) & 0b1100, 0);
         assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
     }
 
