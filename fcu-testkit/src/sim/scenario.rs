@@ -352,9 +352,12 @@ fn flight_criteria(hover: (f64, f64), rms_max_deg: f64, end_s: f64) -> Vec<Crite
     ]
 }
 
+/// Builds a scenario under the name it is given.
+pub type Build = fn(&str) -> Scenario;
+
 /// The named scenarios, in the order they are listed (`fly --help`, the error for an unknown
 /// name): each name with the function that builds it under that name.
-pub const SCENARIOS: [(&str, fn(&str) -> Scenario); 9] = [
+pub const SCENARIOS: [(&str, Build); 9] = [
     ("hover", hover),
     ("steps", steps),
     ("sweeps", sweeps),
