@@ -81,7 +81,7 @@ pub struct LogRow {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
-    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`]; not written
+    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`](stick_rate::StickRate); not written
     /// to the CSV): what the yaw metric compares the airframe's rate with.
     pub yaw_rate_cmd_dps: f64,
     pub motors: [u16; 4],
