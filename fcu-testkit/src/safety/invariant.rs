@@ -5,19 +5,20 @@ use core::fmt;
 /// A rule the monitor checks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Invariant {
-    /// (1, 4) Armed (or flying) without a full arming procedure just before: the arm gesture
-    /// for `arm_hold_ticks` on a good link with the throttle low, started from a released
-    /// gesture, then released with no blocker holding.
+    /// Armed (or flying) without a full arming procedure just before: the arm gesture for
+    /// `arm_hold_ticks` on a good link with the throttle low, started from a released gesture,
+    /// then released with no blocker holding (`docs/safety.md#arming`).
     ArmedWithoutProcedure,
-    /// (2) A compare value other than the off value in a state where the motors must not run,
-    /// or while the throttle in force is low.
+    /// A compare value other than the off value in a state where the motors must not run, or
+    /// while the throttle in force is low (`docs/safety.md#motors`).
     MotorsNotOff,
-    /// (3) A compare value outside `[min_compare, max_compare]`.
+    /// A compare value outside `[min_compare, max_compare]` (`docs/safety.md#motors`).
     CompareOutOfRange,
-    /// (5) The motors may still run after the link was gone for more than 1.0 s in total:
-    /// the silences since the arming, each from the last pulse of the channel that fell
-    /// silent first and counted once, less what flying under stick control has forgotten
-    /// (one tick per `loss_forget_ticks`). A brief recovery forgets nothing.
+    /// The motors may still run after the link was gone for more than 1.0 s in total
+    /// (`docs/safety.md#failsafe`): the silences since the arming, each from the last pulse of
+    /// the channel that fell silent first and counted once, less what flying under stick
+    /// control has forgotten (one tick per `loss_forget_ticks`). A brief recovery forgets
+    /// nothing.
     MotorsOnAfterLinkLoss,
     /// Armed (motors following the sticks) without a good link.
     ArmedWithoutLink,

@@ -1,6 +1,6 @@
-//! [`SafetyMonitor`]: a [`FlightController`](fcu_core::flight::FlightController) watched tick by tick from outside, with its own
-//! model of the radio, the calibration, the failsafe's lost-time budget and the arming
-//! procedure.
+//! [`SafetyMonitor`]: a [`FlightController`](fcu_core::flight::FlightController) watched tick
+//! by tick from outside, with its own model of the radio, the calibration, the failsafe's
+//! lost-time budget and the arming procedure.
 
 use fcu_core::config::Config;
 use fcu_core::flight::{Status, TickOutput};
@@ -229,7 +229,7 @@ impl SafetyMonitor {
         Ok(())
     }
 
-    /// (1) The state this tick entered: an arming needs the whole procedure, control comes
+    /// The state this tick entered (`docs/safety.md#arming`, `#failsafe`): an arming needs the whole procedure, control comes
     /// back from failsafe stage 1 only after the recovery time, and armed needs a good link.
     fn state_change(&self, safety: &SafetyConfig, seen: &Seen<'_>) -> Result<(), Violation> {
         let state = seen.st.state;
@@ -248,7 +248,7 @@ impl SafetyMonitor {
         Ok(())
     }
 
-    /// (2) Motors off where they must be: in every state but armed and failsafe stage 1, and
+    /// Motors off where they must be (`docs/safety.md#motors`): in every state but armed and failsafe stage 1, and
     /// while the throttle in force is low (then the heading target is 0 too); stage 1 flies
     /// level sticks and no more than the last good throttle.
     fn motors_off_where_due(&self, seen: &Seen<'_>, out: &TickOutput) -> Result<(), Violation> {
@@ -284,7 +284,7 @@ impl SafetyMonitor {
         Ok(())
     }
 
-    /// (5) Link loss: motors off once the link has been gone 1.0 s in total, each loss from
+    /// Link loss (`docs/safety.md#failsafe`): motors off once the link has been gone 1.0 s in total, each loss from
     /// the last pulse.
     fn link_loss(&self, seen: &Seen<'_>) -> Result<(), Violation> {
         let gone = u64::from(self.proc.lost_ticks);
