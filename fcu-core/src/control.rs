@@ -18,7 +18,8 @@ pub struct AxisGains {
     pub inner_i_limit: f32,
     /// Clamp of the inner output (the reference's MAX_ADJ_AMOUNT, ±800 counts).
     pub output_limit: f32,
-    /// Low-pass the derivative (the reference does on pitch and roll, not on yaw: B6/D3).
+    /// Low-pass the derivative (the reference does on pitch and roll, not on yaw; the default
+    /// profile on every axis).
     pub d_lowpass: bool,
 }
 
@@ -38,7 +39,7 @@ impl AxisGains {
     }
 }
 
-/// Where the derivative term looks (difference D7).
+/// Where the derivative term looks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Derivative {
     /// d/dt of the rate error: a step in the demand kicks the output (reference).
@@ -58,29 +59,30 @@ pub struct ControlConfig {
     pub derivative: Derivative,
     /// Inner-loop step, s (the reference's `pid.ts`, 0.00125 though it ticks at 807.69 Hz).
     pub inner_dt_s: f32,
-    /// Step of the outer integrator, s: the reference uses the inner `ts` (B5), the default
-    /// profile the real outer period (D2).
+    /// Step of the outer integrator, s: the reference uses the inner `ts`, the default
+    /// profile the real outer period.
     pub outer_integrator_dt_s: f32,
-    /// Stop integrating in the direction the mixer saturates (D6).
+    /// Stop integrating in the direction the mixer saturates (the reference's integrators wind
+    /// up against a saturated motor).
     pub anti_windup: bool,
     /// Fraction of the yaw stick's commanded rate fed straight into the yaw rate demand
-    /// (D13). 0 in the reference: the rate comes only from the heading loop, as
+    /// (a feedforward). 0 in the reference: the rate comes only from the heading loop, as
     /// `outer_kp` × the heading error, so a turn lags its stick by a heading error of
     /// rate / `outer_kp` and the rate loop sees the demand only as that error builds up.
     pub yaw_rate_feedforward: f32,
     /// Shape the stick's yaw rate into one the airframe can follow, and lead the yaw rate
-    /// demand by the shaped rate's acceleration (D16); `None` in the reference, whose heading
+    /// demand by the shaped rate's acceleration; `None` in the reference, whose heading
     /// target moves at the stick's rate from one outer step to the next.
     pub yaw_shaping: Option<YawShaping>,
-    /// Scale the rate loop's output and the throttle map with the battery voltage (D14);
+    /// Scale the rate loop's output and the throttle map with the battery voltage;
     /// `None` in the reference, whose gains weaken as the battery sags.
     pub battery: Option<BatteryCompensation>,
-    /// Scale the rate loop with the motors' thrust curve at the throttle flown (D17); `None`
+    /// Scale the rate loop with the motors' thrust curve at the throttle flown; `None`
     /// in the reference, whose corrections make less thrust the higher the throttle.
     pub thrust_curve: Option<ThrustCurve>,
 }
 
-/// The motors' static thrust against duty, for the rate loop's gain (D17).
+/// The motors' static thrust against duty, for the rate loop's gain.
 ///
 /// A brushed motor's thrust is not linear in its duty: the STEVAL-DRONE01's 8520 motors give
 /// `quad·d² + lin·d` of their full thrust at duty `d` (−0.33 d² + 1.32 d), so a correction of
@@ -132,7 +134,7 @@ impl ThrustCurve {
     }
 }
 
-/// Thrust compensation for the battery (D14). A brushed motor's speed at a given duty is
+/// Thrust compensation for the battery. A brushed motor's speed at a given duty is
 /// proportional to the voltage and its thrust to the speed squared, so at `v` the same duty
 /// gives `(v / nominal)²` of the thrust it gave at `nominal`: the rate loop's gains, its output
 /// limit and the throttle map are multiplied by `(nominal / v)²` (the thrust gain), so the
@@ -210,8 +212,8 @@ impl BatteryFilter {
 }
 
 /// The scaling the outer step works out at run time ([`GainSchedule`]): the throttle map's gain
-/// (the battery compensation's thrust gain, D14) and the rate loop's (the thrust gain times the
-/// thrust curve's factor at the throttle flown, D17). Both 1 without either.
+/// (the battery compensation's thrust gain) and the rate loop's (the thrust gain times the
+/// thrust curve's factor at the throttle flown). Both 1 without either.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Gains {
     /// The throttle map's: [`BatteryCompensation`].
@@ -225,8 +227,8 @@ impl Gains {
     pub const UNITY: Gains = Gains { thrust: 1.0, rate: 1.0 };
 }
 
-/// Where the [`Gains`] come from, once per outer step: the battery's filtered voltage (D14) and
-/// the duty the throttle stick flies at (D17).
+/// Where the [`Gains`] come from, once per outer step: the battery's filtered voltage (battery
+/// compensation) and the duty the throttle stick flies at (the thrust curve).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GainSchedule {
     battery: Option<BatteryCompensation>,
@@ -352,7 +354,7 @@ impl ControlConfig {
     }
 }
 
-/// Yaw turns shaped to what the airframe can follow (D16).
+/// Yaw turns shaped to what the airframe can follow.
 ///
 /// A stick step asks for a new yaw rate at once, which no airframe can give: the motors take
 /// tens of milliseconds to change their torque, and a quad's yaw torque is small against its
@@ -361,7 +363,7 @@ impl ControlConfig {
 /// (critically damped: no overshoot, the turn's total heading unchanged) and the heading
 /// target moves at the shaped rate. The yaw rate demand then leads the shaped rate by
 /// `lead_s` times its acceleration: the rate loop's P term turns that into the torque the
-/// acceleration needs (the inertia's, and what the D term on the measurement, D7, takes away
+/// acceleration needs (the inertia's, and what the derivative term on the measurement takes away
 /// while the rate changes) before a rate error has to build up to ask for it. Both happen in
 /// the outer step; the tick sees only its rate demand.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -423,7 +425,8 @@ impl YawRateShaper {
     }
 }
 
-/// The outer (angle) loop: `s1 = kp·(target − estimate) + ki·∫`, per axis.
+/// The outer (angle) loop: rate demand = kp·(target − estimate) + ki·∫(target − estimate), per
+/// axis.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AngleLoop {
     integ: [f32; 3],
@@ -436,21 +439,21 @@ impl AngleLoop {
             self.integ = [0.0; 3];
         }
         let ts = cfg.outer_integrator_dt_s;
-        let mut s1 = [0.0f32; 3];
+        let mut demand_rad_s = [0.0f32; 3];
         for (((s, integ), gains), (t, e_est)) in
-            s1.iter_mut().zip(self.integ.iter_mut()).zip(cfg.axes()).zip(target_rad.iter().zip(estimate_rad))
+            demand_rad_s.iter_mut().zip(self.integ.iter_mut()).zip(cfg.axes()).zip(target_rad.iter().zip(estimate_rad))
         {
             let e = t - e_est;
             *integ = clamp_symmetric(*integ + e * ts, gains.outer_i_limit);
             *s = gains.outer_kp * e + gains.outer_ki * *integ;
         }
-        s1
+        demand_rad_s
     }
 }
 
 /// Which directions of which axes the mixer could not deliver on the last tick: one byte
-/// for the three axes (bit `2·axis` positive, `2·axis + 1` negative), read and written once
-/// per tick, where six flags were six loads and six stores.
+/// for the three axes (bit `2·axis` positive, `2·axis + 1` negative), so the tick reads and
+/// writes it once rather than six flags one by one.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Saturation(u8);
 
@@ -546,7 +549,8 @@ pub struct RateLoop {
 }
 
 impl RateLoop {
-    /// One tick: rate demands `s1` and measured rates (rad/s) in, clamped commands out.
+    /// One tick: the angle loop's rate demands and the measured rates (rad/s) in, clamped
+    /// commands out.
     /// `saturation` is the mixer's verdict of the previous tick (used only with anti-windup).
     pub fn commands(
         &mut self,
@@ -610,7 +614,7 @@ impl RateLoop {
     }
 }
 
-/// Anti-windup (D6): integrating `e` would push further in a direction that is already
+/// Anti-windup: integrating `e` would push further in a direction that is already
 /// saturated, either in the mixer on the last tick (`sat`) or by this output's own clamp
 /// (`over`: conditional integration, since what the clamp holds back would only have to be
 /// unwound later). Compared by sign bits (docs/performance.md, «sign bits»): with `e = ±0`
@@ -702,8 +706,8 @@ mod tests {
     fn outer_loop_is_proportional_with_the_reference_gains() {
         let cfg = ControlConfig::REFERENCE;
         let mut o = AngleLoop::default();
-        let s1 = o.rate_demands(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
-        assert!((s1[0] - 0.3).abs() < 1e-6 && (s1[1] + 0.6).abs() < 1e-6 && (s1[2] - 0.2).abs() < 1e-6);
+        let d = o.rate_demands(&cfg, [0.1, -0.2, 0.05], [0.0; 3], false);
+        assert!((d[0] - 0.3).abs() < 1e-6 && (d[1] + 0.6).abs() < 1e-6 && (d[2] - 0.2).abs() < 1e-6);
     }
 
     #[test]

@@ -24,7 +24,7 @@ impl BiquadCoeffs {
         b2: 0.097_631_072_937_817_49_f64 as f32,
     };
 
-    /// The default profile's gyro low-pass (D15): Butterworth at 150 Hz for 800 Hz, i.e.
+    /// The default profile's gyro low-pass: Butterworth at 150 Hz for 800 Hz, i.e.
     /// `butterworth_lowpass(150.0, 800.0)` (tested equal), as a constant so that building a
     /// configuration cannot fail. Half the reference's lag at the loop's crossover (~4° at
     /// 10 Hz instead of 8°), and still −17 dB at the 400 Hz Nyquist limit.

@@ -38,7 +38,7 @@ use self::block::{accumulate_accel_mg, Block};
 use self::heading::{HeadingEstimate, HeadingTarget};
 use self::output::{MotorsAllowed, Output};
 use self::params::{Derived, OuterParams};
-use self::sensors::{Calibration, Sensors};
+use self::sensors::{AfterCalibration, Sensors};
 use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
@@ -106,7 +106,7 @@ pub struct OuterResult {
     pub tilt_from_level_rad: f32,
     /// Pitch, roll and (accumulated) yaw targets, rad.
     pub target_rad: [f32; 3],
-    /// Rate demands for the inner loop, rad/s (`s1`).
+    /// Rate demands for the inner loop, rad/s: the angle loop's output.
     pub rate_demand_rad_s: [f32; 3],
     /// The gains the tick's rate loop and throttle map are to be scaled by.
     pub gains: Gains,
@@ -145,8 +145,8 @@ pub struct Status {
     /// The battery compensation's thrust gain in force (1 without it).
     pub thrust_gain: f32,
     /// The yaw rate the stick asks for, rad/s (0 with the throttle low): what the pilot
-    /// commands, and what the simulator's yaw metric holds the airframe to. Without D16 the
-    /// heading target moves at this rate and the yaw feedforward (D13) passes it on; with D16
+    /// commands, and what the simulator's yaw metric holds the airframe to. Without yaw shaping
+    /// the heading target moves at this rate and the yaw feedforward passes it on; with it,
     /// both follow its shaped version.
     pub yaw_rate_target_rad_s: f32,
 }
@@ -337,7 +337,7 @@ impl ControlTick {
 
         // 2. Calibration: start-up (nothing else runs until the first offsets exist) and
         // requested. Idle with nothing asked, it has nothing to do.
-        if self.sensors.calibration_due() && self.sensors.calibrate(imu, &p.decoder, &mut self.block) == Calibration::StopsTheTick {
+        if self.sensors.calibration_due() && self.sensors.calibrate(imu, &p.decoder, &mut self.block) == AfterCalibration::NoOffsetsYet {
             return TickOutput { compare: self.output.off(p), outer_job: None };
         }
 

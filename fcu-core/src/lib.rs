@@ -24,10 +24,10 @@
 //! | motor mixing and saturation | [`mixer`] |
 //! | stick values and compare counts (both 16-bit counts, never mixed up) | [`rc::StickCounts`], [`mixer::CompareCounts`] |
 //! | status lines, LEDs, boot checks | [`telemetry`], [`boot`] |
-//! | what the default changes from the reference (D1–D17) | [`config`]: each difference is a field with a comment |
+//! | what the default changes from the reference | [`config`]: each difference is a field with a comment |
 //!
-//! The comments name the reference's quirks B1–B28 (`docs/reference.md#quirks`) and the
-//! default's differences D1–D17 (`docs/profiles.md`); the safety rules are `docs/safety.md`.
+//! The reference's quirks are listed in `docs/reference.md#quirks`, the default's differences
+//! with the test that shows each in `docs/profiles.md`, the safety rules in `docs/safety.md`.
 #![no_std]
 #![cfg_attr(
     not(test),

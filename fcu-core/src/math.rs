@@ -252,7 +252,7 @@ pub fn inv_sqrt_exact(x: f32) -> f32 {
     }
 }
 
-/// Which inverse square root an algorithm uses (difference D4).
+/// Which inverse square root an algorithm uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InvSqrt {
     /// The reference's one-Newton-step approximation.

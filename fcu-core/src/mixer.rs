@@ -34,7 +34,7 @@ pub enum Saturate {
     /// correction it was asked for.
     Clip,
     /// Shift all four (and, if the spread itself does not fit, scale the corrections) so
-    /// the differences between motors, i.e. the torques, survive (difference D6).
+    /// the differences between motors, i.e. the torques, survive.
     AttitudePriority,
 }
 

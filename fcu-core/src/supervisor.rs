@@ -1,7 +1,7 @@
 //! The supervisor: the one place that decides whether the motors may turn.
 //!
 //! Two kinds, chosen by [`SupervisorConfig`]:
-//! - [`SupervisorConfig::Reference`]: the ST reference's behaviour (B8–B11, B16), a
+//! - [`SupervisorConfig::Reference`]: the ST reference's behaviour, a
 //!   [`ReferenceLatch`]: the arm gesture latches "armed" for ever, motors run while armed and
 //!   any edge arrived in the last 31 ms, no failsafe, calibration on the gesture at any time.
 //! - [`SupervisorConfig::Safe`]: the product's safety layer (`docs/safety.md`), the state machine
@@ -1238,7 +1238,7 @@ mod tests {
         // The arm gesture seen: latched, and nothing but a replay's flag clears it.
         assert!(latch.decide(true, Some(true), false).motors_enabled);
         assert!(latch.decide(true, None, false).motors_enabled);
-        // Link loss stops the motors but keeps "armed": they resume when edges return (B8).
+        // Link loss stops the motors but keeps "armed": they resume when edges return.
         assert!(!latch.decide(false, None, false).motors_enabled);
         assert!(latch.decide(true, None, false).motors_enabled);
         assert_eq!(latch.decide(true, None, true).state, FlightState::Armed);

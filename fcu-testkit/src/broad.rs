@@ -24,7 +24,8 @@ pub const HEADER: &str = "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,ref_qw,ref_qx,
 const COLUMNS: [&str; 12] =
     ["t_s", "gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y", "acc_z", "ref_qw", "ref_qx", "ref_qy", "ref_qz", "movement"];
 
-/// Standard gravity used to turn m/s² into mg (the brief's 9.81, not 9.80665).
+/// Gravity used to turn m/s² into mg: 9.81, the value the recordings' README gives at rest
+/// (`fcu-testkit/data/broad/README.md`), not the standard 9.80665.
 pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// rad/s → mdps.

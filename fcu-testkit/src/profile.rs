@@ -5,7 +5,8 @@ use fcu_core::Config;
 /// Which `Config` flies, replays or estimates.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Profile {
-    /// `Config::default()`: the product, with the safety layer and differences D1–D17.
+    /// `Config::default()`: the product, the reference with the safety layer and the
+    /// differences listed in `docs/profiles.md`.
     Default,
     /// `Config::reference()`: ST's reference firmware, number for number.
     Reference,

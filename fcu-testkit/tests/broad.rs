@@ -54,7 +54,7 @@ fn default_estimator_matches_or_beats_vqf_on_every_trial() {
         if (textbook - readme_mahony_deg).abs() > 0.01 {
             failures.push(format!("{name}: textbook Mahony {textbook:.3}° vs README {readme_mahony_deg}°"));
         }
-        // The bit-exact reference (sequential update B13, fast inverse square root D4): close to
+        // The bit-exact reference (sequential quaternion update, fast inverse square root): close to
         // the README on three trials; on the fast rotations the sequential update costs 2°.
         let reference_expected = if name.starts_with("07") { 5.80 } else { readme_mahony_deg };
         if (reference - reference_expected).abs() > 0.02 {

@@ -1,5 +1,5 @@
 //! Bad input files and options for `fcu-sim`: each gets a short, printable error naming it and
-//! exit status 2 (findings of an adversarial pass).
+//! exit status 2.
 
 use std::process::Command;
 

@@ -164,7 +164,7 @@ fn holding_the_arm_gesture_while_the_link_comes_up_does_not_arm() {
 
 #[test]
 fn reference_arms_by_accident_when_the_link_comes_back_with_the_rudder_held() {
-    // B10: after a link loss the reference clears its capture state; if the link comes back
+    // After a link loss the reference clears its capture state; if the link comes back
     // in the middle of the pulses, the first edge of each channel is a falling one and reports
     // the reset width 0: aileron −5862, elevator −6151, throttle 0 for one update each. With
     // the rudder held left (its stick keeps the last value) that is the arm gesture, and the
@@ -215,7 +215,7 @@ fn a_single_glitch_pulse_does_not_change_any_stick() {
 
 #[test]
 fn reference_turns_a_full_wrap_glitch_into_95_percent_throttle() {
-    // B11: fall == rise gives a width of 32768 counts; gTHR ≈ 28000 and the clamp writes 1900.
+    // The reference has no pulse check: fall == rise gives a width of 32768 counts; gTHR ≈ 28000 and the clamp writes 1900.
     let mut b = Bench::new(Config::reference());
     b.run(NEUTRAL, 2 * TICKS_PER_S);
     b.run(ARM, 20);
@@ -430,8 +430,8 @@ fn flap(off_ms: u32, on_ms: u32, thr_us: f64, seconds: u32) -> (Vec<(u32, Flight
 
 #[test]
 fn a_flapping_link_cannot_keep_the_motors_running() {
-    // The adversarial review's link: off 900 ms, on 40 ms (two frames). It used to hand control
-    // back 21 times in 20 s with the motors running throughout.
+    // Off 900 ms, on 40 ms (two frames): handing control back on each burst would keep the
+    // motors running throughout.
     let (log, handed_back) = flap(900, 40, 1600.0, 20);
     assert!(!handed_back, "control handed back to a flapping link");
     let stage2 = log.iter().position(|&(_, s, _)| s == FlightState::FailsafeOff).expect("never reached stage 2");

@@ -23,7 +23,7 @@ use fcu_testkit::Profile;
 /// The scenarios and the seconds recorded of each: boot (2 s), calibration, the arm gesture
 /// (2.5..4 s), take-off, the 20° roll step at 8 s, the 0.5 s link loss at 8 s, the calibration
 /// retried while the drone is rocked, a full-stick yaw turn from 8 s and its stop at 11 s (the
-/// shaped turn of D16).
+/// shaped turn).
 const SCENARIOS: [(&str, f64); 5] = [("hover", 6.0), ("steps", 9.5), ("link-short", 10.0), ("calibration-motion", 10.0), ("yaw", 12.0)];
 
 fn path(name: &str) -> std::path::PathBuf {

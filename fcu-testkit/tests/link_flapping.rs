@@ -1,6 +1,6 @@
 //! A flapping link, flown: a receiver that delivers a burst of frames now and then must not
-//! keep the drone flying (the adversarial review flew 20 s on 4 % of the frames, and climbed
-//! to 85 m on bursts carrying 1400 µs of throttle).
+//! keep the drone flying, whatever throttle the bursts carry (a supervisor that hands control
+//! back on every burst flies on 4 % of the frames, and climbs on bursts of 1400 µs).
 
 use fcu_core::supervisor::FlightState;
 use fcu_testkit::sim::scenario::{self, StickRow, Throttle, Timeline};
@@ -36,7 +36,7 @@ fn flap(off_ms: f64, on_ms: f64, thr_us: f64) -> sim::FlightLog {
 #[test]
 fn a_link_delivering_less_than_half_of_its_frames_ends_in_stage_2_within_3_s() {
     // From a fifth of the frames (off 150 / on 40 ms) to nearly half (off 200 / on 180 ms);
-    // off 900 / on 40 ms is the review's 4 %.
+    // off 900 / on 40 ms is 4 % of them.
     for (off, on) in [(150.0, 40.0), (900.0, 40.0), (300.0, 60.0), (120.0, 100.0), (200.0, 180.0)] {
         let log = flap(off, on, 1400.0);
         let stage2 = log.rows.iter().find(|r| r.state == FlightState::FailsafeOff).map(|r| r.t_s);

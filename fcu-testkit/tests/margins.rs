@@ -1,4 +1,4 @@
-//! The attitude loops keep classical robustness margins (D15): at least 45° of phase and 6 dB
+//! The attitude loops keep classical robustness margins: at least 45° of phase and 6 dB
 //! of gain on every axis, measured by `fcu-sim margins` (the loop broken at the motors, in
 //! hover), on the nominal airframe and on five airframes with every parameter randomised by
 //! ±30 %, each as it is and with one more control tick of delay than the firmware has. The

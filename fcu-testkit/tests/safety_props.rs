@@ -789,17 +789,17 @@ fn timeline_generator_reaches_every_safety_state() {
 }
 
 // ---------------------------------------------------------------------------------------
-// Regression tests for findings
+// Cases the properties reach only by chance, pinned
 // ---------------------------------------------------------------------------------------
 
-/// F1 (found by `supervisor_any_config_…` and `raw_edge_streams_…`): armed, the pilot holds
-/// the arm gesture (throttle at 0, so the motors are stopped and the drone looks disarmed);
-/// after 5 s the automatic disarm fires; the gesture is still held for 1 s more and let go:
-/// the supervisor arms again, although `docs/safety.md#disarming` blocks arming until the gesture
-/// has been released since the last disarm. Fails until `Supervisor::decide` clears `released` on
-/// the automatic disarm (as it does on the gesture disarm and on stage 2).
+/// Armed, the pilot holds the arm gesture (throttle at 0, so the motors are stopped and the
+/// drone looks disarmed); after 5 s the automatic disarm fires; the gesture is still held for
+/// 1 s more and let go: the supervisor must not arm again, because `docs/safety.md#disarming`
+/// blocks arming until the gesture has been released since the last disarm, and the automatic
+/// disarm is one (`Supervisor::decide` clears `released` on it, as on the gesture disarm and
+/// on stage 2).
 #[test]
-fn f1_arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
+fn arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
     let mut rig = Rig::booted(Config::default(), 7).unwrap_or_else(|e| panic!("{e}"));
     rig.arm().unwrap_or_else(|e| panic!("{e}"));
     // Hold the arm gesture while armed until the automatic disarm (4000 ticks), then 1 s more.
@@ -808,7 +808,7 @@ fn f1_arm_gesture_held_through_the_automatic_disarm_does_not_rearm() {
     assert_eq!(r, Ok(()), "the monitor objects");
     assert_ne!(rig.state(), FlightState::Armed, "re-armed by a gesture held through the automatic disarm");
 
-    // The bare supervisor, short numbers: the minimal case proptest found.
+    // The bare supervisor, short numbers: the smallest case of it.
     let cfg = SafetyConfig { arm_hold_ticks: 1, auto_disarm_ticks: 3, boot_settle_ticks: 0, ..SafetyConfig::DEFAULT };
     let idle = Inputs::READY;
     let arm = Inputs { gesture: Some(Gesture::Arm), ..idle };

@@ -21,8 +21,8 @@ pub struct MahonyConfig {
     /// Integration step, s: the reference's nominal 0.00625 (a C double).
     pub dt_s: f64,
     pub inv_sqrt: InvSqrt,
-    /// Reference quirk B13: each quaternion component is integrated with the ones already
-    /// updated above it.
+    /// The reference's sequential update: each quaternion component is integrated with the
+    /// ones already updated above it.
     pub sequential_update: bool,
     /// Evaluate the reference's double-precision spots in f64 (gyro conversion, integral).
     pub reference_arithmetic: bool,

@@ -9,27 +9,13 @@
 //! filter estimate the gyro bias (at rest from the gyro itself, in motion from the inclination
 //! corrections, horizontal axes only). No magnetometer, so the heading is free.
 //!
-//! Why this one (BROAD, inclination RMSE in degrees, 285.7 Hz, from the first sample, scored by
-//! `fcu-testkit/tests/broad.rs`):
-//!
-//! | candidate | 02 | 07 | 11 | 15 |
-//! |---|---|---|---|---|
-//! | reference Mahony (kP 0.4, kI 0.1, sequential update, fast 1/√x) | 0.391 | 5.803 | 1.467 | 23.358 |
-//! | textbook Mahony, same gains (the published row of `fcu-testkit/data/broad/README.md`) | 0.378 | 3.667 | 1.471 | 23.355 |
-//! | Mahony-style gating: low-pass input weighted by 1/(1 + ((‖a‖ − 1 g)/tol)²), tol 50–400 mg | 0.38–0.48 | 1.95–3.6 | 0.45–0.95 | 10–31 |
-//! | `vqf-rs` 0.3, f64, defaults (VQF 6D) | 0.429 | 1.023 | 0.420 | 0.470 |
-//! | `vqf-rs`, rest bias only / no bias | 0.443 / 0.947 | 1.032 / 1.415 | 0.441 / 1.109 | 0.471 / 0.442 |
-//! | this, f32, VQF's parameters | 0.429 | 1.023 | 0.420 | 0.470 |
-//! | **this, f32, [`VqfConfig::DEFAULT`]** (bias forgetting 15 s, σ_motion 0.15 °/s) | **0.401** | **1.009** | **0.383** | **0.464** |
-//!
-//! Gating the accelerometer by its norm (difference D5 in its simplest form) breaks the
-//! zero-mean property the quasi-inertial low-pass relies on and was far worse; VQF's structure
-//! wins, and its bias estimation is what beats a plain low-pass on the slow trials. τ_acc 2–4 s
-//! was swept: 3 s is the best compromise (2 s: 0.62° on 11, 4 s: 0.50° on 15). The two changed
-//! bias parameters came from a small sweep on these same four trials (σ_motion 0.07–0.15,
-//! forgetting 15–100 s): treat the gain over VQF's own defaults (≤ 0.05°) as tuning, not as a
-//! property of the method. A shorter forgetting time also suits the drone, whose gyro bias
-//! moves with the board's temperature once the motors run.
+//! Why this one: on the BROAD trials (every candidate measured in
+//! `docs/estimator.md#why-this-estimator`), gating the accelerometer by its norm breaks the
+//! zero-mean property the quasi-inertial low-pass relies on, so VQF's structure wins, and its
+//! bias estimation is what beats a plain low-pass on the slow trials. [`VqfConfig::DEFAULT`]
+//! changes two of VQF's bias parameters after a small sweep on those same trials: treat that
+//! gain as tuning, not as a property of the method. A shorter forgetting time also suits the
+//! drone, whose gyro bias moves with the board's temperature once the motors run.
 //!
 //! Why not the `vqf-rs` crate itself (MIT, no_std): its Butterworth filters always run in f64,
 //! which the Cortex-M4 emulates in software, and its gyro step calls `sin`/`cos` every sample.
@@ -37,11 +23,8 @@
 //! direct form is not (poles within 1e-3 of z = 1), and the gyro exponential is a 4th-order
 //! polynomial. Result identical to `vqf-rs` to 0.001° on all four trials.
 //!
-//! Cost per update (steady state, both bias paths): roughly 400 multiply/adds, 4 `sqrtf`,
-//! 7 divisions, no other transcendental (a tangent and `ceilf` only at construction); 7 three-channel
-//! low-pass steps. Measured with callgrind on x86-64 (a proxy): ≈ 1,800 instructions per update
-//! (the reference Mahony: ≈ 260 there, but its f64 arithmetic is emulated on the M4). Note that
-//! `libm::sqrtf` is a software routine on thumbv7em (≈ 40–60 instructions), not `VSQRT`.
+//! What an update costs, on the Cortex-M4 and as a proxy on the host, is in
+//! `docs/performance.md`.
 //!
 //! The product runs it once per outer step at 160 Hz ([`VqfConfig::DEFAULT`]); any other rate is
 //! [`VqfConfig::at_rate`]. Every time constant is in seconds, so the behaviour does not depend
@@ -377,9 +360,8 @@ impl Vqf {
     ///
     /// On a multirotor the flight pipeline passes "throttle low" (motors stopped): a steady
     /// hover looks like rest to the detector (steady accelerometer, small gyro) while the craft
-    /// may be turning slowly, and a rest update would take that real rotation for gyro bias.
-    /// In the simulator's weak-motor hover that drift cost 2.5° RMS against 1.1° with rest
-    /// updates held off in flight.
+    /// may be turning slowly, and a rest update would take that real rotation for gyro bias
+    /// (the drift it gives in flight is measured in `docs/estimator.md`).
     pub fn update_gated(&mut self, accel_mg: [f32; 3], gyro_mdps: [f32; 3], rest_possible: bool) {
         if !rest_possible {
             self.rest_s = 0.0;

@@ -63,11 +63,11 @@ impl HeadingEstimate {
 }
 
 /// The outer step's half: the heading target, moved by the yaw stick at its rate or at its
-/// shaped rate (D16).
+/// shaped rate.
 #[derive(Clone, Debug)]
 pub(super) struct HeadingTarget {
     yaw_target_rad: f32,
-    /// The stick's yaw rate shaped for the airframe (`None` without D16).
+    /// The stick's yaw rate shaped for the airframe (`None` without yaw shaping).
     shaper: Option<YawRateShaper>,
 }
 
@@ -77,13 +77,13 @@ impl HeadingTarget {
     }
 
     /// One outer step: the heading target, rad, and what the yaw rate demand adds to the
-    /// heading loop's (the stick's rate passed on, D13; `None`: nothing, not even a zero).
+    /// heading loop's (the yaw feedforward: the stick's rate passed on; `None`: nothing, not even a zero).
     pub(super) fn step(&mut self, p: &OuterParams, job: &OuterJob) -> (f32, Option<f32>) {
         if job.yaw_target_reset {
             self.yaw_target_rad = 0.0;
         }
         let yaw_step = p.rc.yaw_step(&job.sticks);
-        // The heading target moves at the stick's rate, or at its shaped rate (D16), which
+        // The heading target moves at the stick's rate, or at its shaped rate, which
         // starts again from rest whenever the throttle has been low.
         let shaped = self.shaper.as_mut().map(|shaper| {
             if job.yaw_target_reset || job.throttle_low {

@@ -6,12 +6,14 @@ use crate::config::Config;
 use crate::filter::BiquadBank;
 use crate::imu::{CalibrationPhase, Calibrator, Decoder, HealthMonitor, Offsets, RawImu, SensorFault, MAX_MISSING_SAMPLES};
 
-/// Whether the calibration let the tick go on.
+/// What the tick may do once the calibration has had its sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Calibration {
-    TickGoesOn,
-    /// Settling or averaging at start-up: motors off, nothing else this tick.
-    StopsTheTick,
+pub(super) enum AfterCalibration {
+    /// Offsets exist: the tick runs its pipeline.
+    RunPipeline,
+    /// The start-up calibration is still settling or averaging, so there are no offsets to
+    /// correct the sensor with: the motors stay off and the tick does nothing else.
+    NoOffsetsYet,
 }
 
 /// The front end's state: calibration, offsets, health, and the gyro filters.
@@ -89,14 +91,14 @@ impl Sensors {
     /// and a requested average. Out of line: the 800 Hz path only reaches it while a
     /// calibration is asked for or running.
     #[inline(never)]
-    pub(super) fn calibrate(&mut self, imu: RawImu, decoder: &Decoder, block: &mut Block) -> Calibration {
+    pub(super) fn calibrate(&mut self, imu: RawImu, decoder: &Decoder, block: &mut Block) -> AfterCalibration {
         if self.calibrator.in_startup() {
             if self.calibrator.settle() {
-                return Calibration::StopsTheTick;
+                return AfterCalibration::NoOffsetsYet;
             }
             match self.calibrator.feed(decoder.to_body(imu)) {
                 Some(o) => self.set_offsets(o, decoder, block), // and this tick goes on, as the reference's does
-                None => return Calibration::StopsTheTick,
+                None => return AfterCalibration::NoOffsetsYet,
             }
         }
         if self.cal_pending && !self.calibrator.is_averaging() {
@@ -108,7 +110,7 @@ impl Sensors {
                 self.set_offsets(o, decoder, block);
             }
         }
-        Calibration::TickGoesOn
+        AfterCalibration::RunPipeline
     }
 
     /// New offsets from a calibration; the block's samples taken before keep the ones they were

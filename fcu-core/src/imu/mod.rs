@@ -206,7 +206,7 @@ impl Offsets {
     }
 }
 
-/// Motion check of a calibration (difference D11): while averaging, a gyro axis that moves
+/// Motion check of a calibration: while averaging, a gyro axis that moves
 /// more than `gyro_max_dev_mdps` from its running mean, or an accelerometer norm outside
 /// `1 g ± accel_norm_tol_mg`, restarts the average; after `timeout_ticks` it gives up.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -223,7 +223,7 @@ pub struct CalibrationConfig {
     pub settle_ticks: u32,
     /// Samples averaged (800); the factor is `1/samples` applied as the reference does.
     pub samples: u32,
-    /// `None` in the reference profile: any motion is accepted (B16).
+    /// `None` in the reference profile: any motion is accepted.
     pub motion_check: Option<MotionCheck>,
 }
 

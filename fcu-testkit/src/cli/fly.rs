@@ -15,9 +15,7 @@ use crate::sim::{self as sim, FlightLog, LogRow, Profile, RunOptions};
 
 #[derive(clap::Args, Debug)]
 pub struct FlyArgs {
-    /// Scenario name (hover, steps, sweeps, yaw, link-short, link-long, gust, weak-motor,
-    /// calibration-motion).
-    #[arg(long)]
+    #[arg(long, help = scenario::help())]
     pub scenario: String,
     /// Flight-controller profile: `default` (the product) or `reference` (ST's firmware).
     #[arg(long, default_value = "default")]
@@ -41,8 +39,7 @@ pub struct FlyArgs {
 
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
-    /// Scenario name (see `fly --help`).
-    #[arg(long)]
+    #[arg(long, help = scenario::help())]
     pub scenario: String,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -52,7 +49,7 @@ pub struct CompareArgs {
 }
 
 fn scenario_named(name: &str) -> Result<Scenario, CliError> {
-    scenario::by_name(name).ok_or_else(|| CliError(format!("--scenario: unknown scenario `{name}`; known: {}", scenario::NAMES.join(", "))))
+    scenario::by_name(name).ok_or_else(|| CliError(format!("--scenario: unknown scenario `{name}`; known: {}", scenario::names_list())))
 }
 
 /// `--spread` checked: a fraction in [0, 0.9]. Shared with `fcu-pil fly`.

@@ -12,24 +12,27 @@
 pub mod imu_model;
 pub mod loop_id;
 pub mod metrics;
+mod pilot;
 pub mod plant;
 pub mod plot;
 pub mod radio_model;
 pub mod rng;
 pub mod scenario;
 pub mod stick_rate;
+mod world;
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use fcu_core::imu::CalibrationPhase;
 use fcu_core::supervisor::FlightState;
 use fcu_core::{Config, FlightController};
 
-use imu_model::{ImuModel, ImuModelParams, Vibration};
-use plant::{Disturbance, Plant, PlantParams};
-use radio_model::{RadioModel, TimedEdge, TxFrame};
-use scenario::{Scenario, Throttle};
-use stick_rate::StickRate;
+use pilot::Transmitter;
+use plant::{Plant, PlantParams};
+use radio_model::TimedEdge;
+use scenario::Scenario;
+use world::World;
 
 pub use crate::Profile;
 
@@ -78,7 +81,7 @@ pub struct LogRow {
     pub roll_target_deg: f64,
     pub pitch_target_deg: f64,
     pub yaw_target_deg: f64,
-    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`]; not written
+    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`](stick_rate::StickRate); not written
     /// to the CSV): what the yaw metric compares the airframe's rate with.
     pub yaw_rate_cmd_dps: f64,
     pub motors: [u16; 4],
@@ -115,36 +118,6 @@ impl std::fmt::Display for SimError {
         match self {
             SimError::Config(m) | SimError::Computer(m) | SimError::Output(m) => write!(f, "{m}"),
         }
-    }
-}
-
-/// The simulated pilot on the throttle stick: knows roughly where hover is and holds a height.
-#[derive(Clone, Debug, Default)]
-struct Pilot {
-    integral: f64,
-}
-
-impl Pilot {
-    /// Throttle pulse (µs) to hold `alt_m`, from what a pilot sees (height, climb rate, tilt).
-    fn throttle_us(&mut self, alt_target_m: f64, plant: &Plant, cfg: &Config, dt_s: f64) -> f64 {
-        let p = &plant.params;
-        let s = &plant.state;
-        let alt_err = alt_target_m - s.pos_earth_m[2];
-        let vz_wanted = (1.2 * alt_err).clamp(-0.4, 0.6);
-        let vz_err = vz_wanted - s.vel_earth_m_s[2];
-        if !s.on_ground {
-            self.integral = (self.integral + 0.3 * alt_err * dt_s).clamp(-0.2, 0.2);
-        }
-        let factor = (1.0 + 0.6 * vz_err + self.integral).clamp(0.5, 1.5);
-        let up = plant::quat_rotate(s.quat, [0.0, 0.0, 1.0])[2].max(0.5);
-        let frac = p.hover_fraction(s.battery_v) * factor / up;
-        let ccr = p.duty_for_fraction(frac) * p.pwm_full_scale_counts;
-        let m = &cfg.mixer;
-        let g_thr = if m.throttle_slope > 0.0 { (ccr - f64::from(m.throttle_offset)) / f64::from(m.throttle_slope) } else { 0.0 };
-        // Never below MIN_THR + margin: below it the core cuts the motors (a pilot flying
-        // knows not to pull the stick to the bottom).
-        let g_thr = g_thr.max(f64::from(cfg.rc.min_throttle.get()) + 40.0);
-        (f64::from(cfg.rc.thr_bottom) + g_thr) / 4.0
     }
 }
 
@@ -281,104 +254,88 @@ pub fn run_streaming(
     opts: &RunOptions,
     on_row: &mut dyn FnMut(&LogRow) -> Result<(), String>,
 ) -> Result<FlightLog, SimError> {
-    let cfg = profile.config();
     let mut params = if opts.plant_spread > 0.0 { PlantParams::randomized(opts.seed, opts.plant_spread) } else { PlantParams::default() };
     for (s, w) in params.motor_thrust_scale.iter_mut().zip(scenario.motor_thrust_scale) {
         *s *= w;
     }
-    let mut plant = Plant::new(params.clone());
-    let mut imu = ImuModel::new(ImuModelParams::default(), opts.seed);
-    let mut radio = RadioModel::new(scenario.radio.clone(), opts.seed);
-    let mut air = Air::new(scenario.turbulence, opts.seed);
-    let mut pilot = Pilot::default();
-    let mut stick = StickRate::new(&cfg);
+    let mut world = World::new(scenario, &params, opts.seed, opts.substeps);
+    let mut tx = Transmitter::new(scenario, profile.config(), opts.seed);
+    let mut motors = MotorLine::new(opts);
 
     let tick_hz = computer.tick_hz();
     let tick_s = 1.0 / tick_hz;
-    let substeps = opts.substeps.clamp(1, 100);
-    let sub_s = tick_s / f64::from(substeps);
     let duration_s = opts.duration_s.unwrap_or(scenario.duration_s).max(0.0);
     let n_ticks = (duration_s * tick_hz).round() as u64;
-    let vibration = Vibration { amplitude_g_at_full_speed: params.vibration_accel_g, full_speed_hz: params.motor_full_speed_hz };
+    let mut progress = Progress::new(opts.progress, format!("{} ({})", scenario.name, profile.name()), duration_s);
 
     // Grown as the flight goes, never sized from the duration up front.
     let mut rows = Vec::new();
-    // Compare values on their way to the plant with `extra_delay_ticks` (motors off before).
-    let mut late: std::collections::VecDeque<[u16; 4]> = std::collections::VecDeque::new();
     let mut edges: Vec<TimedEdge> = Vec::with_capacity(32);
-    let mut last_thr_us = scenario::THR_LOW_US;
-    let started = Instant::now();
-    let mut next_progress = Duration::from_secs(2);
-
     for k in 0..n_ticks {
         let t0 = k as f64 * tick_s;
         let t1 = t0 + tick_s;
+        let yaw_rate_cmd_dps = tx.send(t1, &world.plant, &mut edges);
+        world.advance(t0, tick_s);
+        let compare = computer.step(t1, &edges, world.imu.read(), world.plant.state.battery_v)?;
+        motors.deliver(compare, t1, &mut world.plant);
+        let sent = Sent { link: scenario.timeline.at(t1).link, thr_us: tx.last_thr_us, yaw_rate_cmd_dps };
+        let logged = LogRow::of(t1, &computer.view(), &world.plant, compare, sent);
+        on_row(&logged).map_err(SimError::Output)?;
+        rows.push(logged);
+        progress.tick(t1, k + 1 == n_ticks);
+    }
+    progress.finish();
 
-        // 1. Radio: the transmitter frame uses the pilot's sticks at the frame's start.
-        edges.clear();
-        radio.advance(
-            t1,
-            |tf| {
-                let row = scenario.timeline.at(tf);
-                let thr_us = match row.thr {
-                    Throttle::Us(u) => u,
-                    Throttle::HoldAltitude { alt_m } => pilot.throttle_us(alt_m, &plant, &cfg, 0.02),
-                };
-                last_thr_us = thr_us;
-                TxFrame { width_us: [row.ail_us, row.ele_us, thr_us, row.rud_us], link: row.link }
-            },
-            &mut edges,
-        );
+    Ok(FlightLog { scenario: scenario.name.clone(), profile, seed: opts.seed, tick_hz, plant: params, rows })
+}
 
-        let yaw_rate_cmd_dps = stick.yaw_rate_dps(edges.iter().map(|e| e.edge));
+/// The compare values on their way to the motors: the loop identification's excitation added,
+/// and held back `extra_delay_ticks` (motors off before the first arrives).
+struct MotorLine<'o> {
+    excitation: Option<&'o loop_id::Multisine>,
+    extra_delay_ticks: usize,
+    late: VecDeque<[u16; 4]>,
+}
 
-        // 2. Plant and sensor over the tick, motors held.
-        for j in 0..substeps {
-            let t = t0 + f64::from(j) * sub_s;
-            match scenario.hand.filter(|h| t >= h.start_s && t < h.end_s) {
-                Some(h) => {
-                    let ph = std::f64::consts::TAU * h.freq_hz * (t - h.start_s);
-                    plant.carry(sub_s, [h.peak_rate_rad_s * ph.sin(), 0.5 * h.peak_rate_rad_s * ph.cos(), 0.0]);
-                }
-                None => {
-                    let mut dist = air.disturbance();
-                    for g in &scenario.gusts {
-                        if t >= g.start_s && t < g.start_s + g.duration_s {
-                            for i in 0..3 {
-                                dist.wind_earth_m_s[i] += g.push.wind_earth_m_s[i];
-                                dist.force_earth_n[i] += g.push.force_earth_n[i];
-                                dist.torque_body_nm[i] += g.push.torque_body_nm[i];
-                            }
-                        }
-                    }
-                    plant.step(sub_s, &dist);
-                }
-            }
-            imu.step(sub_s, &plant.kinematics(), vibration);
-        }
+impl<'o> MotorLine<'o> {
+    fn new(opts: &'o RunOptions) -> Self {
+        MotorLine { excitation: opts.excitation.as_ref(), extra_delay_ticks: opts.extra_delay_ticks as usize, late: VecDeque::new() }
+    }
 
-        air.advance(tick_s);
-
-        // 3. The flight computer's tick: edges and the IMU's words in, compare values out.
-        let compare = computer.step(t1, &edges, imu.read(), plant.state.battery_v)?;
-        let to_plant = opts.excitation.as_ref().map_or(compare, |x| x.add_to(compare, t1));
-        if opts.extra_delay_ticks == 0 {
+    /// `compare`, written by the computer at `t_s`, on its way to the plant.
+    fn deliver(&mut self, compare: [u16; 4], t_s: f64, plant: &mut Plant) {
+        let to_plant = self.excitation.map_or(compare, |x| x.add_to(compare, t_s));
+        if self.extra_delay_ticks == 0 {
             plant.set_compare(to_plant);
         } else {
-            late.push_back(to_plant);
-            while late.len() > opts.extra_delay_ticks as usize {
-                plant.set_compare(late.pop_front().unwrap_or(to_plant));
+            self.late.push_back(to_plant);
+            while self.late.len() > self.extra_delay_ticks {
+                plant.set_compare(self.late.pop_front().unwrap_or(to_plant));
             }
         }
+    }
+}
 
-        let v = computer.view();
+/// What the pilot's side sent by the end of a tick, as the log records it.
+struct Sent {
+    /// The timeline's link flag.
+    link: bool,
+    /// The last throttle pulse sent, µs.
+    thr_us: f64,
+    /// The yaw rate the stick asks for on this tick, °/s.
+    yaw_rate_cmd_dps: f64,
+}
+
+impl LogRow {
+    /// The row of the tick ending at `t_s`: the plant's truth, what the computer says of itself
+    /// and the compare values it wrote.
+    fn of(t_s: f64, v: &ComputerView, plant: &Plant, compare: [u16; 4], sent: Sent) -> LogRow {
         let (pitch, roll, yaw) = plant.euler_rad();
-        let row = scenario.timeline.at(t1);
-        let logged = LogRow {
-            t_s: t1,
+        LogRow {
+            t_s,
             state: v.state,
             armed: v.armed,
-            link_tx: row.link,
+            link_tx: sent.link,
             link_core: v.link,
             roll_deg: roll.to_degrees(),
             pitch_deg: pitch.to_degrees(),
@@ -389,31 +346,48 @@ pub fn run_streaming(
             roll_target_deg: v.roll_target_deg,
             pitch_target_deg: v.pitch_target_deg,
             yaw_target_deg: v.yaw_target_deg,
-            yaw_rate_cmd_dps,
+            yaw_rate_cmd_dps: sent.yaw_rate_cmd_dps,
             motors: compare,
             alt_m: plant.state.pos_earth_m[2],
             battery_v: plant.state.battery_v,
-            thr_us: last_thr_us,
+            thr_us: sent.thr_us,
             calibrated: v.calibrated,
             calibrating: v.calibrating,
             calibration_restarts: v.calibration_restarts,
-        };
-        on_row(&logged).map_err(SimError::Output)?;
-        rows.push(logged);
+        }
+    }
+}
 
-        if opts.progress && started.elapsed() >= next_progress {
-            next_progress += Duration::from_secs(1);
-            eprint!("\r{} ({}): {:.1} / {:.1} s simulated", scenario.name, profile.name(), t1, duration_s);
-            if k + 1 == n_ticks {
+/// A progress line on stderr, once the run has taken more than a couple of seconds.
+struct Progress {
+    on: bool,
+    label: String,
+    duration_s: f64,
+    started: Instant,
+    next: Duration,
+}
+
+impl Progress {
+    fn new(on: bool, label: String, duration_s: f64) -> Self {
+        Progress { on, label, duration_s, started: Instant::now(), next: Duration::from_secs(2) }
+    }
+
+    fn tick(&mut self, t_s: f64, last: bool) {
+        if self.on && self.started.elapsed() >= self.next {
+            self.next += Duration::from_secs(1);
+            eprint!("\r{}: {:.1} / {:.1} s simulated", self.label, t_s, self.duration_s);
+            if last {
                 eprintln!();
             }
         }
     }
-    if opts.progress && started.elapsed() >= Duration::from_secs(2) {
-        eprintln!("\r{} ({}): {:.1} s simulated in {:.1} s", scenario.name, profile.name(), duration_s, started.elapsed().as_secs_f64());
-    }
 
-    Ok(FlightLog { scenario: scenario.name.clone(), profile, seed: opts.seed, tick_hz, plant: params, rows })
+    fn finish(&self) {
+        if self.on && self.started.elapsed() >= Duration::from_secs(2) {
+            let took_s = self.started.elapsed().as_secs_f64();
+            eprintln!("\r{}: {:.1} s simulated in {:.1} s", self.label, self.duration_s, took_s);
+        }
+    }
 }
 
 /// The header of a flight's CSV, one row per control tick ([`LogRow::write_csv`]).
@@ -460,42 +434,5 @@ impl FlightLog {
             let _ = r.write_csv(&mut bytes);
         }
         String::from_utf8_lossy(&bytes).into_owned()
-    }
-}
-
-/// The scenario's turbulence as it evolves: first-order Gauss–Markov processes, advanced once
-/// per control tick (their correlation time is hundreds of ticks).
-struct Air {
-    turbulence: Option<scenario::Turbulence>,
-    rng: rng::Rng,
-    /// Wind east, north; torque about body X, Y (unit-variance states, scaled on use).
-    state: [f64; 4],
-}
-
-impl Air {
-    fn new(turbulence: Option<scenario::Turbulence>, seed: u64) -> Air {
-        Air { turbulence, rng: rng::Rng::fork(seed, 0x7475_7262), state: [0.0; 4] }
-    }
-
-    fn advance(&mut self, dt_s: f64) {
-        if let Some(t) = self.turbulence {
-            let a = (-dt_s / t.correlation_s).exp();
-            let b = (1.0 - a * a).sqrt();
-            for x in &mut self.state {
-                *x = a * *x + b * self.rng.gaussian();
-            }
-        }
-    }
-
-    fn disturbance(&self) -> Disturbance {
-        let Some(t) = self.turbulence else {
-            return Disturbance::default();
-        };
-        let [we, wn, tx, ty] = self.state;
-        Disturbance {
-            wind_earth_m_s: [t.wind_rms_m_s * we, t.wind_rms_m_s * wn, 0.0],
-            force_earth_n: [0.0; 3],
-            torque_body_nm: [t.torque_rms_nm * tx, t.torque_rms_nm * ty, 0.0],
-        }
     }
 }

@@ -1,0 +1,104 @@
+//! The airframe and what acts on it over a control tick: the plant with the motors held, its
+//! IMU following every substep, the air (turbulence and gusts) or a hand rocking it.
+
+use super::imu_model::{ImuModel, ImuModelParams, Vibration};
+use super::plant::{Disturbance, Plant, PlantParams};
+use super::rng;
+use super::scenario::{self, Gust, HandMotion};
+
+/// The simulated drone in its world.
+pub(super) struct World {
+    pub(super) plant: Plant,
+    pub(super) imu: ImuModel,
+    air: Air,
+    hand: Option<HandMotion>,
+    gusts: Vec<Gust>,
+    vibration: Vibration,
+    /// Plant RK4 steps per control tick.
+    substeps: u32,
+}
+
+impl World {
+    pub(super) fn new(scenario: &scenario::Scenario, params: &PlantParams, seed: u64, substeps: u32) -> Self {
+        World {
+            plant: Plant::new(params.clone()),
+            imu: ImuModel::new(ImuModelParams::default(), seed),
+            air: Air::new(scenario.turbulence, seed),
+            hand: scenario.hand,
+            gusts: scenario.gusts.clone(),
+            vibration: Vibration { amplitude_g_at_full_speed: params.vibration_accel_g, full_speed_hz: params.motor_full_speed_hz },
+            substeps: substeps.clamp(1, 100),
+        }
+    }
+
+    /// The tick from `t0_s`, `tick_s` long, with the compare values the plant holds (a
+    /// zero-order hold, like TIM4): the plant and the IMU substep by substep, then the air.
+    pub(super) fn advance(&mut self, t0_s: f64, tick_s: f64) {
+        let sub_s = tick_s / f64::from(self.substeps);
+        for j in 0..self.substeps {
+            let t = t0_s + f64::from(j) * sub_s;
+            match self.hand.filter(|h| t >= h.start_s && t < h.end_s) {
+                Some(h) => {
+                    let ph = std::f64::consts::TAU * h.freq_hz * (t - h.start_s);
+                    self.plant.carry(sub_s, [h.peak_rate_rad_s * ph.sin(), 0.5 * h.peak_rate_rad_s * ph.cos(), 0.0]);
+                }
+                None => {
+                    let dist = self.disturbance_at(t);
+                    self.plant.step(sub_s, &dist);
+                }
+            }
+            self.imu.step(sub_s, &self.plant.kinematics(), self.vibration);
+        }
+        self.air.advance(tick_s);
+    }
+
+    /// The turbulence in force and every gust blowing at `t_s`.
+    fn disturbance_at(&self, t_s: f64) -> Disturbance {
+        let mut dist = self.air.disturbance();
+        for g in self.gusts.iter().filter(|g| t_s >= g.start_s && t_s < g.start_s + g.duration_s) {
+            for i in 0..3 {
+                dist.wind_earth_m_s[i] += g.push.wind_earth_m_s[i];
+                dist.force_earth_n[i] += g.push.force_earth_n[i];
+                dist.torque_body_nm[i] += g.push.torque_body_nm[i];
+            }
+        }
+        dist
+    }
+}
+
+/// The scenario's turbulence as it evolves: first-order Gauss–Markov processes, advanced once
+/// per control tick (their correlation time is hundreds of ticks).
+struct Air {
+    turbulence: Option<scenario::Turbulence>,
+    rng: rng::Rng,
+    /// Wind east, north; torque about body X, Y (unit-variance states, scaled on use).
+    state: [f64; 4],
+}
+
+impl Air {
+    fn new(turbulence: Option<scenario::Turbulence>, seed: u64) -> Air {
+        Air { turbulence, rng: rng::Rng::fork(seed, 0x7475_7262), state: [0.0; 4] }
+    }
+
+    fn advance(&mut self, dt_s: f64) {
+        if let Some(t) = self.turbulence {
+            let a = (-dt_s / t.correlation_s).exp();
+            let b = (1.0 - a * a).sqrt();
+            for x in &mut self.state {
+                *x = a * *x + b * self.rng.gaussian();
+            }
+        }
+    }
+
+    fn disturbance(&self) -> Disturbance {
+        let Some(t) = self.turbulence else {
+            return Disturbance::default();
+        };
+        let [we, wn, tx, ty] = self.state;
+        Disturbance {
+            wind_earth_m_s: [t.wind_rms_m_s * we, t.wind_rms_m_s * wn, 0.0],
+            force_earth_n: [0.0; 3],
+            torque_body_nm: [t.torque_rms_nm * tx, t.torque_rms_nm * ty, 0.0],
+        }
+    }
+}
