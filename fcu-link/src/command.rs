@@ -41,8 +41,7 @@ pub const DO_MOTOR_TEST: u16 = MavCmd::MAV_CMD_DO_MOTOR_TEST as u16;
 pub const REQUEST_MESSAGE: u16 = MavCmd::MAV_CMD_REQUEST_MESSAGE as u16;
 /// `MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES`.
 #[allow(deprecated)]
-pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 =
-    MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES as u16;
+pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 = MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES as u16;
 /// AUTOPILOT_VERSION's message id.
 pub const AUTOPILOT_VERSION_ID: u32 = mavlink::dialects::common::AUTOPILOT_VERSION_DATA::ID;
 
@@ -78,31 +77,21 @@ impl Command {
         if frame.message_id == COMMAND_INT_DATA::ID {
             let (m, [id, _frame]) = frame::decode_with_raw::<COMMAND_INT_DATA, 2>(
                 frame.payload,
-                [
-                    (COMMAND_AT, 2, STAND_IN_COMMAND),
-                    (FRAME_AT, 1, STAND_IN_FRAME),
-                ],
+                [(COMMAND_AT, 2, STAND_IN_COMMAND), (FRAME_AT, 1, STAND_IN_FRAME)],
             )?;
             return Some(Self {
                 id: id as u16,
-                params: [
-                    m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z,
-                ],
+                params: [m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z],
                 system_id: frame.system_id,
                 component_id: frame.component_id,
                 target_system: m.target_system,
                 target_component: m.target_component,
             });
         }
-        let (m, [id]) = frame::decode_with_raw::<COMMAND_LONG_DATA, 1>(
-            frame.payload,
-            [(COMMAND_AT, 2, STAND_IN_COMMAND)],
-        )?;
+        let (m, [id]) = frame::decode_with_raw::<COMMAND_LONG_DATA, 1>(frame.payload, [(COMMAND_AT, 2, STAND_IN_COMMAND)])?;
         Some(Self {
             id: id as u16,
-            params: [
-                m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7,
-            ],
+            params: [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7],
             system_id: frame.system_id,
             component_id: frame.component_id,
             target_system: m.target_system,
@@ -125,25 +114,16 @@ fn unsupported() -> Refusal {
 }
 
 pub(crate) fn while_armed(what: &str) -> Refusal {
-    Refusal(
-        MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
-        Text::new().push(what).push(" refused: armed"),
-    )
+    Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push(what).push(" refused: armed"))
 }
 
 pub(crate) fn denied(what: &str, rule: &str) -> Refusal {
-    Refusal(
-        MavResult::MAV_RESULT_DENIED,
-        Text::new().push(what).push(": ").push(rule),
-    )
+    Refusal(MavResult::MAV_RESULT_DENIED, Text::new().push(what).push(": ").push(rule))
 }
 
 /// Passes a request on to the vehicle, a refusal coming back DENIED with its rule.
 fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &str) -> Result<Then, Refusal> {
-    vehicle
-        .request(request)
-        .map(|()| Then::Nothing)
-        .map_err(|rule| denied(what, rule))
+    vehicle.request(request).map(|()| Then::Nothing).map_err(|rule| denied(what, rule))
 }
 
 impl<const TX: usize> Core<TX> {
@@ -164,9 +144,7 @@ impl<const TX: usize> Core<TX> {
                 outcome
             }
             DO_MOTOR_TEST => self.start_motor_test(command, &state, vehicle),
-            REQUEST_MESSAGE if command.params[0] == AUTOPILOT_VERSION_ID as f32 => {
-                Ok(Then::SendVersion)
-            }
+            REQUEST_MESSAGE if command.params[0] == AUTOPILOT_VERSION_ID as f32 => Ok(Then::SendVersion),
             REQUEST_AUTOPILOT_CAPABILITIES if command.params[0] == 1.0 => Ok(Then::SendVersion),
             _ => Err(unsupported()),
         };
@@ -200,11 +178,7 @@ impl<const TX: usize> Core<TX> {
     }
 }
 
-fn arm_disarm<V: Vehicle>(
-    command: &Command,
-    state: &VehicleState,
-    vehicle: &mut V,
-) -> Result<Then, Refusal> {
+fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
     let [action, force, ..] = command.params;
     if action == 1.0 {
         return Err(denied("Arm refused", "arm with the stick gesture"));
@@ -217,25 +191,15 @@ fn arm_disarm<V: Vehicle>(
     }
     let forced = force == FORCE_DISARM;
     if !forced && state.in_air {
-        return Err(Refusal(
-            MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
-            Text::new().push("Disarm refused: in the air (force 21196)"),
-        ));
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: in the air (force 21196)")));
     }
     if !forced && !state.throttle_low {
-        return Err(Refusal(
-            MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
-            Text::new().push("Disarm refused: throttle not low"),
-        ));
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: throttle not low")));
     }
     ask(vehicle, Request::Disarm { forced }, "Disarm refused")
 }
 
-fn calibration<V: Vehicle>(
-    command: &Command,
-    state: &VehicleState,
-    vehicle: &mut V,
-) -> Result<Then, Refusal> {
+fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
     let [gyro, mag, baro, radio, accel, p6, p7] = command.params;
     let imu = gyro == 1.0 || accel != 0.0;
     let radio = radio == 1.0;
@@ -245,19 +209,11 @@ fn calibration<V: Vehicle>(
     if state.armed {
         return Err(while_armed("Calibration"));
     }
-    let request = if imu {
-        Request::CalibrateImu
-    } else {
-        Request::CalibrateRadio
-    };
+    let request = if imu { Request::CalibrateImu } else { Request::CalibrateRadio };
     ask(vehicle, request, "Calibration refused")
 }
 
-fn storage<V: Vehicle>(
-    command: &Command,
-    state: &VehicleState,
-    vehicle: &mut V,
-) -> Result<Then, Refusal> {
+fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
     let request = if command.params[0] == 1.0 {
         Request::SaveParams
     } else if command.params[0] == 2.0 {
@@ -271,11 +227,7 @@ fn storage<V: Vehicle>(
     ask(vehicle, request, "Storage refused")
 }
 
-fn reboot<V: Vehicle>(
-    command: &Command,
-    state: &VehicleState,
-    vehicle: &mut V,
-) -> Result<Then, Refusal> {
+fn reboot<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
     if command.params[0] != 1.0 {
         return Err(unsupported());
     }

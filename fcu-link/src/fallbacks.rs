@@ -1,9 +1,7 @@
 //! Answers that tell a ground station what this board does not have, so that it stops asking:
 //! no mission (MISSION_COUNT 0) and no file transfer (an FTP NAK).
 
-use mavlink::dialects::common::{
-    MavMissionType, FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA,
-};
+use mavlink::dialects::common::{MavMissionType, FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA};
 
 use crate::frame;
 use crate::link::{bump, for_us, Core};
@@ -24,10 +22,9 @@ impl<const TX: usize> Core<TX> {
     /// for all three while connecting).
     pub(crate) fn mission_request_list(&mut self, frame: &Frame<'_>) {
         let mission = MavMissionType::MAV_MISSION_TYPE_MISSION as u32;
-        let Some((m, [mission_type])) = frame::decode_with_raw::<MISSION_REQUEST_LIST_DATA, 1>(
-            frame.payload,
-            [(REQUEST_TYPE_AT, 1, mission)],
-        ) else {
+        let Some((m, [mission_type])) =
+            frame::decode_with_raw::<MISSION_REQUEST_LIST_DATA, 1>(frame.payload, [(REQUEST_TYPE_AT, 1, mission)])
+        else {
             bump(&mut self.stats.bad_payload);
             return;
         };

@@ -29,12 +29,7 @@ pub fn encode<D: MessageData>(sequence: u8, data: &D, out: &mut [u8; MAX_FRAME])
 }
 
 /// [`encode`], with `patches` written into the payload before truncation and CRC.
-pub fn encode_patched<D: MessageData>(
-    sequence: u8,
-    data: &D,
-    patches: &[Patch],
-    out: &mut [u8; MAX_FRAME],
-) -> usize {
+pub fn encode_patched<D: MessageData>(sequence: u8, data: &D, patches: &[Patch], out: &mut [u8; MAX_FRAME]) -> usize {
     let mut payload = [0u8; MAX_PAYLOAD];
     // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
     data.ser(MavlinkVersion::V2, &mut payload);
@@ -47,26 +42,13 @@ pub fn encode_patched<D: MessageData>(
     // MAVLink 2 drops trailing zero bytes of the payload but always keeps the first.
     let len = full.iter().rposition(|&b| b != 0).map_or(1, |last| last + 1);
     let id = D::ID.to_le_bytes();
-    let header = [
-        crate::reader::STX_V2,
-        len as u8,
-        0,
-        0,
-        sequence,
-        SYSTEM_ID,
-        COMPONENT_ID,
-        id[0],
-        id[1],
-        id[2],
-    ];
+    let header = [crate::reader::STX_V2, len as u8, 0, 0, sequence, SYSTEM_ID, COMPONENT_ID, id[0], id[1], id[2]];
     out[..V2_HEADER].copy_from_slice(&header);
     let end = V2_HEADER + len;
     if let (Some(dst), Some(src)) = (out.get_mut(V2_HEADER..end), payload.get(..len)) {
         dst.copy_from_slice(src);
     }
-    let crc = out
-        .get(1..end)
-        .map_or(0, |covered| mavlink::calculate_crc(covered, D::EXTRA_CRC));
+    let crc = out.get(1..end).map_or(0, |covered| mavlink::calculate_crc(covered, D::EXTRA_CRC));
     if let Some(dst) = out.get_mut(end..end + 2) {
         dst.copy_from_slice(&crc.to_le_bytes());
     }
@@ -77,10 +59,7 @@ pub fn encode_patched<D: MessageData>(
 /// width)`, little-endian, zero where the payload was truncated) and writing in its place a
 /// value the dialect lists (`stand_in`), so that an unlisted value does not fail the decode.
 /// Returns the message and the raw values in the order of `fields`.
-pub fn decode_with_raw<D: MessageData, const F: usize>(
-    payload: &[u8],
-    fields: [(usize, usize, u32); F],
-) -> Option<(D, [u32; F])> {
+pub fn decode_with_raw<D: MessageData, const F: usize>(payload: &[u8], fields: [(usize, usize, u32); F]) -> Option<(D, [u32; F])> {
     let mut padded = [0u8; MAX_PAYLOAD];
     let n = payload.len().min(MAX_PAYLOAD);
     if let (Some(dst), Some(src)) = (padded.get_mut(..n), payload.get(..n)) {

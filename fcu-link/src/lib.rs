@@ -35,8 +35,8 @@
 )]
 
 pub mod command;
-pub mod frame;
 mod fallbacks;
+pub mod frame;
 mod link;
 mod motor_test;
 mod params;

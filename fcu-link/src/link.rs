@@ -1,8 +1,8 @@
 //! The link: frames in, answers and telemetry out (see [`Link`]).
 
 use mavlink::dialects::common::{
-    COMMAND_INT_DATA, COMMAND_LONG_DATA, FILE_TRANSFER_PROTOCOL_DATA, HEARTBEAT_DATA,
-    MISSION_REQUEST_LIST_DATA, PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
+    COMMAND_INT_DATA, COMMAND_LONG_DATA, FILE_TRANSFER_PROTOCOL_DATA, HEARTBEAT_DATA, MISSION_REQUEST_LIST_DATA, PARAM_REQUEST_LIST_DATA,
+    PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
 };
 use mavlink::MessageData;
 
@@ -30,11 +30,7 @@ pub struct LinkConfig {
 
 impl LinkConfig {
     /// Default rates, version 0.1.0 (type "dev"), no uid.
-    pub const DEFAULT: Self = Self {
-        rates: Rates::DEFAULT,
-        flight_sw_version: 0x0001_0000,
-        uid: 0,
-    };
+    pub const DEFAULT: Self = Self { rates: Rates::DEFAULT, flight_sw_version: 0x0001_0000, uid: 0 };
 }
 
 impl Default for LinkConfig {
@@ -74,11 +70,8 @@ impl Stream {
             return false;
         }
         let period = u32::from(period_ms);
-        self.next_ms = if now_ms.wrapping_sub(self.next_ms) >= period {
-            now_ms.wrapping_add(period)
-        } else {
-            self.next_ms.wrapping_add(period)
-        };
+        self.next_ms =
+            if now_ms.wrapping_sub(self.next_ms) >= period { now_ms.wrapping_add(period) } else { self.next_ms.wrapping_add(period) };
         true
     }
 }
@@ -169,15 +162,7 @@ impl<const TX: usize> Link<TX> {
                 now_ms: 0,
                 reboot_pending: false,
                 stats: LinkStats {
-                    reader: ReaderStats {
-                        frames: 0,
-                        bad_crc: 0,
-                        bad_length: 0,
-                        unknown_id: 0,
-                        signed: 0,
-                        incompatible: 0,
-                        noise_bytes: 0,
-                    },
+                    reader: ReaderStats { frames: 0, bad_crc: 0, bad_length: 0, unknown_id: 0, signed: 0, incompatible: 0, noise_bytes: 0 },
                     not_for_us: 0,
                     bad_payload: 0,
                     param_unknown: 0,
@@ -251,8 +236,7 @@ pub(crate) fn bump(counter: &mut u32) {
 
 /// True for a message addressed to us or to everyone.
 pub(crate) fn for_us(target_system: u8, target_component: u8) -> bool {
-    (target_system == 0 || target_system == SYSTEM_ID)
-        && (target_component == 0 || target_component == COMPONENT_ID)
+    (target_system == 0 || target_system == SYSTEM_ID) && (target_component == 0 || target_component == COMPONENT_ID)
 }
 
 impl<const TX: usize> Core<TX> {
@@ -262,11 +246,7 @@ impl<const TX: usize> Core<TX> {
     }
 
     /// [`Core::send`] with payload patches (see [`frame::encode_patched`]).
-    pub(crate) fn send_patched<D: MessageData>(
-        &mut self,
-        data: &D,
-        patches: &[frame::Patch],
-    ) -> bool {
+    pub(crate) fn send_patched<D: MessageData>(&mut self, data: &D, patches: &[frame::Patch]) -> bool {
         let mut out = [0u8; MAX_FRAME];
         let len = frame::encode_patched(self.sequence, data, patches, &mut out);
         // The sequence advances for dropped frames too, so the ground station's loss count
@@ -284,30 +264,26 @@ impl<const TX: usize> Core<TX> {
         let payload = frame.payload;
         match frame.message_id {
             HEARTBEAT_DATA::ID => {}
-            PARAM_REQUEST_LIST_DATA::ID => {
-                match frame::decode::<PARAM_REQUEST_LIST_DATA>(payload) {
-                    Some(m) if for_us(m.target_system, m.target_component) => {
-                        self.param_cursor = Some(0);
-                    }
-                    Some(_) => bump(&mut self.stats.not_for_us),
-                    None => bump(&mut self.stats.bad_payload),
+            PARAM_REQUEST_LIST_DATA::ID => match frame::decode::<PARAM_REQUEST_LIST_DATA>(payload) {
+                Some(m) if for_us(m.target_system, m.target_component) => {
+                    self.param_cursor = Some(0);
                 }
-            }
+                Some(_) => bump(&mut self.stats.not_for_us),
+                None => bump(&mut self.stats.bad_payload),
+            },
             PARAM_REQUEST_READ_DATA::ID => match frame::decode::<PARAM_REQUEST_READ_DATA>(payload) {
                 Some(m) => self.param_request_read(&m, vehicle),
                 None => bump(&mut self.stats.bad_payload),
             },
             PARAM_SET_DATA::ID => self.param_set(payload, vehicle),
             MISSION_REQUEST_LIST_DATA::ID => self.mission_request_list(&frame),
-            COMMAND_LONG_DATA::ID | COMMAND_INT_DATA::ID => {
-                match Command::decode(&frame) {
-                    Some(command) if for_us(command.target_system, command.target_component) => {
-                        self.command(&command, vehicle);
-                    }
-                    Some(_) => bump(&mut self.stats.not_for_us),
-                    None => bump(&mut self.stats.bad_payload),
+            COMMAND_LONG_DATA::ID | COMMAND_INT_DATA::ID => match Command::decode(&frame) {
+                Some(command) if for_us(command.target_system, command.target_component) => {
+                    self.command(&command, vehicle);
                 }
-            }
+                Some(_) => bump(&mut self.stats.not_for_us),
+                None => bump(&mut self.stats.bad_payload),
+            },
             FILE_TRANSFER_PROTOCOL_DATA::ID => self.file_transfer(&frame),
             _ => {}
         }

@@ -53,11 +53,7 @@ pub struct MotorTestState {
 impl MotorTest {
     pub(crate) fn state(&self, now_ms: u32) -> MotorTestState {
         let left = self.end_ms.wrapping_sub(now_ms);
-        MotorTestState {
-            motor: self.motor,
-            throttle_pct: self.throttle_pct,
-            remaining_ms: if (left as i32) < 0 { 0 } else { left },
-        }
+        MotorTestState { motor: self.motor, throttle_pct: self.throttle_pct, remaining_ms: if (left as i32) < 0 { 0 } else { left } }
     }
 }
 
@@ -92,13 +88,7 @@ impl<const TX: usize> Core<TX> {
         let motor = motor as u8 - 1;
         let throttle_pct = throttle.min(MOTOR_TEST_THROTTLE_CAP_PCT);
         let duration_ms = (timeout_s * 1000.0).min(f32::from(MOTOR_TEST_MAX_MS)) as u16;
-        vehicle
-            .request(Request::MotorTest {
-                motor,
-                throttle_pct,
-                duration_ms,
-            })
-            .map_err(|rule| denied(WHAT, rule))?;
+        vehicle.request(Request::MotorTest { motor, throttle_pct, duration_ms }).map_err(|rule| denied(WHAT, rule))?;
         self.motor_test = Some(MotorTest {
             motor,
             throttle_pct,
@@ -127,17 +117,9 @@ impl<const TX: usize> Core<TX> {
         let now = self.now_ms;
         let reason = if (now.wrapping_sub(test.end_ms) as i32) >= 0 {
             Some("time up")
-        } else if self
-            .last_rx_ms
-            .is_none_or(|last| now.wrapping_sub(last) > MOTOR_TEST_SILENCE_MS)
-        {
+        } else if self.last_rx_ms.is_none_or(|last| now.wrapping_sub(last) > MOTOR_TEST_SILENCE_MS) {
             Some("link silent")
-        } else if test
-            .start_widths_us
-            .iter()
-            .zip(state.rc_widths_us.iter())
-            .any(|(&a, &b)| a.abs_diff(b) > MOTOR_TEST_STICK_MOVE_US)
-        {
+        } else if test.start_widths_us.iter().zip(state.rc_widths_us.iter()).any(|(&a, &b)| a.abs_diff(b) > MOTOR_TEST_STICK_MOVE_US) {
             Some("stick moved")
         } else if state.armed {
             Some("armed")

@@ -59,11 +59,7 @@ impl<const TX: usize> Core<TX> {
         }
     }
 
-    pub(crate) fn param_request_read<V: Vehicle>(
-        &mut self,
-        m: &PARAM_REQUEST_READ_DATA,
-        vehicle: &V,
-    ) {
+    pub(crate) fn param_request_read<V: Vehicle>(&mut self, m: &PARAM_REQUEST_READ_DATA, vehicle: &V) {
         if !for_us(m.target_system, m.target_component) {
             bump(&mut self.stats.not_for_us);
             return;
@@ -81,9 +77,7 @@ impl<const TX: usize> Core<TX> {
     /// PARAM_SET: the value in force always goes back, taken or refused.
     pub(crate) fn param_set<V: Vehicle>(&mut self, payload: &[u8], vehicle: &mut V) {
         let real32 = MavParamType::MAV_PARAM_TYPE_REAL32 as u32;
-        let Some((m, [param_type])) =
-            frame::decode_with_raw::<PARAM_SET_DATA, 1>(payload, [(PARAM_SET_TYPE_AT, 1, real32)])
-        else {
+        let Some((m, [param_type])) = frame::decode_with_raw::<PARAM_SET_DATA, 1>(payload, [(PARAM_SET_TYPE_AT, 1, real32)]) else {
             bump(&mut self.stats.bad_payload);
             return;
         };

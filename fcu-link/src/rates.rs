@@ -21,8 +21,7 @@
 //! holds the defaults under 60 % of the line.
 
 use mavlink::dialects::common::{
-    ATTITUDE_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, RC_CHANNELS_DATA,
-    SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    ATTITUDE_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 use mavlink::MessageData;
 
@@ -71,11 +70,7 @@ impl Rates {
             }
             (12 + D::ENCODED_LEN as u32) * 1000 / u32::from(period_ms)
         }
-        let heartbeat = if self.heartbeat_ms == 0 {
-            Self::DEFAULT.heartbeat_ms
-        } else {
-            self.heartbeat_ms
-        };
+        let heartbeat = if self.heartbeat_ms == 0 { Self::DEFAULT.heartbeat_ms } else { self.heartbeat_ms };
         rate::<HEARTBEAT_DATA>(heartbeat)
             + rate::<ATTITUDE_DATA>(self.attitude_ms)
             + rate::<SYS_STATUS_DATA>(self.sys_status_ms)

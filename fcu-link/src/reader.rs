@@ -8,8 +8,8 @@
 //! byte.
 
 use mavlink::dialects::common::{
-    COMMAND_INT_DATA, COMMAND_LONG_DATA, FILE_TRANSFER_PROTOCOL_DATA, HEARTBEAT_DATA,
-    MISSION_REQUEST_LIST_DATA, PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
+    COMMAND_INT_DATA, COMMAND_LONG_DATA, FILE_TRANSFER_PROTOCOL_DATA, HEARTBEAT_DATA, MISSION_REQUEST_LIST_DATA, PARAM_REQUEST_LIST_DATA,
+    PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
 };
 use mavlink::MessageData;
 
@@ -43,12 +43,7 @@ pub struct Handled {
 }
 
 const fn handled<D: MessageData>(v1_len: u8) -> Handled {
-    Handled {
-        id: D::ID,
-        extra_crc: D::EXTRA_CRC,
-        v1_len,
-        v2_max_len: D::ENCODED_LEN as u8,
-    }
+    Handled { id: D::ID, extra_crc: D::EXTRA_CRC, v1_len, v2_max_len: D::ENCODED_LEN as u8 }
 }
 
 /// The messages whose frames are checked and kept. HEARTBEAT is kept (not decoded) because a
@@ -151,15 +146,7 @@ impl FrameReader {
             buf: [0; MAX_KEPT],
             len: 0,
             phase: Phase::Idle,
-            stats: ReaderStats {
-                frames: 0,
-                bad_crc: 0,
-                bad_length: 0,
-                unknown_id: 0,
-                signed: 0,
-                incompatible: 0,
-                noise_bytes: 0,
-            },
+            stats: ReaderStats { frames: 0, bad_crc: 0, bad_length: 0, unknown_id: 0, signed: 0, incompatible: 0, noise_bytes: 0 },
         }
     }
 
@@ -204,9 +191,7 @@ impl FrameReader {
                     return None;
                 }
                 if self.is_v2() && self.buf[2] & IFLAG_SIGNED != 0 {
-                    self.phase = Phase::Signature {
-                        left: SIGNATURE_LEN,
-                    };
+                    self.phase = Phase::Signature { left: SIGNATURE_LEN };
                     return None;
                 }
                 self.phase = Phase::Idle;
@@ -248,12 +233,7 @@ impl FrameReader {
             let id = u32::from_le_bytes([self.buf[7], self.buf[8], self.buf[9], 0]);
             (id, self.buf[4], self.buf[5], self.buf[6])
         } else {
-            (
-                u32::from(self.buf[5]),
-                self.buf[2],
-                self.buf[3],
-                self.buf[4],
-            )
+            (u32::from(self.buf[5]), self.buf[2], self.buf[3], self.buf[4])
         };
         let Some(handled) = handled_message(message_id) else {
             bump(&mut self.stats.unknown_id);
@@ -261,9 +241,7 @@ impl FrameReader {
         };
         let header = self.header_len();
         let crc_at = header + payload_len;
-        let (Some(covered), Some(&[lo, hi])) =
-            (self.buf.get(1..crc_at), self.buf.get(crc_at..crc_at + 2))
-        else {
+        let (Some(covered), Some(&[lo, hi])) = (self.buf.get(1..crc_at), self.buf.get(crc_at..crc_at + 2)) else {
             return None;
         };
         let received = u16::from_le_bytes([lo, hi]);
@@ -286,13 +264,6 @@ impl FrameReader {
         }
         bump(&mut self.stats.frames);
         let payload = self.buf.get(header..crc_at)?;
-        Some(Frame {
-            version: if v2 { Version::V2 } else { Version::V1 },
-            sequence,
-            system_id,
-            component_id,
-            message_id,
-            payload,
-        })
+        Some(Frame { version: if v2 { Version::V2 } else { Version::V1 }, sequence, system_id, component_id, message_id, payload })
     }
 }

@@ -1,9 +1,8 @@
 //! The periodic messages, from one [`VehicleState`] snapshot per tick.
 
 use mavlink::dialects::common::{
-    MavAutopilot, MavBatteryChargeState, MavBatteryFault, MavBatteryFunction, MavBatteryMode,
-    MavBatteryType, MavModeFlag, MavProtocolCapability, MavState, MavSysStatusSensor,
-    MavSysStatusSensorExtended, MavType, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
+    MavAutopilot, MavBatteryChargeState, MavBatteryFault, MavBatteryFunction, MavBatteryMode, MavBatteryType, MavModeFlag,
+    MavProtocolCapability, MavState, MavSysStatusSensor, MavSysStatusSensorExtended, MavType, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
     BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 
@@ -29,11 +28,7 @@ impl<const TX: usize> Core<TX> {
     pub(crate) fn telemetry(&mut self, state: &VehicleState) {
         let now = self.now_ms;
         let rates = self.config.rates;
-        let heartbeat_ms = if rates.heartbeat_ms == 0 {
-            crate::Rates::DEFAULT.heartbeat_ms
-        } else {
-            rates.heartbeat_ms
-        };
+        let heartbeat_ms = if rates.heartbeat_ms == 0 { crate::Rates::DEFAULT.heartbeat_ms } else { rates.heartbeat_ms };
         if self.schedule.heartbeat.due(now, heartbeat_ms) {
             self.heartbeat(state);
         }
@@ -55,8 +50,7 @@ impl<const TX: usize> Core<TX> {
     }
 
     fn heartbeat(&mut self, state: &VehicleState) {
-        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-            | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
+        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
         if state.armed {
             base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
         }
@@ -95,11 +89,7 @@ impl<const TX: usize> Core<TX> {
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
         for (ok, bits) in [
-            (
-                h.imu,
-                MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO
-                    | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL,
-            ),
+            (h.imu, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL),
             (h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
             (h.estimator, MavSysStatusSensor::MAV_SYS_STATUS_AHRS),
             (h.battery, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY),

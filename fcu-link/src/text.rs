@@ -57,10 +57,7 @@ impl Default for Text {
 impl Text {
     /// Empty.
     pub const fn new() -> Self {
-        Self {
-            buf: [0; TEXT_LEN],
-            len: 0,
-        }
+        Self { buf: [0; TEXT_LEN], len: 0 }
     }
 
     /// Appends `s` (bytes past the limit are dropped).

@@ -18,11 +18,7 @@ impl<const N: usize> Default for TxQueue<N> {
 impl<const N: usize> TxQueue<N> {
     /// An empty queue.
     pub const fn new() -> Self {
-        Self {
-            buf: [0; N],
-            head: 0,
-            len: 0,
-        }
+        Self { buf: [0; N], head: 0, len: 0 }
     }
 
     /// Bytes waiting.
