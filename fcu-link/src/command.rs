@@ -48,6 +48,7 @@ pub const AUTOPILOT_VERSION_ID: u32 = mavlink::dialects::common::AUTOPILOT_VERSI
 /// Offset of the command number in COMMAND_LONG's and COMMAND_INT's payloads, of COMMAND_INT's
 /// frame, and of the command number in COMMAND_ACK's.
 const COMMAND_AT: usize = 28;
+const ACK_TARGET_AT: usize = 8;
 const FRAME_AT: usize = 32;
 /// A command the dialect lists and a frame it lists, written in place of the raw values for
 /// the decode (see [`frame::decode_with_raw`]).
@@ -165,16 +166,12 @@ impl<const TX: usize> Core<TX> {
     }
 
     fn ack(&mut self, command: &Command, result: MavResult) {
-        let ack = COMMAND_ACK_DATA {
-            command: MavCmd::MAV_CMD_NAV_WAYPOINT,
-            result,
-            progress: 0,
-            result_param2: 0,
-            target_system: command.system_id,
-            target_component: command.component_id,
-        };
+        let ack = COMMAND_ACK_DATA { command: MavCmd::MAV_CMD_NAV_WAYPOINT, result };
+        // The number as sent, and the extension fields target_system and target_component
+        // (the crate's struct has neither, see `reader::handled`).
         let [lo, hi] = command.id.to_le_bytes();
-        self.send_patched(&ack, &[(0, lo), (1, hi)]);
+        let patches = [(0, lo), (1, hi), (ACK_TARGET_AT, command.system_id), (ACK_TARGET_AT + 1, command.component_id)];
+        self.send_patched(&ack, &patches);
     }
 }
 

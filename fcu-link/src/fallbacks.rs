@@ -1,7 +1,7 @@
 //! Answers that tell a ground station what this board does not have, so that it stops asking:
 //! no mission (MISSION_COUNT 0) and no file transfer (an FTP NAK).
 
-use mavlink::dialects::common::{MavMissionType, FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA};
+use mavlink::dialects::common::{FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA};
 
 use crate::frame;
 use crate::link::{bump, for_us, Core};
@@ -21,9 +21,8 @@ impl<const TX: usize> Core<TX> {
     /// MISSION_COUNT 0, of the mission type asked (fence and rally too: QGroundControl asks
     /// for all three while connecting).
     pub(crate) fn mission_request_list(&mut self, frame: &Frame<'_>) {
-        let mission = MavMissionType::MAV_MISSION_TYPE_MISSION as u32;
-        let Some((m, [mission_type])) =
-            frame::decode_with_raw::<MISSION_REQUEST_LIST_DATA, 1>(frame.payload, [(REQUEST_TYPE_AT, 1, mission)])
+        // mission_type is an extension field, read raw (any value is echoed).
+        let Some((m, [mission_type])) = frame::decode_with_raw::<MISSION_REQUEST_LIST_DATA, 1>(frame.payload, [(REQUEST_TYPE_AT, 1, 0)])
         else {
             bump(&mut self.stats.bad_payload);
             return;
@@ -32,13 +31,8 @@ impl<const TX: usize> Core<TX> {
             bump(&mut self.stats.not_for_us);
             return;
         }
-        let count = MISSION_COUNT_DATA {
-            count: 0,
-            target_system: frame.system_id,
-            target_component: frame.component_id,
-            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
-            opaque_id: 0,
-        };
+        let count = MISSION_COUNT_DATA { count: 0, target_system: frame.system_id, target_component: frame.component_id };
+        // mission_type is an extension field (see `reader::handled`), written raw.
         self.send_patched(&count, &[(COUNT_TYPE_AT, mission_type as u8)]);
     }
 

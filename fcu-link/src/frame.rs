@@ -28,7 +28,8 @@ pub fn encode<D: MessageData>(sequence: u8, data: &D, out: &mut [u8; MAX_FRAME])
     encode_patched(sequence, data, &[], out)
 }
 
-/// [`encode`], with `patches` written into the payload before truncation and CRC.
+/// [`encode`], with `patches` written into the payload before truncation and CRC; a patch
+/// past the message's length writes an extension field the crate's struct does not have.
 pub fn encode_patched<D: MessageData>(sequence: u8, data: &D, patches: &[Patch], out: &mut [u8; MAX_FRAME]) -> usize {
     let mut payload = [0u8; MAX_PAYLOAD];
     // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
@@ -38,7 +39,8 @@ pub fn encode_patched<D: MessageData>(sequence: u8, data: &D, patches: &[Patch],
             *slot = byte;
         }
     }
-    let full = payload.get(..D::ENCODED_LEN).unwrap_or(&payload);
+    let patched_len = patches.iter().map(|&(at, _)| at + 1).max().unwrap_or(0);
+    let full = payload.get(..D::ENCODED_LEN.max(patched_len)).unwrap_or(&payload);
     // MAVLink 2 drops trailing zero bytes of the payload but always keeps the first.
     let len = full.iter().rposition(|&b| b != 0).map_or(1, |last| last + 1);
     let id = D::ID.to_le_bytes();

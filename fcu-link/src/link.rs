@@ -298,12 +298,8 @@ impl<const TX: usize> Core<TX> {
 
     /// Queues a STATUSTEXT.
     pub(crate) fn text(&mut self, severity: Severity, text: Text) -> bool {
-        let data = mavlink::dialects::common::STATUSTEXT_DATA {
-            severity: severity.mav(),
-            text: mavlink::types::CharArray::new(text.bytes()),
-            id: 0,
-            chunk_seq: 0,
-        };
+        let data =
+            mavlink::dialects::common::STATUSTEXT_DATA { severity: severity.mav(), text: mavlink::types::CharArray::new(text.bytes()) };
         self.send(&data)
     }
 }

@@ -8,13 +8,13 @@
 //! |---|---|---|---|
 //! | HEARTBEAT | 21 | 1 Hz | 21 |
 //! | ATTITUDE | 40 | 25 Hz | 1,000 |
-//! | SYS_STATUS | 55 | 1 Hz | 55 |
-//! | BATTERY_STATUS | 66 | 1 Hz | 66 |
+//! | SYS_STATUS | 43 | 1 Hz | 43 |
+//! | BATTERY_STATUS | 48 | 1 Hz | 48 |
 //! | RC_CHANNELS | 54 | 10 Hz | 540 |
-//! | SERVO_OUTPUT_RAW | 49 | 10 Hz | 490 |
-//! | telemetry | | | 2,172 (19 %) |
+//! | SERVO_OUTPUT_RAW | 33 | 10 Hz | 330 |
+//! | telemetry | | | 1,982 (17 %) |
 //! | PARAM_VALUE during a download | 37 | 100 Hz | 3,700 |
-//! | all | | | 5,872 (51 %) |
+//! | all | | | 5,682 (49 %) |
 //!
 //! which leaves half the line for answers, STATUSTEXTs and a ground station asking twice.
 //! `budget_bytes_per_s` computes the same from the frame lengths the crate declares, and a test

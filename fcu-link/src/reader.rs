@@ -42,22 +42,25 @@ pub struct Handled {
     pub v2_max_len: u8,
 }
 
-const fn handled<D: MessageData>(v1_len: u8) -> Handled {
-    Handled { id: D::ID, extra_crc: D::EXTRA_CRC, v1_len, v2_max_len: D::ENCODED_LEN as u8 }
+/// The crate is built without extension fields (its `mav2-message-extensions` feature pulls
+/// std into the target build), so `ENCODED_LEN` is the MAVLink 1 length and the extension
+/// bytes a MAVLink 2 frame may add are given here.
+const fn handled<D: MessageData>(extension_bytes: u8) -> Handled {
+    Handled { id: D::ID, extra_crc: D::EXTRA_CRC, v1_len: D::ENCODED_LEN as u8, v2_max_len: D::ENCODED_LEN as u8 + extension_bytes }
 }
 
 /// The messages whose frames are checked and kept. HEARTBEAT is kept (not decoded) because a
 /// ground station's heartbeats are what tells the link it is still there.
 pub const HANDLED: [Handled; 8] = [
-    handled::<HEARTBEAT_DATA>(9),
-    handled::<PARAM_REQUEST_READ_DATA>(20),
-    handled::<PARAM_REQUEST_LIST_DATA>(2),
-    handled::<PARAM_SET_DATA>(23),
-    // mission_type is an extension field: MAVLink 1 frames stop before it.
-    handled::<MISSION_REQUEST_LIST_DATA>(2),
-    handled::<COMMAND_INT_DATA>(35),
-    handled::<COMMAND_LONG_DATA>(33),
-    handled::<FILE_TRANSFER_PROTOCOL_DATA>(254),
+    handled::<HEARTBEAT_DATA>(0),
+    handled::<PARAM_REQUEST_READ_DATA>(0),
+    handled::<PARAM_REQUEST_LIST_DATA>(0),
+    handled::<PARAM_SET_DATA>(0),
+    // mission_type, one byte.
+    handled::<MISSION_REQUEST_LIST_DATA>(1),
+    handled::<COMMAND_INT_DATA>(0),
+    handled::<COMMAND_LONG_DATA>(0),
+    handled::<FILE_TRANSFER_PROTOCOL_DATA>(0),
 ];
 
 /// The handled message with this id.

@@ -1,9 +1,8 @@
 //! The periodic messages, from one [`VehicleState`] snapshot per tick.
 
 use mavlink::dialects::common::{
-    MavAutopilot, MavBatteryChargeState, MavBatteryFault, MavBatteryFunction, MavBatteryMode, MavBatteryType, MavModeFlag,
-    MavProtocolCapability, MavState, MavSysStatusSensor, MavSysStatusSensorExtended, MavType, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
-    BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    MavAutopilot, MavBatteryFunction, MavBatteryType, MavModeFlag, MavProtocolCapability, MavState, MavSysStatusSensor, MavType,
+    ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 
 use crate::link::Core;
@@ -114,9 +113,6 @@ impl<const TX: usize> Core<TX> {
             errors_count3: 0,
             errors_count4: 0,
             battery_remaining: state.battery.remaining_pct,
-            onboard_control_sensors_present_extended: MavSysStatusSensorExtended::empty(),
-            onboard_control_sensors_enabled_extended: MavSysStatusSensorExtended::empty(),
-            onboard_control_sensors_health_extended: MavSysStatusSensorExtended::empty(),
         });
     }
 
@@ -135,11 +131,6 @@ impl<const TX: usize> Core<TX> {
             battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
             mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
             battery_remaining: state.battery.remaining_pct,
-            time_remaining: 0,
-            charge_state: MavBatteryChargeState::MAV_BATTERY_CHARGE_STATE_UNDEFINED,
-            voltages_ext: [0; 4],
-            mode: MavBatteryMode::MAV_BATTERY_MODE_UNKNOWN,
-            fault_bitmask: MavBatteryFault::empty(),
         });
     }
 
@@ -189,14 +180,6 @@ impl<const TX: usize> Core<TX> {
             servo7_raw: 0,
             servo8_raw: 0,
             port: 0,
-            servo9_raw: 0,
-            servo10_raw: 0,
-            servo11_raw: 0,
-            servo12_raw: 0,
-            servo13_raw: 0,
-            servo14_raw: 0,
-            servo15_raw: 0,
-            servo16_raw: 0,
         });
     }
 
@@ -214,7 +197,6 @@ impl<const TX: usize> Core<TX> {
             flight_custom_version: [0; 8],
             middleware_custom_version: [0; 8],
             os_custom_version: [0; 8],
-            uid2: [0; 18],
         });
     }
 }

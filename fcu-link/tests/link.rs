@@ -120,7 +120,7 @@ fn default_rates_leave_most_of_115200_baud_free() {
     let budget = Rates::DEFAULT.budget_bytes_per_s();
     assert!(budget * 10 < fcu_link::rates::UART_BYTES_PER_S * 6, "{budget} B/s");
     // The table in the rates module's docs.
-    assert_eq!(budget, 21 + 1000 + 55 + 66 + 540 + 490 + 3700);
+    assert_eq!(budget, 21 + 1000 + 43 + 48 + 540 + 330 + 3700);
 }
 
 #[test]
@@ -350,26 +350,20 @@ fn messages_for_another_system_are_ignored_and_counted() {
 fn mission_request_list_gets_a_count_of_zero_of_the_asked_type() {
     let mut link = link();
     let mut mock = Mock::new();
-    for mission_type in [
-        common::MavMissionType::MAV_MISSION_TYPE_MISSION,
-        common::MavMissionType::MAV_MISSION_TYPE_FENCE,
-        common::MavMissionType::MAV_MISSION_TYPE_RALLY,
-    ] {
-        let request = common::MISSION_REQUEST_LIST_DATA { target_system: 1, target_component: 1, mission_type };
-        let sent = exchange(&mut link, &mut mock, &v2(&request), 0);
+    // mission_type is an extension field: mission, fence, rally, all, and a value not listed.
+    for mission_type in [0u8, 1, 2, 255, 77] {
+        let request = v2_raw(43, common::MISSION_REQUEST_LIST_DATA::EXTRA_CRC, &[1, 1, mission_type]);
+        let sent = exchange(&mut link, &mut mock, &request, 0);
         match &sent[..] {
-            [Sent { message: MavMessage::MISSION_COUNT(c), .. }] => {
-                assert_eq!((c.count, c.mission_type, c.target_system, c.target_component), (0, mission_type, GCS_SYSTEM, GCS_COMPONENT));
+            [Sent { message: MavMessage::MISSION_COUNT(c), payload, .. }] => {
+                assert_eq!((c.count, c.target_system, c.target_component), (0, GCS_SYSTEM, GCS_COMPONENT));
+                assert_eq!(payload.get(4).copied().unwrap_or(0), mission_type);
             }
             other => panic!("{:?}", messages(other)),
         }
     }
     // MAVLink 1 carries no mission_type.
-    let request = common::MISSION_REQUEST_LIST_DATA {
-        target_system: 1,
-        target_component: 1,
-        mission_type: common::MavMissionType::MAV_MISSION_TYPE_MISSION,
-    };
+    let request = common::MISSION_REQUEST_LIST_DATA { target_system: 1, target_component: 1 };
     let sent = exchange(&mut link, &mut mock, &v1(&request), 0);
     assert!(matches!(&sent[..], [Sent { message: MavMessage::MISSION_COUNT(c), .. }] if c.count == 0));
 }
@@ -401,8 +395,9 @@ fn every_command_gets_an_ack_unsupported_by_default() {
     let mut mock = Mock::new();
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7]);
     assert_eq!(ack_of(&sent), (MavCmd::MAV_CMD_NAV_TAKEOFF as u16, MavResult::MAV_RESULT_UNSUPPORTED));
+    // target_system and target_component, extension fields at 8 and 9.
     let ack_target = sent.iter().find_map(|s| match &s.message {
-        MavMessage::COMMAND_ACK(a) => Some((a.target_system, a.target_component)),
+        MavMessage::COMMAND_ACK(_) => Some((s.payload[8], s.payload[9])),
         _ => None,
     });
     assert_eq!(ack_target, Some((GCS_SYSTEM, GCS_COMPONENT)));
