@@ -3,11 +3,12 @@
 //!
 //! Going per message keeps the dialect's `MavMessage` enum (and with it every message of the
 //! common dialect) out of the image. Two things the crate does not do for us:
-//! - its decoder refuses an enum field whose value the dialect does not list, and a command
-//!   number the dialect does not know must still be answered (UNSUPPORTED), so such fields are
-//!   read raw and swapped for a listed value before decoding ([`decode_with_raw`]);
-//! - its encoder cannot write such a raw value back (the COMMAND_ACK's command), so a payload
-//!   can be patched before the CRC is taken ([`encode_patched`]).
+//! - its decoder refuses an enum field whose value the dialect does not list, where the link
+//!   must still answer (a PARAM_SET of another type gets its echo), so such fields are read raw
+//!   and swapped for a listed value before decoding ([`decode_with_raw`]);
+//! - its structs carry no extension fields (see [`crate::reader::HANDLED`]) and cannot hold a
+//!   command number the dialect does not list, so a payload can be patched before the CRC is
+//!   taken ([`encode_patched`]).
 
 use mavlink::{MavlinkVersion, MessageData};
 

@@ -183,3 +183,54 @@ fn frames_split_anywhere_across_receive_calls() {
         assert_eq!(param_values(&drain(&mut link)).len(), 1, "split at {split}");
     }
 }
+
+#[test]
+fn commands_decode_as_the_crate_decodes_them() {
+    let long = common::COMMAND_LONG_DATA {
+        param1: 1.5,
+        param2: -2.0,
+        param3: 3.25,
+        param4: 4.0,
+        param5: 5.0,
+        param6: -6.5,
+        param7: 7.0,
+        command: common::MavCmd::MAV_CMD_DO_MOTOR_TEST,
+        target_system: 1,
+        target_component: 0,
+        confirmation: 3,
+    };
+    let int = common::COMMAND_INT_DATA {
+        param1: 1.5,
+        param2: 0.0,
+        param3: 0.0,
+        param4: 4.0,
+        x: -123_456,
+        y: 42,
+        z: 9.5,
+        command: common::MavCmd::MAV_CMD_PREFLIGHT_STORAGE,
+        target_system: 1,
+        target_component: 1,
+        frame: common::MavFrame::MAV_FRAME_LOCAL_NED,
+        current: 0,
+        autocontinue: 0,
+    };
+    let mut reader = FrameReader::new();
+    let mut commands = Vec::new();
+    for bytes in [v2(&long), v1(&long), v2(&int)] {
+        for b in bytes {
+            if let Some(f) = reader.push(b) {
+                commands.push(fcu_link::command::Command::decode(&f).expect("decodes"));
+            }
+        }
+    }
+    assert_eq!(commands.len(), 3);
+    for c in &commands[..2] {
+        assert_eq!(c.id, 209);
+        assert_eq!(c.params, [1.5, -2.0, 3.25, 4.0, 5.0, -6.5, 7.0]);
+        assert_eq!((c.target_system, c.target_component), (1, 0));
+        assert_eq!((c.system_id, c.component_id), (GCS_SYSTEM, GCS_COMPONENT));
+    }
+    assert_eq!(commands[2].id, 245);
+    assert_eq!(commands[2].params, [1.5, 0.0, 0.0, 4.0, -123_456.0, 42.0, 9.5]);
+    assert_eq!((commands[2].target_system, commands[2].target_component), (1, 1));
+}
