@@ -13,13 +13,25 @@
 //! - Identity: system [`SYSTEM_ID`], component [`COMPONENT_ID`], `MAV_TYPE_QUADROTOR`,
 //!   `MAV_AUTOPILOT_GENERIC`.
 //! - Receives MAVLink 1 and 2 ([`FrameReader`]), sends MAVLink 2 only. pymavlink starts in
-//!   MAVLink 1 and switches to 2 when the first byte it reads is a MAVLink 2 start byte; a test
-//!   that connects mid-stream sets `MAVLINK20=1` (MAVProxy does by default).
+//!   MAVLink 1 and switches to 2 (and sends 2 from then on) when a read of its port begins with
+//!   the MAVLink 2 start byte; until a read begins with a start byte it keeps looking, so a
+//!   connection that opens mid-frame switches at a later read. `MAVLINK20=1` in its environment
+//!   starts it in MAVLink 2 outright.
 //! - Each message is serialized and parsed on its own with the `mavlink` crate's `*_DATA`
 //!   structs and their extra CRC ([`frame`]); the dialect's `MavMessage` enum, which would
 //!   link every message of the common dialect, is never built.
 //! - Sent, handled and refused: see [`Link`], the rules of the commands in [`command`].
 //! - Rates and the byte budget at 115200 baud: [`Rates`].
+//!
+//! # What it costs in flash
+//!
+//! Measured on thumbv7em-none-eabihf with the firmware's release profile (opt-level "z", LTO,
+//! one codegen unit) in a probe binary holding nothing else: the whole [`Link`] (receive, tick,
+//! poll_tx, over a stub vehicle) is 11,474 B of code and 1,333 B of read-only data (the CRC
+//! table, UTF-8 checks' table, the refusal texts); one frame in (reader and PARAM_SET decode)
+//! and one out (PARAM_VALUE encode) alone are 2,218 + 608 B. Parsing and serializing one
+//! message through the dialect's `MavMessage` enum instead costs 91,434 + 7,980 B; no
+//! `MavMessage` symbol is in the link's image.
 #![no_std]
 #![cfg_attr(
     not(test),
