@@ -1,12 +1,16 @@
 //! Any bytes into fcu-link's frame reader and handler, in chunks with telemetry ticks between:
 //! no panic, every frame sent out is well formed, and nothing changes without a frame that
 //! asks for it: each parameter set must match a PARAM_SET frame with a good CRC somewhere in
-//! the input (found by a scan independent of the reader), and the vehicle gets a request only
-//! when the input holds a COMMAND_LONG or COMMAND_INT with a good CRC.
+//! the bytes given to the link (found by a scan independent of the reader), and the vehicle
+//! gets a request only when those bytes hold a COMMAND_LONG or COMMAND_INT with a good CRC.
 //!
 //! Input: byte 0 the vehicle's state (bit 0 armed, bit 1 in the air, bit 2 throttle low), then
-//! chunks: a length byte `k` ((k & 63) + 1 bytes follow, then one tick, `k >> 6` · 500 ms + 7 ms
-//! later).
+//! chunks, each followed by one tick, and a chunk starts with a byte `k`:
+//! - `k < 0xC0`: the next `(k & 63) + 1` bytes go to the link as they are; the tick comes
+//!   `(k >> 6) · 500 + 7` ms later;
+//! - `k >= 0xC0`: a byte `m` picks one of the handled messages (`m % 8`) and the version (bit 7:
+//!   MAVLink 1), and the next `(k & 63) + 1` bytes are wrapped as its payload in a frame with a
+//!   good CRC (so that the handler, not only the reader, sees arbitrary payloads); 7 ms later.
 #![no_main]
 
 use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, Request, SystemStatus, Vehicle, VehicleState};
@@ -89,6 +93,22 @@ fn good_frames(data: &[u8], wanted: &[(u32, u8)]) -> Vec<(u32, Vec<u8>)> {
     found
 }
 
+/// `payload` in a frame with a good CRC for the handled message `m % 8`, MAVLink 1 when bit 7
+/// of `m` is set.
+fn wrap(m: u8, payload: &[u8]) -> Vec<u8> {
+    let handled = &fcu_link::reader::HANDLED[usize::from(m % 8)];
+    let mut f = if m & 0x80 != 0 {
+        vec![0xFE, payload.len() as u8, 0, 255, 190, handled.id as u8]
+    } else {
+        let id = handled.id.to_le_bytes();
+        vec![0xFD, payload.len() as u8, 0, 0, 0, 255, 190, id[0], id[1], id[2]]
+    };
+    f.extend_from_slice(payload);
+    let crc = mavlink::calculate_crc(&f[1..], handled.extra_crc);
+    f.extend_from_slice(&crc.to_le_bytes());
+    f
+}
+
 fuzz_target!(|data: &[u8]| {
     let Some((&flags, mut rest)) = data.split_first() else { return };
     let mut mock = Mock { flags, values: [1.0, 1000.0, 30.0, 0.5], sets: Vec::new(), requests: Vec::new() };
@@ -96,10 +116,24 @@ fuzz_target!(|data: &[u8]| {
     let mut now = 0u32;
     let mut out = Vec::new();
     let mut buf = [0u8; 128];
+    // The bytes the link was given, in order (the length bytes are not among them).
+    let mut fed = Vec::new();
     while let Some((&k, tail)) = rest.split_first() {
-        let n = (usize::from(k & 63) + 1).min(tail.len());
-        link.receive(&tail[..n], now, &mut mock);
-        now = now.wrapping_add(u32::from(k >> 6) * 500 + 7);
+        if k >= 0xC0 {
+            let Some((&m, tail)) = tail.split_first() else { break };
+            let n = (usize::from(k & 63) + 1).min(tail.len());
+            let frame = wrap(m, &tail[..n]);
+            link.receive(&frame, now, &mut mock);
+            fed.extend_from_slice(&frame);
+            now = now.wrapping_add(7);
+            rest = &tail[n..];
+        } else {
+            let n = (usize::from(k & 63) + 1).min(tail.len());
+            link.receive(&tail[..n], now, &mut mock);
+            fed.extend_from_slice(&tail[..n]);
+            now = now.wrapping_add(u32::from(k >> 6) * 500 + 7);
+            rest = &tail[n..];
+        }
         link.tick(now, &mut mock);
         loop {
             let got = link.poll_tx(&mut buf);
@@ -108,7 +142,6 @@ fuzz_target!(|data: &[u8]| {
             }
             out.extend_from_slice(&buf[..got]);
         }
-        rest = &tail[n..];
     }
 
     // What went out is whole MAVLink 2 frames from us, back to back.
@@ -121,7 +154,7 @@ fuzz_target!(|data: &[u8]| {
     }
     assert_eq!(at, out.len(), "a frame cut short");
 
-    let body = &data[1..];
+    let body = &fed[..];
     if !mock.sets.is_empty() {
         let sets = good_frames(body, &[(PARAM_SET_DATA::ID, PARAM_SET_DATA::EXTRA_CRC)]);
         for &(index, value) in &mock.sets {
