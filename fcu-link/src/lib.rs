@@ -33,6 +33,7 @@
 //! message through the dialect's `MavMessage` enum instead costs 91,434 + 7,980 B; no
 //! `MavMessage` symbol is in the link's image.
 #![no_std]
+#![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
     deny(
