@@ -1,0 +1,241 @@
+//! COMMAND_LONG and COMMAND_INT: every command gets a COMMAND_ACK, UNSUPPORTED unless it is
+//! one of these, with the rules real autopilots apply:
+//!
+//! | command | rule |
+//! |---|---|
+//! | COMPONENT_ARM_DISARM | arming stays the stick gesture's: arm is DENIED with a STATUSTEXT. Disarm is passed on on the ground with the throttle low, and in the air (or with the throttle up) only with param2 = [`FORCE_DISARM`], MAVLink's force value; otherwise TEMPORARILY_REJECTED |
+//! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time, disarmed only; magnetometer, baro and the rest UNSUPPORTED |
+//! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults; disarmed only |
+//! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot, disarmed only; the host reboots when [`crate::Link::reboot_ready`] |
+//! | DO_MOTOR_TEST | one motor, disarmed only, capped and stopped as [`crate::MotorTestState`] says |
+//! | REQUEST_MESSAGE | AUTOPILOT_VERSION (param1 = 148) after the ACK; any other message UNSUPPORTED |
+//! | REQUEST_AUTOPILOT_CAPABILITIES | AUTOPILOT_VERSION after the ACK |
+//!
+//! Any command other than DO_MOTOR_TEST stops a running motor test first. "Disarmed only"
+//! refusals are TEMPORARILY_REJECTED, rule refusals DENIED, both with a STATUSTEXT naming the
+//! rule; a refusal by the vehicle is DENIED with its rule.
+
+use mavlink::dialects::common::{MavCmd, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA};
+use mavlink::MessageData;
+
+use crate::link::Core;
+use crate::reader::Frame;
+use crate::text::{Severity, Text};
+use crate::vehicle::{Request, Vehicle, VehicleState};
+
+/// MAVLink's value of COMPONENT_ARM_DISARM's param2 that forces a disarm in flight.
+pub const FORCE_DISARM: f32 = 21196.0;
+
+/// Command numbers handled (`MAV_CMD`).
+pub const COMPONENT_ARM_DISARM: u16 = MavCmd::MAV_CMD_COMPONENT_ARM_DISARM as u16;
+/// `MAV_CMD_PREFLIGHT_CALIBRATION`.
+pub const PREFLIGHT_CALIBRATION: u16 = MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION as u16;
+/// `MAV_CMD_PREFLIGHT_STORAGE`.
+pub const PREFLIGHT_STORAGE: u16 = MavCmd::MAV_CMD_PREFLIGHT_STORAGE as u16;
+/// `MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN`.
+pub const PREFLIGHT_REBOOT_SHUTDOWN: u16 = MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN as u16;
+/// `MAV_CMD_DO_MOTOR_TEST`.
+pub const DO_MOTOR_TEST: u16 = MavCmd::MAV_CMD_DO_MOTOR_TEST as u16;
+/// `MAV_CMD_REQUEST_MESSAGE`.
+pub const REQUEST_MESSAGE: u16 = MavCmd::MAV_CMD_REQUEST_MESSAGE as u16;
+/// `MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES`.
+#[allow(deprecated)]
+pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 = MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES as u16;
+/// AUTOPILOT_VERSION's message id.
+pub const AUTOPILOT_VERSION_ID: u32 = mavlink::dialects::common::AUTOPILOT_VERSION_DATA::ID;
+
+/// Offset of the command number in COMMAND_LONG's and COMMAND_INT's payloads (the targets
+/// follow it), and of the targets in COMMAND_ACK's.
+const COMMAND_AT: usize = 28;
+const ACK_TARGET_AT: usize = 8;
+
+/// A command from either message, with its number as sent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Command {
+    /// `MAV_CMD` number (any, listed by the dialect or not).
+    pub id: u16,
+    /// param1..param7 (COMMAND_INT's x and y converted from their integers).
+    pub params: [f32; 7],
+    /// Sender.
+    pub system_id: u8,
+    /// Sender's component.
+    pub component_id: u8,
+    /// Addressee.
+    pub target_system: u8,
+    /// Addressee's component.
+    pub target_component: u8,
+}
+
+impl Command {
+    /// The command in a COMMAND_LONG or COMMAND_INT frame.
+    ///
+    /// Read field by field rather than with the crate's `deser`: that validates the command
+    /// number against the dialect's `MavCmd` list, a 1.7 KB match on the Cortex-M4, only for
+    /// the link to set the number aside (an unlisted one must be answered UNSUPPORTED). The two
+    /// messages share the layout: param1..4 (f32), then param5..7 (f32) or x, y (i32) and z
+    /// (f32), the command (u16), target system and component.
+    pub fn decode(frame: &Frame<'_>) -> Option<Self> {
+        // Zero-padded: MAVLink 2 drops trailing zero bytes.
+        let mut p = [0u8; COMMAND_INT_DATA::ENCODED_LEN];
+        for (dst, &src) in p.iter_mut().zip(frame.payload) {
+            *dst = src;
+        }
+        let word = |i: usize| -> [u8; 4] {
+            let mut w = [0u8; 4];
+            if let Some(bytes) = p.get(4 * i..4 * i + 4) {
+                w.copy_from_slice(bytes);
+            }
+            w
+        };
+        let real = |i: usize| f32::from_le_bytes(word(i));
+        let int = |i: usize| i32::from_le_bytes(word(i)) as f32;
+        let (p5, p6) = if frame.message_id == COMMAND_INT_DATA::ID {
+            (int(4), int(5))
+        } else if frame.message_id == COMMAND_LONG_DATA::ID {
+            (real(4), real(5))
+        } else {
+            return None;
+        };
+        Some(Self {
+            id: u16::from_le_bytes([p[COMMAND_AT], p[COMMAND_AT + 1]]),
+            params: [real(0), real(1), real(2), real(3), p5, p6, real(6)],
+            system_id: frame.system_id,
+            component_id: frame.component_id,
+            target_system: p[COMMAND_AT + 2],
+            target_component: p[COMMAND_AT + 3],
+        })
+    }
+}
+
+/// What follows an accepted command's ACK.
+pub(crate) enum Then {
+    Nothing,
+    SendVersion,
+}
+
+/// A refusal: the ACK's result and the STATUSTEXT naming the rule (none when empty).
+pub(crate) struct Refusal(pub(crate) MavResult, pub(crate) Text);
+
+fn unsupported() -> Refusal {
+    Refusal(MavResult::MAV_RESULT_UNSUPPORTED, Text::new())
+}
+
+pub(crate) fn while_armed(what: &str) -> Refusal {
+    Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push(what).push(" refused: armed"))
+}
+
+pub(crate) fn denied(what: &str, rule: &str) -> Refusal {
+    Refusal(MavResult::MAV_RESULT_DENIED, Text::new().push(what).push(": ").push(rule))
+}
+
+/// Passes a request on to the vehicle, a refusal coming back DENIED with its rule.
+fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &str) -> Result<Then, Refusal> {
+    vehicle.request(request).map(|()| Then::Nothing).map_err(|rule| denied(what, rule))
+}
+
+impl<const TX: usize> Core<TX> {
+    pub(crate) fn command<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) {
+        if command.id != DO_MOTOR_TEST {
+            self.stop_motor_test(vehicle, "another command");
+        }
+        let state = vehicle.state();
+        let outcome = match command.id {
+            COMPONENT_ARM_DISARM => arm_disarm(command, &state, vehicle),
+            PREFLIGHT_CALIBRATION => calibration(command, &state, vehicle),
+            PREFLIGHT_STORAGE => storage(command, &state, vehicle),
+            PREFLIGHT_REBOOT_SHUTDOWN => {
+                let outcome = reboot(command, &state, vehicle);
+                if outcome.is_ok() {
+                    self.reboot_pending = true;
+                }
+                outcome
+            }
+            DO_MOTOR_TEST => self.start_motor_test(command, &state, vehicle),
+            REQUEST_MESSAGE if command.params[0] == AUTOPILOT_VERSION_ID as f32 => Ok(Then::SendVersion),
+            REQUEST_AUTOPILOT_CAPABILITIES if command.params[0] == 1.0 => Ok(Then::SendVersion),
+            _ => Err(unsupported()),
+        };
+        match outcome {
+            Ok(then) => {
+                self.ack(command, MavResult::MAV_RESULT_ACCEPTED);
+                if let Then::SendVersion = then {
+                    self.autopilot_version();
+                }
+            }
+            Err(Refusal(result, text)) => {
+                self.ack(command, result);
+                if !text.as_bytes().is_empty() {
+                    self.text(Severity::Warning, text);
+                }
+            }
+        }
+    }
+
+    fn ack(&mut self, command: &Command, result: MavResult) {
+        let ack = COMMAND_ACK_DATA { command: MavCmd::MAV_CMD_NAV_WAYPOINT, result };
+        // The number as sent, and the extension fields target_system and target_component
+        // (the crate's struct has neither, see `reader::handled`).
+        let [lo, hi] = command.id.to_le_bytes();
+        let patches = [(0, lo), (1, hi), (ACK_TARGET_AT, command.system_id), (ACK_TARGET_AT + 1, command.component_id)];
+        self.send_patched(&ack, &patches);
+    }
+}
+
+fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+    let [action, force, ..] = command.params;
+    if action == 1.0 {
+        return Err(denied("Arm refused", "arm with the stick gesture"));
+    }
+    if action != 0.0 {
+        return Err(denied("Arm/disarm", "param1 must be 0 or 1"));
+    }
+    if !state.armed {
+        return Ok(Then::Nothing);
+    }
+    let forced = force == FORCE_DISARM;
+    if !forced && state.in_air {
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: in the air (force 21196)")));
+    }
+    if !forced && !state.throttle_low {
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: throttle not low")));
+    }
+    ask(vehicle, Request::Disarm { forced }, "Disarm refused")
+}
+
+fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+    let [gyro, mag, baro, radio, accel, p6, p7] = command.params;
+    let imu = gyro == 1.0 || accel != 0.0;
+    let radio = radio == 1.0;
+    if mag != 0.0 || baro != 0.0 || p6 != 0.0 || p7 != 0.0 || imu == radio {
+        return Err(unsupported());
+    }
+    if state.armed {
+        return Err(while_armed("Calibration"));
+    }
+    let request = if imu { Request::CalibrateImu } else { Request::CalibrateRadio };
+    ask(vehicle, request, "Calibration refused")
+}
+
+fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+    let request = if command.params[0] == 1.0 {
+        Request::SaveParams
+    } else if command.params[0] == 2.0 {
+        Request::ResetParams
+    } else {
+        return Err(unsupported());
+    };
+    if state.armed {
+        return Err(while_armed("Storage"));
+    }
+    ask(vehicle, request, "Storage refused")
+}
+
+fn reboot<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+    if command.params[0] != 1.0 {
+        return Err(unsupported());
+    }
+    if state.armed {
+        return Err(while_armed("Reboot"));
+    }
+    ask(vehicle, Request::Reboot, "Reboot refused")
+}

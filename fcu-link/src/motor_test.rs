@@ -1,0 +1,133 @@
+//! DO_MOTOR_TEST: one motor at a time, to check order and direction with the propellers off.
+//!
+//! - disarmed only (TEMPORARILY_REJECTED armed);
+//! - param1 the motor, 1 to 4; param2 the throttle type, percent (0) only; param3 the
+//!   throttle, capped to [`MOTOR_TEST_THROTTLE_CAP_PCT`] %; param4 the time in s, capped to
+//!   [`MOTOR_TEST_MAX_MS`]; param5 the motor count, 0 or 1 (one motor at a time);
+//! - stopped ([`Request::StopMotorTest`]) when its time is up, by any other command, when no
+//!   frame came for [`MOTOR_TEST_SILENCE_MS`] (a ground station sends a HEARTBEAT every
+//!   second) and when a radio channel moves more than [`MOTOR_TEST_STICK_MOVE_US`] from where it
+//!   was at the start;
+//! - a new DO_MOTOR_TEST replaces the running one.
+//!
+//! The link only reports that a test runs ([`crate::Link::motor_test`]); refusing to arm while
+//! it does is the flight controller's rule.
+
+use crate::command::{denied, while_armed, Command, Refusal, Then};
+use crate::link::Core;
+use crate::text::{Severity, Text};
+use crate::vehicle::{Request, Vehicle, VehicleState};
+
+/// The motor test's throttle cap, percent of full output: enough to see a brushed motor turn
+/// and which way, little enough that a forgotten propeller does not lift the board.
+pub const MOTOR_TEST_THROTTLE_CAP_PCT: f32 = 15.0;
+/// The longest motor test, ms.
+pub const MOTOR_TEST_MAX_MS: u16 = 3000;
+/// A test stops when no frame came for this long, ms.
+pub const MOTOR_TEST_SILENCE_MS: u32 = 1500;
+/// A test stops when a radio channel moves more than this from its width at the start, µs.
+pub const MOTOR_TEST_STICK_MOVE_US: u16 = 50;
+/// Motors on the board.
+pub const MOTOR_COUNT: u8 = 4;
+
+/// A motor test the link has started.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct MotorTest {
+    motor: u8,
+    throttle_pct: f32,
+    end_ms: u32,
+    start_widths_us: [u16; 8],
+}
+
+/// A running motor test as the host sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotorTestState {
+    /// Motor index, 0-based.
+    pub motor: u8,
+    /// Throttle, percent (capped).
+    pub throttle_pct: f32,
+    /// Time left, ms.
+    pub remaining_ms: u32,
+}
+
+impl MotorTest {
+    pub(crate) fn state(&self, now_ms: u32) -> MotorTestState {
+        let left = self.end_ms.wrapping_sub(now_ms);
+        MotorTestState { motor: self.motor, throttle_pct: self.throttle_pct, remaining_ms: if (left as i32) < 0 { 0 } else { left } }
+    }
+}
+
+const WHAT: &str = "Motor test";
+
+impl<const TX: usize> Core<TX> {
+    pub(crate) fn start_motor_test<V: Vehicle>(
+        &mut self,
+        command: &Command,
+        state: &VehicleState,
+        vehicle: &mut V,
+    ) -> Result<Then, Refusal> {
+        let [motor, throttle_type, throttle, timeout_s, count, ..] = command.params;
+        if state.armed {
+            return Err(while_armed(WHAT));
+        }
+        if !(1.0..=f32::from(MOTOR_COUNT)).contains(&motor) || motor != (motor as u8) as f32 {
+            return Err(denied(WHAT, "motor must be 1 to 4"));
+        }
+        if throttle_type != 0.0 {
+            return Err(denied(WHAT, "throttle type must be percent"));
+        }
+        if !(throttle >= 0.0 && throttle.is_finite()) {
+            return Err(denied(WHAT, "bad throttle"));
+        }
+        if !(timeout_s > 0.0 && timeout_s.is_finite()) {
+            return Err(denied(WHAT, "bad timeout"));
+        }
+        if count != 0.0 && count != 1.0 {
+            return Err(denied(WHAT, "one motor at a time"));
+        }
+        let motor = motor as u8 - 1;
+        let throttle_pct = throttle.min(MOTOR_TEST_THROTTLE_CAP_PCT);
+        let duration_ms = (timeout_s * 1000.0).min(f32::from(MOTOR_TEST_MAX_MS)) as u16;
+        vehicle.request(Request::MotorTest { motor, throttle_pct, duration_ms }).map_err(|rule| denied(WHAT, rule))?;
+        self.motor_test = Some(MotorTest {
+            motor,
+            throttle_pct,
+            end_ms: self.now_ms.wrapping_add(u32::from(duration_ms)),
+            start_widths_us: state.rc_widths_us,
+        });
+        Ok(Then::Nothing)
+    }
+
+    /// Ends a running test for `reason` (nothing when none runs).
+    pub(crate) fn stop_motor_test<V: Vehicle>(&mut self, vehicle: &mut V, reason: &str) {
+        if self.motor_test.take().is_none() {
+            return;
+        }
+        // The vehicle stops the motor whatever it answers: a refusal here has no rule to keep.
+        let _ = vehicle.request(Request::StopMotorTest);
+        let text = Text::new().push("Motor test stopped: ").push(reason);
+        self.text(Severity::Info, text);
+    }
+
+    /// The limits of a running test, once per tick.
+    pub(crate) fn check_motor_test<V: Vehicle>(&mut self, state: &VehicleState, vehicle: &mut V) {
+        let Some(test) = self.motor_test else {
+            return;
+        };
+        let now = self.now_ms;
+        let reason = if (now.wrapping_sub(test.end_ms) as i32) >= 0 {
+            Some("time up")
+        } else if self.last_rx_ms.is_none_or(|last| now.wrapping_sub(last) > MOTOR_TEST_SILENCE_MS) {
+            Some("link silent")
+        } else if test.start_widths_us.iter().zip(state.rc_widths_us.iter()).any(|(&a, &b)| a.abs_diff(b) > MOTOR_TEST_STICK_MOVE_US) {
+            Some("stick moved")
+        } else if state.armed {
+            Some("armed")
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            self.stop_motor_test(vehicle, reason);
+        }
+    }
+}

@@ -1,0 +1,202 @@
+//! The periodic messages, from one [`VehicleState`] snapshot per tick.
+
+use mavlink::dialects::common::{
+    MavAutopilot, MavBatteryFunction, MavBatteryType, MavModeFlag, MavProtocolCapability, MavState, MavSysStatusSensor, MavType,
+    ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+};
+
+use crate::link::Core;
+use crate::vehicle::{SystemStatus, VehicleState};
+
+/// RC_CHANNELS' value for a channel that is not there.
+const NO_CHANNEL: u16 = u16::MAX;
+
+fn sensors_present() -> MavSysStatusSensor {
+    MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+        | MavSysStatusSensor::MAV_SYS_STATUS_AHRS
+        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY
+}
+
+impl<const TX: usize> Core<TX> {
+    /// Every stream that is due.
+    pub(crate) fn telemetry(&mut self, state: &VehicleState) {
+        let now = self.now_ms;
+        let rates = self.config.rates;
+        let heartbeat_ms = if rates.heartbeat_ms == 0 { crate::Rates::DEFAULT.heartbeat_ms } else { rates.heartbeat_ms };
+        if self.schedule.heartbeat.due(now, heartbeat_ms) {
+            self.heartbeat(state);
+        }
+        if self.schedule.attitude.due(now, rates.attitude_ms) {
+            self.attitude(state);
+        }
+        if self.schedule.sys_status.due(now, rates.sys_status_ms) {
+            self.sys_status(state);
+        }
+        if self.schedule.battery.due(now, rates.battery_ms) {
+            self.battery_status(state);
+        }
+        if self.schedule.rc_channels.due(now, rates.rc_channels_ms) {
+            self.rc_channels(state);
+        }
+        if self.schedule.servo_output.due(now, rates.servo_output_ms) {
+            self.servo_output(state);
+        }
+    }
+
+    fn heartbeat(&mut self, state: &VehicleState) {
+        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
+        if state.armed {
+            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        let system_status = match state.status {
+            SystemStatus::Boot => MavState::MAV_STATE_BOOT,
+            SystemStatus::Standby => MavState::MAV_STATE_STANDBY,
+            SystemStatus::Active => MavState::MAV_STATE_ACTIVE,
+            SystemStatus::Critical => MavState::MAV_STATE_CRITICAL,
+        };
+        self.send(&HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            base_mode,
+            system_status,
+            mavlink_version: 3,
+        });
+    }
+
+    fn attitude(&mut self, state: &VehicleState) {
+        let a = state.attitude;
+        self.send(&ATTITUDE_DATA {
+            time_boot_ms: self.now_ms,
+            roll: a.roll_rad,
+            pitch: a.pitch_rad,
+            yaw: a.yaw_rad,
+            rollspeed: a.roll_rate_rad_s,
+            pitchspeed: a.pitch_rate_rad_s,
+            yawspeed: a.yaw_rate_rad_s,
+        });
+    }
+
+    fn sys_status(&mut self, state: &VehicleState) {
+        let h = state.health;
+        let mut health = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+            | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+            | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+        for (ok, bits) in [
+            (h.imu, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL),
+            (h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
+            (h.estimator, MavSysStatusSensor::MAV_SYS_STATUS_AHRS),
+            (h.battery, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY),
+        ] {
+            if ok {
+                health |= bits;
+            }
+        }
+        let reader = self.stats.reader;
+        let errors = reader.bad_crc.saturating_add(reader.bad_length);
+        self.send(&SYS_STATUS_DATA {
+            onboard_control_sensors_present: sensors_present(),
+            onboard_control_sensors_enabled: sensors_present(),
+            onboard_control_sensors_health: health,
+            load: state.load_permille,
+            voltage_battery: state.battery.voltage_mv,
+            current_battery: state.battery.current_ca,
+            drop_rate_comm: 0,
+            errors_comm: u16::try_from(errors).unwrap_or(u16::MAX),
+            errors_count1: 0,
+            errors_count2: 0,
+            errors_count3: 0,
+            errors_count4: 0,
+            battery_remaining: state.battery.remaining_pct,
+        });
+    }
+
+    fn battery_status(&mut self, state: &VehicleState) {
+        // Without cell voltages, the first cell carries the whole battery's and the others are
+        // "not there".
+        let mut voltages = [u16::MAX; 10];
+        voltages[0] = state.battery.voltage_mv;
+        self.send(&BATTERY_STATUS_DATA {
+            current_consumed: -1,
+            energy_consumed: -1,
+            temperature: i16::MAX,
+            voltages,
+            current_battery: state.battery.current_ca,
+            id: 0,
+            battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
+            mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
+            battery_remaining: state.battery.remaining_pct,
+        });
+    }
+
+    fn rc_channels(&mut self, state: &VehicleState) {
+        let count = usize::from(state.rc_channel_count);
+        let mut ch = [NO_CHANNEL; 8];
+        for (i, (slot, &width)) in ch.iter_mut().zip(state.rc_widths_us.iter()).enumerate() {
+            if i < count && width != 0 {
+                *slot = width;
+            }
+        }
+        self.send(&RC_CHANNELS_DATA {
+            time_boot_ms: self.now_ms,
+            chan1_raw: ch[0],
+            chan2_raw: ch[1],
+            chan3_raw: ch[2],
+            chan4_raw: ch[3],
+            chan5_raw: ch[4],
+            chan6_raw: ch[5],
+            chan7_raw: ch[6],
+            chan8_raw: ch[7],
+            chan9_raw: NO_CHANNEL,
+            chan10_raw: NO_CHANNEL,
+            chan11_raw: NO_CHANNEL,
+            chan12_raw: NO_CHANNEL,
+            chan13_raw: NO_CHANNEL,
+            chan14_raw: NO_CHANNEL,
+            chan15_raw: NO_CHANNEL,
+            chan16_raw: NO_CHANNEL,
+            chan17_raw: NO_CHANNEL,
+            chan18_raw: NO_CHANNEL,
+            chancount: state.rc_channel_count.min(8),
+            rssi: u8::MAX,
+        });
+    }
+
+    fn servo_output(&mut self, state: &VehicleState) {
+        let [m1, m2, m3, m4] = state.motor_outputs_us;
+        self.send(&SERVO_OUTPUT_RAW_DATA {
+            time_usec: self.now_ms.wrapping_mul(1000),
+            servo1_raw: m1,
+            servo2_raw: m2,
+            servo3_raw: m3,
+            servo4_raw: m4,
+            servo5_raw: 0,
+            servo6_raw: 0,
+            servo7_raw: 0,
+            servo8_raw: 0,
+            port: 0,
+        });
+    }
+
+    pub(crate) fn autopilot_version(&mut self) {
+        self.send(&AUTOPILOT_VERSION_DATA {
+            capabilities: MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+                | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
+            uid: self.config.uid,
+            flight_sw_version: self.config.flight_sw_version,
+            middleware_sw_version: 0,
+            os_sw_version: 0,
+            board_version: 0,
+            vendor_id: 0,
+            product_id: 0,
+            flight_custom_version: [0; 8],
+            middleware_custom_version: [0; 8],
+            os_custom_version: [0; 8],
+        });
+    }
+}

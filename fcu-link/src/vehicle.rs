@@ -1,0 +1,161 @@
+//! The seam between the link and the flight controller: what the link may see and ask.
+//!
+//! The link owns no configuration and decides nothing about flight. The host application (the
+//! firmware, fcu-pil's board, a test's mock) implements [`Vehicle`]: a snapshot of the state
+//! for telemetry and for the command rules, the parameter table, and the requests the link
+//! passes on. Whatever the link already refused never reaches the vehicle; whatever reaches it
+//! the vehicle may still refuse, naming the rule (`Err("...")`), and the link reports that
+//! rule to the ground station in a STATUSTEXT.
+
+/// MAVLink's `MAV_STATE` as the link reports it in HEARTBEAT.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SystemStatus {
+    /// Booting or calibrating: not ready to arm (`MAV_STATE_BOOT`).
+    Boot,
+    /// On the ground, disarmed, ready (`MAV_STATE_STANDBY`).
+    Standby,
+    /// Armed (`MAV_STATE_ACTIVE`).
+    Active,
+    /// A failsafe stage or a latched fault (`MAV_STATE_CRITICAL`).
+    Critical,
+}
+
+/// Attitude in MAVLink's convention (ATTITUDE): roll right side down positive, pitch nose up
+/// positive, yaw clockwise seen from above positive; rates about the same axes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Attitude {
+    /// Roll, rad.
+    pub roll_rad: f32,
+    /// Pitch, rad.
+    pub pitch_rad: f32,
+    /// Yaw, rad.
+    pub yaw_rad: f32,
+    /// Roll rate, rad/s.
+    pub roll_rate_rad_s: f32,
+    /// Pitch rate, rad/s.
+    pub pitch_rate_rad_s: f32,
+    /// Yaw rate, rad/s.
+    pub yaw_rate_rad_s: f32,
+}
+
+/// The battery as far as it is measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Battery {
+    /// Voltage, mV.
+    pub voltage_mv: u16,
+    /// Current, cA (10 mA); -1 when not measured.
+    pub current_ca: i16,
+    /// Charge left, percent; -1 when not estimated.
+    pub remaining_pct: i8,
+}
+
+/// Health of what SYS_STATUS reports (all present and enabled on this board).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Health {
+    /// Gyro and accelerometer (the LSM6DSL) answering and not faulted.
+    pub imu: bool,
+    /// Radio receiver: a valid link.
+    pub radio: bool,
+    /// The attitude estimate is usable (boot calibration done).
+    pub estimator: bool,
+    /// Battery above its low threshold.
+    pub battery: bool,
+}
+
+/// A snapshot of the vehicle for one telemetry tick or one command decision.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VehicleState {
+    /// Motors armed.
+    pub armed: bool,
+    /// Flying (armed and past take-off); a disarm then needs MAVLink's force value.
+    pub in_air: bool,
+    /// Throttle stick at its low end.
+    pub throttle_low: bool,
+    /// What HEARTBEAT reports.
+    pub status: SystemStatus,
+    /// For ATTITUDE.
+    pub attitude: Attitude,
+    /// Radio pulse widths, µs, in receiver channel order; 0 for a channel without pulses.
+    pub rc_widths_us: [u16; 8],
+    /// Channels the receiver delivers (RC_CHANNELS' `chancount`).
+    pub rc_channel_count: u8,
+    /// Motor outputs on the 1000–2000 scale of SERVO_OUTPUT_RAW (µs for an ESC, the
+    /// equivalent of the duty cycle for the brushed motors).
+    pub motor_outputs_us: [u16; 4],
+    /// For SYS_STATUS and BATTERY_STATUS.
+    pub battery: Battery,
+    /// For SYS_STATUS.
+    pub health: Health,
+    /// Main loop load, per mille (SYS_STATUS' `load`).
+    pub load_permille: u16,
+}
+
+/// One parameter: name (at most 16 characters, upper case) and value in force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Param {
+    /// Name as the ground station shows it.
+    pub name: &'static str,
+    /// Value in force (every parameter is a `MAV_PARAM_TYPE_REAL32`).
+    pub value: f32,
+}
+
+/// What the link asks the vehicle to do, once its own rules let the command through.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Request {
+    /// Disarm now. `forced` when the ground station sent MAVLink's force value (the link has
+    /// checked: on the ground with the throttle low, or forced).
+    Disarm {
+        /// Sent with the force value 21196.
+        forced: bool,
+    },
+    /// Gyro/accelerometer calibration (the boot calibration). Disarmed (checked).
+    CalibrateImu,
+    /// Radio calibration: endpoints and trims from the sticks. Disarmed (checked).
+    CalibrateRadio,
+    /// Save the parameters to flash. Disarmed (checked).
+    SaveParams,
+    /// Reset the parameters to the defaults. Disarmed (checked).
+    ResetParams,
+    /// Reboot once [`crate::Link::reboot_ready`] says the acknowledgement is out and any
+    /// pending save is done. Disarmed (checked).
+    Reboot,
+    /// Spin one motor for a motor test. Disarmed (checked); the throttle is already capped to
+    /// [`crate::MOTOR_TEST_THROTTLE_CAP_PCT`] and the duration to [`crate::MOTOR_TEST_MAX_MS`].
+    /// The link sends [`Request::StopMotorTest`] when the test ends; the vehicle refuses to arm
+    /// while a test runs and should stop the motor itself after `duration_ms` as well.
+    MotorTest {
+        /// Motor index, 0-based.
+        motor: u8,
+        /// Throttle, percent of full output.
+        throttle_pct: f32,
+        /// How long, ms.
+        duration_ms: u16,
+    },
+    /// Stop the motor test now (its time is up, another command came, the link fell silent or
+    /// a stick moved).
+    StopMotorTest,
+}
+
+/// The host application's side of the link (see the module docs).
+pub trait Vehicle {
+    /// The state now.
+    fn state(&self) -> VehicleState;
+
+    /// Number of parameters; indices run from 0 to `param_count() - 1`.
+    fn param_count(&self) -> u16;
+
+    /// Parameter `index`, or `None` past the end.
+    fn param(&self, index: u16) -> Option<Param>;
+
+    /// Index of the parameter called `name` (exact, upper case), if any.
+    fn param_index(&self, name: &str) -> Option<u16>;
+
+    /// Sets parameter `index` to `value` (finite: the link refuses NaN and infinities before
+    /// asking). `Ok` carries the value now in force, `Err` the rule that refused it (short,
+    /// it goes into a 50-character STATUSTEXT after the parameter's name); on a refusal nothing
+    /// may change.
+    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str>;
+
+    /// Carries out a request, or refuses it naming the rule.
+    fn request(&mut self, request: Request) -> Result<(), &'static str>;
+}

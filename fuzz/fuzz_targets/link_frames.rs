@@ -1,0 +1,193 @@
+//! Any bytes into fcu-link's frame reader and handler, in chunks with telemetry ticks between:
+//! no panic, every frame sent out is well formed, and nothing changes without a frame that
+//! asks for it: each parameter set must match a PARAM_SET frame with a good CRC somewhere in
+//! the bytes given to the link (found by a scan independent of the reader), and the vehicle
+//! gets a request only when those bytes hold a COMMAND_LONG or COMMAND_INT with a good CRC.
+//!
+//! Input: byte 0 the vehicle's state (bit 0 armed, bit 1 in the air, bit 2 throttle low), then
+//! chunks, each followed by one tick, and a chunk starts with a byte `k`:
+//! - `k < 0xC0`: the next `(k & 63) + 1` bytes go to the link as they are; the tick comes
+//!   `(k >> 6) · 500 + 7` ms later;
+//! - `k >= 0xC0`: a byte `m` picks one of the handled messages (`m % 8`) and the version (bit 7:
+//!   MAVLink 1), and the next `(k & 63) + 1` bytes are wrapped as its payload in a frame with a
+//!   good CRC (so that the handler, not only the reader, sees arbitrary payloads); 7 ms later.
+#![no_main]
+
+use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, Request, SystemStatus, Vehicle, VehicleState};
+use libfuzzer_sys::fuzz_target;
+use mavlink::dialects::common::{COMMAND_INT_DATA, COMMAND_LONG_DATA, PARAM_SET_DATA};
+use mavlink::MessageData;
+
+const NAMES: [&str; 4] = ["RCMAP_ROLL", "RC1_MIN", "ANGLE_MAX_DEG", "RATE_ROLL_P_GAIN"];
+
+struct Mock {
+    flags: u8,
+    values: [f32; 4],
+    sets: Vec<(u16, f32)>,
+    requests: Vec<Request>,
+}
+
+impl Vehicle for Mock {
+    fn state(&self) -> VehicleState {
+        VehicleState {
+            armed: self.flags & 1 != 0,
+            in_air: self.flags & 2 != 0,
+            throttle_low: self.flags & 4 != 0,
+            status: SystemStatus::Standby,
+            attitude: Attitude::default(),
+            rc_widths_us: [1500; 8],
+            rc_channel_count: 8,
+            motor_outputs_us: [1000; 4],
+            battery: Battery { voltage_mv: 3900, current_ca: -1, remaining_pct: -1 },
+            health: Health { imu: true, radio: true, estimator: true, battery: true },
+            load_permille: 0,
+        }
+    }
+    fn param_count(&self) -> u16 {
+        NAMES.len() as u16
+    }
+    fn param(&self, index: u16) -> Option<Param> {
+        let i = usize::from(index);
+        Some(Param { name: NAMES.get(i)?, value: *self.values.get(i)? })
+    }
+    fn param_index(&self, name: &str) -> Option<u16> {
+        NAMES.iter().position(|n| *n == name).map(|i| i as u16)
+    }
+    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
+        assert!(value.is_finite(), "non-finite value passed on");
+        if !(-1000.0..=1000.0).contains(&value) {
+            return Err("out of range");
+        }
+        let slot = self.values.get_mut(usize::from(index)).ok_or("index")?;
+        *slot = value;
+        self.sets.push((index, value));
+        Ok(value)
+    }
+    fn request(&mut self, request: Request) -> Result<(), &'static str> {
+        self.requests.push(request);
+        Ok(())
+    }
+}
+
+/// Every (message id, payload) with a good CRC at any offset of `data`, MAVLink 1 or 2, for the
+/// messages listed.
+fn good_frames(data: &[u8], wanted: &[(u32, u8)]) -> Vec<(u32, Vec<u8>)> {
+    let mut found = Vec::new();
+    for at in 0..data.len() {
+        let rest = &data[at..];
+        let (header, id) = match rest {
+            [0xFD, _, _, _, _, _, _, a, b, c, ..] => (10, u32::from_le_bytes([*a, *b, *c, 0])),
+            [0xFE, _, _, _, _, id, ..] => (6, u32::from(*id)),
+            _ => continue,
+        };
+        let len = usize::from(rest[1]);
+        let Some(&(_, extra)) = wanted.iter().find(|(w, _)| *w == id) else { continue };
+        if rest.len() < header + len + 2 {
+            continue;
+        }
+        let crc = u16::from_le_bytes([rest[header + len], rest[header + len + 1]]);
+        if mavlink::calculate_crc(&rest[1..header + len], extra) == crc {
+            found.push((id, rest[header..header + len].to_vec()));
+        }
+    }
+    found
+}
+
+/// `payload` in a frame with a good CRC for the handled message `m % 8`, MAVLink 1 when bit 7
+/// of `m` is set.
+fn wrap(m: u8, payload: &[u8]) -> Vec<u8> {
+    let handled = &fcu_link::reader::HANDLED[usize::from(m % 8)];
+    let mut f = if m & 0x80 != 0 {
+        vec![0xFE, payload.len() as u8, 0, 255, 190, handled.id as u8]
+    } else {
+        let id = handled.id.to_le_bytes();
+        vec![0xFD, payload.len() as u8, 0, 0, 0, 255, 190, id[0], id[1], id[2]]
+    };
+    f.extend_from_slice(payload);
+    let crc = mavlink::calculate_crc(&f[1..], handled.extra_crc);
+    f.extend_from_slice(&crc.to_le_bytes());
+    f
+}
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&flags, mut rest)) = data.split_first() else { return };
+    let mut mock = Mock { flags, values: [1.0, 1000.0, 30.0, 0.5], sets: Vec::new(), requests: Vec::new() };
+    let mut link: Link<512> = Link::new(LinkConfig::DEFAULT);
+    let mut now = 0u32;
+    let mut out = Vec::new();
+    let mut buf = [0u8; 128];
+    // The bytes the link was given, in order (the length bytes are not among them).
+    let mut fed = Vec::new();
+    while let Some((&k, tail)) = rest.split_first() {
+        if k >= 0xC0 {
+            let Some((&m, tail)) = tail.split_first() else { break };
+            let n = (usize::from(k & 63) + 1).min(tail.len());
+            let frame = wrap(m, &tail[..n]);
+            link.receive(&frame, now, &mut mock);
+            fed.extend_from_slice(&frame);
+            now = now.wrapping_add(7);
+            rest = &tail[n..];
+        } else {
+            let n = (usize::from(k & 63) + 1).min(tail.len());
+            link.receive(&tail[..n], now, &mut mock);
+            fed.extend_from_slice(&tail[..n]);
+            now = now.wrapping_add(u32::from(k >> 6) * 500 + 7);
+            rest = &tail[n..];
+        }
+        link.tick(now, &mut mock);
+        loop {
+            let got = link.poll_tx(&mut buf);
+            if got == 0 {
+                break;
+            }
+            out.extend_from_slice(&buf[..got]);
+        }
+    }
+
+    // What went out is whole MAVLink 2 frames from us, back to back.
+    let mut at = 0;
+    while at < out.len() {
+        assert_eq!(out[at], 0xFD, "frame start");
+        let len = usize::from(out[at + 1]);
+        assert_eq!((out[at + 5], out[at + 6]), (1, 1), "our system and component");
+        at += 12 + len;
+    }
+    assert_eq!(at, out.len(), "a frame cut short");
+
+    let body = &fed[..];
+    if !mock.sets.is_empty() {
+        let sets = good_frames(body, &[(PARAM_SET_DATA::ID, PARAM_SET_DATA::EXTRA_CRC)]);
+        for &(index, value) in &mock.sets {
+            let name = NAMES[usize::from(index)].as_bytes();
+            let asked = sets.iter().any(|(_, p)| {
+                let mut p = p.clone();
+                p.resize(23, 0);
+                let id_end = p[6..22].iter().position(|&b| b == 0).map_or(22, |z| 6 + z);
+                f32::from_le_bytes([p[0], p[1], p[2], p[3]]).to_bits() == value.to_bits() && &p[6..id_end] == name
+            });
+            assert!(asked, "{} set to {value} without a PARAM_SET asking for it", NAMES[usize::from(index)]);
+        }
+    }
+    if !mock.requests.is_empty() {
+        let commands = good_frames(
+            body,
+            &[(COMMAND_LONG_DATA::ID, COMMAND_LONG_DATA::EXTRA_CRC), (COMMAND_INT_DATA::ID, COMMAND_INT_DATA::EXTRA_CRC)],
+        );
+        assert!(!commands.is_empty(), "{:?} without a command frame", mock.requests);
+    }
+    if mock.flags & 1 != 0 {
+        assert!(
+            !mock.requests.iter().any(|r| matches!(
+                r,
+                Request::MotorTest { .. }
+                    | Request::SaveParams
+                    | Request::ResetParams
+                    | Request::Reboot
+                    | Request::CalibrateImu
+                    | Request::CalibrateRadio
+            )),
+            "{:?} while armed",
+            mock.requests
+        );
+    }
+});
