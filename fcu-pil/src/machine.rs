@@ -179,6 +179,9 @@ impl MaskingStats {
 const CFSR_IBUSERR: u32 = 1 << 8;
 const CFSR_PRECISERR: u32 = 1 << 9;
 const CFSR_STKERR: u32 = 1 << 12;
+/// CFSR bits (ARMv7-M B3.2.15): UsageFault UNDEFINSTR, INVSTATE.
+const CFSR_UNDEFINSTR: u32 = 1 << 16;
+const CFSR_INVSTATE: u32 = 1 << 17;
 
 #[derive(Clone, Debug)]
 enum Stop {
@@ -188,8 +191,7 @@ enum Stop {
     Interrupt,
     /// The guest branched to an EXC_RETURN value in handler mode.
     ExceptionReturn,
-    /// An undefined instruction (a panic's `udf`), or another synchronous fault.
-    SyncFault(String),
+    SyncFault(SyncFault),
     Unmodelled(Unmodelled),
     Memory {
         kind: &'static str,
@@ -197,6 +199,35 @@ enum Stop {
         /// The CFSR bits of the BusFault silicon raises for it; `None`: not modelled.
         bus_fault: Option<u32>,
     },
+}
+
+/// A fault the core raises at the instruction it executes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SyncFault {
+    /// An undefined instruction (a panic's `udf`).
+    UndefinedInstruction,
+    /// Another CPU exception QEMU raised, by its EXCP number.
+    CpuException(u32),
+}
+
+impl SyncFault {
+    /// The UsageFault status bit it sets in CFSR (ARMv7-M B3.2.15): UNDEFINSTR for an
+    /// undefined instruction, INVSTATE otherwise.
+    fn cfsr_bits(self) -> u32 {
+        match self {
+            SyncFault::UndefinedInstruction => CFSR_UNDEFINSTR,
+            SyncFault::CpuException(_) => CFSR_INVSTATE,
+        }
+    }
+}
+
+impl std::fmt::Display for SyncFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SyncFault::UndefinedInstruction => write!(f, "undefined instruction (UsageFault UNDEFINSTR)"),
+            SyncFault::CpuException(n) => write!(f, "CPU exception {n} (QEMU EXCP number)"),
+        }
+    }
 }
 
 /// Instruction counts and pessimistic cycle counts of translation blocks, from the flash image.
@@ -424,7 +455,7 @@ impl<P: Peripherals> State<P> {
                 *since = Some(rose_by);
             } else if !level && since.is_some() {
                 // Software may have cleared the pending bit (NVIC_ICPR) with the line low.
-                let ispr = self.scs.read(0x200 + 4 * (irq / 32), now, self.current_exception).unwrap_or(u32::MAX);
+                let ispr = self.scs.read(scs::reg::NVIC_ISPR + 4 * (irq / 32), now, self.current_exception).unwrap_or(u32::MAX);
                 if ispr & (1 << (irq % 32)) == 0 {
                     *since = None;
                 }
@@ -553,14 +584,13 @@ impl<P: Peripherals + 'static> Machine<P> {
         uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
             let st = uc.get_data_mut();
             // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
-            st.stop =
-                Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(format!("CPU exception {intno} (QEMU EXCP number)")) });
+            st.stop = Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(SyncFault::CpuException(intno)) });
             let _ = uc.emu_stop();
         })
         .map_err(emu)?;
         uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
             let st = uc.get_data_mut();
-            st.stop = Some(Stop::SyncFault("undefined instruction (UsageFault UNDEFINSTR)".into()));
+            st.stop = Some(Stop::SyncFault(SyncFault::UndefinedInstruction));
             let _ = uc.emu_stop();
             true
         })
@@ -1069,11 +1099,9 @@ impl<P: Peripherals + 'static> Machine<P> {
                     return Err(Fault::Memory { kind, address, pc: self.pc(), at: now })
                 }
                 (_, Some(Stop::ExceptionReturn)) => self.return_from_exception()?,
-                (_, Some(Stop::SyncFault(cause))) => {
+                (_, Some(Stop::SyncFault(fault))) => {
                     let pc = self.pc();
-                    // CFSR.UNDEFINSTR (bit 16) for an undefined instruction, INVSTATE otherwise.
-                    let bits = if cause.starts_with("undefined") { 1 << 16 } else { 1 << 17 };
-                    self.raise_hard_fault(pc, cause, bits)?;
+                    self.raise_hard_fault(pc, fault.to_string(), fault.cfsr_bits())?;
                 }
                 (Ok(()), Some(Stop::Deadline | Stop::Interrupt)) => {}
                 (Ok(()), None) => {
@@ -1152,7 +1180,7 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
             let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
             let (a, s0, l) = (reg(uc, reg_addr), reg(uc, start), reg(uc, limit));
             let st = uc.get_data_mut();
-            if a == scs::DWT_BASE + 4 && st.scs.cyccnt_running() {
+            if a == scs::DWT_BASE + scs::reg::DWT_CYCCNT && st.scs.cyccnt_running() {
                 // The read is the block's first instruction: at its start under the optimistic
                 // profile, at its end under the pessimistic (as `access_time` stamps it).
                 let read_at = match st.timing.profile {
@@ -1216,7 +1244,7 @@ impl<P: Peripherals> State<P> {
         let Some(watched) = st.masking.as_ref().map(|m| m.watched) else { return };
         let masked = primask
             || (basepri != 0 && {
-                let prigroup = st.scs.read(0xD0C, now, current).map_or(0, |aircr| (aircr >> 8) & 7);
+                let prigroup = st.scs.read(scs::reg::AIRCR, now, current).map_or(0, |aircr| (aircr >> 8) & 7);
                 let group_mask = (0xFFu32 << (prigroup + 1)) & 0xFF;
                 (basepri & group_mask) as i32 <= st.scs.group_priority(watched)
             });
@@ -1672,6 +1700,20 @@ mod tests {
         m.reg(reg).unwrap()
     }
 
+    /// Rule: an undefined instruction (a panic's `udf`) is a UsageFault with CFSR.UNDEFINSTR,
+    /// escalated to HardFault when UsageFault is not enabled (ARMv7-M B1.5.14, B3.2.15).
+    #[test]
+    fn an_undefined_instruction_sets_undefinstr_and_escalates_to_hard_fault() {
+        let udf = [0xDE00u16, 0xE7FE];
+        let m = run(program_with(&udf, &[(scs::HARD_FAULT, &STACKLESS_HANDLER)], HANDLERS_AT), TimingProfile::Optimistic, 400);
+        let st = m.state();
+        assert_eq!(st.hard_faults.len(), 1, "{:?}", st.hard_faults);
+        assert!(st.hard_faults[0].cause.contains("undefined instruction"), "{}", st.hard_faults[0].cause);
+        assert_eq!(st.scs.cfsr, CFSR_UNDEFINSTR);
+        assert_eq!(st.scs.hfsr, 1 << 30, "HFSR.FORCED: the UsageFault is not enabled");
+        assert_eq!(m.current_exception(), scs::HARD_FAULT, "the handler ran");
+    }
+
     #[test]
     fn a_read_of_reserved_memory_is_a_precise_bus_fault_escalated_to_hard_fault() {
         let code = [RESERVED_READ.as_slice(), &[0xE7FE]].concat();
@@ -1705,7 +1747,7 @@ mod tests {
         // Locked: no instruction runs and an interrupt does not wake it, for as long as it lasts.
         let instructions = st.instructions;
         let now = m.now();
-        m.state_mut().scs.write(0x100, 1, now).unwrap();
+        m.state_mut().scs.write(scs::reg::NVIC_ISER, 1, now).unwrap();
         m.state_mut().scs.set_pending(16);
         m.run_until(3999).unwrap();
         assert_eq!((m.now(), m.state().instructions), (4000, instructions), "time passes, nothing runs");
