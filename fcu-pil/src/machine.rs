@@ -425,6 +425,43 @@ struct LazyFp {
 }
 
 impl<P: Peripherals> State<P> {
+    /// The state at power-on: nothing run, nothing pending, the clock at the board's reset
+    /// frequency.
+    fn power_on(board: P, code: Code, timing: Timing) -> Result<Self, Fault> {
+        let units_per_cycle = board.units_per_cycle().map_err(|error| Fault::Unmodelled { error, pc: 0, at: 0 })?;
+        Ok(State {
+            board,
+            scs: Scs::new(units_per_cycle),
+            now: 0,
+            deadline: 0,
+            units_per_cycle,
+            instructions: 0,
+            idle_time: 0,
+            stop: None,
+            code,
+            timing,
+            block_pc: 0,
+            block_size: 0,
+            block_started_at: 0,
+            access_pc: 0,
+            current_exception: 0,
+            exc_instructions: vec![0; scs::EXCEPTIONS],
+            exc_entered_at: vec![0; scs::EXCEPTIONS],
+            exc_stack: Vec::new(),
+            exception_stats: HashMap::new(),
+            sleeping: false,
+            hard_faults: Vec::new(),
+            lockups: Vec::new(),
+            locked_up: false,
+            resets: Vec::new(),
+            fp_frames: 0,
+            fp_frames_owed: Vec::new(),
+            masking: None,
+            pending_since: vec![None; scs::EXCEPTIONS],
+            lines_sampled_at: 0,
+        })
+    }
+
     fn attribute(&mut self, n: u64) {
         if let Some(c) = self.exc_instructions.get_mut(self.current_exception) {
             *c += n;
@@ -479,152 +516,127 @@ fn emu(e: unicorn_engine::uc_error) -> Fault {
     Fault::Emulator(format!("{e:?}"))
 }
 
+/// The flash as the image programs it (erased bytes read 0xFF).
+fn flash_contents(image: &Image) -> Result<Vec<u8>, Fault> {
+    let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
+    for seg in &image.segments {
+        let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
+        match off.and_then(|o| flash.get_mut(o..o + seg.data.len())) {
+            Some(dst) => dst.copy_from_slice(&seg.data),
+            None => {
+                return Err(Fault::Emulator(format!("ELF segment at {:#010x} ({} bytes) is not in flash", seg.address, seg.data.len())))
+            }
+        }
+    }
+    Ok(flash)
+}
+
+/// Flash, read-only and executable, and its alias at 0 (BOOT0 low: boot from flash); SRAM; the
+/// system-memory page.
+fn map_memory<P: Peripherals>(uc: &mut Unicorn<'static, State<P>>, flash: &[u8], sysmem: &[u8]) -> Result<(), Fault> {
+    uc.mem_map(u64::from(FLASH_BASE), u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+    uc.mem_write(u64::from(FLASH_BASE), flash).map_err(emu)?;
+    uc.mem_map(0, u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+    uc.mem_write(0, flash).map_err(emu)?;
+    uc.mem_map(u64::from(SRAM_BASE), u64::from(SRAM_SIZE), Prot::READ | Prot::WRITE).map_err(emu)?;
+    uc.mem_map(u64::from(SYSMEM_PAGE), 0x1000, Prot::READ).map_err(emu)?;
+    uc.mem_write(u64::from(SYSMEM_PAGE), sysmem).map_err(emu)
+}
+
+/// The regions whose accesses go to the peripheral models and the SCS: APB1, APB2, AHB1
+/// (GPIO, RCC, FLASH), the peripheral bit-band alias and the private peripheral bus, as
+/// (base, size). Everything else stays unmapped: an access faults.
+const PERIPHERAL_REGIONS: [(u64, u64); 5] =
+    [(0x4000_0000, 0x8000), (0x4001_0000, 0x8000), (0x4002_0000, 0x8000), (0x4200_0000, 0x0200_0000), (0xE000_0000, 0x0010_0000)];
+
+fn map_peripherals<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>) -> Result<(), Fault> {
+    for (base, size) in PERIPHERAL_REGIONS {
+        uc.mmio_map(
+            base,
+            size,
+            Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize| mmio_read(uc, (base + offset) as u32, size as u32)),
+            Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize, value: u64| {
+                mmio_write(uc, (base + offset) as u32, size as u32, value as u32)
+            }),
+        )
+        .map_err(emu)?;
+    }
+    Ok(())
+}
+
+/// The hooks that price blocks, stamp register accesses and stop the emulation at a fault.
+fn add_hooks<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>, profile: TimingProfile) -> Result<(), Fault> {
+    uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
+    // Any memory hook sends every load and store through Unicorn's slow path (about 30 %
+    // more host time), so each profile installs only the one it needs.
+    match profile {
+        TimingProfile::Optimistic => {
+            uc.add_mem_hook(HookType::MEM_READ | HookType::MEM_WRITE, 0x4000_0000, 0xE00F_FFFF, access_pc_hook::<P>).map_err(emu)?;
+        }
+        // Data reads from flash are priced from the block's literal loads (see `timing`):
+        // a memory hook on flash corrupts registers in Unicorn 2.1.5.
+        TimingProfile::Pessimistic => {}
+    }
+    uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
+        let st = uc.get_data_mut();
+        // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
+        st.stop = Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(SyncFault::CpuException(intno)) });
+        let _ = uc.emu_stop();
+    })
+    .map_err(emu)?;
+    uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
+        uc.get_data_mut().stop = Some(Stop::SyncFault(SyncFault::UndefinedInstruction));
+        let _ = uc.emu_stop();
+        true
+    })
+    .map_err(emu)?;
+    uc.add_mem_hook(HookType::MEM_UNMAPPED | HookType::MEM_PROT, 1, 0, memory_fault_hook::<P>).map_err(emu)?;
+    Ok(())
+}
+
+/// Unicorn restores the PC before calling a memory hook; the MMIO callback that follows for
+/// the same access then knows the accessing instruction.
+fn access_pc_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, _: MemType, _: u64, _: usize, _: i64) -> bool {
+    let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+    uc.get_data_mut().access_pc = pc;
+    true
+}
+
+/// Nothing answers at a reserved address: the bus returns an error, a BusFault (precise for a
+/// data access, ARMv7-M B3.2.15; an instruction fetch faults when the instruction would
+/// execute). An address where the chip has something the model lacks, and the rest, are
+/// refused.
+fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64) -> bool {
+    let reserved = !implemented_but_unmodelled(addr as u32);
+    let (kind, bus_fault) = match kind {
+        MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
+        MemType::WRITE_UNMAPPED if reserved => ("write to reserved memory", Some(CFSR_PRECISERR)),
+        MemType::FETCH_UNMAPPED if reserved => ("instruction fetch from reserved memory", Some(CFSR_IBUSERR)),
+        MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
+            ("access to memory the chip has and the model does not", None)
+        }
+        MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
+        MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
+        _ => ("memory access fault", None),
+    };
+    let st = uc.get_data_mut();
+    if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+        st.stop = Some(Stop::Memory { kind, address: addr as u32, bus_fault });
+    }
+    false
+}
+
 impl<P: Peripherals + 'static> Machine<P> {
     /// Powers on the board with `image` in flash, its time priced by `profile`.
     pub fn new(image: Image, board: P, profile: TimingProfile) -> Result<Self, Fault> {
-        let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
-        for seg in &image.segments {
-            let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
-            match off.and_then(|o| flash.get_mut(o..o + seg.data.len())) {
-                Some(dst) => dst.copy_from_slice(&seg.data),
-                None => {
-                    return Err(Fault::Emulator(format!("ELF segment at {:#010x} ({} bytes) is not in flash", seg.address, seg.data.len())))
-                }
-            }
-        }
+        let flash = flash_contents(&image)?;
         let sysmem = board.system_memory_page();
-        let scs = Scs::new(board.units_per_cycle().map_err(|e| Fault::Unmodelled { error: e, pc: 0, at: 0 })?);
-        let upc = board.units_per_cycle().unwrap_or(21);
-        let state = State {
-            board,
-            scs,
-            now: 0,
-            deadline: 0,
-            units_per_cycle: upc,
-            instructions: 0,
-            idle_time: 0,
-            stop: None,
-            code: Code::new(flash.clone()),
-            timing: Timing::new(profile),
-            block_pc: 0,
-            block_size: 0,
-            block_started_at: 0,
-            access_pc: 0,
-            current_exception: 0,
-            exc_instructions: vec![0; scs::EXCEPTIONS],
-            exc_entered_at: vec![0; scs::EXCEPTIONS],
-            exc_stack: Vec::new(),
-            exception_stats: HashMap::new(),
-            sleeping: false,
-            hard_faults: Vec::new(),
-            lockups: Vec::new(),
-            locked_up: false,
-            resets: Vec::new(),
-            fp_frames: 0,
-            fp_frames_owed: Vec::new(),
-            masking: None,
-            pending_since: vec![None; scs::EXCEPTIONS],
-            lines_sampled_at: 0,
-        };
+        let state = State::power_on(board, Code::new(flash.clone()), Timing::new(profile))?;
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
-
-        // Flash, read-only and executable, and its alias at 0 (BOOT0 low: boot from flash).
-        uc.mem_map(u64::from(FLASH_BASE), u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
-        uc.mem_write(u64::from(FLASH_BASE), &flash).map_err(emu)?;
-        uc.mem_map(0, u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
-        uc.mem_write(0, &flash).map_err(emu)?;
-        uc.mem_map(u64::from(SRAM_BASE), u64::from(SRAM_SIZE), Prot::READ | Prot::WRITE).map_err(emu)?;
-        uc.mem_map(u64::from(SYSMEM_PAGE), 0x1000, Prot::READ).map_err(emu)?;
-        uc.mem_write(u64::from(SYSMEM_PAGE), &sysmem).map_err(emu)?;
-
-        // Peripherals: APB1, APB2, AHB1 (GPIO, RCC, FLASH), the peripheral bit-band alias and
-        // the private peripheral bus. Everything else stays unmapped: an access faults.
-        for (base, size) in [
-            (0x4000_0000u64, 0x8000u64),
-            (0x4001_0000, 0x8000),
-            (0x4002_0000, 0x8000),
-            (0x4200_0000, 0x0200_0000),
-            (0xE000_0000, 0x0010_0000),
-        ] {
-            uc.mmio_map(
-                base,
-                size,
-                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize| mmio_read(uc, (base + offset) as u32, size as u32)),
-                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize, value: u64| {
-                    mmio_write(uc, (base + offset) as u32, size as u32, value as u32)
-                }),
-            )
-            .map_err(emu)?;
-        }
-
-        uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
-        // Any memory hook sends every load and store through Unicorn's slow path (about 30 %
-        // more host time), so each profile installs only the one it needs.
-        match profile {
-            TimingProfile::Optimistic => {
-                // Unicorn restores the PC before calling a memory hook; the MMIO callback that
-                // follows for the same access then knows the accessing instruction.
-                uc.add_mem_hook(
-                    HookType::MEM_READ | HookType::MEM_WRITE,
-                    0x4000_0000,
-                    0xE00F_FFFF,
-                    |uc: &mut Unicorn<'_, State<P>>, _: MemType, _: u64, _: usize, _: i64| {
-                        let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
-                        uc.get_data_mut().access_pc = pc;
-                        true
-                    },
-                )
-                .map_err(emu)?;
-            }
-            // Data reads from flash are priced from the block's literal loads (see `timing`):
-            // a memory hook on flash corrupts registers in Unicorn 2.1.5.
-            TimingProfile::Pessimistic => {}
-        }
-        uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
-            let st = uc.get_data_mut();
-            // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
-            st.stop = Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(SyncFault::CpuException(intno)) });
-            let _ = uc.emu_stop();
-        })
-        .map_err(emu)?;
-        uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
-            let st = uc.get_data_mut();
-            st.stop = Some(Stop::SyncFault(SyncFault::UndefinedInstruction));
-            let _ = uc.emu_stop();
-            true
-        })
-        .map_err(emu)?;
-        uc.add_mem_hook(
-            HookType::MEM_UNMAPPED | HookType::MEM_PROT,
-            1,
-            0,
-            |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64| {
-                // Nothing answers at a reserved address: the bus returns an error, a BusFault
-                // (precise for a data access, ARMv7-M B3.2.15; an instruction fetch faults when
-                // the instruction would execute). An address where the chip has something the
-                // model lacks, and the rest, are refused.
-                let reserved = !implemented_but_unmodelled(addr as u32);
-                let (kind, bus_fault) = match kind {
-                    MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
-                    MemType::WRITE_UNMAPPED if reserved => ("write to reserved memory", Some(CFSR_PRECISERR)),
-                    MemType::FETCH_UNMAPPED if reserved => ("instruction fetch from reserved memory", Some(CFSR_IBUSERR)),
-                    MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
-                        ("access to memory the chip has and the model does not", None)
-                    }
-                    MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
-                    MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
-                    _ => ("memory access fault", None),
-                };
-                let st = uc.get_data_mut();
-                if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
-                    st.stop = Some(Stop::Memory { kind, address: addr as u32, bus_fault });
-                }
-                false
-            },
-        )
-        .map_err(emu)?;
-
+        map_memory(&mut uc, &flash, &sysmem)?;
+        map_peripherals(&mut uc)?;
+        add_hooks(&mut uc, profile)?;
         let stack_top = image.initial_sp;
         let mut m = Machine { uc, image, stack_bottom: SRAM_BASE, stack_top };
         // Paint the stack region so its high-water mark can be read later.
