@@ -567,8 +567,8 @@ fn map_peripherals<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>
 /// The hooks that price blocks, stamp register accesses and stop the emulation at a fault.
 fn add_hooks<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>, profile: TimingProfile) -> Result<(), Fault> {
     uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
-    // Any memory hook sends every load and store through Unicorn's slow path (about 30 %
-    // more host time), so each profile installs only the one it needs.
+    // Any memory hook sends every load and store through Unicorn's slow path, so each profile
+    // installs only the one it needs.
     match profile {
         TimingProfile::Optimistic => {
             uc.add_mem_hook(HookType::MEM_READ | HookType::MEM_WRITE, 0x4000_0000, 0xE00F_FFFF, access_pc_hook::<P>).map_err(emu)?;
@@ -1141,10 +1141,9 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// Called as each translated block starts. A stop requested here stops the emulation before
 /// the block runs, so the block is charged only once it is going to run: a deadline or an
 /// interrupt that came due during the previous block stops here uncharged, and the block
-/// runs whole (and pays) when the emulation resumes. (Charging first and then stopping billed
-/// the block twice whenever an event fell inside it, and froze the CPU outright when events
-/// came closer together than the block was long: an edge every 0.5 µs against a 50-instruction
-/// block never let it run.)
+/// runs whole (and pays) when the emulation resumes. Charging before stopping would bill a
+/// block twice whenever an event fell inside it, and never let a block run that is longer than
+/// the spacing of the events.
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
     if stop_before_block(uc) {
         return;
