@@ -443,29 +443,24 @@ impl Board {
         }
     }
 
-    /// The timers count their APB's timer clock.
-    fn sync_timer_clocks(&mut self, now: Time) -> Result<(), Unmodelled> {
-        let c = self.rcc.clocks()?;
-        let units = |hz: u64| {
-            periph::units_per_cycle(hz)
-                .ok_or_else(|| Unmodelled::new("RCC", format!("timer clock {hz} Hz does not divide the 336 MHz time base")))
-        };
-        let (apb1, apb2) = (units(c.tim_apb1_hz)?, units(c.tim_apb2_hz)?);
-        self.tim2.set_clock_units(now, apb1);
-        self.tim4.set_clock_units(now, apb1);
-        self.tim9.set_clock_units(now, apb2);
-        Ok(())
+    /// Every model learns the clocks RCC derives now (the timers count their APB's timer
+    /// clock); returns them.
+    fn sync_clocks(&mut self, now: Time) -> Result<periph::Clocks, Unmodelled> {
+        let clocks = self.rcc.clocks()?;
+        for slot in &SLOTS {
+            (slot.model_mut)(self).set_clocks(now, clocks);
+        }
+        Ok(clocks)
     }
 
     fn route(&mut self, addr: u32, now: Time, op: Op) -> Result<u32, Unmodelled> {
-        self.sync_timer_clocks(now)?;
+        let clocks = self.sync_clocks(now)?;
         let Some((slot, offset)) = slot_at(addr) else {
             return Err(Unmodelled::new(format!("{addr:#010x}"), "no peripheral modelled at this address"));
         };
         if let Some((bus, bit)) = slot.rcc.filter(|&(bus, bit)| !self.rcc.is_enabled(bus, bit)) {
             return Err(Unmodelled::new(slot.name, format!("accessed while its clock is disabled in RCC ({bus:?} enable bit {bit})")));
         }
-        let clocks = self.rcc.clocks()?;
         if slot.base == iwdg::BASE {
             // The IWDG runs on the LSI (no enable bit in RCC): it learns when the LSI is ready.
             self.iwdg.set_lsi(self.rcc.lsi_ready_at());
@@ -600,8 +595,7 @@ impl Peripherals for Board {
         // The RCC first: the clocks the others run on come from it (its turn below is then a
         // no-op).
         self.rcc.advance(now);
-        let clocks = self.rcc.clocks()?;
-        self.sync_timer_clocks(now)?;
+        let clocks = self.sync_clocks(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         for slot in &SLOTS {
             (slot.model_mut)(self).advance(now, clocks);

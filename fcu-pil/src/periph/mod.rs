@@ -41,6 +41,9 @@ pub trait Peripheral {
     }
     /// Brings the model up to `now`.
     fn advance(&mut self, _now: Time, _clocks: Clocks) {}
+    /// The clocks as RCC derives them now, before every access and every advance: a model that
+    /// counts a clock on its own (a timer) counts at the new rate from `now` on.
+    fn set_clocks(&mut self, _now: Time, _clocks: Clocks) {}
     /// The level of its interrupt output `line` (0 for a peripheral with one line; a DMA
     /// controller's stream number).
     fn irq_line(&self, _line: usize) -> bool {

@@ -822,6 +822,10 @@ impl Peripheral for Timer {
         Timer::irq_line(self)
     }
 
+    fn set_clocks(&mut self, now: Time, clocks: Clocks) {
+        Timer::set_clocks(self, clocks, now)
+    }
+
     fn reset(&mut self) {
         *self = Timer::new(self.kind);
     }
