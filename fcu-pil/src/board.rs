@@ -114,8 +114,9 @@ struct Slot {
 const TIM2_BASE: u32 = tim::TimerKind::Tim2.base();
 const TIM4_BASE: u32 = tim::TimerKind::Tim4.base();
 
-/// The peripherals at their addresses (RM0368 table 1), with their RCC bits (RM0368 §6.3.9–
-/// §6.3.12 and the matching reset registers) and interrupt lines (RM0368 table 38).
+/// The peripherals at their addresses (RM0368 table 1), with their RCC bits (the enable
+/// registers, RM0368 §6.3.9 to §6.3.12, and the matching reset registers) and their interrupt
+/// lines (RM0368 table 38).
 const SLOTS: [Slot; 15] = [
     Slot {
         base: TIM2_BASE,
