@@ -9,6 +9,7 @@ use fcu_core::supervisor::FlightState;
 use fcu_core::telemetry::StatusFields;
 use fcu_pil::elf::Image;
 use fcu_pil::firmware;
+use fcu_pil::periph::sensors::Sensor;
 use fcu_pil::periph::time_from_s;
 use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
 use fcu_pil::telemetry::Line;

@@ -306,36 +306,41 @@ impl<T: Chip> SpiDevice for T {
     }
 }
 
-/// Fault injection and statistics common to the three models.
-macro_rules! common_api {
-    ($t:ty) => {
-        impl $t {
-            /// Make `WHO_AM_I` answer `value` instead of the datasheet's (None: the real one).
-            pub fn set_who_am_i_override(&mut self, value: Option<u8>) {
-                self.port.who_am_i_override = value;
-            }
+/// A sensor on the bus: what the SPI master needs of it, and the fault injection and
+/// statistics the harness and the tests use.
+pub trait Sensor: SpiDevice {
+    /// Make `WHO_AM_I` answer `value` instead of the datasheet's (None: the real one).
+    fn set_who_am_i_override(&mut self, value: Option<u8>);
+    /// A silent sensor never drives the line (reads are undriven); writes still work.
+    fn set_silent(&mut self, silent: bool);
+    /// Writes to read-only or undocumented registers (accepted silently by a real sensor).
+    fn unexpected_writes(&self) -> u32;
+    /// The register's current content as the bus would read it at `now`.
+    fn register(&self, addr: u8, now: Time) -> u8;
+    /// Whether the sensor answers on the bus at `now` (not booting).
+    fn is_ready(&self, now: Time) -> bool;
+}
 
-            /// A silent sensor never drives the line (reads are undriven); writes still work.
-            pub fn set_silent(&mut self, silent: bool) {
-                self.port.silent = silent;
-            }
+impl<T: Chip> Sensor for T {
+    fn set_who_am_i_override(&mut self, value: Option<u8>) {
+        self.port_mut().who_am_i_override = value;
+    }
 
-            /// Writes to read-only or undocumented registers (accepted silently by a real sensor).
-            pub fn unexpected_writes(&self) -> u32 {
-                self.port.unexpected_writes
-            }
+    fn set_silent(&mut self, silent: bool) {
+        self.port_mut().silent = silent;
+    }
 
-            /// The register's current content as the bus would read it at `now` (for tests).
-            pub fn register(&self, addr: u8, now: Time) -> u8 {
-                self.port.peek(addr & 0x7F, now)
-            }
+    fn unexpected_writes(&self) -> u32 {
+        self.port().unexpected_writes
+    }
 
-            /// Whether the sensor answers on the bus at `now` (not booting).
-            pub fn is_ready(&self, now: Time) -> bool {
-                self.port.ready(now)
-            }
-        }
-    };
+    fn register(&self, addr: u8, now: Time) -> u8 {
+        self.port().peek(addr & 0x7F, now)
+    }
+
+    fn is_ready(&self, now: Time) -> bool {
+        self.port().ready(now)
+    }
 }
 
 /// Register access class in a sensor's map.
@@ -429,8 +434,6 @@ impl Lsm6dsl {
         self.reads
     }
 }
-
-common_api!(Lsm6dsl);
 
 impl Chip for Lsm6dsl {
     type Output = ([i16; 3], [i16; 3]);
@@ -574,8 +577,6 @@ impl Lis2mdl {
     }
 }
 
-common_api!(Lis2mdl);
-
 impl Chip for Lis2mdl {
     type Output = [i16; 3];
 
@@ -694,8 +695,6 @@ impl Lps22hb {
     }
 }
 
-common_api!(Lps22hb);
-
 impl Chip for Lps22hb {
     type Output = (u32, i16);
 
@@ -757,8 +756,8 @@ impl Sensors {
         Sensors { lsm6dsl: Lsm6dsl::new(), lis2mdl: Lis2mdl::new(), lps22hb: Lps22hb::new() }
     }
 
-    /// The device behind chip select `i` (0 = LSM6DSL, 1 = LIS2MDL, 2 = LPS22HB).
-    pub fn device(&self, i: usize) -> Option<&dyn SpiDevice> {
+    /// The sensor behind chip select `i` (0 = LSM6DSL, 1 = LIS2MDL, 2 = LPS22HB).
+    pub fn device(&self, i: usize) -> Option<&dyn Sensor> {
         match i {
             0 => Some(&self.lsm6dsl),
             1 => Some(&self.lis2mdl),
@@ -768,7 +767,7 @@ impl Sensors {
     }
 
     /// Mutable [`Sensors::device`].
-    pub fn device_mut(&mut self, i: usize) -> Option<&mut dyn SpiDevice> {
+    pub fn device_mut(&mut self, i: usize) -> Option<&mut dyn Sensor> {
         match i {
             0 => Some(&mut self.lsm6dsl),
             1 => Some(&mut self.lis2mdl),
@@ -779,27 +778,21 @@ impl Sensors {
 
     /// `WHO_AM_I` override of the sensor behind chip select `i` (see [`Sensors::device`]).
     pub fn set_who_am_i_override(&mut self, i: usize, value: Option<u8>) {
-        match i {
-            0 => self.lsm6dsl.set_who_am_i_override(value),
-            1 => self.lis2mdl.set_who_am_i_override(value),
-            2 => self.lps22hb.set_who_am_i_override(value),
-            _ => {}
+        if let Some(d) = self.device_mut(i) {
+            d.set_who_am_i_override(value);
         }
     }
 
     /// Silence the sensor behind chip select `i`.
     pub fn set_silent(&mut self, i: usize, silent: bool) {
-        match i {
-            0 => self.lsm6dsl.set_silent(silent),
-            1 => self.lis2mdl.set_silent(silent),
-            2 => self.lps22hb.set_silent(silent),
-            _ => {}
+        if let Some(d) = self.device_mut(i) {
+            d.set_silent(silent);
         }
     }
 
     /// Unexpected writes summed over the three.
     pub fn unexpected_writes(&self) -> u32 {
-        self.lsm6dsl.unexpected_writes() + self.lis2mdl.unexpected_writes() + self.lps22hb.unexpected_writes()
+        (0..3).filter_map(|i| self.device(i)).map(|d| d.unexpected_writes()).sum()
     }
 }
 

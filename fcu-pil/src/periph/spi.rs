@@ -748,7 +748,7 @@ impl Peripheral for Spi2 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::periph::sensors::{LPS22HB_BOOT, UNDRIVEN};
+    use crate::periph::sensors::{Sensor, LPS22HB_BOOT, UNDRIVEN};
 
     /// After every sensor's boot.
     const T0: Time = 50 * (TIME_HZ / 1000);
