@@ -31,7 +31,8 @@
 use std::collections::VecDeque;
 
 use crate::machine::{Peripherals, SYSMEM_PAGE};
-use crate::periph::{self, adc, dbgmcu, dma, flash, gpio, iwdg, pwr, rcc, spi, tim, usart, Time, Unmodelled};
+use crate::periph::rcc::Bus::{Ahb1, Apb1, Apb2};
+use crate::periph::{self, adc, dbgmcu, dma, flash, gpio, irq, iwdg, pwr, rcc, spi, tim, usart, Peripheral, Time, Unmodelled};
 
 /// A chip-select or LED pin: (port index 0 = A, pin).
 const CS_PINS: [(usize, u8); 3] = [(0, 8), (1, 12), (2, 13)];
@@ -85,34 +86,206 @@ pub struct Records {
     pub last_read: Option<(Time, u32, u32)>,
 }
 
+/// A peripheral's clock enable in RCC: its bus and bit. Its reset bit sits at the same position
+/// in the bus's reset register (RM0368 §6.3: RCC_AHB1ENR/_AHB1RSTR, _APB1ENR/_APB1RSTR,
+/// _APB2ENR/_APB2RSTR).
+type RccBit = (rcc::Bus, u32);
+
+/// One peripheral on the board's bus: where it is, how RCC clocks and resets it, its interrupt
+/// lines, and the model behind it. A new peripheral is a row here and a [`Peripheral`] model.
+struct Slot {
+    base: u32,
+    name: &'static str,
+    /// Its clock enable and reset bit in RCC. `None`: not gated by RCC and no reset bit (the
+    /// IWDG runs on the LSI; RCC, FLASH and DBGMCU are always there).
+    rcc: Option<RccBit>,
+    /// Its interrupt lines: (IRQ number, RM0368 table 38; the model's line, see
+    /// [`Peripheral::irq_line`]).
+    irqs: &'static [(u32, usize)],
+    /// The registers a report names: (offset, name).
+    registers: &'static [(u32, &'static str)],
+    /// The data register, where a narrow write is a write of that data rather than of a byte
+    /// lane (the bus does a read-modify-write of the word elsewhere).
+    data_register: Option<u32>,
+    model: fn(&Board) -> &dyn Peripheral,
+    model_mut: fn(&mut Board) -> &mut dyn Peripheral,
+}
+
+const TIM2_BASE: u32 = tim::TimerKind::Tim2.base();
+const TIM4_BASE: u32 = tim::TimerKind::Tim4.base();
+
+/// The peripherals at their addresses (RM0368 table 1), with their RCC bits (the enable
+/// registers, RM0368 §6.3.9 to §6.3.12, and the matching reset registers) and their interrupt
+/// lines (RM0368 table 38).
+const SLOTS: [Slot; 15] = [
+    Slot {
+        base: TIM2_BASE,
+        name: "TIM2",
+        rcc: Some((Apb1, 0)),
+        irqs: &[(irq::TIM2, 0)],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.tim2,
+        model_mut: |b| &mut b.tim2,
+    },
+    Slot {
+        base: TIM4_BASE,
+        name: "TIM4",
+        rcc: Some((Apb1, 2)),
+        irqs: &[(irq::TIM4, 0)],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.tim4,
+        model_mut: |b| &mut b.tim4,
+    },
+    Slot {
+        base: iwdg::BASE,
+        name: "IWDG",
+        rcc: None,
+        irqs: &[],
+        registers: &[(0x0, "KR"), (0x4, "PR"), (0x8, "RLR"), (0xC, "SR")],
+        data_register: None,
+        model: |b| &b.iwdg,
+        model_mut: |b| &mut b.iwdg,
+    },
+    Slot {
+        base: spi::BASE,
+        name: "SPI2",
+        rcc: Some((Apb1, 14)),
+        irqs: &[(irq::SPI2, 0)],
+        registers: &[(spi::CR1, "CR1"), (spi::CR2, "CR2"), (spi::SR, "SR"), (spi::DR, "DR")],
+        data_register: Some(spi::DR),
+        model: |b| &b.spi2,
+        model_mut: |b| &mut b.spi2,
+    },
+    Slot {
+        base: pwr::BASE,
+        name: "PWR",
+        rcc: Some((Apb1, 28)),
+        irqs: &[],
+        registers: &[(0x0, "CR"), (0x4, "CSR")],
+        data_register: None,
+        model: |b| &b.pwr,
+        model_mut: |b| &mut b.pwr,
+    },
+    Slot {
+        base: usart::BASE,
+        name: "USART1",
+        rcc: Some((Apb2, 4)),
+        irqs: &[(irq::USART1, 0)],
+        registers: &[(0x0, "SR"), (usart::DR, "DR"), (0x8, "BRR"), (0xC, "CR1"), (0x10, "CR2"), (0x14, "CR3")],
+        data_register: Some(usart::DR),
+        model: |b| &b.usart1,
+        model_mut: |b| &mut b.usart1,
+    },
+    Slot {
+        base: adc::BASE,
+        name: "ADC1",
+        rcc: Some((Apb2, 8)),
+        irqs: &[(irq::ADC, 0)],
+        registers: &[(0x0, "SR"), (0x4, "CR1"), (0x8, "CR2")],
+        data_register: None,
+        model: |b| &b.adc,
+        model_mut: |b| &mut b.adc,
+    },
+    Slot {
+        base: tim::TimerKind::Tim9.base(),
+        name: "TIM9",
+        rcc: Some((Apb2, 16)),
+        irqs: &[(irq::TIM1_BRK_TIM9, 0)],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.tim9,
+        model_mut: |b| &mut b.tim9,
+    },
+    Slot {
+        base: gpio::base('A').unwrap(),
+        name: "GPIOA",
+        rcc: Some((Ahb1, 0)),
+        irqs: &[],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.gpio[0],
+        model_mut: |b| &mut b.gpio[0],
+    },
+    Slot {
+        base: gpio::base('B').unwrap(),
+        name: "GPIOB",
+        rcc: Some((Ahb1, 1)),
+        irqs: &[],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.gpio[1],
+        model_mut: |b| &mut b.gpio[1],
+    },
+    Slot {
+        base: gpio::base('C').unwrap(),
+        name: "GPIOC",
+        rcc: Some((Ahb1, 2)),
+        irqs: &[],
+        registers: &[],
+        data_register: None,
+        model: |b| &b.gpio[2],
+        model_mut: |b| &mut b.gpio[2],
+    },
+    Slot {
+        base: rcc::BASE,
+        name: "RCC",
+        rcc: None,
+        irqs: &[],
+        registers: &[(0x0, "CR"), (0x4, "PLLCFGR"), (0x8, "CFGR"), (0xC, "CIR"), (0x74, "CSR")],
+        data_register: None,
+        model: |b| &b.rcc,
+        model_mut: |b| &mut b.rcc,
+    },
+    Slot {
+        base: flash::BASE,
+        name: "FLASH",
+        rcc: None,
+        irqs: &[],
+        registers: &[(0x0, "ACR"), (0x4, "KEYR"), (0x8, "OPTKEYR"), (0xC, "SR"), (0x10, "CR")],
+        data_register: None,
+        model: |b| &b.flash,
+        model_mut: |b| &mut b.flash,
+    },
+    Slot {
+        base: dma::BASE,
+        name: "DMA1",
+        rcc: Some((Ahb1, 21)),
+        irqs: &[(irq::DMA1_STREAM3, dma::SPI2_RX_STREAM)],
+        registers: &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")],
+        data_register: None,
+        model: |b| &b.dma1,
+        model_mut: |b| &mut b.dma1,
+    },
+    Slot {
+        base: dbgmcu::BASE,
+        name: "DBGMCU",
+        rcc: None,
+        irqs: &[],
+        registers: &[(0x0, "IDCODE"), (0x4, "CR"), (0x8, "APB1_FZ"), (0xC, "APB2_FZ")],
+        data_register: None,
+        model: |b| &b.dbgmcu,
+        model_mut: |b| &mut b.dbgmcu,
+    },
+];
+
+/// Every peripheral's registers fit in 1 KiB from its base.
+const SLOT_SIZE: u32 = 0x400;
+
+/// The peripheral at `addr`, with the register's offset in it.
+fn slot_at(addr: u32) -> Option<(&'static Slot, u32)> {
+    let (base, offset) = (addr & !(SLOT_SIZE - 1), addr & (SLOT_SIZE - 1));
+    SLOTS.iter().find(|s| s.base == base).map(|s| (s, offset))
+}
+
 /// A peripheral register's name for reports: `IWDG.SR`, `SPI2.SR`, `RCC.CR`, or the
 /// peripheral and offset (`TIM2+0x010`).
 pub fn register_name(addr: u32) -> String {
-    /// The registers a report names in a peripheral: (offset, name).
-    type Registers = &'static [(u32, &'static str)];
-    /// (base, peripheral, its named registers).
-    const PERIPHERALS: [(u32, &str, Registers); 15] = [
-        (tim::TimerKind::Tim2.base(), "TIM2", &[]),
-        (tim::TimerKind::Tim4.base(), "TIM4", &[]),
-        (iwdg::BASE, "IWDG", &[(0x0, "KR"), (0x4, "PR"), (0x8, "RLR"), (0xC, "SR")]),
-        (0x4000_3800, "SPI2", &[(0x0, "CR1"), (0x4, "CR2"), (0x8, "SR"), (0xC, "DR")]),
-        (pwr::BASE, "PWR", &[(0x0, "CR"), (0x4, "CSR")]),
-        (usart::BASE, "USART1", &[(0x0, "SR"), (0x4, "DR"), (0x8, "BRR"), (0xC, "CR1"), (0x10, "CR2"), (0x14, "CR3")]),
-        (adc::BASE, "ADC1", &[(0x0, "SR"), (0x4, "CR1"), (0x8, "CR2")]),
-        (tim::TimerKind::Tim9.base(), "TIM9", &[]),
-        (0x4002_0000, "GPIOA", &[]),
-        (0x4002_0400, "GPIOB", &[]),
-        (0x4002_0800, "GPIOC", &[]),
-        (rcc::BASE, "RCC", &[(0x0, "CR"), (0x4, "PLLCFGR"), (0x8, "CFGR"), (0xC, "CIR"), (0x74, "CSR")]),
-        (flash::BASE, "FLASH", &[(0x0, "ACR"), (0x4, "KEYR"), (0x8, "OPTKEYR"), (0xC, "SR"), (0x10, "CR")]),
-        (dma::BASE, "DMA1", &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")]),
-        (dbgmcu::BASE, "DBGMCU", &[(0x0, "IDCODE"), (0x4, "CR"), (0x8, "APB1_FZ"), (0xC, "APB2_FZ")]),
-    ];
-    let (base, offset) = (addr & !0x3FF, addr & 0x3FF);
-    match PERIPHERALS.iter().find(|(b, _, _)| *b == base) {
-        Some((_, name, regs)) => match regs.iter().find(|(o, _)| *o == offset) {
-            Some((_, reg)) => format!("{name}.{reg}"),
-            None => format!("{name}+{offset:#05x}"),
+    match slot_at(addr) {
+        Some((slot, offset)) => match slot.registers.iter().find(|(o, _)| *o == offset) {
+            Some((_, reg)) => format!("{}.{reg}", slot.name),
+            None => format!("{}+{offset:#05x}", slot.name),
         },
         None => format!("{addr:#010x}"),
     }
@@ -183,7 +356,7 @@ impl Board {
     /// The compare values TIM4 drives at `now` (the preloaded values in force).
     pub fn motor_compares(&mut self, now: Time) -> [u16; 4] {
         let mut out = [0u16; 4];
-        let running = self.rcc.is_enabled(rcc::Bus::Apb1, 2);
+        let running = self.is_clocked(TIM4_BASE);
         for (ch, o) in out.iter_mut().enumerate() {
             // Without its clock (or after a reset) TIM4's outputs are off, and a pin not routed
             // to TIM4 does not carry them: the MOSFET gates are pulled low.
@@ -220,12 +393,9 @@ impl Board {
         self.adc.set_channel_volts(adc::BATTERY_CHANNEL, volts);
     }
 
-    fn clock_check(&self, name: &str, bus: rcc::Bus, bit: u32) -> Result<(), Unmodelled> {
-        if self.rcc.is_enabled(bus, bit) {
-            Ok(())
-        } else {
-            Err(Unmodelled::new(name, format!("accessed while its clock is disabled in RCC ({bus:?} enable bit {bit})")))
-        }
+    /// Whether the peripheral at `base` has its clock (one RCC does not gate always has).
+    fn is_clocked(&self, base: u32) -> bool {
+        slot_at(base).is_some_and(|(slot, _)| slot.rcc.is_none_or(|(bus, bit)| self.rcc.is_enabled(bus, bit)))
     }
 
     fn forward_pins(&mut self, now: Time) {
@@ -259,7 +429,7 @@ impl Board {
             self.edges.pop_front();
             self.gpio[RADIO_PORT].set_external(channel as u8, Some(level));
             // TIM2 sees the pin only through AF1, and only with its clock on.
-            if !self.gpio[RADIO_PORT].routes(channel as u8, AF_TIM2) || !self.rcc.is_enabled(rcc::Bus::Apb1, 0) {
+            if !self.gpio[RADIO_PORT].routes(channel as u8, AF_TIM2) || !self.is_clocked(TIM2_BASE) {
                 continue;
             }
             // The capture unit latches the counter at the edge itself, whenever the firmware
@@ -274,114 +444,54 @@ impl Board {
         }
     }
 
-    /// The timers count their APB's timer clock.
-    fn sync_timer_clocks(&mut self, now: Time) -> Result<(), Unmodelled> {
-        let c = self.rcc.clocks()?;
-        let units = |hz: u64| {
-            periph::units_per_cycle(hz)
-                .ok_or_else(|| Unmodelled::new("RCC", format!("timer clock {hz} Hz does not divide the 336 MHz time base")))
-        };
-        let (apb1, apb2) = (units(c.tim_apb1_hz)?, units(c.tim_apb2_hz)?);
-        self.tim2.set_clock_units(now, apb1);
-        self.tim4.set_clock_units(now, apb1);
-        self.tim9.set_clock_units(now, apb2);
-        Ok(())
+    /// Every model learns the clocks RCC derives now (the timers count their APB's timer
+    /// clock); returns them.
+    fn sync_clocks(&mut self, now: Time) -> Result<periph::Clocks, Unmodelled> {
+        let clocks = self.rcc.clocks()?;
+        for slot in &SLOTS {
+            (slot.model_mut)(self).set_clocks(now, clocks);
+        }
+        Ok(clocks)
     }
 
     fn route(&mut self, addr: u32, now: Time, op: Op) -> Result<u32, Unmodelled> {
-        use rcc::Bus::{Ahb1, Apb1, Apb2};
-        self.sync_timer_clocks(now)?;
-        let (base, offset) = (addr & !0x3FF, addr & 0x3FF);
-        let clocks = self.rcc.clocks();
-        macro_rules! dev {
-            ($name:expr, $bus:expr, $bit:expr, $model:expr) => {{
-                self.clock_check($name, $bus, $bit)?;
-                match op {
-                    Op::Read => $model.read(offset, now),
-                    Op::Write(v) => $model.write(offset, v, now).map(|()| 0),
-                }
-            }};
+        let clocks = self.sync_clocks(now)?;
+        let Some((slot, offset)) = slot_at(addr) else {
+            return Err(Unmodelled::new(format!("{addr:#010x}"), "no peripheral modelled at this address"));
+        };
+        if let Some((bus, bit)) = slot.rcc.filter(|&(bus, bit)| !self.rcc.is_enabled(bus, bit)) {
+            return Err(Unmodelled::new(slot.name, format!("accessed while its clock is disabled in RCC ({bus:?} enable bit {bit})")));
         }
-        match base {
-            0x4000_0000 => {
-                let v = dev!("TIM2", Apb1, 0, self.tim2)?;
-                if matches!(op, Op::Read) && (0x34..=0x40).contains(&offset) {
-                    let ch = ((offset - 0x34) / 4) as usize;
-                    if let Some(Some(at)) = self.last_capture.get_mut(ch).map(Option::take) {
-                        self.records.capture_reads.push((at, now));
-                    }
+        if slot.base == iwdg::BASE {
+            // The IWDG runs on the LSI (no enable bit in RCC): it learns when the LSI is ready.
+            self.iwdg.set_lsi(self.rcc.lsi_ready_at());
+        }
+        let model = (slot.model_mut)(self);
+        let value = match op {
+            Op::Read => model.read(offset, now, clocks)?,
+            Op::Write(v) => model.write(offset, v, now, clocks).map(|()| 0)?,
+        };
+        self.observe_access(slot.base, offset, op, now);
+        Ok(value)
+    }
+
+    /// What the board does with an access the model took: the capture latency of a TIM2
+    /// capture register read, TIM4's compare writes, and the IWDG's start key forcing the LSI
+    /// on (RM0368 §17.3.2).
+    fn observe_access(&mut self, base: u32, offset: u32, op: Op, now: Time) {
+        let ccr = (tim::CCR1..tim::CCR1 + 16).contains(&offset).then(|| ((offset - tim::CCR1) / 4) as usize);
+        match (base, op, ccr) {
+            (TIM2_BASE, Op::Read, Some(ch)) => {
+                if let Some(Some(at)) = self.last_capture.get_mut(ch).map(Option::take) {
+                    self.records.capture_reads.push((at, now));
                 }
-                Ok(v)
             }
-            0x4000_0800 => {
-                let v = dev!("TIM4", Apb1, 2, self.tim4)?;
-                if let Op::Write(value) = op {
-                    if (0x34..=0x40).contains(&offset) {
-                        self.records.ccr_writes.push((now, ((offset - 0x34) / 4) as usize, value));
-                    }
-                }
-                Ok(v)
-            }
-            0x4000_3000 => {
-                // The IWDG runs on the LSI and has no enable bit in RCC; its start key forces
-                // the LSI on.
+            (TIM4_BASE, Op::Write(value), Some(ch)) => self.records.ccr_writes.push((now, ch, value)),
+            (iwdg::BASE, _, _) if self.iwdg.is_started() => {
+                self.rcc.force_lsi_on(now);
                 self.iwdg.set_lsi(self.rcc.lsi_ready_at());
-                let v = match op {
-                    Op::Read => self.iwdg.read(offset, now),
-                    Op::Write(v) => self.iwdg.write(offset, v, now).map(|()| 0),
-                }?;
-                if self.iwdg.is_started() {
-                    self.rcc.force_lsi_on(now);
-                    self.iwdg.set_lsi(self.rcc.lsi_ready_at());
-                }
-                Ok(v)
             }
-            0x4000_3800 => {
-                self.clock_check("SPI2", Apb1, 14)?;
-                let clocks = clocks?;
-                match op {
-                    Op::Read => self.spi2.read(offset, now, clocks),
-                    Op::Write(v) => self.spi2.write(offset, v, now, clocks).map(|()| 0),
-                }
-            }
-            0x4000_7000 => dev!("PWR", Apb1, 28, self.pwr),
-            0x4001_1000 => {
-                self.clock_check("USART1", Apb2, 4)?;
-                let clocks = clocks?;
-                match op {
-                    Op::Read => self.usart1.read(offset, now, clocks),
-                    Op::Write(v) => self.usart1.write(offset, v, now, clocks).map(|()| 0),
-                }
-            }
-            0x4001_2000 => {
-                self.clock_check("ADC1", Apb2, 8)?;
-                let clocks = clocks?;
-                match op {
-                    Op::Read => self.adc.read(offset, now, clocks),
-                    Op::Write(v) => self.adc.write(offset, v, now, clocks).map(|()| 0),
-                }
-            }
-            0x4001_4000 => {
-                let v = dev!("TIM9", Apb2, 16, self.tim9)?;
-                Ok(v)
-            }
-            0x4002_0000 => dev!("GPIOA", Ahb1, 0, self.gpio[0]),
-            0x4002_0400 => dev!("GPIOB", Ahb1, 1, self.gpio[1]),
-            0x4002_0800 => dev!("GPIOC", Ahb1, 2, self.gpio[2]),
-            0x4002_3800 => match op {
-                Op::Read => self.rcc.read(offset, now),
-                Op::Write(v) => self.rcc.write(offset, v, now).map(|()| 0),
-            },
-            0x4002_6000 => dev!("DMA1", Ahb1, 21, self.dma1),
-            0x4002_3C00 => match op {
-                Op::Read => self.flash.read(offset, now),
-                Op::Write(v) => self.flash.write(offset, v, now).map(|()| 0),
-            },
-            0xE004_2000 => match op {
-                Op::Read => self.dbgmcu.read(offset, now),
-                Op::Write(v) => self.dbgmcu.write(offset, v, now).map(|()| 0),
-            },
-            _ => Err(Unmodelled::new(format!("{addr:#010x}"), "no peripheral modelled at this address")),
+            _ => {}
         }
     }
 
@@ -431,22 +541,9 @@ impl Board {
         self.flash.check_wait_states(clocks.hclk_hz)
     }
 
-    fn reset_peripheral(&mut self, (bus, bit): (rcc::Bus, u32)) {
-        use rcc::Bus::{Ahb1, Apb1, Apb2};
-        match (bus, bit) {
-            // The pins' external levels (the radio) survive a reset of the port's registers.
-            (Ahb1, 0) => self.gpio[0].reset_registers(),
-            (Ahb1, 1) => self.gpio[1].reset_registers(),
-            (Ahb1, 2) => self.gpio[2].reset_registers(),
-            (Apb1, 0) => self.tim2 = tim::Timer::new(tim::TimerKind::Tim2),
-            (Apb1, 2) => self.tim4 = tim::Timer::new(tim::TimerKind::Tim4),
-            (Apb1, 14) => self.spi2.reset_registers(),
-            (Apb1, 28) => self.pwr = pwr::Pwr::new(),
-            (Apb2, 4) => self.usart1.reset_registers(),
-            (Apb2, 8) => self.adc.reset_registers(),
-            (Apb2, 16) => self.tim9 = tim::Timer::new(tim::TimerKind::Tim9),
-            (Ahb1, 21) => self.dma1 = dma::Dma::new(),
-            _ => {}
+    fn reset_peripheral(&mut self, bit: RccBit) {
+        if let Some(slot) = SLOTS.iter().find(|slot| slot.rcc == Some(bit)) {
+            (slot.model_mut)(self).reset();
         }
     }
 }
@@ -474,7 +571,7 @@ impl Peripherals for Board {
         let word = if size >= 4 {
             value
         } else {
-            let is_data_register = matches!(addr & !3, 0x4000_380C | 0x4001_1004);
+            let is_data_register = slot_at(addr & !3).is_some_and(|(slot, offset)| slot.data_register == Some(offset));
             if is_data_register {
                 // A narrow write to a data register is a write of that data.
                 value & ((1u32 << (8 * size)) - 1)
@@ -490,43 +587,27 @@ impl Peripherals for Board {
     }
 
     fn next_event(&self) -> Option<Time> {
-        [
-            self.edges.front().map(|e| e.0),
-            self.rcc.next_event(),
-            self.tim2.next_event(),
-            self.tim4.next_event(),
-            self.tim9.next_event(),
-            self.spi2.next_event(),
-            self.usart1.next_event(),
-            self.iwdg.next_event(),
-            self.adc.next_event(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        let models = SLOTS.iter().filter_map(|slot| (slot.model)(self).next_event());
+        self.edges.front().map(|e| e.0).into_iter().chain(models).min()
     }
 
     fn advance(&mut self, now: Time, lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled> {
         self.deliver_edges(now);
+        // The RCC first: the clocks the others run on come from it (its turn below is then a
+        // no-op).
         self.rcc.advance(now);
-        let clocks = self.rcc.clocks()?;
-        self.sync_timer_clocks(now)?;
-        self.tim2.advance(now);
-        self.tim4.advance(now);
-        self.tim9.advance(now);
-        self.spi2.advance(now, clocks);
+        let clocks = self.sync_clocks(now)?;
+        self.iwdg.set_lsi(self.rcc.lsi_ready_at());
+        for slot in &SLOTS {
+            (slot.model_mut)(self).advance(now, clocks);
+        }
         self.serve_dma();
         self.collect_uart(now)?;
-        self.iwdg.set_lsi(self.rcc.lsi_ready_at());
-        self.iwdg.advance(now);
-        self.adc.advance(now, clocks);
-        lines(periph::irq::TIM2, self.tim2.irq_line());
-        lines(periph::irq::TIM4, self.tim4.irq_line());
-        lines(periph::irq::TIM1_BRK_TIM9, self.tim9.irq_line());
-        lines(periph::irq::SPI2, self.spi2.irq_line());
-        lines(periph::irq::USART1, self.usart1.irq_line());
-        lines(periph::irq::ADC, self.adc.irq_line());
-        lines(periph::irq::DMA1_STREAM3, self.dma1.irq_line(dma::SPI2_RX_STREAM));
+        for slot in &SLOTS {
+            for &(irq, line) in slot.irqs {
+                lines(irq, (slot.model)(self).irq_line(line));
+            }
+        }
         Ok(self.iwdg.expired(now))
     }
 

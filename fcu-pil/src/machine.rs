@@ -179,6 +179,9 @@ impl MaskingStats {
 const CFSR_IBUSERR: u32 = 1 << 8;
 const CFSR_PRECISERR: u32 = 1 << 9;
 const CFSR_STKERR: u32 = 1 << 12;
+/// CFSR bits (ARMv7-M B3.2.15): UsageFault UNDEFINSTR, INVSTATE.
+const CFSR_UNDEFINSTR: u32 = 1 << 16;
+const CFSR_INVSTATE: u32 = 1 << 17;
 
 #[derive(Clone, Debug)]
 enum Stop {
@@ -188,8 +191,7 @@ enum Stop {
     Interrupt,
     /// The guest branched to an EXC_RETURN value in handler mode.
     ExceptionReturn,
-    /// An undefined instruction (a panic's `udf`), or another synchronous fault.
-    SyncFault(String),
+    SyncFault(SyncFault),
     Unmodelled(Unmodelled),
     Memory {
         kind: &'static str,
@@ -197,6 +199,35 @@ enum Stop {
         /// The CFSR bits of the BusFault silicon raises for it; `None`: not modelled.
         bus_fault: Option<u32>,
     },
+}
+
+/// A fault the core raises at the instruction it executes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SyncFault {
+    /// An undefined instruction (a panic's `udf`).
+    UndefinedInstruction,
+    /// Another CPU exception QEMU raised, by its EXCP number.
+    CpuException(u32),
+}
+
+impl SyncFault {
+    /// The UsageFault status bit it sets in CFSR (ARMv7-M B3.2.15): UNDEFINSTR for an
+    /// undefined instruction, INVSTATE otherwise.
+    fn cfsr_bits(self) -> u32 {
+        match self {
+            SyncFault::UndefinedInstruction => CFSR_UNDEFINSTR,
+            SyncFault::CpuException(_) => CFSR_INVSTATE,
+        }
+    }
+}
+
+impl std::fmt::Display for SyncFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SyncFault::UndefinedInstruction => write!(f, "undefined instruction (UsageFault UNDEFINSTR)"),
+            SyncFault::CpuException(n) => write!(f, "CPU exception {n} (QEMU EXCP number)"),
+        }
+    }
 }
 
 /// Instruction counts and pessimistic cycle counts of translation blocks, from the flash image.
@@ -375,6 +406,42 @@ struct LazyFp {
 }
 
 impl<P: Peripherals> State<P> {
+    /// The state at power-on: nothing run, nothing pending, the clock at the board's reset
+    /// frequency.
+    fn power_on(board: P, code: Code, timing: Timing) -> Result<Self, Fault> {
+        let units_per_cycle = board.units_per_cycle().map_err(|error| Fault::Unmodelled { error, pc: 0, at: 0 })?;
+        Ok(State {
+            board,
+            scs: Scs::new(units_per_cycle),
+            now: 0,
+            deadline: 0,
+            units_per_cycle,
+            instructions: 0,
+            idle_time: 0,
+            stop: None,
+            code,
+            timing,
+            block_pc: 0,
+            block_size: 0,
+            block_started_at: 0,
+            current_exception: 0,
+            exc_instructions: vec![0; scs::EXCEPTIONS],
+            exc_entered_at: vec![0; scs::EXCEPTIONS],
+            exc_stack: Vec::new(),
+            exception_stats: HashMap::new(),
+            sleeping: false,
+            hard_faults: Vec::new(),
+            lockups: Vec::new(),
+            locked_up: false,
+            resets: Vec::new(),
+            fp_frames: 0,
+            fp_frames_owed: Vec::new(),
+            masking: None,
+            pending_since: vec![None; scs::EXCEPTIONS],
+            lines_sampled_at: 0,
+        })
+    }
+
     fn attribute(&mut self, n: u64) {
         if let Some(c) = self.exc_instructions.get_mut(self.current_exception) {
             *c += n;
@@ -405,7 +472,7 @@ impl<P: Peripherals> State<P> {
                 *since = Some(rose_by);
             } else if !level && since.is_some() {
                 // Software may have cleared the pending bit (NVIC_ICPR) with the line low.
-                let ispr = self.scs.read(0x200 + 4 * (irq / 32), now, self.current_exception).unwrap_or(u32::MAX);
+                let ispr = self.scs.read(scs::reg::NVIC_ISPR + 4 * (irq / 32), now, self.current_exception).unwrap_or(u32::MAX);
                 if ispr & (1 << (irq % 32)) == 0 {
                     *since = None;
                 }
@@ -429,134 +496,111 @@ fn emu(e: unicorn_engine::uc_error) -> Fault {
     Fault::Emulator(format!("{e:?}"))
 }
 
+/// The flash as the image programs it (erased bytes read 0xFF).
+fn flash_contents(image: &Image) -> Result<Vec<u8>, Fault> {
+    let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
+    for seg in &image.segments {
+        let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
+        match off.and_then(|o| flash.get_mut(o..o + seg.data.len())) {
+            Some(dst) => dst.copy_from_slice(&seg.data),
+            None => {
+                return Err(Fault::Emulator(format!("ELF segment at {:#010x} ({} bytes) is not in flash", seg.address, seg.data.len())))
+            }
+        }
+    }
+    Ok(flash)
+}
+
+/// Flash, read-only and executable, and its alias at 0 (BOOT0 low: boot from flash); SRAM; the
+/// system-memory page.
+fn map_memory<P: Peripherals>(uc: &mut Unicorn<'static, State<P>>, flash: &[u8], sysmem: &[u8]) -> Result<(), Fault> {
+    uc.mem_map(u64::from(FLASH_BASE), u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+    uc.mem_write(u64::from(FLASH_BASE), flash).map_err(emu)?;
+    uc.mem_map(0, u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
+    uc.mem_write(0, flash).map_err(emu)?;
+    uc.mem_map(u64::from(SRAM_BASE), u64::from(SRAM_SIZE), Prot::READ | Prot::WRITE).map_err(emu)?;
+    uc.mem_map(u64::from(SYSMEM_PAGE), 0x1000, Prot::READ).map_err(emu)?;
+    uc.mem_write(u64::from(SYSMEM_PAGE), sysmem).map_err(emu)
+}
+
+/// The regions whose accesses go to the peripheral models and the SCS: APB1, APB2, AHB1
+/// (GPIO, RCC, FLASH), the peripheral bit-band alias and the private peripheral bus, as
+/// (base, size). Everything else stays unmapped: an access faults.
+const PERIPHERAL_REGIONS: [(u64, u64); 5] =
+    [(0x4000_0000, 0x8000), (0x4001_0000, 0x8000), (0x4002_0000, 0x8000), (0x4200_0000, 0x0200_0000), (0xE000_0000, 0x0010_0000)];
+
+fn map_peripherals<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>) -> Result<(), Fault> {
+    for (base, size) in PERIPHERAL_REGIONS {
+        uc.mmio_map(
+            base,
+            size,
+            Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize| mmio_read(uc, (base + offset) as u32, size as u32)),
+            Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize, value: u64| {
+                mmio_write(uc, (base + offset) as u32, size as u32, value as u32)
+            }),
+        )
+        .map_err(emu)?;
+    }
+    Ok(())
+}
+
+/// The hooks that price blocks, stamp register accesses and stop the emulation at a fault.
+fn add_hooks<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>) -> Result<(), Fault> {
+    uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
+    // No memory hook on the peripheral range or on flash: with one, Unicorn 2.1.5 misexecuted
+    // the release image (see `timing`); the profiles date accesses from the block being run.
+    uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
+        let st = uc.get_data_mut();
+        // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
+        st.stop = Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(SyncFault::CpuException(intno)) });
+        let _ = uc.emu_stop();
+    })
+    .map_err(emu)?;
+    uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
+        uc.get_data_mut().stop = Some(Stop::SyncFault(SyncFault::UndefinedInstruction));
+        let _ = uc.emu_stop();
+        true
+    })
+    .map_err(emu)?;
+    uc.add_mem_hook(HookType::MEM_UNMAPPED | HookType::MEM_PROT, 1, 0, memory_fault_hook::<P>).map_err(emu)?;
+    Ok(())
+}
+
+/// Nothing answers at a reserved address: the bus returns an error, a BusFault (precise for a
+/// data access, ARMv7-M B3.2.15; an instruction fetch faults when the instruction would
+/// execute). An address where the chip has something the model lacks, and the rest, are
+/// refused.
+fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64) -> bool {
+    let reserved = !implemented_but_unmodelled(addr as u32);
+    let (kind, bus_fault) = match kind {
+        MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
+        MemType::WRITE_UNMAPPED if reserved => ("write to reserved memory", Some(CFSR_PRECISERR)),
+        MemType::FETCH_UNMAPPED if reserved => ("instruction fetch from reserved memory", Some(CFSR_IBUSERR)),
+        MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
+            ("access to memory the chip has and the model does not", None)
+        }
+        MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
+        MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
+        _ => ("memory access fault", None),
+    };
+    let st = uc.get_data_mut();
+    if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+        st.stop = Some(Stop::Memory { kind, address: addr as u32, bus_fault });
+    }
+    false
+}
+
 impl<P: Peripherals + 'static> Machine<P> {
     /// Powers on the board with `image` in flash, its time priced by `profile`.
     pub fn new(image: Image, board: P, profile: TimingProfile) -> Result<Self, Fault> {
-        let mut flash = vec![0xFFu8; FLASH_SIZE as usize];
-        for seg in &image.segments {
-            let off = seg.address.checked_sub(FLASH_BASE).map(|o| o as usize);
-            match off.and_then(|o| flash.get_mut(o..o + seg.data.len())) {
-                Some(dst) => dst.copy_from_slice(&seg.data),
-                None => {
-                    return Err(Fault::Emulator(format!("ELF segment at {:#010x} ({} bytes) is not in flash", seg.address, seg.data.len())))
-                }
-            }
-        }
+        let flash = flash_contents(&image)?;
         let sysmem = board.system_memory_page();
-        let scs = Scs::new(board.units_per_cycle().map_err(|e| Fault::Unmodelled { error: e, pc: 0, at: 0 })?);
-        let upc = board.units_per_cycle().unwrap_or(21);
-        let state = State {
-            board,
-            scs,
-            now: 0,
-            deadline: 0,
-            units_per_cycle: upc,
-            instructions: 0,
-            idle_time: 0,
-            stop: None,
-            code: Code::new(flash.clone()),
-            timing: Timing::new(profile),
-            block_pc: 0,
-            block_size: 0,
-            block_started_at: 0,
-            current_exception: 0,
-            exc_instructions: vec![0; scs::EXCEPTIONS],
-            exc_entered_at: vec![0; scs::EXCEPTIONS],
-            exc_stack: Vec::new(),
-            exception_stats: HashMap::new(),
-            sleeping: false,
-            hard_faults: Vec::new(),
-            lockups: Vec::new(),
-            locked_up: false,
-            resets: Vec::new(),
-            fp_frames: 0,
-            fp_frames_owed: Vec::new(),
-            masking: None,
-            pending_since: vec![None; scs::EXCEPTIONS],
-            lines_sampled_at: 0,
-        };
+        let state = State::power_on(board, Code::new(flash.clone()), Timing::new(profile))?;
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
-
-        // Flash, read-only and executable, and its alias at 0 (BOOT0 low: boot from flash).
-        uc.mem_map(u64::from(FLASH_BASE), u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
-        uc.mem_write(u64::from(FLASH_BASE), &flash).map_err(emu)?;
-        uc.mem_map(0, u64::from(FLASH_SIZE), Prot::READ | Prot::EXEC).map_err(emu)?;
-        uc.mem_write(0, &flash).map_err(emu)?;
-        uc.mem_map(u64::from(SRAM_BASE), u64::from(SRAM_SIZE), Prot::READ | Prot::WRITE).map_err(emu)?;
-        uc.mem_map(u64::from(SYSMEM_PAGE), 0x1000, Prot::READ).map_err(emu)?;
-        uc.mem_write(u64::from(SYSMEM_PAGE), &sysmem).map_err(emu)?;
-
-        // Peripherals: APB1, APB2, AHB1 (GPIO, RCC, FLASH), the peripheral bit-band alias and
-        // the private peripheral bus. Everything else stays unmapped: an access faults.
-        for (base, size) in [
-            (0x4000_0000u64, 0x8000u64),
-            (0x4001_0000, 0x8000),
-            (0x4002_0000, 0x8000),
-            (0x4200_0000, 0x0200_0000),
-            (0xE000_0000, 0x0010_0000),
-        ] {
-            uc.mmio_map(
-                base,
-                size,
-                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize| mmio_read(uc, (base + offset) as u32, size as u32)),
-                Some(move |uc: &mut Unicorn<'_, State<P>>, offset: u64, size: usize, value: u64| {
-                    mmio_write(uc, (base + offset) as u32, size as u32, value as u32)
-                }),
-            )
-            .map_err(emu)?;
-        }
-
-        uc.add_block_hook(1, 0, block_hook::<P>).map_err(emu)?;
-        // No memory hook in either profile: with one bound to the peripheral range, Unicorn 2.1.5
-        // misexecuted the release image's capture interrupt (a TIM2 CCR read inside an IT block
-        // landed 0x400 past the timer), and one on flash corrupted a register. The profiles date
-        // accesses from the block being run instead (see `timing`).
-        uc.add_intr_hook(|uc: &mut Unicorn<'_, State<P>>, intno: u32| {
-            let st = uc.get_data_mut();
-            // QEMU's EXCP_EXCEPTION_EXIT: a branch to EXC_RETURN in handler mode.
-            st.stop =
-                Some(if intno == 8 { Stop::ExceptionReturn } else { Stop::SyncFault(format!("CPU exception {intno} (QEMU EXCP number)")) });
-            let _ = uc.emu_stop();
-        })
-        .map_err(emu)?;
-        uc.add_insn_invalid_hook(|uc: &mut Unicorn<'_, State<P>>| {
-            let st = uc.get_data_mut();
-            st.stop = Some(Stop::SyncFault("undefined instruction (UsageFault UNDEFINSTR)".into()));
-            let _ = uc.emu_stop();
-            true
-        })
-        .map_err(emu)?;
-        uc.add_mem_hook(
-            HookType::MEM_UNMAPPED | HookType::MEM_PROT,
-            1,
-            0,
-            |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64| {
-                // Nothing answers at a reserved address: the bus returns an error, a BusFault
-                // (precise for a data access, ARMv7-M B3.2.15; an instruction fetch faults when
-                // the instruction would execute). An address where the chip has something the
-                // model lacks, and the rest, are refused.
-                let reserved = !implemented_but_unmodelled(addr as u32);
-                let (kind, bus_fault) = match kind {
-                    MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
-                    MemType::WRITE_UNMAPPED if reserved => ("write to reserved memory", Some(CFSR_PRECISERR)),
-                    MemType::FETCH_UNMAPPED if reserved => ("instruction fetch from reserved memory", Some(CFSR_IBUSERR)),
-                    MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
-                        ("access to memory the chip has and the model does not", None)
-                    }
-                    MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
-                    MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
-                    _ => ("memory access fault", None),
-                };
-                let st = uc.get_data_mut();
-                if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
-                    st.stop = Some(Stop::Memory { kind, address: addr as u32, bus_fault });
-                }
-                false
-            },
-        )
-        .map_err(emu)?;
-
+        map_memory(&mut uc, &flash, &sysmem)?;
+        map_peripherals(&mut uc)?;
+        add_hooks(&mut uc)?;
         let stack_top = image.initial_sp;
         let mut m = Machine { uc, image, stack_bottom: SRAM_BASE, stack_top };
         // Paint the stack region so its high-water mark can be read later.
@@ -1031,11 +1075,9 @@ impl<P: Peripherals + 'static> Machine<P> {
                     return Err(Fault::Memory { kind, address, pc: self.pc(), at: now })
                 }
                 (_, Some(Stop::ExceptionReturn)) => self.return_from_exception()?,
-                (_, Some(Stop::SyncFault(cause))) => {
+                (_, Some(Stop::SyncFault(fault))) => {
                     let pc = self.pc();
-                    // CFSR.UNDEFINSTR (bit 16) for an undefined instruction, INVSTATE otherwise.
-                    let bits = if cause.starts_with("undefined") { 1 << 16 } else { 1 << 17 };
-                    self.raise_hard_fault(pc, cause, bits)?;
+                    self.raise_hard_fault(pc, fault.to_string(), fault.cfsr_bits())?;
                 }
                 (Ok(()), Some(Stop::Deadline | Stop::Interrupt)) => {}
                 (Ok(()), None) => {
@@ -1063,10 +1105,9 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// Called as each translated block starts. A stop requested here stops the emulation before
 /// the block runs, so the block is charged only once it is going to run: a deadline or an
 /// interrupt that came due during the previous block stops here uncharged, and the block
-/// runs whole (and pays) when the emulation resumes. (Charging first and then stopping billed
-/// the block twice whenever an event fell inside it, and froze the CPU outright when events
-/// came closer together than the block was long: an edge every 0.5 µs against a 50-instruction
-/// block never let it run.)
+/// runs whole (and pays) when the emulation resumes. Charging before stopping would bill a
+/// block twice whenever an event fell inside it, and never let a block run that is longer than
+/// the spacing of the events.
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
     if stop_before_block(uc) {
         return;
@@ -1114,7 +1155,7 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
             let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
             let (a, s0, l) = (reg(uc, reg_addr), reg(uc, start), reg(uc, limit));
             let st = uc.get_data_mut();
-            if a == scs::DWT_BASE + 4 && st.scs.cyccnt_running() {
+            if a == scs::DWT_BASE + scs::reg::DWT_CYCCNT && st.scs.cyccnt_running() {
                 // The read is the block's first instruction: at its start under the optimistic
                 // profile, at its end under the pessimistic (as `access_time` stamps it).
                 let read_at = match st.timing.profile {
@@ -1178,7 +1219,7 @@ impl<P: Peripherals> State<P> {
         let Some(watched) = st.masking.as_ref().map(|m| m.watched) else { return };
         let masked = primask
             || (basepri != 0 && {
-                let prigroup = st.scs.read(0xD0C, now, current).map_or(0, |aircr| (aircr >> 8) & 7);
+                let prigroup = st.scs.read(scs::reg::AIRCR, now, current).map_or(0, |aircr| (aircr >> 8) & 7);
                 let group_mask = (0xFFu32 << (prigroup + 1)) & 0xFF;
                 (basepri & group_mask) as i32 <= st.scs.group_priority(watched)
             });
@@ -1633,6 +1674,20 @@ mod tests {
         m.reg(reg).unwrap()
     }
 
+    /// Rule: an undefined instruction (a panic's `udf`) is a UsageFault with CFSR.UNDEFINSTR,
+    /// escalated to HardFault when UsageFault is not enabled (ARMv7-M B1.5.14, B3.2.15).
+    #[test]
+    fn an_undefined_instruction_sets_undefinstr_and_escalates_to_hard_fault() {
+        let udf = [0xDE00u16, 0xE7FE];
+        let m = run(program_with(&udf, &[(scs::HARD_FAULT, &STACKLESS_HANDLER)], HANDLERS_AT), TimingProfile::Optimistic, 400);
+        let st = m.state();
+        assert_eq!(st.hard_faults.len(), 1, "{:?}", st.hard_faults);
+        assert!(st.hard_faults[0].cause.contains("undefined instruction"), "{}", st.hard_faults[0].cause);
+        assert_eq!(st.scs.cfsr, CFSR_UNDEFINSTR);
+        assert_eq!(st.scs.hfsr, 1 << 30, "HFSR.FORCED: the UsageFault is not enabled");
+        assert_eq!(m.current_exception(), scs::HARD_FAULT, "the handler ran");
+    }
+
     #[test]
     fn a_read_of_reserved_memory_is_a_precise_bus_fault_escalated_to_hard_fault() {
         let code = [RESERVED_READ.as_slice(), &[0xE7FE]].concat();
@@ -1666,7 +1721,7 @@ mod tests {
         // Locked: no instruction runs and an interrupt does not wake it, for as long as it lasts.
         let instructions = st.instructions;
         let now = m.now();
-        m.state_mut().scs.write(0x100, 1, now).unwrap();
+        m.state_mut().scs.write(scs::reg::NVIC_ISER, 1, now).unwrap();
         m.state_mut().scs.set_pending(16);
         m.run_until(3999).unwrap();
         assert_eq!((m.now(), m.state().instructions), (4000, instructions), "time passes, nothing runs");

@@ -25,6 +25,51 @@ pub const SCS_BASE: u32 = 0xE000_E000;
 /// Base of the DWT unit.
 pub const DWT_BASE: u32 = 0xE000_1000;
 
+/// Register offsets from [`SCS_BASE`] (ARMv7-M B3.2.2 SCB, B3.3.2 SysTick, B3.4.3 NVIC, C1.6.5
+/// DEMCR; the FPU's FPCCR, FPCAR and FPDSCR in the Cortex-M4 TRM). The NVIC's banks run over 8
+/// words, its priority registers over 60; `_END` is a bank's last word.
+pub mod reg {
+    pub const ICTR: u32 = 0x004;
+    pub const SYST_CSR: u32 = 0x010;
+    pub const SYST_RVR: u32 = 0x014;
+    pub const SYST_CVR: u32 = 0x018;
+    pub const SYST_CALIB: u32 = 0x01C;
+    pub const NVIC_ISER: u32 = 0x100;
+    pub const NVIC_ISER_END: u32 = 0x11C;
+    pub const NVIC_ICER: u32 = 0x180;
+    pub const NVIC_ICER_END: u32 = 0x19C;
+    pub const NVIC_ISPR: u32 = 0x200;
+    pub const NVIC_ISPR_END: u32 = 0x21C;
+    pub const NVIC_ICPR: u32 = 0x280;
+    pub const NVIC_ICPR_END: u32 = 0x29C;
+    pub const NVIC_IABR: u32 = 0x300;
+    pub const NVIC_IABR_END: u32 = 0x31C;
+    pub const NVIC_IPR: u32 = 0x400;
+    pub const NVIC_IPR_END: u32 = 0x4EC;
+    pub const CPUID: u32 = 0xD00;
+    pub const ICSR: u32 = 0xD04;
+    pub const VTOR: u32 = 0xD08;
+    pub const AIRCR: u32 = 0xD0C;
+    pub const SCR: u32 = 0xD10;
+    pub const CCR: u32 = 0xD14;
+    pub const SHPR1: u32 = 0xD18;
+    pub const SHPR2: u32 = 0xD1C;
+    pub const SHPR3: u32 = 0xD20;
+    pub const SHCSR: u32 = 0xD24;
+    pub const CFSR: u32 = 0xD28;
+    pub const HFSR: u32 = 0xD2C;
+    pub const CPACR: u32 = 0xD88;
+    pub const DEMCR: u32 = 0xDFC;
+    pub const STIR: u32 = 0xF00;
+    pub const FPCCR: u32 = 0xF34;
+    pub const FPCAR: u32 = 0xF38;
+    pub const FPDSCR: u32 = 0xF3C;
+    /// DWT registers, from [`super::DWT_BASE`] (ARMv7-M C1.8.7, C1.8.8).
+    pub const DWT_CTRL: u32 = 0x000;
+    pub const DWT_CYCCNT: u32 = 0x004;
+}
+use reg::*;
+
 /// Priority of thread mode with nothing active: lower than any configurable priority.
 pub const THREAD_PRIORITY: i32 = 256;
 
@@ -73,7 +118,7 @@ pub struct Scs {
 }
 
 /// CPUID of a Cortex-M4 r0p1 (the STM32F401's core, DBGMCU/PM0214).
-const CPUID: u32 = 0x410F_C241;
+const CPUID_VALUE: u32 = 0x410F_C241;
 
 impl Scs {
     pub fn new(units_per_cycle: u64) -> Self {
@@ -369,22 +414,22 @@ impl Scs {
 
     pub fn dwt_read(&mut self, offset: u32, now: Time) -> Result<u32, Unmodelled> {
         match offset {
-            0x000 => Ok(self.dwt_ctrl),
-            0x004 => Ok(self.cyccnt(now)),
+            DWT_CTRL => Ok(self.dwt_ctrl),
+            DWT_CYCCNT => Ok(self.cyccnt(now)),
             _ => Err(Unmodelled::offset("DWT", offset, false)),
         }
     }
 
     pub fn dwt_write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         match offset {
-            0x000 => {
+            DWT_CTRL => {
                 // Only CYCCNTENA is modelled; the read-only NUMCOMP/NOxxx fields are ignored.
                 Unmodelled::check_bits("DWT.CTRL", value & 0x0FFF_FFFF, 1)?;
                 self.rebase_cyccnt(now);
                 self.dwt_ctrl = (self.dwt_ctrl & 0xF000_0000) | (value & 1);
                 Ok(())
             }
-            0x004 => {
+            DWT_CYCCNT => {
                 self.cyccnt_base = value;
                 self.cyccnt_at = now;
                 Ok(())
@@ -398,46 +443,40 @@ impl Scs {
     /// A 32-bit read at `offset` from 0xE000_E000.
     pub fn read(&mut self, offset: u32, now: Time, current_exception: usize) -> Result<u32, Unmodelled> {
         self.advance(now);
+        let bank = (offset & 0x1F) / 4;
         match offset {
-            // ICTR: 3 → up to 128 interrupts.
-            0x004 => Ok(2),
-            // SysTick.
-            0x010 => {
+            // INTLINESNUM = 2: 65 to 96 interrupt lines, for the F401's 85.
+            ICTR => Ok(2),
+            SYST_CSR => {
                 let flag = self.systick_countflag;
                 // COUNTFLAG clears on read.
                 self.systick_countflag = false;
                 Ok(self.systick_csr | (u32::from(flag) << 16))
             }
-            0x014 => Ok(self.systick_rvr),
-            0x018 => Ok(self.systick_cvr(now)),
-            // CALIB: no reference clock, 10 ms not exact (TENMS = 0).
-            0x01C => Ok(0xC000_0000),
-            // NVIC ISER/ICER (read: enable state), ISPR/ICPR (pending), IABR (active).
-            0x100..=0x11C | 0x180..=0x19C => Ok(self.bits32(&self.enabled, (offset & 0x1F) / 4)),
-            0x200..=0x21C | 0x280..=0x29C => Ok(self.bits32(&self.pending, (offset & 0x1F) / 4)),
-            0x300..=0x31C => Ok(self.bits32(&self.active, (offset & 0x1F) / 4)),
-            0x400..=0x4EC => {
-                let first = 16 + (offset - 0x400) as usize;
-                Ok(self.priority_word(first))
-            }
-            // SCB.
-            0xD00 => Ok(CPUID),
-            0xD04 => Ok(self.icsr(current_exception)),
-            0xD08 => Ok(self.vtor),
-            0xD0C => Ok(0xFA05_0000 | (self.prigroup << 8)),
-            0xD10 => Ok(self.scr),
-            0xD14 => Ok(self.ccr),
-            0xD18 => Ok(self.priority_word(4)),
-            0xD1C => Ok(self.priority_word(8)),
-            0xD20 => Ok(self.priority_word(12)),
-            0xD24 => Ok(self.shcsr),
-            0xD28 => Ok(self.cfsr),
-            0xD2C => Ok(self.hfsr),
-            0xD88 => Ok(self.cpacr),
-            0xDFC => Ok(self.demcr),
-            0xF34 => Ok(self.fpccr),
-            0xF38 => Ok(self.fpcar),
-            0xF3C => Ok(self.fpdscr),
+            SYST_RVR => Ok(self.systick_rvr),
+            SYST_CVR => Ok(self.systick_cvr(now)),
+            // No reference clock, 10 ms not exact (TENMS = 0).
+            SYST_CALIB => Ok(0xC000_0000),
+            // ISER/ICER read the enable state, ISPR/ICPR the pending state.
+            NVIC_ISER..=NVIC_ISER_END | NVIC_ICER..=NVIC_ICER_END => Ok(self.bits32(&self.enabled, bank)),
+            NVIC_ISPR..=NVIC_ISPR_END | NVIC_ICPR..=NVIC_ICPR_END => Ok(self.bits32(&self.pending, bank)),
+            NVIC_IABR..=NVIC_IABR_END => Ok(self.bits32(&self.active, bank)),
+            NVIC_IPR..=NVIC_IPR_END => Ok(self.priority_word(16 + (offset - NVIC_IPR) as usize)),
+            CPUID => Ok(CPUID_VALUE),
+            ICSR => Ok(self.icsr(current_exception)),
+            VTOR => Ok(self.vtor),
+            AIRCR => Ok(0xFA05_0000 | (self.prigroup << 8)),
+            SCR => Ok(self.scr),
+            CCR => Ok(self.ccr),
+            SHPR1 | SHPR2 | SHPR3 => Ok(self.priority_word(4 + (offset - SHPR1) as usize)),
+            SHCSR => Ok(self.shcsr),
+            CFSR => Ok(self.cfsr),
+            HFSR => Ok(self.hfsr),
+            CPACR => Ok(self.cpacr),
+            DEMCR => Ok(self.demcr),
+            FPCCR => Ok(self.fpccr),
+            FPCAR => Ok(self.fpcar),
+            FPDSCR => Ok(self.fpdscr),
             _ => Err(Unmodelled::offset("SCS", offset, false)),
         }
     }
@@ -446,7 +485,44 @@ impl Scs {
     pub fn write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.advance(now);
         match offset {
-            0x010 => {
+            SYST_CSR | SYST_RVR | SYST_CVR => self.write_systick(offset, value, now),
+            NVIC_ISER..=NVIC_ISER_END
+            | NVIC_ICER..=NVIC_ICER_END
+            | NVIC_ISPR..=NVIC_ISPR_END
+            | NVIC_ICPR..=NVIC_ICPR_END
+            | NVIC_IPR..=NVIC_IPR_END
+            | STIR => {
+                self.write_nvic(offset, value);
+                Ok(())
+            }
+            ICSR | VTOR | AIRCR | SCR | CCR | SHPR1 | SHPR2 | SHPR3 | SHCSR | CFSR | HFSR | CPACR => self.write_scb(offset, value, now),
+            DEMCR => {
+                // TRCENA (bit 24) gates the DWT; the vector-catch and monitor bits need a debugger.
+                Unmodelled::check_bits("DCB.DEMCR", value, 1 << 24)?;
+                self.rebase_cyccnt(now);
+                self.demcr = value;
+                Ok(())
+            }
+            FPCCR => {
+                Unmodelled::check_bits("FPU.FPCCR", value, 0xC000_0000)?;
+                if value & 0xC000_0000 != 0xC000_0000 {
+                    return Err(Unmodelled::new("FPU.FPCCR", "turning automatic/lazy FP state preservation off is not modelled"));
+                }
+                self.fpccr = value;
+                Ok(())
+            }
+            FPDSCR => {
+                self.fpdscr = value & 0x07C0_0000;
+                Ok(())
+            }
+            _ => Err(Unmodelled::offset("SCS", offset, true)),
+        }
+    }
+
+    /// SysTick's CSR, RVR and CVR.
+    fn write_systick(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        match offset {
+            SYST_CSR => {
                 // ENABLE, TICKINT, CLKSOURCE. The external reference (CLKSOURCE = 0, HCLK/8 on
                 // the STM32F4) is not modelled.
                 Unmodelled::check_bits("SysTick.CSR", value, 0x7)?;
@@ -470,12 +546,12 @@ impl Scs {
                 }
                 Ok(())
             }
-            0x014 => {
+            SYST_RVR => {
                 Unmodelled::check_bits("SysTick.RVR", value, 0x00FF_FFFF)?;
                 self.systick_rvr = value;
                 Ok(())
             }
-            0x018 => {
+            SYST_CVR => {
                 // Any write clears the counter and COUNTFLAG; it reloads on the next cycle.
                 self.systick_countflag = false;
                 self.systick_loaded = 0;
@@ -486,117 +562,70 @@ impl Scs {
                 }
                 Ok(())
             }
-            0x100..=0x11C => {
-                self.set_bits32(EnableOp::Enable, (offset & 0x1F) / 4, value);
-                Ok(())
-            }
-            0x180..=0x19C => {
-                self.set_bits32(EnableOp::Disable, (offset & 0x1F) / 4, value);
-                Ok(())
-            }
-            0x200..=0x21C => {
-                self.set_bits32(EnableOp::Pend, (offset & 0x1F) / 4, value);
-                Ok(())
-            }
-            0x280..=0x29C => {
-                self.set_bits32(EnableOp::Unpend, (offset & 0x1F) / 4, value);
-                Ok(())
-            }
-            0x400..=0x4EC => {
-                let first = 16 + (offset - 0x400) as usize;
-                self.set_priority_word(first, value);
-                Ok(())
-            }
-            0xD04 => self.write_icsr(value),
-            0xD08 => {
+            _ => Err(Unmodelled::offset("SCS", offset, true)),
+        }
+    }
+
+    /// The NVIC's enable, pending and priority registers, and the software trigger.
+    fn write_nvic(&mut self, offset: u32, value: u32) {
+        let bank = (offset & 0x1F) / 4;
+        match offset {
+            NVIC_ISER..=NVIC_ISER_END => self.set_bits32(EnableOp::Enable, bank, value),
+            NVIC_ICER..=NVIC_ICER_END => self.set_bits32(EnableOp::Disable, bank, value),
+            NVIC_ISPR..=NVIC_ISPR_END => self.set_bits32(EnableOp::Pend, bank, value),
+            NVIC_ICPR..=NVIC_ICPR_END => self.set_bits32(EnableOp::Unpend, bank, value),
+            NVIC_IPR..=NVIC_IPR_END => self.set_priority_word(16 + (offset - NVIC_IPR) as usize, value),
+            // STIR: software trigger of an external interrupt.
+            _ => self.set_pending(16 + (value & 0x1FF) as usize),
+        }
+    }
+
+    /// The system control block, CPACR included.
+    fn write_scb(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        match offset {
+            ICSR => self.write_icsr(value)?,
+            VTOR => {
                 // TBLOFF: bits 29:9 for 85 interrupts (the table is 101 words: 512-byte aligned).
                 Unmodelled::check_bits("SCB.VTOR", value, 0x3FFF_FE00)?;
                 self.vtor = value;
-                Ok(())
             }
-            0xD0C => {
-                if value >> 16 != 0x05FA {
-                    // Writes without VECTKEY are ignored (ARMv7-M B3.2.6).
-                    return Ok(());
-                }
+            // Writes without VECTKEY are ignored (ARMv7-M B3.2.6).
+            AIRCR if value >> 16 != 0x05FA => {}
+            AIRCR => {
                 Unmodelled::check_bits("SCB.AIRCR", value & 0xFFFF, 0x0704 | 0x4)?;
                 self.prigroup = (value >> 8) & 7;
                 if value & 4 != 0 {
                     self.reset_requested = true;
                 }
-                Ok(())
             }
-            0xD10 => {
+            SCR => {
                 // SLEEPONEXIT modelled; SLEEPDEEP (stop mode) and SEVONPEND are not.
                 Unmodelled::check_bits("SCB.SCR", value, 0x2)?;
                 self.scr = value;
-                Ok(())
             }
-            0xD14 => {
+            CCR => {
                 // STKALIGN, DIV_0_TRP, UNALIGN_TRP stored (Unicorn does not trap either).
                 Unmodelled::check_bits("SCB.CCR", value, 0x200 | 0x10 | 0x8)?;
                 self.ccr = value;
-                Ok(())
             }
-            0xD18 => {
-                self.set_priority_word(4, value);
-                Ok(())
-            }
-            0xD1C => {
-                self.set_priority_word(8, value);
-                Ok(())
-            }
-            0xD20 => {
-                self.set_priority_word(12, value);
-                Ok(())
-            }
-            0xD24 => {
+            SHPR1 | SHPR2 | SHPR3 => self.set_priority_word(4 + (offset - SHPR1) as usize, value),
+            SHCSR => {
                 Unmodelled::check_bits("SCB.SHCSR", value, 0x0007_0000)?;
                 self.shcsr = value;
-                Ok(())
             }
-            0xD28 => {
-                self.cfsr &= !value;
-                Ok(())
-            }
-            0xD2C => {
-                self.hfsr &= !value;
-                Ok(())
-            }
-            0xD88 => {
+            // Write one to clear.
+            CFSR => self.cfsr &= !value,
+            HFSR => self.hfsr &= !value,
+            CPACR => {
                 Unmodelled::check_bits("SCB.CPACR", value, 0x00F0_0000)?;
                 self.cpacr = value;
                 if value & 0x00F0_0000 == 0x00F0_0000 && self.fpu_enabled_at.is_none() {
                     self.fpu_enabled_at = Some(now);
                 }
-                Ok(())
             }
-            0xDFC => {
-                // TRCENA (bit 24) gates the DWT; the vector-catch and monitor bits need a debugger.
-                Unmodelled::check_bits("DCB.DEMCR", value, 1 << 24)?;
-                self.rebase_cyccnt(now);
-                self.demcr = value;
-                Ok(())
-            }
-            0xF00 => {
-                // STIR: software trigger of an external interrupt.
-                self.set_pending(16 + (value & 0x1FF) as usize);
-                Ok(())
-            }
-            0xF34 => {
-                Unmodelled::check_bits("FPU.FPCCR", value, 0xC000_0000)?;
-                if value & 0xC000_0000 != 0xC000_0000 {
-                    return Err(Unmodelled::new("FPU.FPCCR", "turning automatic/lazy FP state preservation off is not modelled"));
-                }
-                self.fpccr = value;
-                Ok(())
-            }
-            0xF3C => {
-                self.fpdscr = value & 0x07C0_0000;
-                Ok(())
-            }
-            _ => Err(Unmodelled::offset("SCS", offset, true)),
+            _ => return Err(Unmodelled::offset("SCS", offset, true)),
         }
+        Ok(())
     }
 
     fn icsr(&self, current_exception: usize) -> u32 {
@@ -675,14 +704,14 @@ impl Scs {
     /// Byte lanes: priority registers may be written a byte at a time (RTIC does).
     pub fn write_byte(&mut self, offset: u32, value: u8, now: Time) -> Result<(), Unmodelled> {
         match offset {
-            0x400..=0x4EF => {
-                if let Some(p) = self.priority.get_mut(16 + (offset - 0x400) as usize) {
+            NVIC_IPR..=0x4EF => {
+                if let Some(p) = self.priority.get_mut(16 + (offset - NVIC_IPR) as usize) {
                     *p = value & 0xF0;
                 }
                 Ok(())
             }
-            0xD18..=0xD23 => {
-                if let Some(p) = self.priority.get_mut(4 + (offset - 0xD18) as usize) {
+            SHPR1..=0xD23 => {
+                if let Some(p) = self.priority.get_mut(4 + (offset - SHPR1) as usize) {
                     *p = value & 0xF0;
                 }
                 Ok(())
@@ -721,8 +750,8 @@ mod tests {
     #[test]
     fn a_higher_priority_irq_preempts_and_basepri_masks_it() {
         let mut s = Scs::new(4);
-        s.write(0x100, 1 << 28, 0).unwrap(); // enable TIM2 (IRQ 28)
-        s.write_byte(0x400 + 28, 0x10, 0).unwrap();
+        s.write(NVIC_ISER, 1 << 28, 0).unwrap(); // enable TIM2 (IRQ 28)
+        s.write_byte(NVIC_IPR + 28, 0x10, 0).unwrap();
         s.sample_line(28, true);
         assert_eq!(s.takeable(0, false), Some(16 + 28));
         assert_eq!(s.takeable(0x10, false), None, "BASEPRI at the same priority masks it");
@@ -734,9 +763,9 @@ mod tests {
     #[test]
     fn systick_pends_every_reload_period() {
         let mut s = Scs::new(4);
-        s.write(0x014, 999, 0).unwrap();
-        s.write(0x018, 0, 0).unwrap();
-        s.write(0x010, 7, 0).unwrap();
+        s.write(SYST_RVR, 999, 0).unwrap();
+        s.write(SYST_CVR, 0, 0).unwrap();
+        s.write(SYST_CSR, 7, 0).unwrap();
         let first = s.next_event(0).unwrap();
         assert_eq!(first, 1000 * 4, "RVR loads on the first cycle after enabling, then counts 999 down to 0");
         s.advance(first);
@@ -747,9 +776,9 @@ mod tests {
     #[test]
     fn cyccnt_counts_cycles_only_with_trcena_and_cyccntena() {
         let mut s = Scs::new(4);
-        s.dwt_write(0, 1, 0).unwrap();
+        s.dwt_write(DWT_CTRL, 1, 0).unwrap();
         assert_eq!(s.cyccnt(400), 0);
-        s.write(0xDFC, 1 << 24, 400).unwrap();
+        s.write(DEMCR, 1 << 24, 400).unwrap();
         assert_eq!(s.cyccnt(800), 100);
     }
 }

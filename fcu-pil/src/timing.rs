@@ -59,8 +59,8 @@
 //! - data reads from flash: every PC-relative (literal) load pays LATENCY, as a miss of the
 //!   ART's data cache would (pessimistic: a pool read again soon hits). Constant tables read
 //!   through a register are not seen: watching flash data reads needs a Unicorn memory hook on
-//!   flash, and with one, Unicorn 2.1.5 corrupted a register in the capture interrupt of the
-//!   release image (a literal-loaded base address came out wrong), so the model does without.
+//!   flash, which corrupts guest registers in Unicorn 2.1.5 (see docs/fcu-pil.md), so the model
+//!   does without.
 //! - every access to a peripheral register stalls the core for the bridge and the APB
 //!   transfer. ST gives no figure for this; the model's, an assumption from the AMBA APB
 //!   protocol: one HCLK through the AHB/APB bridge, up to one PCLK period less one HCLK to meet
@@ -89,8 +89,8 @@
 //! unaligned 32-bit instruction (the TRM's P of 3 covers the latter), contention between the
 //! I-code and D-code buses for the flash beyond the literal-load cycle, the prefetch buffer
 //! falling behind on sequential code with many loads, interrupts taken only between
-//! translation blocks (as before: a quantum of a few instructions), and a divide's or VDIV's
-//! overlap with later independent instructions (counted as blocking: pessimistic).
+//! translation blocks (a quantum of a few instructions), and a divide's or VDIV's overlap with
+//! later independent instructions (counted as blocking: pessimistic).
 
 use std::ffi::OsStr;
 use std::fmt;

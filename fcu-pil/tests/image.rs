@@ -9,6 +9,7 @@ use fcu_core::supervisor::FlightState;
 use fcu_core::telemetry::StatusFields;
 use fcu_pil::elf::Image;
 use fcu_pil::firmware;
+use fcu_pil::periph::sensors::Sensor;
 use fcu_pil::periph::time_from_s;
 use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
 use fcu_pil::telemetry::Line;
@@ -290,8 +291,7 @@ fn edge_storm_on_pa0(b: &mut EmulatedBoard, at_s: f64) {
 /// for the rest of each capture wrap (`timers::EDGE_BUDGET_PER_WRAP`), so the control tick
 /// keeps its 800 Hz and the watchdog has nothing to reset; the core sees the aileron's pulses
 /// stop, declares the link lost and flies its failsafe (its status line counting the muted
-/// pin, `rc_muted`), and the link is back once the storm is over. (Before, the storm starved
-/// the control task and the watchdog reset the board in the air.)
+/// pin, `rc_muted`), and the link is back once the storm is over.
 #[test]
 fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
     let (log, c) = fly_and_inject("hover", 8.0, 11.0, |b| edge_storm_on_pa0(b, 8.0));

@@ -465,7 +465,7 @@ mod pins {
     /// 3-wire mode from power-on) reads the undriven line, and a write does not reach the LSM6DSL.
     #[test]
     fn spi2_reaches_the_sensors_only_with_sck_and_data_on_af5() {
-        use fcu_pil::periph::sensors::{lis2mdl_reg, lsm6dsl_reg, UNDRIVEN};
+        use fcu_pil::periph::sensors::{lis2mdl_reg, lsm6dsl_reg, Sensor, UNDRIVEN};
         for (what, sck_af, data_af, reached) in [("AF5", 5, 5, true), ("SCK on AF6", 6, 5, false), ("data on AF0", 5, 0, false)] {
             let mut b = sensor_bus(sck_af, data_af);
             let who = sensor_read(&mut b, CS_LIS2MDL, lis2mdl_reg::WHO_AM_I);

@@ -40,7 +40,7 @@
 //! Layout, reset values and access types from the `stm32f4` 0.16 PAC (`stm32f401/adc1/*.rs`,
 //! `adc_common/ccr.rs`).
 
-use super::{units_per_cycle, Clocks, Time, Unmodelled, TIME_HZ};
+use super::{units_per_cycle, Clocks, Peripheral, Time, Unmodelled, TIME_HZ};
 
 /// Base address of ADC1 (RM0368 memory map).
 pub const BASE: u32 = 0x4001_2000;
@@ -468,26 +468,40 @@ impl Adc {
     }
 }
 
+impl Peripheral for Adc {
+    fn read(&mut self, offset: u32, now: Time, clocks: Clocks) -> Result<u32, Unmodelled> {
+        Adc::read(self, offset, now, clocks)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
+        Adc::write(self, offset, value, now, clocks)
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        Adc::next_event(self)
+    }
+
+    fn advance(&mut self, now: Time, clocks: Clocks) {
+        Adc::advance(self, now, clocks)
+    }
+
+    fn irq_line(&self, _line: usize) -> bool {
+        Adc::irq_line(self)
+    }
+
+    fn reset(&mut self) {
+        self.reset_registers();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     const US: Time = TIME_HZ / 1_000_000;
 
-    /// The board's clocks: PCLK2 = 84 MHz.
-    fn clocks() -> Clocks {
-        Clocks {
-            sysclk_hz: 84_000_000,
-            hclk_hz: 84_000_000,
-            pclk1_hz: 42_000_000,
-            pclk2_hz: 84_000_000,
-            tim_apb1_hz: 84_000_000,
-            tim_apb2_hz: 84_000_000,
-        }
-    }
-
     fn write(adc: &mut Adc, offset: u32, value: u32, now: Time) {
-        adc.write(offset, value, now, clocks()).expect("modelled");
+        adc.write(offset, value, now, Clocks::PLL_84_MHZ).expect("modelled");
     }
 
     /// ADCPRE = /4 (21 MHz), channel `ch` with sample code `smp`, ADON, then SWSTART at `t`.
@@ -508,7 +522,7 @@ mod tests {
     fn reset_values_are_zero() {
         let mut adc = Adc::new();
         for offset in [SR, CR1, CR2, SMPR1, SMPR2, SQR1, SQR2, SQR3, DR, CSR, CCR] {
-            assert_eq!(adc.read(offset, 0, clocks()), Ok(0), "offset {offset:#x}");
+            assert_eq!(adc.read(offset, 0, Clocks::PLL_84_MHZ), Ok(0), "offset {offset:#x}");
         }
     }
 
@@ -518,15 +532,15 @@ mod tests {
         adc.set_channel_volts(BATTERY_CHANNEL, 1.65);
         convert(&mut adc, 9, 0, 0);
         let start = T_STAB;
-        assert_eq!(adc.read(SR, start, clocks()).unwrap() & (SR_STRT | SR_EOC), SR_STRT);
-        assert_eq!(adc.read(CR2, start, clocks()).unwrap() & CR2_SWSTART, 0, "SWSTART cleared by hardware");
+        assert_eq!(adc.read(SR, start, Clocks::PLL_84_MHZ).unwrap() & (SR_STRT | SR_EOC), SR_STRT);
+        assert_eq!(adc.read(CR2, start, Clocks::PLL_84_MHZ).unwrap() & CR2_SWSTART, 0, "SWSTART cleared by hardware");
         // 21 MHz ADC clock = 16 units per cycle; 3 + 12 cycles.
         let end = start + 15 * 16;
         assert_eq!(adc.next_event(), Some(end));
-        assert_eq!(adc.read(SR, end - 1, clocks()).unwrap() & SR_EOC, 0);
-        assert_eq!(adc.read(SR, end, clocks()).unwrap() & (SR_STRT | SR_EOC), SR_STRT | SR_EOC);
-        assert_eq!(adc.read(DR, end, clocks()), Ok(2048), "round(1.65 / 3.3 x 4095) = round(2047.5)");
-        assert_eq!(adc.read(SR, end, clocks()).unwrap() & SR_EOC, 0, "reading DR clears EOC");
+        assert_eq!(adc.read(SR, end - 1, Clocks::PLL_84_MHZ).unwrap() & SR_EOC, 0);
+        assert_eq!(adc.read(SR, end, Clocks::PLL_84_MHZ).unwrap() & (SR_STRT | SR_EOC), SR_STRT | SR_EOC);
+        assert_eq!(adc.read(DR, end, Clocks::PLL_84_MHZ), Ok(2048), "round(1.65 / 3.3 x 4095) = round(2047.5)");
+        assert_eq!(adc.read(SR, end, Clocks::PLL_84_MHZ).unwrap() & SR_EOC, 0, "reading DR clears EOC");
         assert_eq!(adc.diagnostics(), AdcDiagnostics::default());
     }
 
@@ -536,7 +550,7 @@ mod tests {
         adc.set_channel_volts(0, 1.0);
         // ADCPRE = /2 (reset value): 84 MHz / 2 = 42 MHz.
         write(&mut adc, CR2, CR2_ADON, 0);
-        let e = adc.write(CR2, CR2_ADON | CR2_SWSTART, T_STAB, clocks()).unwrap_err();
+        let e = adc.write(CR2, CR2_ADON | CR2_SWSTART, T_STAB, Clocks::PLL_84_MHZ).unwrap_err();
         assert!(e.what.contains("ADC clock 42 MHz above the F401's 36 MHz maximum"), "{e}");
     }
 
@@ -545,10 +559,10 @@ mod tests {
         let mut adc = Adc::new();
         adc.set_channel_volts(3, 4.0);
         convert(&mut adc, 3, 0, 0);
-        assert_eq!(adc.read(DR, 1_000 * US, clocks()), Ok(4095));
+        assert_eq!(adc.read(DR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(4095));
         adc.set_channel_volts(3, -0.2);
         write(&mut adc, CR2, CR2_ADON | CR2_SWSTART, 1_000 * US);
-        assert_eq!(adc.read(DR, 2_000 * US, clocks()), Ok(0));
+        assert_eq!(adc.read(DR, 2_000 * US, Clocks::PLL_84_MHZ), Ok(0));
     }
 
     #[test]
@@ -559,10 +573,10 @@ mod tests {
         write(&mut adc, CR2, CR2_ALIGN, 0);
         convert(&mut adc, 1, 0, 0);
         assert_eq!(adc.next_event(), Some(T_STAB + 13 * 16), "3 + 10 cycles");
-        assert_eq!(adc.read(DR, 1_000 * US, clocks()), Ok(1023 << 6));
+        assert_eq!(adc.read(DR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(1023 << 6));
         write(&mut adc, CR1, 0b11 << 24, 1_000 * US); // 6 bits, left aligned to bit 7
         write(&mut adc, CR2, CR2_ADON | CR2_ALIGN | CR2_SWSTART, 1_000 * US);
-        assert_eq!(adc.read(DR, 2_000 * US, clocks()), Ok(63 << 2));
+        assert_eq!(adc.read(DR, 2_000 * US, Clocks::PLL_84_MHZ), Ok(63 << 2));
     }
 
     #[test]
@@ -570,7 +584,7 @@ mod tests {
         let mut adc = Adc::new();
         write(&mut adc, CCR, CCR_TSVREFE, 0);
         convert(&mut adc, 17, 7, 20 * US);
-        let sample = adc.read(DR, 1_000 * US, clocks()).unwrap();
+        let sample = adc.read(DR, 1_000 * US, Clocks::PLL_84_MHZ).unwrap();
         assert_eq!(sample, u32::from(vrefint_cal()));
         assert!((1490..=1510).contains(&vrefint_cal()), "1.21 V / 3.3 V x 4095 = 1501.5");
         // The HAL's VDDA estimate: 3300 x VREFINT_CAL / sample.
@@ -578,7 +592,7 @@ mod tests {
         // At VDDA = 3.0 V the same VREFINT converts higher and the HAL computes ~3000 mV.
         adc.set_vdda(3.0);
         write(&mut adc, CR2, CR2_ADON | CR2_SWSTART, 1_000 * US);
-        let sample = adc.read(DR, 2_000 * US, clocks()).unwrap();
+        let sample = adc.read(DR, 2_000 * US, Clocks::PLL_84_MHZ).unwrap();
         assert!((2995..=3005).contains(&(3300 * u32::from(vrefint_cal()) / sample)));
         assert_eq!(adc.diagnostics(), AdcDiagnostics::default(), "480 cycles at 21 MHz = 22.9 µs");
     }
@@ -589,14 +603,14 @@ mod tests {
         write(&mut adc, CCR, 1 << 16, 0);
         write(&mut adc, CR2, CR2_ADON, 0);
         write(&mut adc, SQR3, 17, 0);
-        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 10 * US, clocks()).is_err());
+        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 10 * US, Clocks::PLL_84_MHZ).is_err());
         write(&mut adc, CCR, (1 << 16) | CCR_TSVREFE, 10 * US);
         write(&mut adc, SQR3, 16, 10 * US);
-        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 30 * US, clocks()).is_err());
+        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 30 * US, Clocks::PLL_84_MHZ).is_err());
         write(&mut adc, SQR3, 18, 30 * US);
         write(&mut adc, SMPR1, 7 << 24, 30 * US);
         write(&mut adc, CR2, CR2_ADON | CR2_SWSTART, 30 * US);
-        assert_eq!(adc.read(DR, 1_000 * US, clocks()), Ok(u32::from(code(0.76, 3.3, 12))));
+        assert_eq!(adc.read(DR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(u32::from(code(0.76, 3.3, 12))));
     }
 
     #[test]
@@ -605,7 +619,7 @@ mod tests {
         write(&mut adc, CCR, 1 << 16, 0);
         write(&mut adc, CR2, CR2_ADON, 0);
         write(&mut adc, SQR3, 5, 0);
-        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 10 * US, clocks()).is_err());
+        assert!(adc.write(CR2, CR2_ADON | CR2_SWSTART, 10 * US, Clocks::PLL_84_MHZ).is_err());
     }
 
     #[test]
@@ -615,15 +629,15 @@ mod tests {
         write(&mut adc, CR1, CR1_EOCIE, 0);
         convert(&mut adc, 9, 0, 0);
         assert!(!adc.irq_line());
-        adc.advance(1_000 * US, clocks());
+        adc.advance(1_000 * US, Clocks::PLL_84_MHZ);
         assert!(adc.irq_line());
         // rc_w0: writing 1 keeps EOC, writing 0 clears it.
         write(&mut adc, SR, SR_FLAGS, 1_000 * US);
         assert!(adc.irq_line());
         write(&mut adc, SR, SR_FLAGS & !SR_EOC, 1_000 * US);
         assert!(!adc.irq_line());
-        assert_eq!(adc.read(SR, 1_000 * US, clocks()), Ok(SR_STRT));
-        assert_eq!(adc.read(CSR, 1_000 * US, clocks()), Ok(SR_STRT));
+        assert_eq!(adc.read(SR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(SR_STRT));
+        assert_eq!(adc.read(CSR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(SR_STRT));
     }
 
     #[test]
@@ -647,9 +661,9 @@ mod tests {
         adc.set_channel_volts(0, 1.0);
         convert(&mut adc, 0, 0, 0);
         write(&mut adc, CR2, CR2_ADON | CR2_SWSTART, 100 * US);
-        assert_eq!(adc.read(SR, 200 * US, clocks()).unwrap() & SR_OVR, 0, "EOCS = 0: no overrun detection");
+        assert_eq!(adc.read(SR, 200 * US, Clocks::PLL_84_MHZ).unwrap() & SR_OVR, 0, "EOCS = 0: no overrun detection");
         write(&mut adc, CR2, CR2_ADON | CR2_EOCS | CR2_SWSTART, 200 * US);
-        assert_eq!(adc.read(SR, 300 * US, clocks()).unwrap() & SR_OVR, SR_OVR);
+        assert_eq!(adc.read(SR, 300 * US, Clocks::PLL_84_MHZ).unwrap() & SR_OVR, SR_OVR);
         assert_eq!(adc.diagnostics().overruns, 1);
     }
 
@@ -667,10 +681,10 @@ mod tests {
             (DR, 0),
             (CSR, 0),
         ] {
-            assert!(adc.write(offset, value, 0, clocks()).is_err(), "{offset:#x} {value:#x}");
+            assert!(adc.write(offset, value, 0, Clocks::PLL_84_MHZ).is_err(), "{offset:#x} {value:#x}");
         }
-        assert!(adc.read(0x24, 0, clocks()).is_err(), "HTR");
-        assert!(adc.read(COMMON_OFFSET + 8, 0, clocks()).is_err(), "CDR");
+        assert!(adc.read(0x24, 0, Clocks::PLL_84_MHZ).is_err(), "HTR");
+        assert!(adc.read(COMMON_OFFSET + 8, 0, Clocks::PLL_84_MHZ).is_err(), "CDR");
     }
 
     #[test]
@@ -679,9 +693,9 @@ mod tests {
         adc.set_channel_volts(9, 2.0);
         write(&mut adc, CCR, 1 << 16, 0);
         adc.reset_registers();
-        assert_eq!(adc.read(CCR, 0, clocks()), Ok(0));
+        assert_eq!(adc.read(CCR, 0, Clocks::PLL_84_MHZ), Ok(0));
         convert(&mut adc, 9, 0, 0);
-        assert_eq!(adc.read(DR, 1_000 * US, clocks()), Ok(u32::from(code(2.0, 3.3, 12))));
+        assert_eq!(adc.read(DR, 1_000 * US, Clocks::PLL_84_MHZ), Ok(u32::from(code(2.0, 3.3, 12))));
     }
 
     #[test]

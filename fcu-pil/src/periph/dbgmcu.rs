@@ -11,7 +11,7 @@
 //! `docs/reference.md#versions`, built for the STM32F401xC) has DEV_ID 0x423 (RM0368
 //! DBGMCU_IDCODE), REV_ID 0x1000 for revision A and 0x1001 for revision Z. Assumption: revision Z.
 
-use super::{Time, Unmodelled};
+use super::{Clocks, Peripheral, Time, Unmodelled};
 
 /// Base address of DBGMCU (on the private peripheral bus).
 pub const BASE: u32 = 0xE004_2000;
@@ -90,6 +90,16 @@ impl Dbgmcu {
             }
             _ => Err(Unmodelled::offset(NAME, offset, true)),
         }
+    }
+}
+
+impl Peripheral for Dbgmcu {
+    fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
+        Dbgmcu::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: Clocks) -> Result<(), Unmodelled> {
+        Dbgmcu::write(self, offset, value, now)
     }
 }
 

@@ -286,6 +286,24 @@ fn stream_register(offset: u32) -> Option<(usize, u32)> {
     (stream < 8 && offset % 4 == 0).then_some((stream, rel % STREAM_STRIDE))
 }
 
+impl super::Peripheral for Dma {
+    fn read(&mut self, offset: u32, now: Time, _clocks: super::Clocks) -> Result<u32, Unmodelled> {
+        Dma::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: super::Clocks) -> Result<(), Unmodelled> {
+        Dma::write(self, offset, value, now)
+    }
+
+    fn irq_line(&self, stream: usize) -> bool {
+        Dma::irq_line(self, stream)
+    }
+
+    fn reset(&mut self) {
+        *self = Dma::new();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

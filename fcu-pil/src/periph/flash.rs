@@ -138,6 +138,16 @@ impl Flash {
     }
 }
 
+impl super::Peripheral for Flash {
+    fn read(&mut self, offset: u32, now: Time, _clocks: super::Clocks) -> Result<u32, Unmodelled> {
+        Flash::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: super::Clocks) -> Result<(), Unmodelled> {
+        Flash::write(self, offset, value, now)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -25,10 +25,10 @@
 //! 0. The SVD (PAC `gpioa/ospeedr.rs`) gives GPIOA.OSPEEDR a reset value of 0; the RM's
 //! 0x0C00_0000 is used here.
 
-use super::{Time, Unmodelled};
+use super::{Clocks, Peripheral, Time, Unmodelled};
 
 /// Base address of a port ('A'..='E', 'H'), RM0368 memory map.
-pub fn base(port: char) -> Option<u32> {
+pub const fn base(port: char) -> Option<u32> {
     let index = match port.to_ascii_uppercase() {
         'A' => 0,
         'B' => 1,
@@ -315,6 +315,21 @@ fn field2(reg: u32, pin: u8) -> u8 {
         ((reg >> (2 * u32::from(pin))) & 0b11) as u8
     } else {
         0
+    }
+}
+
+impl Peripheral for Gpio {
+    fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
+        Gpio::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: Clocks) -> Result<(), Unmodelled> {
+        Gpio::write(self, offset, value, now)
+    }
+
+    fn reset(&mut self) {
+        // The pins' external levels (the radio) survive a reset of the port's registers.
+        self.reset_registers();
     }
 }
 

@@ -32,7 +32,7 @@
 //!
 //! Layout and reset values from the `stm32f4` 0.16 PAC (`stm32f401/iwdg/*.rs`).
 
-use super::{Time, Unmodelled, TIME_HZ};
+use super::{Clocks, Peripheral, Time, Unmodelled, TIME_HZ};
 
 /// Base address of the IWDG (RM0368 memory map).
 pub const BASE: u32 = 0x4000_3000;
@@ -261,6 +261,24 @@ impl Iwdg {
             SR => Err(Unmodelled::new("IWDG.SR", format!("write of {value:#010x} to a read-only register"))),
             _ => Err(Unmodelled::offset(NAME, offset, true)),
         }
+    }
+}
+
+impl Peripheral for Iwdg {
+    fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
+        Iwdg::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: Clocks) -> Result<(), Unmodelled> {
+        Iwdg::write(self, offset, value, now)
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        Iwdg::next_event(self)
+    }
+
+    fn advance(&mut self, now: Time, _clocks: Clocks) {
+        Iwdg::advance(self, now)
     }
 }
 

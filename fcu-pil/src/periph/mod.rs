@@ -2,16 +2,8 @@
 //! reference manual (RM0368) and the `stm32f4` PAC's register descriptions (generated from ST's
 //! SVD), never from the firmware's code.
 //!
-//! Every model follows the same contract:
-//! - registers are addressed by their byte offset from the peripheral's base address;
-//! - `read(offset, now)` / `write(offset, value, now)` see 32-bit accesses (the bus splits or
-//!   widens other sizes, see [`crate::bus`]); an offset or a bit the model does not implement is
-//!   an [`Unmodelled`] error, which ends the run naming the register: no silent zeros;
-//! - time is [`Time`], in units of 1/336 MHz: every clock of the board (16 MHz HSI and HSE,
-//!   84 MHz SYSCLK and APB2, 42 MHz APB1) is a whole number of units per cycle;
-//! - a model that changes state on its own (a timer's update, a byte shifted out) says when
-//!   with `next_event()`, and brings itself up to date in `advance(now)`; reads and writes
-//!   always come with the current time, so a model may also compute lazily.
+//! Every model is a [`Peripheral`]; the board ([`crate::board`]) places each at its base address,
+//! gates it by its RCC clock enable and wires its interrupt lines, from one table.
 
 pub mod adc;
 pub mod dbgmcu;
@@ -25,6 +17,43 @@ pub mod sensors;
 pub mod spi;
 pub mod tim;
 pub mod usart;
+
+/// What the board needs from a peripheral model.
+///
+/// - Registers are addressed by their byte offset from the peripheral's base address.
+/// - `read` and `write` see 32-bit accesses: the board splits or widens other sizes. An offset
+///   or a bit the model does not implement is an [`Unmodelled`] error, which ends the run naming
+///   the register: no silent zeros.
+/// - Every access and every [`Peripheral::advance`] comes with the current time ([`Time`]) and
+///   the clocks the RCC derives, so a model may compute lazily; one that changes by itself (a
+///   timer's update, a byte shifted out) says when in [`Peripheral::next_event`].
+///
+/// Each model also keeps its own `read`/`write` taking only what it uses; this trait is the
+/// board's uniform view of them.
+pub trait Peripheral {
+    /// The register at `offset`, read at `now`.
+    fn read(&mut self, offset: u32, now: Time, clocks: Clocks) -> Result<u32, Unmodelled>;
+    /// `value` written to the register at `offset` at `now`.
+    fn write(&mut self, offset: u32, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled>;
+    /// The next time the model changes by itself, if it does.
+    fn next_event(&self) -> Option<Time> {
+        None
+    }
+    /// Brings the model up to `now`.
+    fn advance(&mut self, _now: Time, _clocks: Clocks) {}
+    /// The clocks as RCC derives them now, before every access and every advance: a model that
+    /// counts a clock on its own (a timer) counts at the new rate from `now` on.
+    fn set_clocks(&mut self, _now: Time, _clocks: Clocks) {}
+    /// The level of its interrupt output `line` (0 for a peripheral with one line; a DMA
+    /// controller's stream number).
+    fn irq_line(&self, _line: usize) -> bool {
+        false
+    }
+    /// Its reset bit in RCC was pulsed (RM0368 §6.3, RCC_AHB1RSTR, _APB1RSTR, _APB2RSTR: each
+    /// reset bit sits where the peripheral's enable bit sits in the matching xENR): its
+    /// registers go back to their reset values. A peripheral with no reset bit never sees this.
+    fn reset(&mut self) {}
+}
 
 /// Emulated time since power-on, in units of 1/[`TIME_HZ`] s.
 pub type Time = u64;
@@ -108,6 +137,17 @@ impl Clocks {
         pclk2_hz: 16_000_000,
         tim_apb1_hz: 16_000_000,
         tim_apb2_hz: 16_000_000,
+    };
+
+    /// The board running: SYSCLK 84 MHz from the PLL, APB1 at 42 MHz (its timers at 84 MHz),
+    /// APB2 at 84 MHz.
+    pub const PLL_84_MHZ: Clocks = Clocks {
+        sysclk_hz: 84_000_000,
+        hclk_hz: 84_000_000,
+        pclk1_hz: 42_000_000,
+        pclk2_hz: 84_000_000,
+        tim_apb1_hz: 84_000_000,
+        tim_apb2_hz: 84_000_000,
     };
 }
 

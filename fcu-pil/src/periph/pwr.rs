@@ -11,7 +11,7 @@
 //! value of 0, but RM0368 (PWR_CR) gives 0x0000_8000: VOS = 0b10, scale 2, the F401's reset value.
 //! The RM is followed here.
 
-use super::{Time, Unmodelled};
+use super::{Clocks, Peripheral, Time, Unmodelled};
 
 /// Base address of PWR (RM0368 memory map).
 pub const BASE: u32 = 0x4000_7000;
@@ -110,6 +110,20 @@ impl Pwr {
             CSR => Unmodelled::check_bits("PWR.CSR", value, CSR_READ_ONLY),
             _ => Err(Unmodelled::offset(NAME, offset, true)),
         }
+    }
+}
+
+impl Peripheral for Pwr {
+    fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
+        Pwr::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: Clocks) -> Result<(), Unmodelled> {
+        Pwr::write(self, offset, value, now)
+    }
+
+    fn reset(&mut self) {
+        *self = Pwr::new();
     }
 }
 

@@ -89,9 +89,33 @@ enum Phase {
     Read { addr: u8, started: bool },
 }
 
-/// The serial-interface state every sensor shares.
+/// What sets the three sensors' serial interfaces apart: the register map and the control
+/// register that holds the software-reset and reboot bits (the datasheets' register tables).
+#[derive(Debug)]
+struct Spec {
+    /// WHO_AM_I's address and the value the datasheet gives it.
+    who_am_i: (u8, u8),
+    /// The register holding the software-reset and reboot bits.
+    control: u8,
+    /// Software reset: the registers go back to their reset values; the bit reads 1 for
+    /// [`SW_RESET_TIME`], while the bus works.
+    sw_reset: u8,
+    /// Reboot of the trimming memory: the interface is unavailable for `boot_time`.
+    boot: u8,
+    /// Further control bits that clear themselves (never read back as written).
+    self_clearing: u8,
+    /// Power-on boot and reboot duration.
+    boot_time: Time,
+    /// Read-write registers whose reset value is not 0: (address, value).
+    reset_values: &'static [(u8, u8)],
+    access: fn(u8) -> Access,
+}
+
+/// The serial-interface state and the register file every sensor shares; `O` is the sensor's
+/// output sample.
 #[derive(Clone, Debug)]
-struct Port {
+struct Port<O> {
+    spec: &'static Spec,
     phase: Phase,
     /// The bus is ignored until then (power-on boot, BOOT/REBOOT).
     busy_until: Time,
@@ -100,33 +124,113 @@ struct Port {
     silent: bool,
     who_am_i_override: Option<u8>,
     unexpected_writes: u32,
+    regs: [u8; 128],
+    /// Output given during a transaction, applied when CS rises.
+    pending: Option<O>,
 }
 
-impl Port {
-    fn new(boot: Time) -> Self {
-        Port { phase: Phase::Idle, busy_until: boot, reset_until: 0, silent: false, who_am_i_override: None, unexpected_writes: 0 }
+impl<O> Port<O> {
+    /// Powered on at time 0: booting for the spec's boot time.
+    fn new(spec: &'static Spec) -> Self {
+        let mut p = Port {
+            spec,
+            phase: Phase::Idle,
+            busy_until: spec.boot_time,
+            reset_until: 0,
+            silent: false,
+            who_am_i_override: None,
+            unexpected_writes: 0,
+            regs: [0; 128],
+            pending: None,
+        };
+        p.reset_registers();
+        p
     }
 
     fn ready(&self, now: Time) -> bool {
         now >= self.busy_until
     }
+
+    fn reg(&self, addr: u8) -> u8 {
+        self.regs[usize::from(addr & 0x7F)]
+    }
+
+    fn reg_mut(&mut self, addr: u8) -> &mut u8 {
+        &mut self.regs[usize::from(addr & 0x7F)]
+    }
+
+    fn reset_registers(&mut self) {
+        for a in 0..128u8 {
+            if (self.spec.access)(a) == Access::Rw {
+                *self.reg_mut(a) = 0;
+            }
+        }
+        for &(a, v) in self.spec.reset_values {
+            *self.reg_mut(a) = v;
+        }
+    }
+
+    /// The value a read of `addr` returns now (no side effects).
+    fn peek(&self, addr: u8, now: Time) -> u8 {
+        let (who_am_i, value) = self.spec.who_am_i;
+        match addr {
+            a if a == who_am_i => self.who_am_i_override.unwrap_or(value),
+            a if a == self.spec.control && now < self.reset_until => self.reg(a) | self.spec.sw_reset,
+            a => self.reg(a),
+        }
+    }
+
+    /// A register write from the bus. A write to a read-only or reserved register is counted,
+    /// and otherwise ignored as the sensor ignores it.
+    fn write(&mut self, addr: u8, value: u8, now: Time) {
+        let spec = self.spec;
+        if (spec.access)(addr) != Access::Rw {
+            self.unexpected_writes += 1;
+            return;
+        }
+        if addr != spec.control {
+            *self.reg_mut(addr) = value;
+            return;
+        }
+        if value & spec.sw_reset != 0 {
+            self.reset_registers();
+            self.reset_until = now + SW_RESET_TIME;
+        } else {
+            *self.reg_mut(addr) = value & !(spec.boot | spec.self_clearing);
+        }
+        if value & spec.boot != 0 {
+            self.busy_until = now + spec.boot_time;
+        }
+    }
 }
 
 /// Register behaviour of one sensor; the transaction logic is shared (blanket [`SpiDevice`]).
 trait Chip {
-    fn port(&self) -> &Port;
-    fn port_mut(&mut self) -> &mut Port;
-    /// The value a read of `addr` returns now (no side effects).
-    fn peek(&self, addr: u8, now: Time) -> u8;
+    type Output;
+    fn port(&self) -> &Port<Self::Output>;
+    fn port_mut(&mut self) -> &mut Port<Self::Output>;
+    /// Puts a new sample in the output registers, if the sensor's mode takes it.
+    fn apply_output(&mut self, out: Self::Output);
     /// Side effects of reading `addr` (flags cleared, burst tracking).
     fn read_effects(&mut self, addr: u8);
     /// A register write from the bus.
-    fn write(&mut self, addr: u8, value: u8, now: Time);
+    fn write(&mut self, addr: u8, value: u8, now: Time) {
+        self.port_mut().write(addr, value, now);
+    }
     fn three_wire(&self) -> bool;
     fn increments(&self) -> bool;
     fn i2c_on(&self) -> bool;
-    /// CS rose after a transaction (not an ignored one).
-    fn end_transaction(&mut self);
+    /// CS rose after a transaction (not an ignored one), before a pending sample is applied.
+    fn end_transaction(&mut self) {}
+
+    /// A new sample: in the output registers at once between transactions, else when CS rises.
+    fn stage_output(&mut self, out: Self::Output) {
+        if self.port().phase == Phase::Idle {
+            self.apply_output(out);
+        } else {
+            self.port_mut().pending = Some(out);
+        }
+    }
 }
 
 fn next_addr(addr: u8, inc: bool) -> u8 {
@@ -148,13 +252,16 @@ impl<T: Chip> SpiDevice for T {
         self.port_mut().phase = Phase::Idle;
         if !matches!(phase, Phase::Idle | Phase::Ignored) {
             self.end_transaction();
+            if let Some(out) = self.port_mut().pending.take() {
+                self.apply_output(out);
+            }
         }
     }
 
     fn output(&self, now: Time) -> Option<u8> {
         let p = self.port();
         match p.phase {
-            Phase::Read { addr, .. } if !p.silent && p.ready(now) && self.three_wire() => Some(self.peek(addr, now)),
+            Phase::Read { addr, .. } if !p.silent && p.ready(now) && self.three_wire() => Some(p.peek(addr, now)),
             _ => None,
         }
     }
@@ -199,44 +306,45 @@ impl<T: Chip> SpiDevice for T {
     }
 }
 
-/// Fault injection and statistics common to the three models.
-macro_rules! common_api {
-    ($t:ty, $who:expr) => {
-        impl $t {
-            /// Make `WHO_AM_I` answer `value` instead of the datasheet's (None: the real one).
-            pub fn set_who_am_i_override(&mut self, value: Option<u8>) {
-                self.port.who_am_i_override = value;
-            }
+/// A sensor on the bus: what the SPI master needs of it, and the fault injection and
+/// statistics the harness and the tests use.
+pub trait Sensor: SpiDevice {
+    /// Make `WHO_AM_I` answer `value` instead of the datasheet's (None: the real one).
+    fn set_who_am_i_override(&mut self, value: Option<u8>);
+    /// A silent sensor never drives the line (reads are undriven); writes still work.
+    fn set_silent(&mut self, silent: bool);
+    /// Writes to read-only or undocumented registers (accepted silently by a real sensor).
+    fn unexpected_writes(&self) -> u32;
+    /// The register's current content as the bus would read it at `now`.
+    fn register(&self, addr: u8, now: Time) -> u8;
+    /// Whether the sensor answers on the bus at `now` (not booting).
+    fn is_ready(&self, now: Time) -> bool;
+}
 
-            /// A silent sensor never drives the line (reads are undriven); writes still work.
-            pub fn set_silent(&mut self, silent: bool) {
-                self.port.silent = silent;
-            }
+impl<T: Chip> Sensor for T {
+    fn set_who_am_i_override(&mut self, value: Option<u8>) {
+        self.port_mut().who_am_i_override = value;
+    }
 
-            /// Writes to read-only or undocumented registers (accepted silently by a real sensor).
-            pub fn unexpected_writes(&self) -> u32 {
-                self.port.unexpected_writes
-            }
+    fn set_silent(&mut self, silent: bool) {
+        self.port_mut().silent = silent;
+    }
 
-            /// The register's current content as the bus would read it at `now` (for tests).
-            pub fn register(&self, addr: u8, now: Time) -> u8 {
-                self.peek(addr & 0x7F, now)
-            }
+    fn unexpected_writes(&self) -> u32 {
+        self.port().unexpected_writes
+    }
 
-            /// Whether the sensor answers on the bus at `now` (not booting).
-            pub fn is_ready(&self, now: Time) -> bool {
-                self.port.ready(now)
-            }
+    fn register(&self, addr: u8, now: Time) -> u8 {
+        self.port().peek(addr & 0x7F, now)
+    }
 
-            fn who_am_i(&self) -> u8 {
-                self.port.who_am_i_override.unwrap_or($who)
-            }
-        }
-    };
+    fn is_ready(&self, now: Time) -> bool {
+        self.port().ready(now)
+    }
 }
 
 /// Register access class in a sensor's map.
-#[derive(Clone, Copy, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Access {
     Rw,
     Ro,
@@ -275,12 +383,28 @@ pub mod lsm6dsl_reg {
     pub const GDA: u8 = 0x02;
 }
 
+const LSM6DSL: Spec = Spec {
+    who_am_i: (lsm6dsl_reg::WHO_AM_I, lsm6dsl_reg::WHO_AM_I_VALUE),
+    control: lsm6dsl_reg::CTRL3_C,
+    sw_reset: lsm6dsl_reg::SW_RESET,
+    boot: lsm6dsl_reg::BOOT,
+    self_clearing: 0,
+    boot_time: LSM6DSL_BOOT,
+    // CTRL3_C = 0x04 (IF_INC), CTRL9_XL = 0xE0 (DEN_X/Y/Z).
+    reset_values: &[(lsm6dsl_reg::CTRL3_C, lsm6dsl_reg::IF_INC), (lsm6dsl_reg::CTRL9_XL, 0xE0)],
+    // Datasheet table "Registers address map".
+    access: |addr| match addr {
+        0x01 | 0x04..=0x0B | 0x0D | 0x0E | 0x10..=0x1A | 0x42 | 0x58..=0x61 | 0x73..=0x75 => Access::Rw,
+        0x0F | 0x1B..=0x1E | 0x20..=0x41 | 0x49..=0x55 | 0x66..=0x6B => Access::Ro,
+        _ => Access::Reserved,
+    },
+};
+
 /// LSM6DSL accelerometer + gyroscope (WHO_AM_I 0x6A).
 #[derive(Clone, Debug)]
 pub struct Lsm6dsl {
-    port: Port,
-    regs: [u8; 128],
-    pending: Option<([i16; 3], [i16; 3])>,
+    /// Output sample: gyro X, Y, Z then accel X, Y, Z.
+    port: Port<([i16; 3], [i16; 3])>,
     /// Output registers 0x22..=0x2D read in this transaction (bit n = 0x22 + n).
     burst: u16,
     reads: u64,
@@ -295,68 +419,14 @@ impl Default for Lsm6dsl {
 impl Lsm6dsl {
     /// Powered on at time 0: booting for [`LSM6DSL_BOOT`].
     pub fn new() -> Self {
-        let mut s = Lsm6dsl { port: Port::new(LSM6DSL_BOOT), regs: [0; 128], pending: None, burst: 0, reads: 0 };
-        s.reset_registers();
-        s
-    }
-
-    fn reset_registers(&mut self) {
-        use lsm6dsl_reg::*;
-        for a in 0..128u8 {
-            if Self::access(a) == Access::Rw {
-                self.regs[usize::from(a)] = 0;
-            }
-        }
-        // Datasheet reset values: CTRL3_C = 0x04 (IF_INC), CTRL9_XL = 0xE0 (DEN_X/Y/Z).
-        self.regs[usize::from(CTRL3_C)] = IF_INC;
-        self.regs[usize::from(CTRL9_XL)] = 0xE0;
-    }
-
-    /// Register map (datasheet table "Registers address map").
-    fn access(addr: u8) -> Access {
-        match addr {
-            0x01 | 0x04..=0x0B | 0x0D | 0x0E | 0x10..=0x1A | 0x42 | 0x58..=0x61 | 0x73..=0x75 => Access::Rw,
-            0x0F | 0x1B..=0x1E | 0x20..=0x41 | 0x49..=0x55 | 0x66..=0x6B => Access::Ro,
-            _ => Access::Reserved,
-        }
+        Lsm6dsl { port: Port::new(&LSM6DSL), burst: 0, reads: 0 }
     }
 
     /// New sensor output (raw LSB, sensor axes): gyro X, Y, Z then accel X, Y, Z, stored from
     /// OUTX_L_G (0x22) little-endian as in the datasheet. A half whose ODR is 0 (power-down) keeps
     /// its old output. Given during a transaction, it is applied when CS rises.
     pub fn set_output(&mut self, gyro: [i16; 3], accel: [i16; 3]) {
-        if self.port.phase == Phase::Idle {
-            self.apply_output(gyro, accel);
-        } else {
-            self.pending = Some((gyro, accel));
-        }
-    }
-
-    fn apply_output(&mut self, gyro: [i16; 3], accel: [i16; 3]) {
-        use lsm6dsl_reg::*;
-        let xl_on = self.regs[usize::from(CTRL1_XL)] >> 4 != 0;
-        let g_on = self.regs[usize::from(CTRL2_G)] >> 4 != 0;
-        let mut put = |base: u8, v: [i16; 3]| {
-            for (i, axis) in v.iter().enumerate() {
-                let [lo, hi] = axis.to_le_bytes();
-                let a = usize::from(base) + 2 * i;
-                self.regs[a] = lo;
-                self.regs[a + 1] = hi;
-            }
-        };
-        if g_on {
-            put(OUTX_L_G, gyro);
-        }
-        if xl_on {
-            put(OUTX_L_XL, accel);
-        }
-        let status = &mut self.regs[usize::from(STATUS_REG)];
-        if g_on {
-            *status |= GDA;
-        }
-        if xl_on {
-            *status |= XLDA;
-        }
+        self.stage_output((gyro, accel));
     }
 
     /// Completed output-burst reads: transactions that read all 12 bytes OUTX_L_G..OUTZ_H_XL.
@@ -365,23 +435,41 @@ impl Lsm6dsl {
     }
 }
 
-common_api!(Lsm6dsl, lsm6dsl_reg::WHO_AM_I_VALUE);
-
 impl Chip for Lsm6dsl {
-    fn port(&self) -> &Port {
+    type Output = ([i16; 3], [i16; 3]);
+
+    fn port(&self) -> &Port<Self::Output> {
         &self.port
     }
-    fn port_mut(&mut self) -> &mut Port {
+    fn port_mut(&mut self) -> &mut Port<Self::Output> {
         &mut self.port
     }
 
-    fn peek(&self, addr: u8, now: Time) -> u8 {
+    fn apply_output(&mut self, (gyro, accel): Self::Output) {
         use lsm6dsl_reg::*;
-        let v = self.regs[usize::from(addr & 0x7F)];
-        match addr {
-            WHO_AM_I => self.who_am_i(),
-            CTRL3_C if now < self.port.reset_until => v | SW_RESET,
-            _ => v,
+        let p = &mut self.port;
+        let xl_on = p.reg(CTRL1_XL) >> 4 != 0;
+        let g_on = p.reg(CTRL2_G) >> 4 != 0;
+        let mut put = |base: u8, v: [i16; 3]| {
+            for (i, axis) in v.iter().enumerate() {
+                let [lo, hi] = axis.to_le_bytes();
+                let a = base + 2 * i as u8;
+                *p.reg_mut(a) = lo;
+                *p.reg_mut(a + 1) = hi;
+            }
+        };
+        if g_on {
+            put(OUTX_L_G, gyro);
+        }
+        if xl_on {
+            put(OUTX_L_XL, accel);
+        }
+        let status = p.reg_mut(STATUS_REG);
+        if g_on {
+            *status |= GDA;
+        }
+        if xl_on {
+            *status |= XLDA;
         }
     }
 
@@ -391,52 +479,26 @@ impl Chip for Lsm6dsl {
             self.burst |= 1 << (addr - OUTX_L_G);
             // Simplification: reading any byte of a set clears its data-ready flag.
             let flag = if addr < OUTX_L_XL { GDA } else { XLDA };
-            self.regs[usize::from(STATUS_REG)] &= !flag;
+            *self.port.reg_mut(STATUS_REG) &= !flag;
         }
     }
 
     fn write(&mut self, addr: u8, value: u8, now: Time) {
-        use lsm6dsl_reg::*;
-        match Self::access(addr) {
-            Access::Rw => {}
-            Access::Ro | Access::Reserved => {
-                self.port.unexpected_writes += 1;
-                return;
-            }
-        }
-        match addr {
-            CTRL3_C => {
-                if value & SW_RESET != 0 {
-                    // SW_RESET restores the control registers' reset values; the bit reads 1 until done.
-                    self.reset_registers();
-                    self.port.reset_until = now + SW_RESET_TIME;
-                } else {
-                    self.regs[usize::from(CTRL3_C)] = value & !BOOT;
-                }
-                if value & BOOT != 0 {
-                    // Reboot of the trimming memory: the interface is unavailable meanwhile.
-                    self.port.busy_until = now + LSM6DSL_BOOT;
-                }
-            }
-            FUNC_CFG_ACCESS => {
-                // FUNC_CFG_EN switches to the embedded-functions bank, which is not modelled.
-                if value != 0 {
-                    self.port.unexpected_writes += 1;
-                }
-                self.regs[usize::from(addr)] = value;
-            }
-            _ => self.regs[usize::from(addr)] = value,
+        self.port.write(addr, value, now);
+        // FUNC_CFG_EN switches to the embedded-functions bank, which is not modelled.
+        if addr == lsm6dsl_reg::FUNC_CFG_ACCESS && value != 0 {
+            self.port.unexpected_writes += 1;
         }
     }
 
     fn three_wire(&self) -> bool {
-        self.regs[usize::from(lsm6dsl_reg::CTRL3_C)] & lsm6dsl_reg::SIM != 0
+        self.port.reg(lsm6dsl_reg::CTRL3_C) & lsm6dsl_reg::SIM != 0
     }
     fn increments(&self) -> bool {
-        self.regs[usize::from(lsm6dsl_reg::CTRL3_C)] & lsm6dsl_reg::IF_INC != 0
+        self.port.reg(lsm6dsl_reg::CTRL3_C) & lsm6dsl_reg::IF_INC != 0
     }
     fn i2c_on(&self) -> bool {
-        self.regs[usize::from(lsm6dsl_reg::CTRL4_C)] & lsm6dsl_reg::I2C_DISABLE == 0
+        self.port.reg(lsm6dsl_reg::CTRL4_C) & lsm6dsl_reg::I2C_DISABLE == 0
     }
 
     fn end_transaction(&mut self) {
@@ -444,9 +506,6 @@ impl Chip for Lsm6dsl {
             self.reads += 1;
         }
         self.burst = 0;
-        if let Some((g, a)) = self.pending.take() {
-            self.apply_output(g, a);
-        }
     }
 }
 
@@ -475,12 +534,28 @@ pub mod lis2mdl_reg {
     pub const ZYXDA: u8 = 0x08;
 }
 
+const LIS2MDL: Spec = Spec {
+    who_am_i: (lis2mdl_reg::WHO_AM_I, lis2mdl_reg::WHO_AM_I_VALUE),
+    control: lis2mdl_reg::CFG_REG_A,
+    sw_reset: lis2mdl_reg::SOFT_RST,
+    boot: lis2mdl_reg::REBOOT,
+    self_clearing: 0,
+    boot_time: LIS2MDL_BOOT,
+    // CFG_REG_A = 0x03 (MD = 11, idle), INT_CRTL_REG = 0xE0.
+    reset_values: &[(lis2mdl_reg::CFG_REG_A, 0x03), (lis2mdl_reg::INT_CTRL_REG, 0xE0)],
+    // Datasheet table "Register address map".
+    access: |addr| match addr {
+        0x45..=0x4A | 0x60..=0x63 | 0x65 | 0x66 => Access::Rw,
+        0x4F | 0x64 | 0x67..=0x6F => Access::Ro,
+        _ => Access::Reserved,
+    },
+};
+
 /// LIS2MDL magnetometer (WHO_AM_I 0x40). 3-wire SPI is its power-up default.
 #[derive(Clone, Debug)]
 pub struct Lis2mdl {
-    port: Port,
-    regs: [u8; 128],
-    pending: Option<[i16; 3]>,
+    /// Output sample: X, Y, Z.
+    port: Port<[i16; 3]>,
 }
 
 impl Default for Lis2mdl {
@@ -492,123 +567,59 @@ impl Default for Lis2mdl {
 impl Lis2mdl {
     /// Powered on at time 0: booting for [`LIS2MDL_BOOT`].
     pub fn new() -> Self {
-        let mut s = Lis2mdl { port: Port::new(LIS2MDL_BOOT), regs: [0; 128], pending: None };
-        s.reset_registers();
-        s
-    }
-
-    fn reset_registers(&mut self) {
-        use lis2mdl_reg::*;
-        for a in 0..128u8 {
-            if Self::access(a) == Access::Rw {
-                self.regs[usize::from(a)] = 0;
-            }
-        }
-        // Datasheet reset values: CFG_REG_A = 0x03 (MD = 11, idle), INT_CRTL_REG = 0xE0.
-        self.regs[usize::from(CFG_REG_A)] = 0x03;
-        self.regs[usize::from(INT_CTRL_REG)] = 0xE0;
-    }
-
-    /// Register map (datasheet table "Register address map").
-    fn access(addr: u8) -> Access {
-        match addr {
-            0x45..=0x4A | 0x60..=0x63 | 0x65 | 0x66 => Access::Rw,
-            0x4F | 0x64 | 0x67..=0x6F => Access::Ro,
-            _ => Access::Reserved,
-        }
+        Lis2mdl { port: Port::new(&LIS2MDL) }
     }
 
     /// New magnetometer output (raw LSB, X, Y, Z), stored from OUTX_L_REG (0x68) little-endian.
     /// Taken only in continuous (MD = 00) or single (MD = 01, then idle) mode.
     pub fn set_output(&mut self, mag: [i16; 3]) {
-        if self.port.phase == Phase::Idle {
-            self.apply_output(mag);
-        } else {
-            self.pending = Some(mag);
-        }
+        self.stage_output(mag);
+    }
+}
+
+impl Chip for Lis2mdl {
+    type Output = [i16; 3];
+
+    fn port(&self) -> &Port<Self::Output> {
+        &self.port
+    }
+    fn port_mut(&mut self) -> &mut Port<Self::Output> {
+        &mut self.port
     }
 
-    fn apply_output(&mut self, mag: [i16; 3]) {
+    fn apply_output(&mut self, mag: Self::Output) {
         use lis2mdl_reg::*;
-        let md = self.regs[usize::from(CFG_REG_A)] & MD_MASK;
+        let p = &mut self.port;
+        let md = p.reg(CFG_REG_A) & MD_MASK;
         if md > 1 {
             return;
         }
         for (i, axis) in mag.iter().enumerate() {
             let [lo, hi] = axis.to_le_bytes();
-            self.regs[usize::from(OUTX_L_REG) + 2 * i] = lo;
-            self.regs[usize::from(OUTX_L_REG) + 2 * i + 1] = hi;
+            *p.reg_mut(OUTX_L_REG + 2 * i as u8) = lo;
+            *p.reg_mut(OUTX_L_REG + 2 * i as u8 + 1) = hi;
         }
-        self.regs[usize::from(STATUS_REG)] |= ZYXDA;
+        *p.reg_mut(STATUS_REG) |= ZYXDA;
         if md == 1 {
-            self.regs[usize::from(CFG_REG_A)] |= MD_MASK;
-        }
-    }
-}
-
-common_api!(Lis2mdl, lis2mdl_reg::WHO_AM_I_VALUE);
-
-impl Chip for Lis2mdl {
-    fn port(&self) -> &Port {
-        &self.port
-    }
-    fn port_mut(&mut self) -> &mut Port {
-        &mut self.port
-    }
-
-    fn peek(&self, addr: u8, now: Time) -> u8 {
-        use lis2mdl_reg::*;
-        let v = self.regs[usize::from(addr & 0x7F)];
-        match addr {
-            WHO_AM_I => self.who_am_i(),
-            CFG_REG_A if now < self.port.reset_until => v | SOFT_RST,
-            _ => v,
+            *p.reg_mut(CFG_REG_A) |= MD_MASK;
         }
     }
 
     fn read_effects(&mut self, addr: u8) {
         use lis2mdl_reg::*;
         if (OUTX_L_REG..OUTX_L_REG + 6).contains(&addr) {
-            self.regs[usize::from(STATUS_REG)] &= !ZYXDA;
-        }
-    }
-
-    fn write(&mut self, addr: u8, value: u8, now: Time) {
-        use lis2mdl_reg::*;
-        if Self::access(addr) != Access::Rw {
-            self.port.unexpected_writes += 1;
-            return;
-        }
-        if addr == CFG_REG_A {
-            if value & SOFT_RST != 0 {
-                // SOFT_RST: configuration and user registers back to their reset values.
-                self.reset_registers();
-                self.port.reset_until = now + SW_RESET_TIME;
-            } else {
-                self.regs[usize::from(addr)] = value & !REBOOT;
-            }
-            if value & REBOOT != 0 {
-                self.port.busy_until = now + LIS2MDL_BOOT;
-            }
-        } else {
-            self.regs[usize::from(addr)] = value;
+            *self.port.reg_mut(STATUS_REG) &= !ZYXDA;
         }
     }
 
     fn three_wire(&self) -> bool {
-        self.regs[usize::from(lis2mdl_reg::CFG_REG_C)] & lis2mdl_reg::SPI_4WIRE == 0
+        self.port.reg(lis2mdl_reg::CFG_REG_C) & lis2mdl_reg::SPI_4WIRE == 0
     }
     fn increments(&self) -> bool {
         true
     }
     fn i2c_on(&self) -> bool {
-        self.regs[usize::from(lis2mdl_reg::CFG_REG_C)] & lis2mdl_reg::I2C_DIS == 0
-    }
-
-    fn end_transaction(&mut self) {
-        if let Some(m) = self.pending.take() {
-            self.apply_output(m);
-        }
+        self.port.reg(lis2mdl_reg::CFG_REG_C) & lis2mdl_reg::I2C_DIS == 0
     }
 }
 
@@ -639,12 +650,30 @@ pub mod lps22hb_reg {
     pub const T_DA: u8 = 0x02;
 }
 
+const LPS22HB: Spec = Spec {
+    who_am_i: (lps22hb_reg::WHO_AM_I, lps22hb_reg::WHO_AM_I_VALUE),
+    control: lps22hb_reg::CTRL_REG2,
+    // SWRESET: registers back to their reset values (SIM = 0: 4-wire again).
+    sw_reset: lps22hb_reg::SWRESET,
+    boot: lps22hb_reg::BOOT,
+    // ONE_SHOT self-clears (no acquisition is modelled).
+    self_clearing: lps22hb_reg::ONE_SHOT,
+    boot_time: LPS22HB_BOOT,
+    // CTRL_REG2 = 0x10 (IF_ADD_INC).
+    reset_values: &[(lps22hb_reg::CTRL_REG2, lps22hb_reg::IF_ADD_INC)],
+    // Datasheet table "Registers address map".
+    access: |addr| match addr {
+        0x0B..=0x0D | 0x10..=0x12 | 0x14..=0x1A => Access::Rw,
+        0x0F | 0x25..=0x2C | 0x33 => Access::Ro,
+        _ => Access::Reserved,
+    },
+};
+
 /// LPS22HB barometer (WHO_AM_I 0xB1). 4-wire SPI at power-up (CTRL_REG1.SIM = 0).
 #[derive(Clone, Debug)]
 pub struct Lps22hb {
-    port: Port,
-    regs: [u8; 128],
-    pending: Option<(u32, i16)>,
+    /// Output sample: raw pressure, raw temperature.
+    port: Port<(u32, i16)>,
 }
 
 impl Default for Lps22hb {
@@ -656,120 +685,57 @@ impl Default for Lps22hb {
 impl Lps22hb {
     /// Powered on at time 0: booting for [`LPS22HB_BOOT`].
     pub fn new() -> Self {
-        let mut s = Lps22hb { port: Port::new(LPS22HB_BOOT), regs: [0; 128], pending: None };
-        s.reset_registers();
-        s
-    }
-
-    fn reset_registers(&mut self) {
-        for a in 0..128u8 {
-            if Self::access(a) == Access::Rw {
-                self.regs[usize::from(a)] = 0;
-            }
-        }
-        // Datasheet reset value: CTRL_REG2 = 0x10 (IF_ADD_INC).
-        self.regs[usize::from(lps22hb_reg::CTRL_REG2)] = lps22hb_reg::IF_ADD_INC;
-    }
-
-    /// Register map (datasheet table "Registers address map").
-    fn access(addr: u8) -> Access {
-        match addr {
-            0x0B..=0x0D | 0x10..=0x12 | 0x14..=0x1A => Access::Rw,
-            0x0F | 0x25..=0x2C | 0x33 => Access::Ro,
-            _ => Access::Reserved,
-        }
+        Lps22hb { port: Port::new(&LPS22HB) }
     }
 
     /// New output: 24-bit raw pressure (hPa × 4096) and raw temperature (°C × 100). Taken only
     /// while ODR ≠ 0 (continuous mode).
     pub fn set_output(&mut self, pressure_raw: u32, temperature_raw: i16) {
-        if self.port.phase == Phase::Idle {
-            self.apply_output(pressure_raw, temperature_raw);
-        } else {
-            self.pending = Some((pressure_raw, temperature_raw));
-        }
-    }
-
-    fn apply_output(&mut self, p: u32, t: i16) {
-        use lps22hb_reg::*;
-        if self.regs[usize::from(CTRL_REG1)] & ODR_MASK == 0 {
-            return;
-        }
-        let [p0, p1, p2, _] = p.to_le_bytes();
-        let [t0, t1] = t.to_le_bytes();
-        for (i, b) in [p0, p1, p2, t0, t1].into_iter().enumerate() {
-            self.regs[usize::from(PRESS_OUT_XL) + i] = b;
-        }
-        self.regs[usize::from(STATUS)] |= P_DA | T_DA;
+        self.stage_output((pressure_raw, temperature_raw));
     }
 }
 
-common_api!(Lps22hb, lps22hb_reg::WHO_AM_I_VALUE);
-
 impl Chip for Lps22hb {
-    fn port(&self) -> &Port {
+    type Output = (u32, i16);
+
+    fn port(&self) -> &Port<Self::Output> {
         &self.port
     }
-    fn port_mut(&mut self) -> &mut Port {
+    fn port_mut(&mut self) -> &mut Port<Self::Output> {
         &mut self.port
     }
 
-    fn peek(&self, addr: u8, now: Time) -> u8 {
+    fn apply_output(&mut self, (pressure, temperature): Self::Output) {
         use lps22hb_reg::*;
-        let v = self.regs[usize::from(addr & 0x7F)];
-        match addr {
-            WHO_AM_I => self.who_am_i(),
-            CTRL_REG2 if now < self.port.reset_until => v | SWRESET,
-            _ => v,
+        let p = &mut self.port;
+        if p.reg(CTRL_REG1) & ODR_MASK == 0 {
+            return;
         }
+        let [p0, p1, p2, _] = pressure.to_le_bytes();
+        let [t0, t1] = temperature.to_le_bytes();
+        for (i, b) in [p0, p1, p2, t0, t1].into_iter().enumerate() {
+            *p.reg_mut(PRESS_OUT_XL + i as u8) = b;
+        }
+        *p.reg_mut(STATUS) |= P_DA | T_DA;
     }
 
     fn read_effects(&mut self, addr: u8) {
         use lps22hb_reg::*;
         if (PRESS_OUT_XL..TEMP_OUT_L).contains(&addr) {
-            self.regs[usize::from(STATUS)] &= !P_DA;
+            *self.port.reg_mut(STATUS) &= !P_DA;
         } else if (TEMP_OUT_L..=TEMP_OUT_L + 1).contains(&addr) {
-            self.regs[usize::from(STATUS)] &= !T_DA;
-        }
-    }
-
-    fn write(&mut self, addr: u8, value: u8, now: Time) {
-        use lps22hb_reg::*;
-        if Self::access(addr) != Access::Rw {
-            self.port.unexpected_writes += 1;
-            return;
-        }
-        if addr == CTRL_REG2 {
-            if value & SWRESET != 0 {
-                // SWRESET: registers back to their reset values (SIM = 0: 4-wire again).
-                self.reset_registers();
-                self.port.reset_until = now + SW_RESET_TIME;
-            } else {
-                // ONE_SHOT self-clears (no acquisition is modelled); BOOT self-clears when done.
-                self.regs[usize::from(addr)] = value & !(BOOT | ONE_SHOT);
-            }
-            if value & BOOT != 0 {
-                self.port.busy_until = now + LPS22HB_BOOT;
-            }
-        } else {
-            self.regs[usize::from(addr)] = value;
+            *self.port.reg_mut(STATUS) &= !T_DA;
         }
     }
 
     fn three_wire(&self) -> bool {
-        self.regs[usize::from(lps22hb_reg::CTRL_REG1)] & lps22hb_reg::SIM != 0
+        self.port.reg(lps22hb_reg::CTRL_REG1) & lps22hb_reg::SIM != 0
     }
     fn increments(&self) -> bool {
-        self.regs[usize::from(lps22hb_reg::CTRL_REG2)] & lps22hb_reg::IF_ADD_INC != 0
+        self.port.reg(lps22hb_reg::CTRL_REG2) & lps22hb_reg::IF_ADD_INC != 0
     }
     fn i2c_on(&self) -> bool {
-        self.regs[usize::from(lps22hb_reg::CTRL_REG2)] & lps22hb_reg::I2C_DIS == 0
-    }
-
-    fn end_transaction(&mut self) {
-        if let Some((p, t)) = self.pending.take() {
-            self.apply_output(p, t);
-        }
+        self.port.reg(lps22hb_reg::CTRL_REG2) & lps22hb_reg::I2C_DIS == 0
     }
 }
 
@@ -790,8 +756,8 @@ impl Sensors {
         Sensors { lsm6dsl: Lsm6dsl::new(), lis2mdl: Lis2mdl::new(), lps22hb: Lps22hb::new() }
     }
 
-    /// The device behind chip select `i` (0 = LSM6DSL, 1 = LIS2MDL, 2 = LPS22HB).
-    pub fn device(&self, i: usize) -> Option<&dyn SpiDevice> {
+    /// The sensor behind chip select `i` (0 = LSM6DSL, 1 = LIS2MDL, 2 = LPS22HB).
+    pub fn device(&self, i: usize) -> Option<&dyn Sensor> {
         match i {
             0 => Some(&self.lsm6dsl),
             1 => Some(&self.lis2mdl),
@@ -801,7 +767,7 @@ impl Sensors {
     }
 
     /// Mutable [`Sensors::device`].
-    pub fn device_mut(&mut self, i: usize) -> Option<&mut dyn SpiDevice> {
+    pub fn device_mut(&mut self, i: usize) -> Option<&mut dyn Sensor> {
         match i {
             0 => Some(&mut self.lsm6dsl),
             1 => Some(&mut self.lis2mdl),
@@ -812,27 +778,21 @@ impl Sensors {
 
     /// `WHO_AM_I` override of the sensor behind chip select `i` (see [`Sensors::device`]).
     pub fn set_who_am_i_override(&mut self, i: usize, value: Option<u8>) {
-        match i {
-            0 => self.lsm6dsl.set_who_am_i_override(value),
-            1 => self.lis2mdl.set_who_am_i_override(value),
-            2 => self.lps22hb.set_who_am_i_override(value),
-            _ => {}
+        if let Some(d) = self.device_mut(i) {
+            d.set_who_am_i_override(value);
         }
     }
 
     /// Silence the sensor behind chip select `i`.
     pub fn set_silent(&mut self, i: usize, silent: bool) {
-        match i {
-            0 => self.lsm6dsl.set_silent(silent),
-            1 => self.lis2mdl.set_silent(silent),
-            2 => self.lps22hb.set_silent(silent),
-            _ => {}
+        if let Some(d) = self.device_mut(i) {
+            d.set_silent(silent);
         }
     }
 
     /// Unexpected writes summed over the three.
     pub fn unexpected_writes(&self) -> u32 {
-        self.lsm6dsl.unexpected_writes() + self.lis2mdl.unexpected_writes() + self.lps22hb.unexpected_writes()
+        (0..3).filter_map(|i| self.device(i)).map(|d| d.unexpected_writes()).sum()
     }
 }
 
@@ -1049,6 +1009,15 @@ mod tests {
         assert_eq!(s.register(0x11, later), 0x10);
         write(&mut s, 0x10, &[0x01], later);
         assert_eq!(read(&mut s, 0x0F, 1, later), [0xB1]);
+    }
+
+    /// Rule: LPS22HB's ONE_SHOT clears itself (datasheet CTRL_REG2): it never reads back set.
+    #[test]
+    fn lps22hb_one_shot_reads_back_clear() {
+        use lps22hb_reg::*;
+        let mut s = Lps22hb::new();
+        write(&mut s, CTRL_REG2, &[IF_ADD_INC | ONE_SHOT], AFTER_BOOT);
+        assert_eq!(s.register(CTRL_REG2, AFTER_BOOT), IF_ADD_INC);
     }
 
     #[test]

@@ -49,8 +49,10 @@
 //!   stored only (no transmit request is ever served).
 
 use super::sensors::{Sensors, UNDRIVEN};
-use super::{Clocks, Time, Unmodelled, TIME_HZ};
+use super::{Clocks, Peripheral, Time, Unmodelled, TIME_HZ};
 
+/// SPI2's base address (RM0368 table 1).
+pub const BASE: u32 = 0x4000_3800;
 const NAME: &str = "SPI2";
 
 pub const CR1: u32 = 0x00;
@@ -717,28 +719,45 @@ impl Spi2 {
     }
 }
 
+impl Peripheral for Spi2 {
+    fn read(&mut self, offset: u32, now: Time, clocks: Clocks) -> Result<u32, Unmodelled> {
+        Spi2::read(self, offset, now, clocks)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
+        Spi2::write(self, offset, value, now, clocks)
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        Spi2::next_event(self)
+    }
+
+    fn advance(&mut self, now: Time, clocks: Clocks) {
+        Spi2::advance(self, now, clocks)
+    }
+
+    fn irq_line(&self, _line: usize) -> bool {
+        Spi2::irq_line(self)
+    }
+
+    fn reset(&mut self) {
+        self.reset_registers();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::periph::sensors::{LPS22HB_BOOT, UNDRIVEN};
+    use crate::periph::sensors::{Sensor, LPS22HB_BOOT, UNDRIVEN};
 
     /// After every sensor's boot.
     const T0: Time = 50 * (TIME_HZ / 1000);
-    /// 84 MHz PLL clocks: PCLK1 = 42 MHz.
-    const PLL: Clocks = Clocks {
-        sysclk_hz: 84_000_000,
-        hclk_hz: 84_000_000,
-        pclk1_hz: 42_000_000,
-        pclk2_hz: 84_000_000,
-        tim_apb1_hz: 84_000_000,
-        tim_apb2_hz: 84_000_000,
-    };
     /// PCLK1 42 MHz = 8 units; BR = 011 → /16 → 128 units per SCK; 1024 per byte.
     const BYTE: Time = 1024;
 
     impl Spi2 {
         fn advance_to(&mut self, now: Time) {
-            self.advance(now, PLL);
+            self.advance(now, Clocks::PLL_84_MHZ);
         }
     }
 
@@ -752,7 +771,7 @@ mod tests {
         /// The register sequence of stm32f4xx-hal 0.23 `Spi::new_bidi` (mode 3, 2.625 MHz).
         fn new() -> Self {
             let mut spi = Spi2::new();
-            spi.set_clocks(PLL, 0);
+            spi.set_clocks(Clocks::PLL_84_MHZ, 0);
             let mut fw = Fw { spi, t: T0 };
             fw.w(CR2, 0);
             fw.w(CR1, CR1_CPHA | CR1_CPOL | CR1_MSTR | (0b011 << 3) | CR1_SSM | CR1_SSI);
@@ -762,11 +781,11 @@ mod tests {
         }
         fn w(&mut self, off: u32, v: u32) {
             self.t += 8;
-            self.spi.write(off, v, self.t, PLL).unwrap();
+            self.spi.write(off, v, self.t, Clocks::PLL_84_MHZ).unwrap();
         }
         fn r(&mut self, off: u32) -> u32 {
             self.t += 8;
-            self.spi.read(off, self.t, PLL).unwrap()
+            self.spi.read(off, self.t, Clocks::PLL_84_MHZ).unwrap()
         }
         fn cs(&mut self, i: usize, low: bool) {
             self.t += 8;
@@ -824,25 +843,29 @@ mod tests {
     #[test]
     fn reset_values_are_the_pacs() {
         let mut s = Spi2::new();
-        assert_eq!(s.read(SR, 0, PLL), Ok(0x0002));
-        assert_eq!(s.read(CRCPR, 0, PLL), Ok(0x0007));
-        assert_eq!(s.read(I2SPR, 0, PLL), Ok(0x000A));
-        assert_eq!(s.read(CR1, 0, PLL), Ok(0));
-        assert!(s.read(0x24, 0, PLL).is_err());
+        assert_eq!(s.read(SR, 0, Clocks::PLL_84_MHZ), Ok(0x0002));
+        assert_eq!(s.read(CRCPR, 0, Clocks::PLL_84_MHZ), Ok(0x0007));
+        assert_eq!(s.read(I2SPR, 0, Clocks::PLL_84_MHZ), Ok(0x000A));
+        assert_eq!(s.read(CR1, 0, Clocks::PLL_84_MHZ), Ok(0));
+        assert!(s.read(0x24, 0, Clocks::PLL_84_MHZ).is_err());
     }
 
     #[test]
     fn a_byte_takes_8_sck_periods_of_pclk1_over_2_pow_br_plus_1() {
         let mut fw = Fw::new();
         let t = fw.t;
-        fw.spi.write(DR, 0x12, t, PLL).unwrap();
-        assert_eq!(fw.spi.read(SR, t, PLL).unwrap() & (SR_TXE | SR_BSY), SR_TXE | SR_BSY, "moved to the shift register at once");
-        fw.spi.write(DR, 0x34, t, PLL).unwrap();
-        assert_eq!(fw.spi.read(SR, t, PLL).unwrap() & SR_TXE, 0, "second byte waits in the Tx buffer");
-        assert_eq!(fw.spi.read(SR, t + BYTE - 1, PLL).unwrap() & SR_TXE, 0);
-        assert_eq!(fw.spi.read(SR, t + BYTE, PLL).unwrap() & (SR_TXE | SR_BSY), SR_TXE | SR_BSY);
-        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, PLL).unwrap() & SR_BSY, 0);
-        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, PLL).unwrap() & SR_RXNE, 0, "bidi transmit does not feed the receiver");
+        fw.spi.write(DR, 0x12, t, Clocks::PLL_84_MHZ).unwrap();
+        assert_eq!(
+            fw.spi.read(SR, t, Clocks::PLL_84_MHZ).unwrap() & (SR_TXE | SR_BSY),
+            SR_TXE | SR_BSY,
+            "moved to the shift register at once"
+        );
+        fw.spi.write(DR, 0x34, t, Clocks::PLL_84_MHZ).unwrap();
+        assert_eq!(fw.spi.read(SR, t, Clocks::PLL_84_MHZ).unwrap() & SR_TXE, 0, "second byte waits in the Tx buffer");
+        assert_eq!(fw.spi.read(SR, t + BYTE - 1, Clocks::PLL_84_MHZ).unwrap() & SR_TXE, 0);
+        assert_eq!(fw.spi.read(SR, t + BYTE, Clocks::PLL_84_MHZ).unwrap() & (SR_TXE | SR_BSY), SR_TXE | SR_BSY);
+        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, Clocks::PLL_84_MHZ).unwrap() & SR_BSY, 0);
+        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, Clocks::PLL_84_MHZ).unwrap() & SR_RXNE, 0, "bidi transmit does not feed the receiver");
         assert_eq!(fw.spi.frames(), 2);
     }
 
@@ -856,22 +879,22 @@ mod tests {
     #[test]
     fn ssi_low_in_master_mode_is_a_mode_fault() {
         let mut s = Spi2::new();
-        s.write(CR1, CR1_MSTR | CR1_SSM | CR1_SPE, 10, PLL).unwrap();
-        assert_eq!(s.read(CR1, 11, PLL).unwrap() & (CR1_MSTR | CR1_SPE), 0, "MSTR and SPE cleared");
-        assert_ne!(s.read(SR, 12, PLL).unwrap() & SR_MODF, 0);
-        s.write(CR1, CR1_MSTR | CR1_SSM | CR1_SSI, 13, PLL).unwrap();
-        assert_eq!(s.read(SR, 14, PLL).unwrap() & SR_MODF, 0, "SR read then CR1 write clears MODF");
-        assert_ne!(s.read(CR1, 15, PLL).unwrap() & CR1_MSTR, 0);
+        s.write(CR1, CR1_MSTR | CR1_SSM | CR1_SPE, 10, Clocks::PLL_84_MHZ).unwrap();
+        assert_eq!(s.read(CR1, 11, Clocks::PLL_84_MHZ).unwrap() & (CR1_MSTR | CR1_SPE), 0, "MSTR and SPE cleared");
+        assert_ne!(s.read(SR, 12, Clocks::PLL_84_MHZ).unwrap() & SR_MODF, 0);
+        s.write(CR1, CR1_MSTR | CR1_SSM | CR1_SSI, 13, Clocks::PLL_84_MHZ).unwrap();
+        assert_eq!(s.read(SR, 14, Clocks::PLL_84_MHZ).unwrap() & SR_MODF, 0, "SR read then CR1 write clears MODF");
+        assert_ne!(s.read(CR1, 15, Clocks::PLL_84_MHZ).unwrap() & CR1_MSTR, 0);
     }
 
     #[test]
     fn unmodelled_bits_are_refused() {
         let mut s = Spi2::new();
-        assert!(s.write(CR1, CR1_DFF, 0, PLL).is_err());
-        assert!(s.write(CR1, CR1_CRCEN, 0, PLL).is_err());
-        assert!(s.write(CR2, CR2_FRF, 0, PLL).is_err());
-        assert!(s.write(I2SCFGR, I2SCFGR_I2SMOD, 0, PLL).is_err());
-        assert!(s.write(CR1, CR1_SPE, 0, PLL).is_err(), "slave mode");
+        assert!(s.write(CR1, CR1_DFF, 0, Clocks::PLL_84_MHZ).is_err());
+        assert!(s.write(CR1, CR1_CRCEN, 0, Clocks::PLL_84_MHZ).is_err());
+        assert!(s.write(CR2, CR2_FRF, 0, Clocks::PLL_84_MHZ).is_err());
+        assert!(s.write(I2SCFGR, I2SCFGR_I2SMOD, 0, Clocks::PLL_84_MHZ).is_err());
+        assert!(s.write(CR1, CR1_SPE, 0, Clocks::PLL_84_MHZ).is_err(), "slave mode");
     }
 
     #[test]
@@ -914,15 +937,15 @@ mod tests {
         fw.cs(0, true);
         fw.send(&[0x8F]);
         let t = fw.t;
-        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t, PLL).unwrap();
-        assert_eq!(fw.spi.read(SR, t + BYTE - 1, PLL).unwrap() & SR_RXNE, 0);
-        assert_ne!(fw.spi.read(SR, t + BYTE, PLL).unwrap() & (SR_RXNE | SR_BSY), 0, "first byte in, clock still running");
-        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, PLL).unwrap() & SR_OVR, SR_OVR);
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t, Clocks::PLL_84_MHZ).unwrap();
+        assert_eq!(fw.spi.read(SR, t + BYTE - 1, Clocks::PLL_84_MHZ).unwrap() & SR_RXNE, 0);
+        assert_ne!(fw.spi.read(SR, t + BYTE, Clocks::PLL_84_MHZ).unwrap() & (SR_RXNE | SR_BSY), 0, "first byte in, clock still running");
+        assert_eq!(fw.spi.read(SR, t + 2 * BYTE, Clocks::PLL_84_MHZ).unwrap() & SR_OVR, SR_OVR);
         fw.spi.advance_to(t + 5 * BYTE);
         assert_eq!(fw.spi.overruns(), 4, "bytes 2..5 lost");
-        assert_eq!(fw.spi.read(DR, t + 5 * BYTE + 1, PLL).unwrap(), 0x6A, "DR keeps the first byte");
-        assert_eq!(fw.spi.read(SR, t + 5 * BYTE + 2, PLL).unwrap() & SR_OVR, SR_OVR, "this read clears OVR");
-        assert_eq!(fw.spi.read(SR, t + 5 * BYTE + 3, PLL).unwrap() & SR_OVR, 0);
+        assert_eq!(fw.spi.read(DR, t + 5 * BYTE + 1, Clocks::PLL_84_MHZ).unwrap(), 0x6A, "DR keeps the first byte");
+        assert_eq!(fw.spi.read(SR, t + 5 * BYTE + 2, Clocks::PLL_84_MHZ).unwrap() & SR_OVR, SR_OVR, "this read clears OVR");
+        assert_eq!(fw.spi.read(SR, t + 5 * BYTE + 3, Clocks::PLL_84_MHZ).unwrap() & SR_OVR, 0);
     }
 
     #[test]
@@ -932,12 +955,12 @@ mod tests {
         fw.cs(0, true);
         fw.send(&[0x8F]);
         let t = fw.t;
-        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t, PLL).unwrap();
-        fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, t + BYTE / 2, PLL).unwrap();
-        assert_ne!(fw.spi.read(SR, t + BYTE - 1, PLL).unwrap() & SR_BSY, 0, "still shifting");
-        let sr = fw.spi.read(SR, t + BYTE, PLL).unwrap();
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t, Clocks::PLL_84_MHZ).unwrap();
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, t + BYTE / 2, Clocks::PLL_84_MHZ).unwrap();
+        assert_ne!(fw.spi.read(SR, t + BYTE - 1, Clocks::PLL_84_MHZ).unwrap() & SR_BSY, 0, "still shifting");
+        let sr = fw.spi.read(SR, t + BYTE, Clocks::PLL_84_MHZ).unwrap();
         assert_eq!(sr & (SR_RXNE | SR_BSY), SR_RXNE, "byte received, clock stopped");
-        assert_eq!(fw.spi.read(DR, t + BYTE + 1, PLL).unwrap(), 0x6A);
+        assert_eq!(fw.spi.read(DR, t + BYTE + 1, Clocks::PLL_84_MHZ).unwrap(), 0x6A);
         fw.spi.advance_to(t + 10 * BYTE);
         assert_eq!(fw.spi.frames(), 4, "0x12, 0x0C, the address, one received byte, no more");
     }
@@ -960,7 +983,7 @@ mod tests {
             out.push(fw.r(DR) as u8);
         }
         let seen = fw.t;
-        fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, seen + after, PLL).unwrap();
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, seen + after, Clocks::PLL_84_MHZ).unwrap();
         fw.t = seen + after + read_delay;
         for _ in 0..1000 {
             if fw.r(SR) & SR_RXNE != 0 {
@@ -1091,18 +1114,18 @@ mod tests {
         fw.write_reg(0, 0x12, &[0x0C]);
         fw.cs(0, true);
         let t = fw.t;
-        fw.spi.write(DR, 0x8F, t, PLL).unwrap();
-        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t + 4 * 128, PLL).unwrap();
+        fw.spi.write(DR, 0x8F, t, Clocks::PLL_84_MHZ).unwrap();
+        fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t + 4 * 128, Clocks::PLL_84_MHZ).unwrap();
         assert_eq!(fw.spi.truncated_writes(), 1);
         // 0x8F with the last 4 bits undriven (0) = 0x80: a read of register 0x00 (reserved, 0).
         fw.spi.advance_to(t + 2 * BYTE);
-        assert_eq!(fw.spi.read(DR, t + 2 * BYTE, PLL).unwrap(), 0x00);
+        assert_eq!(fw.spi.read(DR, t + 2 * BYTE, Clocks::PLL_84_MHZ).unwrap(), 0x00);
     }
 
     #[test]
     fn a_booting_sensor_leaves_the_line_undriven() {
         let mut spi = Spi2::new();
-        spi.set_clocks(PLL, 0);
+        spi.set_clocks(Clocks::PLL_84_MHZ, 0);
         let mut fw = Fw { spi, t: 0 };
         fw.w(CR1, CR1_CPHA | CR1_CPOL | CR1_MSTR | (0b011 << 3) | CR1_SSM | CR1_SSI | CR1_BIDIMODE | CR1_BIDIOE | CR1_SPE);
         fw.write_reg(2, 0x10, &[0x01]);

@@ -19,7 +19,7 @@
 //!
 //! Channel numbers in this API are 0-based: channel 0 is CH1 (pin TI1), channel 3 is CH4.
 
-use super::{Clocks, Time, Unmodelled, TIME_HZ};
+use super::{Clocks, Peripheral, Time, Unmodelled, TIME_HZ};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TimerKind {
@@ -801,24 +801,46 @@ impl Timer {
     }
 }
 
+impl Peripheral for Timer {
+    fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
+        Timer::read(self, offset, now)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, _clocks: Clocks) -> Result<(), Unmodelled> {
+        Timer::write(self, offset, value, now)
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        Timer::next_event(self)
+    }
+
+    fn advance(&mut self, now: Time, _clocks: Clocks) {
+        Timer::advance(self, now)
+    }
+
+    fn irq_line(&self, _line: usize) -> bool {
+        Timer::irq_line(self)
+    }
+
+    fn set_clocks(&mut self, now: Time, clocks: Clocks) {
+        Timer::set_clocks(self, clocks, now)
+    }
+
+    fn reset(&mut self) {
+        *self = Timer::new(self.kind);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// 84 MHz timer clocks (APB1 42 MHz ×2, APB2 84 MHz): 4 units per tick.
-    const PLL: Clocks = Clocks {
-        sysclk_hz: 84_000_000,
-        hclk_hz: 84_000_000,
-        pclk1_hz: 42_000_000,
-        pclk2_hz: 84_000_000,
-        tim_apb1_hz: 84_000_000,
-        tim_apb2_hz: 84_000_000,
-    };
+    /// Time units per tick of the 84 MHz timer clocks of [`Clocks::PLL_84_MHZ`].
     const UPT: Time = 4;
 
     fn timer(kind: TimerKind) -> Timer {
         let mut t = Timer::new(kind);
-        t.set_clocks(PLL, 0);
+        t.set_clocks(Clocks::PLL_84_MHZ, 0);
         t
     }
 
@@ -1042,7 +1064,7 @@ mod tests {
         let mut t = Timer::new(TimerKind::Tim2);
         start(&mut t, 0, 0xFFFF_FFFF, 0);
         assert_eq!(t.read(CNT, 21 * 100).unwrap(), 100, "16 MHz HSI: 21 units per tick");
-        t.set_clocks(PLL, 21 * 100);
+        t.set_clocks(Clocks::PLL_84_MHZ, 21 * 100);
         assert_eq!(t.read(CNT, 21 * 100 + 4 * 50).unwrap(), 150);
         assert_eq!(t.started_at(), Some(0));
     }

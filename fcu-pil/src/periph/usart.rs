@@ -44,7 +44,7 @@ pub const BASE: u32 = 0x4001_1000;
 pub const NAME: &str = "USART1";
 
 const SR: u32 = 0x00;
-const DR: u32 = 0x04;
+pub const DR: u32 = 0x04;
 const BRR: u32 = 0x08;
 const CR1: u32 = 0x0C;
 const CR2: u32 = 0x10;
@@ -352,20 +352,39 @@ impl Usart {
     }
 }
 
+impl super::Peripheral for Usart {
+    fn read(&mut self, offset: u32, now: Time, clocks: Clocks) -> Result<u32, Unmodelled> {
+        Usart::read(self, offset, now, clocks)
+    }
+
+    fn write(&mut self, offset: u32, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
+        Usart::write(self, offset, value, now, clocks)
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        Usart::next_event(self)
+    }
+
+    fn advance(&mut self, now: Time, clocks: Clocks) {
+        Usart::advance(self, now, clocks)
+    }
+
+    fn irq_line(&self, _line: usize) -> bool {
+        Usart::irq_line(self)
+    }
+
+    fn reset(&mut self) {
+        self.reset_registers();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::periph::TIME_HZ;
 
     fn clocks() -> Clocks {
-        Clocks {
-            sysclk_hz: 84_000_000,
-            hclk_hz: 84_000_000,
-            pclk1_hz: 42_000_000,
-            pclk2_hz: 84_000_000,
-            tim_apb1_hz: 84_000_000,
-            tim_apb2_hz: 84_000_000,
-        }
+        Clocks::PLL_84_MHZ
     }
 
     fn write(u: &mut Usart, offset: u32, value: u32, now: Time) {
