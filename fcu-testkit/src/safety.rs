@@ -552,19 +552,9 @@ impl SafetyMonitor {
                     if let Some(a) = self.channel_age.get_mut(ch) {
                         *a = 0;
                     }
-                    let w = i32::from(w);
-                    let v = match ch {
-                        0 => w - i32::from(self.rc.ail_center),
-                        1 => w - i32::from(self.rc.ele_center),
-                        2 => (w - i32::from(self.rc.thr_bottom)).max(0),
-                        _ => w - i32::from(self.rc.rud_center),
-                    } as i16;
-                    match ch {
-                        0 => self.sticks.ail = StickCounts(v),
-                        1 => self.sticks.ele = StickCounts(v),
-                        2 => self.sticks.thr = StickCounts(v),
-                        _ => self.sticks.rud = StickCounts(v),
-                    }
+                    // The core's own mapping (radio map, endpoints, senses): the monitor
+                    // checks what the sticks lead to, not how a width becomes one.
+                    self.rc.apply_width(&mut self.sticks, ch, w);
                 }
                 None => {
                     if let Some(a) = self.channel_age.get_mut(ch) {
@@ -767,11 +757,7 @@ impl RadioFrame {
 
     /// The widths that decode to `s` (throttle 0 is sent at the bottom of the range).
     pub fn from_sticks(rc: &RcConfig, s: Sticks) -> RadioFrame {
-        let w = |centre: i16, v: StickCounts| (i32::from(centre) + i32::from(v)).clamp(1, i32::from(u16::MAX)) as u16;
-        RadioFrame {
-            width_counts: [w(rc.ail_center, s.ail), w(rc.ele_center, s.ele), w(rc.thr_bottom, s.thr), w(rc.rud_center, s.rud)],
-            link: true,
-        }
+        RadioFrame { width_counts: core::array::from_fn(|input| rc.width_for_sticks(input, &s)), link: true }
     }
 }
 
