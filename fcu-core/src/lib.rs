@@ -42,6 +42,9 @@
     )
 )]
 
+#[cfg(test)]
+extern crate std;
+
 pub mod ahrs;
 pub mod boot;
 pub mod config;
@@ -51,6 +54,7 @@ pub mod flight;
 pub mod imu;
 pub mod math;
 pub mod mixer;
+pub mod parameters;
 pub mod rc;
 pub mod supervisor;
 pub mod telemetry;

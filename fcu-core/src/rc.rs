@@ -198,9 +198,11 @@ impl RcInput {
         RcInput { min_counts: trim_counts - full_scale, trim_counts, max_counts: trim_counts + full_scale, reversed: false }
     }
 
-    /// A throttle with its bottom at `min_counts` and two full scales of travel.
+    /// A throttle with its bottom at `min_counts` and two full scales of travel. The trim,
+    /// which the throttle does not read, at the centre: the input can then be given to a
+    /// centred function (`RCMAP_*`) with valid endpoints.
     pub const fn throttle(min_counts: u16, full_scale: u16) -> RcInput {
-        RcInput { min_counts, trim_counts: min_counts, max_counts: min_counts + 2 * full_scale, reversed: false }
+        RcInput { min_counts, trim_counts: min_counts + full_scale, max_counts: min_counts + 2 * full_scale, reversed: false }
     }
 }
 
@@ -257,46 +259,54 @@ impl RcConfig {
     };
 
     pub fn is_valid(&self) -> bool {
+        self.problem().is_none()
+    }
+
+    /// The first rule this configuration breaks, in words short enough for a ground station's
+    /// status line (at most 32 characters), or `None`.
+    pub fn problem(&self) -> Option<&'static str> {
         let pulses_ok = match self.pulses {
             PulseRules::Reference { .. } => true,
             PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } => {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        self.map.is_permutation()
-            && self.endpoints_are_valid()
-            && self.full_scale > StickCounts::ZERO
-            && self.full_scale <= MAX_FULL_SCALE
+        let rules: [(bool, &'static str); 11] = [
+            (self.map.is_permutation(), "RCMAP: each input once"),
+            (self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"),
+            (self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"),
+            (self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"),
             // A gesture is a stick beyond the threshold while the others are centred: it must
             // be reachable, and a centred stick must not make one.
-            && self.gesture_threshold > CENTRED_COUNTS
-            && self.gesture_threshold < self.full_scale
-            && self.min_throttle >= StickCounts::ZERO
-            && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale)
-            && self.max_tilt_rad.is_finite()
-            && self.max_tilt_rad > 0.0
-            && self.max_tilt_rad < 1.5
-            && self.yaw_deadband >= StickCounts::ZERO
-            && self.yaw_deadband < self.full_scale
-            && self.yaw_max_step_rad.is_finite()
-            && self.yaw_max_step_rad >= 0.0
-            && self.link_timeout_ticks > 0
-            && pulses_ok
+            (self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"),
+            (
+                self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
+                "THR_MIN past the throttle travel",
+            ),
+            (self.max_tilt_rad.is_finite() && self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"),
+            (self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale"),
+            (self.yaw_max_step_rad.is_finite() && self.yaw_max_step_rad >= 0.0, "yaw rate out of range"),
+            (self.link_timeout_ticks > 0, "radio timeout is zero"),
+            (pulses_ok, "pulse limits invalid"),
+        ];
+        rules.into_iter().find(|(ok, _)| !ok).map(|(_, rule)| rule)
     }
 
-    /// Every input: `min < max` inside the capture wrap, the trim between them; a centred
-    /// function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to either end, the
-    /// throttle's that much travel.
-    pub fn endpoints_are_valid(&self) -> bool {
+    /// Every input: `min <= trim <= max`, inside the capture wrap.
+    fn endpoints_ordered(&self) -> bool {
+        self.inputs.iter().all(|e| e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP)
+    }
+
+    /// A centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
+    /// either end, the throttle's that much travel.
+    fn endpoints_span(&self) -> bool {
         let span = i32::from(MIN_ENDPOINT_SPAN_COUNTS);
         self.inputs.iter().enumerate().all(|(i, e)| {
             let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
-            let ordered = min <= trim && trim <= max && max < CAPTURE_WRAP as i32;
-            let spans = match self.map.function(i) {
+            match self.map.function(i) {
                 Function::Throttle => max - min >= span,
                 _ => trim - min >= span && max - trim >= span,
-            };
-            ordered && spans
+            }
         })
     }
 
@@ -325,7 +335,11 @@ impl RcConfig {
             }
             _ => {
                 let d = w - i32::from(e.trim_counts);
-                let span = if d > 0 { i32::from(e.max_counts) - i32::from(e.trim_counts) } else { i32::from(e.trim_counts) - i32::from(e.min_counts) };
+                let span = if d > 0 {
+                    i32::from(e.max_counts) - i32::from(e.trim_counts)
+                } else {
+                    i32::from(e.trim_counts) - i32::from(e.min_counts)
+                };
                 let scaled = d * fs / span.max(1);
                 if e.reversed {
                     -scaled
@@ -371,6 +385,7 @@ impl RcConfig {
 
     /// Store a width into the sticks (one input, the function the map gives it), as
     /// `update_rc_data`.
+    #[inline(never)] // Once per pulse, on a few ticks in sixteen: kept out of the tick's body.
     pub fn apply_width(&self, sticks: &mut Sticks, input: usize, width_counts: u16) {
         let v = self.stick_from_width(input, width_counts);
         match self.map.function(input) {
@@ -794,9 +809,9 @@ mod tests {
     fn the_reference_endpoints_give_each_width_minus_its_centre_unscaled() {
         // Every width the 15-bit capture can produce, on every input: the fixed mapping.
         let centres = [5862, 6151, 4450, 6397];
-        for input in 0..CHANNELS {
+        for (input, centre) in centres.into_iter().enumerate() {
             for w in 0..=u16::MAX {
-                let d = i32::from(w) - centres[input];
+                let d = i32::from(w) - centre;
                 let want = if input == THR { d.max(0) } else { d }.clamp(-32768, 32767) as i16;
                 assert_eq!(REF.stick_from_width(input, w), StickCounts(want), "input {input} width {w}");
             }
@@ -840,13 +855,21 @@ mod tests {
     #[test]
     fn widths_for_sticks_invert_the_mapping_where_the_scale_is_one_and_near_it_elsewhere() {
         for c in [REF, other_radio()] {
-            for s in [Sticks::new(0, 0, 0, 0), Sticks::new(1800, -1800, 3600, 900), Sticks::new(-1300, -1300, 0, 1300), Sticks::new(7, -3, 101, -599)] {
+            for s in [
+                Sticks::new(0, 0, 0, 0),
+                Sticks::new(1800, -1800, 3600, 900),
+                Sticks::new(-1300, -1300, 0, 1300),
+                Sticks::new(7, -3, 101, -599),
+            ] {
                 let mut got = Sticks::default();
                 for input in 0..CHANNELS {
                     c.apply_width(&mut got, input, c.width_for_sticks(input, &s));
                 }
                 let close = |a: StickCounts, b: StickCounts| (i32::from(a) - i32::from(b)).abs() <= 1;
-                assert!(close(got.ail, s.ail) && close(got.ele, s.ele) && close(got.thr, s.thr) && close(got.rud, s.rud), "{s:?} -> {got:?}");
+                assert!(
+                    close(got.ail, s.ail) && close(got.ele, s.ele) && close(got.thr, s.thr) && close(got.rud, s.rud),
+                    "{s:?} -> {got:?}"
+                );
                 if c == REF {
                     assert_eq!(got, s);
                 }
@@ -856,7 +879,11 @@ mod tests {
 
     #[test]
     fn a_map_that_is_not_a_permutation_is_refused() {
-        for map in [RcMap { roll: 0, pitch: 0, throttle: 2, yaw: 3 }, RcMap { roll: 0, pitch: 1, throttle: 2, yaw: 4 }, RcMap { roll: 3, pitch: 3, throttle: 3, yaw: 3 }] {
+        for map in [
+            RcMap { roll: 0, pitch: 0, throttle: 2, yaw: 3 },
+            RcMap { roll: 0, pitch: 1, throttle: 2, yaw: 4 },
+            RcMap { roll: 3, pitch: 3, throttle: 3, yaw: 3 },
+        ] {
             assert!(!map.is_permutation(), "{map:?}");
             assert!(!RcConfig { map, ..REF }.is_valid(), "{map:?}");
         }
@@ -895,8 +922,10 @@ mod tests {
         assert!(!with(THR, &|e| e.trim_counts = e.max_counts + 1));
         // Past the capture wrap no width can reach it.
         assert!(!with(RUD, &|e| e.max_counts = CAPTURE_WRAP as u16));
-        // The same endpoints that suit a throttle do not suit a centred stick.
+        // Endpoints that suit a throttle (trim at the bottom) do not suit a centred stick.
         let mut c = REF;
+        c.inputs[THR].trim_counts = c.inputs[THR].min_counts;
+        assert!(c.is_valid());
         c.map.assign(Function::Roll, THR as u8);
         assert!(!c.is_valid());
     }
