@@ -257,6 +257,51 @@ pub fn with_values(base: &Config, values: &[f32; COUNT]) -> Result<Config, &'sta
     Ok(cfg)
 }
 
+/// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
+/// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
+pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
+    let mut c = with_in_flight_fields_of(base, src);
+    let (r, s) = (&mut c.rc, &src.rc);
+    r.map = s.map;
+    r.inputs = s.inputs;
+    r.link_timeout_ticks = s.link_timeout_ticks;
+    r.gesture_threshold = s.gesture_threshold;
+    r.min_throttle = s.min_throttle;
+    r.yaw_deadband = s.yaw_deadband;
+    if let (SupervisorConfig::Safe(b), SupervisorConfig::Safe(s)) = (&mut c.supervisor, src.supervisor) {
+        b.arm_hold_ticks = s.arm_hold_ticks;
+        b.disarm_hold_ticks = s.disarm_hold_ticks;
+        b.auto_disarm_ticks = s.auto_disarm_ticks;
+        b.failsafe_off_ticks = s.failsafe_off_ticks;
+        b.recovery_ticks = s.recovery_ticks;
+    }
+    c.gyro_filter = src.gyro_filter;
+    c.control.d_filter_k = src.control.d_filter_k;
+    c.battery_sense = src.battery_sense;
+    c.link.protocol = src.link.protocol;
+    c
+}
+
+/// `base` with the fields of the parameters that may change while armed
+/// ([`Applies::Anytime`]) taken from `src`.
+pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
+    let mut c = *base;
+    c.rc.max_tilt_rad = src.rc.max_tilt_rad;
+    c.rc.yaw_max_step_rad = src.rc.yaw_max_step_rad;
+    for (b, s) in
+        [(&mut c.control.roll, src.control.roll), (&mut c.control.pitch, src.control.pitch), (&mut c.control.yaw, src.control.yaw)]
+    {
+        b.outer_kp = s.outer_kp;
+        b.inner_kp = s.inner_kp;
+        b.inner_ki = s.inner_ki;
+        b.inner_kd = s.inner_kd;
+    }
+    c.control.yaw_rate_feedforward = src.control.yaw_rate_feedforward;
+    c.link.attitude_hz = src.link.attitude_hz;
+    c.link.rc_hz = src.link.rc_hz;
+    c
+}
+
 /// The parameter list as Markdown, with `cfg`'s values as the defaults: what
 /// `docs/parameters.md` holds (a test regenerates it and compares).
 pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {

@@ -374,3 +374,26 @@ fn a_whole_set_is_checked_as_a_whole() {
     v[idx("RC1_TRIM")] = f32::NAN;
     assert_eq!(with_values(&base, &v), Err(RULE_NOT_FINITE));
 }
+
+#[test]
+fn the_field_lists_cover_exactly_the_table_and_its_in_flight_part() {
+    // Each parameter moved on its own: the whole change is in the parameter fields, and in
+    // the in-flight fields exactly when the parameter may change armed.
+    let old = Config::default();
+    for (i, p) in TABLE.iter().enumerate() {
+        let v = p.get(&old);
+        let moved = [p.max, p.min, v + 1.0, v - 1.0, v * 1.1].into_iter().find_map(|x| {
+            let mut c = old;
+            set(&mut c, i, x, false).ok().map(|_| c).filter(|c| *c != old)
+        });
+        let new = moved.unwrap_or_else(|| panic!("{} could not be moved", p.name));
+        assert_eq!(with_parameter_fields_of(&new, &old), old, "{}: a field outside the parameter fields moved", p.name);
+        assert_eq!(with_parameter_fields_of(&old, &new), new, "{}", p.name);
+        let in_flight = with_in_flight_fields_of(&old, &new) == new;
+        assert_eq!(in_flight, p.applies == Applies::Anytime, "{}", p.name);
+    }
+    // A field no parameter sets is outside both.
+    let mut other = old;
+    other.mixer.max_compare += 1.0;
+    assert_ne!(with_parameter_fields_of(&other, &old), old);
+}
