@@ -161,6 +161,29 @@ pub fn load(sectors: [&[u32]; 2]) -> Option<Snapshot> {
     newest(sectors).map(|(s, _)| s)
 }
 
+/// Where the configuration at boot came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Source {
+    /// The newest valid snapshot, with its sequence number.
+    Snapshot { sequence: u32 },
+    /// No valid snapshot of this firmware's table: the defaults.
+    NoSnapshot,
+    /// The newest snapshot's values do not make a valid configuration (the rule): the defaults.
+    Refused(&'static str),
+}
+
+/// The configuration to boot with: `defaults` with the newest valid snapshot's values, or
+/// `defaults` alone (and why), never a mix.
+pub fn load_config(sectors: [&[u32]; 2], defaults: &crate::Config) -> (crate::Config, Source) {
+    match load(sectors) {
+        None => (*defaults, Source::NoSnapshot),
+        Some(s) => match super::with_values(defaults, &s.values) {
+            Ok(cfg) => (cfg, Source::Snapshot { sequence: s.sequence }),
+            Err(rule) => (*defaults, Source::Refused(rule)),
+        },
+    }
+}
+
 /// How to save `values` as the newest snapshot.
 pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
     let found = newest(sectors);
