@@ -257,6 +257,45 @@ pub fn with_values(base: &Config, values: &[f32; COUNT]) -> Result<Config, &'sta
     Ok(cfg)
 }
 
+/// A parameter file's line that could not be taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileError {
+    /// 1-based; 0 when the lines are each fine but the set they make is refused.
+    pub line: usize,
+    pub rule: &'static str,
+}
+
+/// The set in MAVProxy's `param save` format: a `NAME VALUE` line per parameter, in table
+/// order, each value as the shortest text that reads back as the same `f32`.
+pub fn write_file(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
+    for p in TABLE.iter() {
+        writeln!(out, "{} {}", p.name, p.get(cfg))?;
+    }
+    Ok(())
+}
+
+/// `base` with the parameters a file in MAVProxy's `param save` format names (`NAME VALUE`
+/// lines, separated by spaces, tabs or a comma; `#` starts a comment; blank lines skipped),
+/// checked as a whole as [`with_values`] does: a file sets a whole radio, whose endpoints
+/// are valid together but not necessarily one at a time. An unknown name, a value that does
+/// not parse, or a line with more than a name and a value is refused with its line.
+pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
+    let mut v = values(base);
+    for (n, raw) in text.lines().enumerate() {
+        let err = |rule| FileError { line: n + 1, rule };
+        let line = raw.split('#').next().unwrap_or("");
+        let mut words = line.split(|c: char| c.is_whitespace() || c == ',').filter(|w| !w.is_empty());
+        let (Some(name), value, extra) = (words.next(), words.next(), words.next()) else { continue };
+        let (Some(value), None) = (value, extra) else { return Err(err("expected NAME VALUE")) };
+        let i = index_of(name.as_bytes()).ok_or(err(RULE_UNKNOWN))?;
+        let x: f32 = value.parse().map_err(|_| err("value is not a number"))?;
+        if let Some(slot) = v.get_mut(i) {
+            *slot = x;
+        }
+    }
+    with_values(base, &v).map_err(|rule| FileError { line: 0, rule })
+}
+
 /// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
 /// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
 pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {

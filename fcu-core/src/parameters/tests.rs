@@ -397,3 +397,26 @@ fn the_field_lists_cover_exactly_the_table_and_its_in_flight_part() {
     other.mixer.max_compare += 1.0;
     assert_ne!(with_parameter_fields_of(&other, &old), old);
 }
+
+#[test]
+fn a_parameter_file_round_trips_and_bad_lines_are_named() {
+    let base = Config::default();
+    let mut text = std::string::String::new();
+    write_file(&mut text, &base).unwrap();
+    assert_eq!(text.lines().count(), COUNT);
+    assert!(text.starts_with("RCMAP_ROLL 1\nRCMAP_PITCH 2\n"), "{text}");
+    assert_eq!(apply_file(&base, &text), Ok(base));
+    // MAVProxy's own layout: padded names, six decimals, comments; a whole radio at once in
+    // an order that one set at a time would refuse (the trim past the old maximum first).
+    let other = "# from another board\nRC1_TRIM      1950.000000\nRC1_MAX 2100\n\nRATE_RLL_P,250.5 # tuned\n";
+    let c = apply_file(&base, other).unwrap();
+    assert_eq!((c.rc.inputs[0].trim_counts, c.rc.inputs[0].max_counts, c.control.roll.inner_kp), (7800, 8400, 250.5));
+    let mut one_at_a_time = base;
+    assert!(set(&mut one_at_a_time, idx("RC1_TRIM"), 1950.0, false).is_err());
+    assert_eq!(apply_file(&base, "ANG_RLL_P 5\nNO_SUCH 1\n"), Err(FileError { line: 2, rule: RULE_UNKNOWN }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P five\n"), Err(FileError { line: 1, rule: "value is not a number" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P 1 2\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P nan\n"), Err(FileError { line: 0, rule: RULE_NOT_FINITE }));
+    assert_eq!(apply_file(&base, "RC1_TRIM 2400\n").map_err(|e| e.line), Err(0));
+}
