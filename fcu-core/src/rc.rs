@@ -1,9 +1,11 @@
 //! Radio: capture edges → pulse widths → sticks → attitude targets, and stick gestures.
 //!
-//! Widths and sticks are in TIM2 counts of 0.25 µs (4000 = 1 ms). Channel order is the
-//! receiver wiring: 0 = AIL (PA0), 1 = ELE (PA1), 2 = THR (PA2), 3 = RUD (PA3).
-//! Sticks are the reference's `gAIL, gELE, gTHR, gRUD`: width minus the channel centre
-//! (throttle: minus the bottom, never negative).
+//! Widths and sticks are in TIM2 counts of 0.25 µs (4000 = 1 ms). Inputs are the captured
+//! pins, 0 = PA0 .. 3 = PA3; which stick each carries is the radio map ([`RcMap`], the
+//! reference's wiring AIL, ELE, THR, RUD by default). Sticks are the reference's
+//! `gAIL, gELE, gTHR, gRUD`: width minus the input's trim (throttle: minus its bottom, never
+//! negative), scaled so that the input's endpoints are full deflections ([`RcInput`]); with the
+//! reference's endpoints the scale is exactly one.
 
 /// Number of radio channels.
 pub const CHANNELS: usize = 4;

@@ -11,7 +11,7 @@
 //! |---|---|
 //! | 0 | [`MAGIC`] |
 //! | 1 | sequence number (one more than the newest snapshot's) |
-//! | 2 | [`LAYOUT_HASH`](super::LAYOUT_HASH): the table's names and order |
+//! | 2 | [`LAYOUT_HASH`]: the table's names and order |
 //! | 3 | the number of values ([`COUNT`]) |
 //! | 4.. | the values, `f32` bits, in table order |
 //! | then | CRC-32 (IEEE) of the words before it, little-endian bytes |
@@ -204,7 +204,7 @@ pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
         return SavePlan { erase: None, sector, first_word: next * RECORD_WORDS, words };
     }
     // The sector is full (or there is no snapshot): the other one, erased unless it is.
-    let other = if found.is_some() { 1 - sector } else { 0 };
+    let other = if found.is_some() { sector ^ 1 } else { 0 };
     let other_words = sectors.get(other).copied().unwrap_or(&[]);
     let fresh = other_words.get(..SLOTS * RECORD_WORDS).is_some_and(|w| w.iter().all(|&x| x == ERASED));
     SavePlan { erase: (!fresh).then_some(other), sector: other, first_word: 0, words }
