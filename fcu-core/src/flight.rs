@@ -175,6 +175,23 @@ impl ApplyError {
     }
 }
 
+/// Whether `new` may replace `old` at run time, with the motors `armed` or not
+/// ([`FlightController::armed`]): valid, differing only in what parameters set, and while
+/// armed only in the in-flight ones. What [`FlightController::apply_config`] checks; a
+/// firmware that runs the two halves in different tasks checks it where it keeps the
+/// configuration, then hands the new one to [`ControlTick::take_config`] and
+/// [`OuterStep::take_config`].
+pub fn check_change(old: &Config, new: &Config, armed: bool) -> Result<(), ApplyError> {
+    new.validate().map_err(ApplyError::Invalid)?;
+    if crate::parameters::with_parameter_fields_of(new, old) != *old {
+        return Err(ApplyError::NeedsRestart);
+    }
+    if armed && crate::parameters::with_in_flight_fields_of(old, new) != *new {
+        return Err(ApplyError::Armed);
+    }
+    Ok(())
+}
+
 /// The per-tick half: the stages, in the order its `run` calls them.
 #[derive(Clone, Debug)]
 pub struct ControlTick {
@@ -247,23 +264,9 @@ impl FlightController {
     /// would change ([`crate::parameters::Applies::Anytime`]), or when a setting that no
     /// parameter reaches would change.
     pub fn apply_config(&mut self, cfg: Config) -> Result<(), ApplyError> {
-        cfg.validate().map_err(ApplyError::Invalid)?;
-        if crate::parameters::with_parameter_fields_of(&cfg, &self.cfg) != self.cfg {
-            return Err(ApplyError::NeedsRestart);
-        }
-        if self.armed() && crate::parameters::with_in_flight_fields_of(&self.cfg, &cfg) != cfg {
-            return Err(ApplyError::Armed);
-        }
-        // Same kind of supervisor (checked above: its kind is no parameter's).
-        if !self.control_tick.supervision.set_config(cfg.supervisor) {
-            return Err(ApplyError::NeedsRestart);
-        }
-        let derived = Derived::new(&cfg);
-        let tick = &mut self.control_tick;
-        tick.params = derived.tick;
-        tick.params.rescale(Gains::UNITY, tick.outer.gains);
-        tick.sensors.set_gyro_filter(cfg.gyro_filter);
-        self.outer_step.params = derived.outer;
+        check_change(&self.cfg, &cfg, self.armed())?;
+        self.control_tick.take_config(&cfg)?;
+        self.outer_step.take_config(&cfg);
         self.cfg = cfg;
         Ok(())
     }
@@ -348,6 +351,20 @@ impl ControlTick {
     /// See [`FlightController::armed`].
     pub fn armed(&self) -> bool {
         matches!(self.supervision.in_force().decision.state, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel)
+    }
+
+    /// The tick's half of a change [`check_change`] allowed: its values made again by
+    /// `Derived::new`, the rate loop and throttle map scaled by the gains in force, the gyro
+    /// low-pass's coefficients and the supervisor's numbers replaced, every state kept. Refused
+    /// (nothing changed) for another kind of supervisor, which `check_change` refuses too.
+    pub fn take_config(&mut self, cfg: &Config) -> Result<(), ApplyError> {
+        if !self.supervision.set_config(cfg.supervisor) {
+            return Err(ApplyError::NeedsRestart);
+        }
+        self.params = Derived::new(cfg).tick;
+        self.params.rescale(Gains::UNITY, self.outer.gains);
+        self.sensors.set_gyro_filter(cfg.gyro_filter);
+        Ok(())
     }
 
     /// What the tick works with: the configuration's values, the rate loop and throttle map
@@ -500,6 +517,12 @@ impl OuterStep {
     /// The latest battery reading, mV (for the battery compensation; ignored without it).
     pub fn set_battery_mv(&mut self, battery_mv: u32) {
         self.gains.set_battery_mv(battery_mv);
+    }
+
+    /// The outer step's half of a change [`check_change`] allowed: its values made again by
+    /// `Derived::new` (the angle loop's gains, the stick limits), its state kept.
+    pub fn take_config(&mut self, cfg: &Config) {
+        self.params = Derived::new(cfg).outer;
     }
 }
 
@@ -654,6 +677,27 @@ mod tests {
         // The gyro low-pass moved: armed again, the two fly differently.
         assert!(fly(&mut fc, 3010, 3400, &FLYING) != fly(&mut twin, 3010, 3400, &FLYING), "the new filter flies");
         assert_eq!(ApplyError::Armed.rule(), crate::parameters::RULE_ARMED);
+    }
+
+    #[test]
+    fn the_split_halves_take_a_change_as_the_whole_controller_does() {
+        let mut whole = FlightController::new(flown()).unwrap();
+        fly(&mut whole, 0, 3000, &FLYING);
+        let (mut tick, mut outer) = whole.clone().into_parts();
+        let mut cfg = flown();
+        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"ANG_PIT_P").unwrap(), 8.0, true).unwrap();
+        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"RATE_YAW_D").unwrap(), 40.0, true).unwrap();
+        assert_eq!(check_change(&flown(), &cfg, tick.armed()), Ok(()));
+        tick.take_config(&cfg).unwrap();
+        outer.take_config(&cfg);
+        whole.apply_config(cfg).unwrap();
+        let mut split = FlightController { control_tick: tick, outer_step: outer, cfg };
+        assert!(fly(&mut whole, 3000, 3500, &FLYING) == fly(&mut split, 3000, 3500, &FLYING));
+        // What check_change refuses armed, it refuses on its own too.
+        let mut radio = flown();
+        crate::parameters::set(&mut radio, crate::parameters::index_of(b"RCMAP_ROLL").unwrap(), 2.0, false).unwrap();
+        assert_eq!(check_change(&flown(), &radio, true), Err(ApplyError::Armed));
+        assert_eq!(check_change(&flown(), &radio, false), Ok(()));
     }
 
     #[test]

@@ -18,6 +18,20 @@
 //! constants) not on the table's steps.
 //!
 //! [`snapshot`] is the whole set as it is kept in flash.
+//!
+//! # For a link
+//!
+//! - `PARAM_REQUEST_LIST` / `PARAM_REQUEST_READ`: [`count`], [`name`], [`value`] by index,
+//!   [`index_of`] for a `param_id` (16 bytes, NUL-terminated when shorter).
+//! - `PARAM_SET`: copy the configuration in force, [`set`] it with the motors' armed flag
+//!   ([`FlightController::armed`](crate::FlightController::armed)); taken, give the copy to
+//!   [`FlightController::apply_config`](crate::FlightController::apply_config) (or, with the
+//!   halves in two tasks, [`check_change`](crate::flight::check_change) and each half's
+//!   `take_config`), echo [`Applied::value`] and, if [`Applied::also_changed`] names one, that
+//!   parameter too; refused, echo [`Refusal::value_in_force`] and send the name and
+//!   [`Refusal::rule`] as a `STATUSTEXT`. An unknown name has no value to echo.
+//! - Saving: [`values`] into [`snapshot::plan_save`]; at boot [`snapshot::load_config`].
+//! - Files in MAVProxy's format: [`write_file`], [`apply_file`].
 
 pub mod snapshot;
 
