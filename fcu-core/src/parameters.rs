@@ -200,13 +200,18 @@ pub fn index_of(id: &[u8]) -> Option<usize> {
 }
 
 /// Set the parameter at `index` to `value` in `cfg`, with the motors `armed` or not: the value
-/// in force afterwards, or the rule that refused it (and `cfg` as it was).
+/// in force afterwards, or the rule that refused it (and `cfg` as it was). The value a
+/// parameter already reads is taken at any time, and changes nothing.
 pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Applied, Refusal> {
     let Some(p) = param(index) else {
         return Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None });
     };
     let refuse = |rule| Refusal { rule, value_in_force: Some(p.get(cfg)) };
     check_value(p, value).map_err(refuse)?;
+    if value.to_bits() == p.get(cfg).to_bits() {
+        // Nothing moves (a file pushed whole while armed sets every value it already has).
+        return Ok(Applied { value, also_changed: None });
+    }
     if armed && p.applies != Applies::Anytime {
         return Err(refuse(RULE_ARMED));
     }

@@ -195,16 +195,27 @@ pub struct RcInput {
 }
 
 impl RcInput {
-    /// A centred stick with `trim_counts` at its centre and one full scale each side.
+    /// A centred stick with `trim_counts` at its centre and one full scale each side
+    /// (saturated at the counter's range).
     pub const fn centred(trim_counts: u16, full_scale: u16) -> RcInput {
-        RcInput { min_counts: trim_counts - full_scale, trim_counts, max_counts: trim_counts + full_scale, reversed: false }
+        RcInput {
+            min_counts: trim_counts.saturating_sub(full_scale),
+            trim_counts,
+            max_counts: trim_counts.saturating_add(full_scale),
+            reversed: false,
+        }
     }
 
     /// A throttle with its bottom at `min_counts` and two full scales of travel. The trim,
     /// which the throttle does not read, at the centre: the input can then be given to a
     /// centred function (`RCMAP_*`) with valid endpoints.
     pub const fn throttle(min_counts: u16, full_scale: u16) -> RcInput {
-        RcInput { min_counts, trim_counts: min_counts + full_scale, max_counts: min_counts + 2 * full_scale, reversed: false }
+        RcInput {
+            min_counts,
+            trim_counts: min_counts.saturating_add(full_scale),
+            max_counts: min_counts.saturating_add(full_scale).saturating_add(full_scale),
+            reversed: false,
+        }
     }
 }
 
@@ -312,7 +323,8 @@ impl RcConfig {
         })
     }
 
-    /// The endpoints of the input that carries `f`.
+    /// The endpoints of the input that carries `f` (a map naming no input, which
+    /// [`is_valid`](Self::is_valid) refuses, reads as a centred stick at 1500 µs).
     pub fn input_for(&self, f: Function) -> RcInput {
         self.inputs.get(usize::from(self.map.input(f))).copied().unwrap_or(RcInput::centred(6000, 1800))
     }

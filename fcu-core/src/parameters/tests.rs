@@ -246,6 +246,8 @@ fn while_armed_only_gains_and_rates_change() {
             Applies::Disarmed | Applies::Reboot => {
                 assert_eq!(r, Err(Refusal { rule: RULE_ARMED, value_in_force: Some(old) }), "{}", p.name);
                 assert_eq!(c, base);
+                // The value it already has is no change: taken.
+                assert_eq!(set(&mut c, i, old, true), Ok(Applied { value: old, also_changed: None }), "{}", p.name);
             }
         }
     }
@@ -327,7 +329,7 @@ fn times_are_whole_ticks_and_the_reference_supervisor_has_none_to_set() {
     assert_eq!(set(&mut c, idx("ARM_HOLD_MS"), 1001.0, false).map_err(|r| r.rule), Err(RULE_NOT_TICKS));
     let mut r = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
     let before = r;
-    assert_eq!(set(&mut r, idx("ARM_HOLD_MS"), 1000.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
+    assert_eq!(set(&mut r, idx("ARM_HOLD_MS"), 2000.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
     assert_eq!(r, before);
 }
 
