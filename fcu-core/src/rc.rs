@@ -740,25 +740,26 @@ impl Receiver {
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
         self.now += 1;
         let now = self.now;
-        // Written out per channel, in channel order as the reference's gestures need
-        // (docs/performance.md, «channels written out»).
         let [w0, w1, w2, w3] = batch.width_counts;
-        let [t0, t1, t2, t3] = &mut self.last_pulse_at;
-        let sticks = &mut self.sticks;
-        let mut channel = |at: &mut u64, width: Option<u16>, index: usize| {
-            if let Some(w) = width {
-                *at = now;
-                cfg.apply_width(sticks, index, w);
-                on_stick_update(sticks);
-            }
-        };
-        channel(t0, w0, AIL);
-        channel(t1, w1, ELE);
-        channel(t2, w2, THR);
-        channel(t3, w3, RUD);
         let timeout = u64::from(cfg.link_timeout_ticks);
         let any_width = w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some();
+        // Most ticks bring no width: everything a width needs is behind this one test.
         if any_width {
+            // Written out per channel, in channel order as the reference's gestures need
+            // (docs/performance.md, «channels written out»).
+            let [t0, t1, t2, t3] = &mut self.last_pulse_at;
+            let sticks = &mut self.sticks;
+            let mut channel = |at: &mut u64, width: Option<u16>, index: usize| {
+                if let Some(w) = width {
+                    *at = now;
+                    cfg.apply_width(sticks, index, w);
+                    on_stick_update(sticks);
+                }
+            };
+            channel(t0, w0, AIL);
+            channel(t1, w1, ELE);
+            channel(t2, w2, THR);
+            channel(t3, w3, RUD);
             if let PulseRules::Validated { .. } = cfg.pulses {
                 self.link_until = (*t0).min(*t1).min(*t2).min(*t3) + timeout;
             }
