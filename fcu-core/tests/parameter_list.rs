@@ -19,9 +19,14 @@ fn generated() -> String {
          {count} parameters, every one a `REAL32` as MAVLink carries it; whole-number ones are exact.\n\
          The defaults are `Config::default()`'s. *Change*: `any time` applies at once, armed too (in RAM,\n\
          saved after disarming); `disarmed` is refused while armed and applies at once; `after reboot` is\n\
-         refused while armed and takes effect at the next boot. A set that is not finite, out of range,\n\
-         off its step or that makes the configuration invalid is refused with the rule it breaks, and\n\
-         the value in force stays.\n\n\
+         refused while armed and takes effect at the next boot. Why: a new radio map, endpoint or\n\
+         gesture threshold changes what the sticks mean under the pilot's thumbs, and a failsafe time\n\
+         or filter changed mid-flight acts on a flight planned with the old one; gains and limits are\n\
+         what a tune changes in the air, as on other autopilots. A set that is not finite, out of\n\
+         range, off its step or that makes the configuration invalid is refused with the rule it\n\
+         breaks, and the value in force stays. Setting the value a parameter already has is always\n\
+         taken. `RCMAP_*` gives an input to a function and the function that had it the old input,\n\
+         so the map stays a permutation (both are reported).\n\n\
          {table}",
         count = parameters::count(),
     )
