@@ -105,7 +105,8 @@ impl Unit {
 /// A setter's own refusal (bounds and steps are checked before it runs).
 type SetResult = Result<(), &'static str>;
 
-/// One parameter.
+/// One parameter: what the firmware keeps of it (its description stays in the definition,
+/// for the parameter list: [`description`]).
 #[derive(Clone, Copy)]
 pub struct Param {
     pub name: &'static str,
@@ -114,10 +115,15 @@ pub struct Param {
     pub max: f32,
     pub step: Step,
     pub applies: Applies,
-    /// One line for the parameter list.
-    pub description: &'static str,
     get: fn(&Config) -> f32,
     set: fn(&mut Config, f32) -> SetResult,
+}
+
+/// A parameter as the table defines it: itself and one line for the parameter list.
+#[derive(Clone, Copy)]
+struct Definition {
+    param: Param,
+    description: &'static str,
 }
 
 impl core::fmt::Debug for Param {
@@ -175,6 +181,11 @@ pub fn count() -> usize {
 /// The parameter at `index`.
 pub fn param(index: usize) -> Option<&'static Param> {
     TABLE.get(index)
+}
+
+/// One line on what the parameter at `index` does (for the parameter list).
+pub fn description(index: usize) -> Option<&'static str> {
+    DESCRIPTIONS.get(index).copied()
 }
 
 /// The name of the parameter at `index`.
@@ -365,7 +376,7 @@ pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
 pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
     writeln!(out, "| Name | Default | Unit | Range | Step | Change | Meaning |")?;
     writeln!(out, "|---|---|---|---|---|---|---|")?;
-    for p in TABLE.iter() {
+    for (p, description) in TABLE.iter().zip(DESCRIPTIONS) {
         let step = match p.step {
             Step::Any => "any",
             Step::Integer => "1",
@@ -381,7 +392,7 @@ pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fm
             p.max,
             step,
             p.applies.describe(),
-            p.description
+            description
         )?;
     }
     Ok(())
@@ -395,11 +406,11 @@ pub const LAYOUT_HASH: u32 = layout_hash(&DEFINITION);
 /// FNV-1a over the names of `table`, each followed by a NUL.
 // Evaluated by the compiler for the table: an index out of bounds would fail the build.
 #[allow(clippy::indexing_slicing)]
-const fn layout_hash(table: &[Param]) -> u32 {
+const fn layout_hash(table: &[Definition]) -> u32 {
     let mut h: u32 = 0x811c_9dc5;
     let mut i = 0;
     while i < table.len() {
-        let name = table[i].name.as_bytes();
+        let name = table[i].param.name.as_bytes();
         let mut j = 0;
         while j <= name.len() {
             let b = if j < name.len() { name[j] } else { 0 };
@@ -493,64 +504,70 @@ fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
 
 macro_rules! rc_map {
     ($name:literal, $f:expr, $what:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::None,
-            min: 1.0,
-            max: 4.0,
-            step: Step::Integer,
-            applies: Applies::Disarmed,
-            description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
-            get: |c| f32::from(c.rc.map.input($f)) + 1.0,
-            set: |c, v| {
-                c.rc.map.assign($f, (v as u8).saturating_sub(1));
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: 1.0,
+                max: 4.0,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| f32::from(c.rc.map.input($f)) + 1.0,
+                set: |c, v| {
+                    c.rc.map.assign($f, (v as u8).saturating_sub(1));
+                    Ok(())
+                },
             },
+            description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
         }
     };
 }
 
 macro_rules! rc_endpoint {
     ($name:literal, $input:literal, $field:ident, $what:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::Microseconds,
-            min: 500.0,
-            max: 2500.0,
-            step: Step::QuarterUs,
-            applies: Applies::Disarmed,
-            description: concat!("radio input ", $input, ": ", $what),
-            get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
-            set: |c, v| {
-                if let Some(e) = c.rc.inputs.get_mut($input - 1) {
-                    e.$field = counts_from_us(v);
-                }
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Microseconds,
+                min: 500.0,
+                max: 2500.0,
+                step: Step::QuarterUs,
+                applies: Applies::Disarmed,
+                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
+                set: |c, v| {
+                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
+                        e.$field = counts_from_us(v);
+                    }
+                    Ok(())
+                },
             },
+            description: concat!("radio input ", $input, ": ", $what),
         }
     };
 }
 
 macro_rules! rc_rev {
     ($name:literal, $input:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::None,
-            min: -1.0,
-            max: 1.0,
-            step: Step::Integer,
-            applies: Applies::Disarmed,
-            description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
-            get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e: &RcInput| if e.reversed { -1.0 } else { 1.0 }),
-            set: |c, v| {
-                if v == 0.0 {
-                    return Err(RULE_REV);
-                }
-                if let Some(e) = c.rc.inputs.get_mut($input - 1) {
-                    e.reversed = v < 0.0;
-                }
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: -1.0,
+                max: 1.0,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e: &RcInput| if e.reversed { -1.0 } else { 1.0 }),
+                set: |c, v| {
+                    if v == 0.0 {
+                        return Err(RULE_REV);
+                    }
+                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
+                        e.reversed = v < 0.0;
+                    }
+                    Ok(())
+                },
             },
+            description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
         }
     };
 }
@@ -568,63 +585,69 @@ macro_rules! rc_input {
 
 macro_rules! gain {
     ($name:literal, $axis:ident . $field:ident, $max:literal, $what:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::None,
-            min: 0.0,
-            max: $max,
-            step: Step::Any,
-            applies: Applies::Anytime,
-            description: $what,
-            get: |c| c.control.$axis.$field,
-            set: |c, v| {
-                c.control.$axis.$field = v;
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: 0.0,
+                max: $max,
+                step: Step::Any,
+                applies: Applies::Anytime,
+                get: |c| c.control.$axis.$field,
+                set: |c, v| {
+                    c.control.$axis.$field = v;
+                    Ok(())
+                },
             },
+            description: $what,
         }
     };
 }
 
 macro_rules! safety_ms {
     ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::Milliseconds,
-            min: $min,
-            max: $max,
-            step: Step::Integer,
-            applies: Applies::Disarmed,
-            description: $what,
-            get: |c| ms_from_ticks(c, safety(c).$field),
-            set: |c, v| {
-                let ticks = ticks_from_ms(c, v)?;
-                safety_mut(c)?.$field = ticks;
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Milliseconds,
+                min: $min,
+                max: $max,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| ms_from_ticks(c, safety(c).$field),
+                set: |c, v| {
+                    let ticks = ticks_from_ms(c, v)?;
+                    safety_mut(c)?.$field = ticks;
+                    Ok(())
+                },
             },
+            description: $what,
         }
     };
 }
 
 macro_rules! stick_us {
     ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
-        Param {
-            name: $name,
-            unit: Unit::Microseconds,
-            min: $min,
-            max: $max,
-            step: Step::QuarterUs,
-            applies: Applies::Disarmed,
-            description: $what,
-            get: |c| stick_us(c.rc.$field),
-            set: |c, v| {
-                c.rc.$field = stick_from_us(v);
-                Ok(())
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Microseconds,
+                min: $min,
+                max: $max,
+                step: Step::QuarterUs,
+                applies: Applies::Disarmed,
+                get: |c| stick_us(c.rc.$field),
+                set: |c, v| {
+                    c.rc.$field = stick_from_us(v);
+                    Ok(())
+                },
             },
+            description: $what,
         }
     };
 }
 
-const RC: [[Param; 4]; 4] = [
+const RC: [[Definition; 4]; 4] = [
     rc_input!("RC1_MIN", "RC1_TRIM", "RC1_MAX", "RC1_REV", 1),
     rc_input!("RC2_MIN", "RC2_TRIM", "RC2_MAX", "RC2_REV", 2),
     rc_input!("RC3_MIN", "RC3_TRIM", "RC3_MAX", "RC3_REV", 3),
@@ -636,10 +659,37 @@ pub const COUNT: usize = 50;
 
 /// The table, in the order of indices, of `PARAM_VALUE`'s `param_index` and of a snapshot.
 /// Appending keeps every index; any change of names or order changes [`LAYOUT_HASH`].
-pub static TABLE: [Param; COUNT] = DEFINITION;
+pub static TABLE: [Param; COUNT] = params_of(&DEFINITION);
 
-/// The table as a constant, which [`LAYOUT_HASH`] can read.
-const DEFINITION: [Param; COUNT] = [
+/// The descriptions, in table order: only the parameter list reads them, so an image that
+/// never writes one leaves them out.
+const DESCRIPTIONS: [&str; COUNT] = descriptions_of(&DEFINITION);
+
+// Evaluated by the compiler: an index out of bounds would fail the build.
+#[allow(clippy::indexing_slicing)]
+const fn params_of(d: &[Definition; COUNT]) -> [Param; COUNT] {
+    let mut out = [d[0].param; COUNT];
+    let mut i = 0;
+    while i < COUNT {
+        out[i] = d[i].param;
+        i += 1;
+    }
+    out
+}
+
+#[allow(clippy::indexing_slicing)]
+const fn descriptions_of(d: &[Definition; COUNT]) -> [&'static str; COUNT] {
+    let mut out = [""; COUNT];
+    let mut i = 0;
+    while i < COUNT {
+        out[i] = d[i].description;
+        i += 1;
+    }
+    out
+}
+
+/// The table with its descriptions, as defined; [`LAYOUT_HASH`] reads it.
+const DEFINITION: [Definition; COUNT] = [
     rc_map!("RCMAP_ROLL", Function::Roll, "roll (aileron)"),
     rc_map!("RCMAP_PITCH", Function::Pitch, "pitch (elevator)"),
     rc_map!("RCMAP_THROTTLE", Function::Throttle, "throttle"),
@@ -660,19 +710,21 @@ const DEFINITION: [Param; COUNT] = [
     RC[3][1],
     RC[3][2],
     RC[3][3],
-    Param {
-        name: "RC_TIMEOUT_MS",
-        unit: Unit::Milliseconds,
-        min: 25.0,
-        max: 500.0,
-        step: Step::Integer,
-        applies: Applies::Disarmed,
-        description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
-        get: |c| ms_from_ticks(c, c.rc.link_timeout_ticks),
-        set: |c, v| {
-            c.rc.link_timeout_ticks = ticks_from_ms(c, v)?;
-            Ok(())
+    Definition {
+        param: Param {
+            name: "RC_TIMEOUT_MS",
+            unit: Unit::Milliseconds,
+            min: 25.0,
+            max: 500.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            get: |c| ms_from_ticks(c, c.rc.link_timeout_ticks),
+            set: |c, v| {
+                c.rc.link_timeout_ticks = ticks_from_ms(c, v)?;
+                Ok(())
+            },
         },
+        description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
     },
     stick_us!(
         "GESTURE_US",
@@ -688,33 +740,37 @@ const DEFINITION: [Param; COUNT] = [
     safety_ms!("DISARM_DELAY_MS", auto_disarm_ticks, 1000.0, 60000.0, "armed with the throttle low this long disarms"),
     safety_ms!("FS_OFF_MS", failsafe_off_ticks, 200.0, 10000.0, "lost radio time over a flight that stops the motors (failsafe stage 2)"),
     safety_ms!("FS_RECOVER_MS", recovery_ticks, 200.0, 10000.0, "a good link must last this long to hand control back"),
-    Param {
-        name: "ANGLE_MAX",
-        unit: Unit::Degrees,
-        min: 5.0,
-        max: 60.0,
-        step: Step::Any,
-        applies: Applies::Anytime,
+    Definition {
+        param: Param {
+            name: "ANGLE_MAX",
+            unit: Unit::Degrees,
+            min: 5.0,
+            max: 60.0,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| c.rc.max_tilt_rad.to_degrees(),
+            set: |c, v| {
+                c.rc.max_tilt_rad = v.to_radians();
+                Ok(())
+            },
+        },
         description: "roll and pitch at full stick",
-        get: |c| c.rc.max_tilt_rad.to_degrees(),
-        set: |c, v| {
-            c.rc.max_tilt_rad = v.to_radians();
-            Ok(())
-        },
     },
-    Param {
-        name: "YAW_RATE_MAX",
-        unit: Unit::DegreesPerSecond,
-        min: 10.0,
-        max: 720.0,
-        step: Step::Any,
-        applies: Applies::Anytime,
-        description: "yaw rate at full stick",
-        get: |c| (c.rc.yaw_max_step_rad * c.timing.outer_hz()).to_degrees(),
-        set: |c, v| {
-            c.rc.yaw_max_step_rad = v.to_radians() / c.timing.outer_hz();
-            Ok(())
+    Definition {
+        param: Param {
+            name: "YAW_RATE_MAX",
+            unit: Unit::DegreesPerSecond,
+            min: 10.0,
+            max: 720.0,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| (c.rc.yaw_max_step_rad * c.timing.outer_hz()).to_degrees(),
+            set: |c, v| {
+                c.rc.yaw_max_step_rad = v.to_radians() / c.timing.outer_hz();
+                Ok(())
+            },
         },
+        description: "yaw rate at full stick",
     },
     gain!("ANG_RLL_P", roll.outer_kp, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
     gain!("ANG_PIT_P", pitch.outer_kp, 20.0, "pitch angle loop: rate demand per angle error, 1/s"),
@@ -728,103 +784,117 @@ const DEFINITION: [Param; COUNT] = [
     gain!("RATE_YAW_P", yaw.inner_kp, 5000.0, "yaw rate loop P, compare counts per rad/s"),
     gain!("RATE_YAW_I", yaw.inner_ki, 5000.0, "yaw rate loop I, counts per rad"),
     gain!("RATE_YAW_D", yaw.inner_kd, 500.0, "yaw rate loop D, counts per rad/s^2"),
-    Param {
-        name: "YAW_FF",
-        unit: Unit::None,
-        min: 0.0,
-        max: 1.5,
-        step: Step::Any,
-        applies: Applies::Anytime,
+    Definition {
+        param: Param {
+            name: "YAW_FF",
+            unit: Unit::None,
+            min: 0.0,
+            max: 1.5,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| c.control.yaw_rate_feedforward,
+            set: |c, v| {
+                c.control.yaw_rate_feedforward = v;
+                Ok(())
+            },
+        },
         description: "share of the yaw stick's rate fed straight to the yaw rate loop",
-        get: |c| c.control.yaw_rate_feedforward,
-        set: |c, v| {
-            c.control.yaw_rate_feedforward = v;
-            Ok(())
-        },
     },
-    Param {
-        name: "GYRO_LPF_HZ",
-        unit: Unit::Hertz,
-        min: 20.0,
-        max: 350.0,
-        step: Step::Integer,
-        applies: Applies::Disarmed,
+    Definition {
+        param: Param {
+            name: "GYRO_LPF_HZ",
+            unit: Unit::Hertz,
+            min: 20.0,
+            max: 350.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            get: gyro_cutoff_hz,
+            set: set_gyro_cutoff,
+        },
         description: "gyro low-pass cut-off (second-order Butterworth at the tick rate)",
-        get: gyro_cutoff_hz,
-        set: set_gyro_cutoff,
     },
-    Param {
-        name: "RATE_D_LPF_K",
-        unit: Unit::None,
-        min: 0.01,
-        max: 1.0,
-        step: Step::Any,
-        applies: Applies::Disarmed,
+    Definition {
+        param: Param {
+            name: "RATE_D_LPF_K",
+            unit: Unit::None,
+            min: 0.01,
+            max: 1.0,
+            step: Step::Any,
+            applies: Applies::Disarmed,
+            get: |c| c.control.d_filter_k,
+            set: |c, v| {
+                c.control.d_filter_k = v;
+                Ok(())
+            },
+        },
         description: "rate loop D low-pass: share of each new sample, 1 = unfiltered (0.4: ~65 Hz at 800 Hz)",
-        get: |c| c.control.d_filter_k,
-        set: |c, v| {
-            c.control.d_filter_k = v;
-            Ok(())
-        },
     },
-    Param {
-        name: "BATT_VOLT_MULT",
-        unit: Unit::None,
-        min: 1.0,
-        max: 10.0,
-        step: Step::Any,
-        applies: Applies::Disarmed,
+    Definition {
+        param: Param {
+            name: "BATT_VOLT_MULT",
+            unit: Unit::None,
+            min: 1.0,
+            max: 10.0,
+            step: Step::Any,
+            applies: Applies::Disarmed,
+            get: |c| c.battery_sense.volt_mult,
+            set: |c, v| {
+                c.battery_sense.volt_mult = v;
+                Ok(())
+            },
+        },
         description: "battery volts per volt at the ADC pin (the board's divider: 1.5)",
-        get: |c| c.battery_sense.volt_mult,
-        set: |c, v| {
-            c.battery_sense.volt_mult = v;
-            Ok(())
-        },
     },
-    Param {
-        name: "LINK_PROTOCOL",
-        unit: Unit::None,
-        min: 0.0,
-        max: 1.0,
-        step: Step::Integer,
-        applies: Applies::Reboot,
+    Definition {
+        param: Param {
+            name: "LINK_PROTOCOL",
+            unit: Unit::None,
+            min: 0.0,
+            max: 1.0,
+            step: Step::Integer,
+            applies: Applies::Reboot,
+            get: |c| match c.link.protocol {
+                LinkProtocol::TextLines => 0.0,
+                LinkProtocol::Mavlink => 1.0,
+            },
+            set: |c, v| {
+                c.link.protocol = if v == 0.0 { LinkProtocol::TextLines } else { LinkProtocol::Mavlink };
+                Ok(())
+            },
+        },
         description: "USART1: 0 text lines (serial plotter), 1 MAVLink",
-        get: |c| match c.link.protocol {
-            LinkProtocol::TextLines => 0.0,
-            LinkProtocol::Mavlink => 1.0,
-        },
-        set: |c, v| {
-            c.link.protocol = if v == 0.0 { LinkProtocol::TextLines } else { LinkProtocol::Mavlink };
-            Ok(())
-        },
     },
-    Param {
-        name: "LINK_ATT_HZ",
-        unit: Unit::Hertz,
-        min: 1.0,
-        max: 50.0,
-        step: Step::Integer,
-        applies: Applies::Anytime,
+    Definition {
+        param: Param {
+            name: "LINK_ATT_HZ",
+            unit: Unit::Hertz,
+            min: 1.0,
+            max: 50.0,
+            step: Step::Integer,
+            applies: Applies::Anytime,
+            get: |c| f32::from(c.link.attitude_hz),
+            set: |c, v| {
+                c.link.attitude_hz = v as u8;
+                Ok(())
+            },
+        },
         description: "attitude messages per second",
-        get: |c| f32::from(c.link.attitude_hz),
-        set: |c, v| {
-            c.link.attitude_hz = v as u8;
-            Ok(())
-        },
     },
-    Param {
-        name: "LINK_RC_HZ",
-        unit: Unit::Hertz,
-        min: 1.0,
-        max: 50.0,
-        step: Step::Integer,
-        applies: Applies::Anytime,
-        description: "radio input and motor output messages per second",
-        get: |c| f32::from(c.link.rc_hz),
-        set: |c, v| {
-            c.link.rc_hz = v as u8;
-            Ok(())
+    Definition {
+        param: Param {
+            name: "LINK_RC_HZ",
+            unit: Unit::Hertz,
+            min: 1.0,
+            max: 50.0,
+            step: Step::Integer,
+            applies: Applies::Anytime,
+            get: |c| f32::from(c.link.rc_hz),
+            set: |c, v| {
+                c.link.rc_hz = v as u8;
+                Ok(())
+            },
         },
+        description: "radio input and motor output messages per second",
     },
 ];
 

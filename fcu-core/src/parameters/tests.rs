@@ -17,7 +17,7 @@ fn names_are_unique_upper_case_and_fit_a_param_id() {
         assert!(!p.name.is_empty() && p.name.len() <= NAME_LEN, "{}", p.name);
         assert!(p.name.bytes().all(|b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_'), "{}", p.name);
         assert_eq!(index_of(p.name.as_bytes()), Some(i), "{} is not unique", p.name);
-        assert!(p.min < p.max && !p.description.is_empty(), "{}", p.name);
+        assert!(p.min < p.max && description(i).is_some_and(|d| !d.is_empty()), "{}", p.name);
         // Whole-number parameters are exact as f32.
         assert!(p.min.abs() < 16_777_216.0 && p.max.abs() < 16_777_216.0);
     }
@@ -355,7 +355,7 @@ fn the_layout_hash_follows_names_and_order() {
     swapped.swap(0, 1);
     assert_ne!(layout_hash(&swapped), LAYOUT_HASH);
     let mut renamed = DEFINITION;
-    renamed[5].name = "RC1_TRIX";
+    renamed[5].param.name = "RC1_TRIX";
     assert_ne!(layout_hash(&renamed), LAYOUT_HASH);
     assert_ne!(layout_hash(&DEFINITION[..COUNT - 1]), LAYOUT_HASH);
     assert_eq!(layout_hash(&DEFINITION), LAYOUT_HASH);
