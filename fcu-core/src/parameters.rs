@@ -171,7 +171,8 @@ pub const RULE_ARMED: &str = "only while disarmed";
 pub const RULE_NOT_TICKS: &str = "not a whole number of ticks";
 pub const RULE_REV: &str = "REV must be 1 or -1";
 pub const RULE_NO_SAFETY: &str = "not used by this profile";
-pub const RULE_FILTER: &str = "cut-off not below tick rate / 2";
+pub const RULE_FILTER: &str = "cut-off: 40..300 Hz in 10s";
+pub const RULE_FILTER_TICK: &str = "cut-offs are for an 800 Hz tick";
 
 /// The number of parameters.
 pub fn count() -> usize {
@@ -483,11 +484,15 @@ fn safety_mut(cfg: &mut Config) -> Result<&mut SafetyConfig, &'static str> {
     }
 }
 
-/// The gyro filter's Butterworth cut-off from its coefficients, whole hertz: for a design
-/// at `fs` with `k = tan(π·fc/fs)`, `(1 − a1 − a2) / (1 + a1 − a2) = k²` (the stored `a`
-/// being pre-negated).
+/// The gyro filter's cut-off: the table's for a design it lists, else the Butterworth cut-off
+/// its coefficients give, whole hertz (for a design at `fs` with `k = tan(π·fc/fs)`,
+/// `(1 − a1 − a2) / (1 + a1 − a2) = k²`, the stored `a` being pre-negated).
 fn gyro_cutoff_hz(cfg: &Config) -> f32 {
     let c = &cfg.gyro_filter;
+    let listed = GYRO_DESIGNS_800_HZ.iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
+    if let (Some(d), true) = (listed, cfg.timing.integration_hz == 800.0) {
+        return f32::from(d.0);
+    }
     let k2 = (1.0 - c.a1 - c.a2) / (1.0 + c.a1 - c.a2);
     if !(k2.is_finite() && k2 > 0.0) {
         return 0.0;
@@ -496,9 +501,53 @@ fn gyro_cutoff_hz(cfg: &Config) -> f32 {
 }
 
 fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
-    cfg.gyro_filter = BiquadCoeffs::butterworth_lowpass(hz, cfg.timing.integration_hz).ok_or(RULE_FILTER)?;
+    if cfg.timing.integration_hz != 800.0 {
+        return Err(RULE_FILTER_TICK);
+    }
+    cfg.gyro_filter = gyro_design_800_hz(hz).ok_or(RULE_FILTER)?;
     Ok(())
 }
+
+/// The gyro low-pass a cut-off of `hz` gives at an 800 Hz tick, from [`GYRO_DESIGNS_800_HZ`].
+fn gyro_design_800_hz(hz: f32) -> Option<BiquadCoeffs> {
+    let &(_, a1, a2, b0) = GYRO_DESIGNS_800_HZ.iter().find(|d| f32::from(d.0) == hz)?;
+    let b0 = f32::from_bits(b0);
+    Some(BiquadCoeffs { a1: f32::from_bits(a1), a2: f32::from_bits(a2), b0, b1: 2.0 * b0, b2: b0 })
+}
+
+/// The cut-offs `GYRO_LPF_HZ` offers at the 800 Hz tick, with the bits of what
+/// [`BiquadCoeffs::butterworth_lowpass`] designs for them (`a1`, `a2`, `b0`; `b1 = 2·b0`,
+/// `b2 = b0`): tested equal, bit for bit. A table, because the design's double-precision
+/// tangent would bring the soft-double routines into the firmware (some 8 KB of flash).
+const GYRO_DESIGNS_800_HZ: [(u16, u32, u32, u32); 27] = [
+    (40, 0x3fc7cf71, 0xbf242f9d, 0x3ca485d8),
+    (50, 0x3fba24a7, 0xbf12f5b9, 0x3cf56358),
+    (60, 0x3facaafa, 0xbf039451, 0x3d28f974),
+    (70, 0x3f9f6355, 0xbeebbd1e, 0x3d5c5f94),
+    (80, 0x3f924d2f, 0xbed35abb, 0x3d8a25ff),
+    (90, 0x3f8566e2, 0xbebdbd8a, 0x3da82202),
+    (100, 0x3f715bef, 0xbeaaaaab, 0x3dc7f2cd),
+    (110, 0x3f583eb9, 0xbe99ef4b, 0x3de971d9),
+    (120, 0x3f3f6f1d, 0xbe8b5fc2, 0x3e0640c4),
+    (130, 0x3f26e570, 0xbe7dad98, 0x3e1885f6),
+    (140, 0x3f0e9995, 0xbe6869d4, 0x3e2b80e0),
+    (150, 0x3eed0636, 0xbe56bf9f, 0x3e3f2ccd),
+    (160, 0x3ebd32b1, 0xbe4883ea, 0x3e5387a2),
+    (170, 0x3e8da6fc, 0xbe3d946a, 0x3e68919c),
+    (180, 0x3e3ca28b, 0xbe35d70a, 0x3e7e4d20),
+    (190, 0x3dbc7e75, 0xbe313975, 0x3e8a5f47),
+    (200, 0x2515f61a, 0xbe2fb0cd, 0x3e95f61a),
+    (210, 0xbdbc7e75, 0xbe313975, 0x3ea1ef16),
+    (220, 0xbe3ca28b, 0xbe35d70a, 0x3eae4f33),
+    (230, 0xbe8da6fc, 0xbe3d946a, 0x3ebb1c4c),
+    (240, 0xbebd32b1, 0xbe4883ea, 0x3ec85d2a),
+    (250, 0xbeed0636, 0xbe56bf9f, 0x3ed61981),
+    (260, 0xbf0e9995, 0xbe6869d4, 0x3ee45a05),
+    (270, 0xbf26e570, 0xbe7dad98, 0x3ef3286b),
+    (280, 0xbf3f6f1d, 0xbe8b5fc2, 0x3f0147c0),
+    (290, 0xbf583eb9, 0xbe99ef4b, 0x3f094d98),
+    (300, 0xbf715bef, 0xbeaaaaab, 0x3f11ac51),
+];
 
 // --- the table ----------------------------------------------------------------------------
 
@@ -804,14 +853,14 @@ const DEFINITION: [Definition; COUNT] = [
         param: Param {
             name: "GYRO_LPF_HZ",
             unit: Unit::Hertz,
-            min: 20.0,
-            max: 350.0,
+            min: 40.0,
+            max: 300.0,
             step: Step::Integer,
             applies: Applies::Disarmed,
             get: gyro_cutoff_hz,
             set: set_gyro_cutoff,
         },
-        description: "gyro low-pass cut-off (second-order Butterworth at the tick rate)",
+        description: "gyro low-pass cut-off, 40..300 Hz in steps of 10 (second-order Butterworth at the 800 Hz tick)",
     },
     Definition {
         param: Param {

@@ -37,6 +37,7 @@ fn every_rule_fits_a_statustext_with_the_name() {
         RULE_REV,
         RULE_NO_SAFETY,
         RULE_FILTER,
+        RULE_FILTER_TICK,
     ];
     let errors = [
         ConfigError::ReferenceArithmetic,
@@ -207,11 +208,11 @@ fn bad_values_are_refused_with_their_rule_and_nothing_moves() {
     assert_eq!(r, Err(Refusal { rule: "FS_* must exceed RC_TIMEOUT_MS", value_in_force: Some(100.0) }));
     assert_eq!(short, before);
     assert!(set(&mut short, idx("RC_TIMEOUT_MS"), 245.0, false).is_ok());
-    // A cut-off at half the tick rate (a 600 Hz tick) has no design.
+    // The cut-offs are designs for the 800 Hz tick.
     let mut slow = base;
     slow.timing.integration_hz = 600.0;
     let before = slow;
-    assert_eq!(set(&mut slow, idx("GYRO_LPF_HZ"), 300.0, false).map_err(|r| r.rule), Err(RULE_FILTER));
+    assert_eq!(set(&mut slow, idx("GYRO_LPF_HZ"), 100.0, false).map_err(|r| r.rule), Err(RULE_FILTER_TICK));
     assert_eq!(slow, before);
 }
 
@@ -335,6 +336,11 @@ fn times_are_whole_ticks_and_the_reference_supervisor_has_none_to_set() {
 
 #[test]
 fn the_gyro_cut_off_is_designed_as_the_profile_designs_it() {
+    // The table is the design, bit for bit.
+    for &(hz, a1, a2, b0) in GYRO_DESIGNS_800_HZ.iter() {
+        let c = BiquadCoeffs::butterworth_lowpass(f32::from(hz), 800.0).unwrap();
+        assert_eq!([c.a1, c.a2, c.b0, c.b1, c.b2].map(f32::to_bits), [a1, a2, b0, (2.0 * f32::from_bits(b0)).to_bits(), b0], "{hz} Hz");
+    }
     let mut c = Config::default();
     assert_eq!(get(&c, "GYRO_LPF_HZ"), 150.0);
     set(&mut c, idx("GYRO_LPF_HZ"), 100.0, false).unwrap();
@@ -342,11 +348,19 @@ fn the_gyro_cut_off_is_designed_as_the_profile_designs_it() {
     assert_eq!(get(&c, "GYRO_LPF_HZ"), 100.0);
     set(&mut c, idx("GYRO_LPF_HZ"), 150.0, false).unwrap();
     assert_eq!(c.gyro_filter, BiquadCoeffs::GYRO_150_HZ_AT_800_HZ);
-    // Every whole cut-off reads back as itself.
-    for hz in 20..=349 {
-        set(&mut c, idx("GYRO_LPF_HZ"), hz as f32, false).unwrap();
-        assert_eq!(get(&c, "GYRO_LPF_HZ"), hz as f32);
+    // Every cut-off offered reads back as itself; any other is refused.
+    for hz in 40..=300 {
+        let r = set(&mut c, idx("GYRO_LPF_HZ"), hz as f32, false);
+        if hz % 10 == 0 {
+            assert!(r.is_ok(), "{hz}");
+            assert_eq!(get(&c, "GYRO_LPF_HZ"), hz as f32);
+        } else {
+            assert_eq!(r.map_err(|r| r.rule), Err(RULE_FILTER), "{hz}");
+        }
     }
+    // A design the table does not list reads as its Butterworth cut-off.
+    c.gyro_filter = BiquadCoeffs::butterworth_lowpass(123.0, 800.0).unwrap();
+    assert_eq!(get(&c, "GYRO_LPF_HZ"), 123.0);
 }
 
 #[test]
