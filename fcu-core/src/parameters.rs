@@ -477,9 +477,16 @@ fn safety(cfg: &Config) -> SafetyConfig {
     }
 }
 
-fn safety_mut(cfg: &mut Config) -> Result<&mut SafetyConfig, &'static str> {
+/// One of the safe supervisor's times, `field`, to `ms` (checked whole). One copy for every
+/// such parameter: each table entry passes only its field.
+#[inline(never)]
+fn set_safety_ms(cfg: &mut Config, ms: f32, field: fn(&mut SafetyConfig) -> &mut u32) -> SetResult {
+    let ticks = ticks_from_ms(cfg, ms)?;
     match &mut cfg.supervisor {
-        SupervisorConfig::Safe(s) => Ok(s),
+        SupervisorConfig::Safe(s) => {
+            *field(s) = ticks;
+            Ok(())
+        }
         SupervisorConfig::Reference => Err(RULE_NO_SAFETY),
     }
 }
@@ -664,11 +671,7 @@ macro_rules! safety_ms {
                 step: Step::Integer,
                 applies: Applies::Disarmed,
                 get: |c| ms_from_ticks(c, safety(c).$field),
-                set: |c, v| {
-                    let ticks = ticks_from_ms(c, v)?;
-                    safety_mut(c)?.$field = ticks;
-                    Ok(())
-                },
+                set: |c, v| set_safety_ms(c, v, |s| &mut s.$field),
             },
             description: $what,
         }
