@@ -18,6 +18,7 @@ use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
 use crate::rc::{PulseRules, RcConfig, StickCounts, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
+use crate::telemetry::BatterySense;
 
 /// The control tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +66,42 @@ impl Timing {
     }
 }
 
+/// What USART1 speaks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkProtocol {
+    /// The reference's text: the TAB-separated debug line and the STATUS lines, for a serial
+    /// plotter or a terminal.
+    TextLines,
+    /// MAVLink 2 (MAVLink 1 accepted), for QGroundControl, MAVProxy and pymavlink.
+    Mavlink,
+}
+
+/// The telemetry link on USART1: which protocol, and how often the streamed messages go out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LinkConfig {
+    /// Takes effect at the next boot: a link never changes its protocol under a ground station.
+    pub protocol: LinkProtocol,
+    /// Attitude messages per second.
+    pub attitude_hz: u8,
+    /// Radio input and motor output messages per second (each).
+    pub rc_hz: u8,
+}
+
+impl LinkConfig {
+    /// The default's link: MAVLink, attitude at 25 Hz, radio and motors at 10 Hz each (at
+    /// 115200 baud, ATTITUDE 25 × 40 B, RC_CHANNELS and SERVO_OUTPUT_RAW 10 × (54 + 49) B and
+    /// the 1 Hz messages about 150 B: some 2.2 kB/s of the link's 11.5).
+    pub const DEFAULT: LinkConfig = LinkConfig { protocol: LinkProtocol::Mavlink, attitude_hz: 25, rc_hz: 10 };
+    /// The reference's: its text lines.
+    pub const REFERENCE: LinkConfig = LinkConfig { protocol: LinkProtocol::TextLines, ..LinkConfig::DEFAULT };
+    /// The fastest stream rate: 50 Hz of every streamed message fits 115200 baud (some 9 kB/s).
+    pub const MAX_HZ: u8 = 50;
+
+    pub fn is_valid(&self) -> bool {
+        (1..=Self::MAX_HZ).contains(&self.attitude_hz) && (1..=Self::MAX_HZ).contains(&self.rc_hz)
+    }
+}
+
 /// Every tunable of the flight core.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
@@ -80,6 +117,10 @@ pub struct Config {
     pub control: ControlConfig,
     pub mixer: MixerConfig,
     pub supervisor: SupervisorConfig,
+    /// The battery voltage's divider, from ADC counts to millivolts.
+    pub battery_sense: BatterySense,
+    /// The telemetry link.
+    pub link: LinkConfig,
     /// Evaluate the reference's double-precision expressions in f64 (bit-exact replay; needs
     /// the crate's `reference` feature). Off, everything is f32 (much cheaper on the Cortex-M4,
     /// whose FPU is single only).
@@ -104,6 +145,8 @@ pub enum ConfigError {
     Control,
     Mixer,
     Supervisor,
+    BatterySense,
+    Link,
 }
 
 impl ConfigError {
@@ -123,6 +166,28 @@ impl ConfigError {
             ConfigError::Control => "control gains and limits",
             ConfigError::Mixer => "mixer",
             ConfigError::Supervisor => "supervisor",
+            ConfigError::BatterySense => "battery sense",
+            ConfigError::Link => "telemetry link",
+        }
+    }
+
+    /// The rule broken, short enough for a ground station's status line (at most 32
+    /// characters) when no part of the configuration names a finer one.
+    pub fn rule(self) -> &'static str {
+        match self {
+            ConfigError::ReferenceArithmetic | ConfigError::ReferenceEstimator => "reference profile not built in",
+            ConfigError::Timing => "tick timing invalid",
+            ConfigError::ImuSensitivity | ConfigError::Mount => "IMU settings invalid",
+            ConfigError::Calibration => "calibration settings invalid",
+            ConfigError::Health => "sensor limits invalid",
+            ConfigError::GyroFilter => "gyro filter invalid",
+            ConfigError::Estimator => "estimator settings invalid",
+            ConfigError::Rc => "radio settings invalid",
+            ConfigError::Control => "gains or limits invalid",
+            ConfigError::Mixer => "mixer settings invalid",
+            ConfigError::Supervisor => "FS_* must exceed RC_TIMEOUT_MS",
+            ConfigError::BatterySense => "battery scale invalid",
+            ConfigError::Link => "link rates invalid",
         }
     }
 }
@@ -149,6 +214,8 @@ impl Config {
             control: ControlConfig::REFERENCE,
             mixer: MixerConfig::REFERENCE_DC,
             supervisor: SupervisorConfig::Reference,
+            battery_sense: BatterySense::BOARD,
+            link: LinkConfig::REFERENCE,
             reference_arithmetic: true,
         }
     }
@@ -228,6 +295,12 @@ impl Config {
             if !s.is_valid() || s.recovery_ticks <= timeout || s.failsafe_off_ticks <= timeout {
                 return Err(ConfigError::Supervisor);
             }
+        }
+        if !self.battery_sense.is_valid() {
+            return Err(ConfigError::BatterySense);
+        }
+        if !self.link.is_valid() {
+            return Err(ConfigError::Link);
         }
         Ok(())
     }
@@ -335,6 +408,9 @@ impl Default for Config {
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..r.mixer },
             // D10, D11: the safety layer.
             supervisor: SupervisorConfig::Safe(SafetyConfig::DEFAULT),
+            battery_sense: BatterySense::BOARD,
+            // MAVLink: QGroundControl and MAVProxy find the board with nothing set up.
+            link: LinkConfig::DEFAULT,
             reference_arithmetic: false,
         }
     }

@@ -130,6 +130,11 @@ impl<const N: usize> BiquadBank<N> {
         BiquadBank { c, s: [BiquadState::default(); N] }
     }
 
+    /// New coefficients, the filters' memory kept (a run-time change of the cut-off).
+    pub fn set_coefficients(&mut self, c: BiquadCoeffs) {
+        self.c = c;
+    }
+
     pub fn update(&mut self, x: [f32; N]) -> [f32; N] {
         let c = self.c;
         let mut y = [0.0; N];

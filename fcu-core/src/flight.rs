@@ -151,6 +151,47 @@ pub struct Status {
     pub yaw_rate_target_rad_s: f32,
 }
 
+/// Why [`FlightController::apply_config`] left the configuration as it was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ApplyError {
+    /// The new configuration cannot fly.
+    Invalid(ConfigError),
+    /// Armed (arming, flying or in the failsafe's level stage), and more than the gains, the
+    /// angle and yaw-rate limits and the telemetry rates would change.
+    Armed,
+    /// A setting no parameter reaches changed (timing, sensors, estimator, mixer, pulse
+    /// rules, the kind of supervisor...): it needs a new controller.
+    NeedsRestart,
+}
+
+impl ApplyError {
+    /// The rule, short enough for a ground station's status line (at most 32 characters).
+    pub fn rule(self) -> &'static str {
+        match self {
+            ApplyError::Invalid(e) => e.rule(),
+            ApplyError::Armed => crate::parameters::RULE_ARMED,
+            ApplyError::NeedsRestart => "needs a restart",
+        }
+    }
+}
+
+/// Whether `new` may replace `old` at run time, with the motors `armed` or not
+/// ([`FlightController::armed`]): valid, differing only in what parameters set, and while
+/// armed only in the in-flight ones. What [`FlightController::apply_config`] checks; a
+/// firmware that runs the two halves in different tasks checks it where it keeps the
+/// configuration, then hands the new one to [`ControlTick::take_config`] and
+/// [`OuterStep::take_config`].
+pub fn check_change(old: &Config, new: &Config, armed: bool) -> Result<(), ApplyError> {
+    new.validate().map_err(ApplyError::Invalid)?;
+    if crate::parameters::with_parameter_fields_of(new, old) != *old {
+        return Err(ApplyError::NeedsRestart);
+    }
+    if armed && crate::parameters::with_in_flight_fields_of(old, new) != *new {
+        return Err(ApplyError::Armed);
+    }
+    Ok(())
+}
+
 /// The per-tick half: the stages, in the order its `run` calls them.
 #[derive(Clone, Debug)]
 pub struct ControlTick {
@@ -202,9 +243,32 @@ impl FlightController {
         Ok(FlightController { control_tick: ControlTick::new(&cfg, derived.tick), outer_step, cfg })
     }
 
-    /// The configuration given to [`new`](Self::new).
+    /// The configuration in force: the one given to [`new`](Self::new), or the last one
+    /// [`apply_config`](Self::apply_config) took.
     pub fn config(&self) -> &Config {
         &self.cfg
+    }
+
+    /// Whether the motors may be running or about to: arming, armed, or the failsafe's level
+    /// stage. Only gains and rates change then ([`apply_config`](Self::apply_config)).
+    pub fn armed(&self) -> bool {
+        self.control_tick.armed()
+    }
+
+    /// Take a changed configuration at run time, as a real autopilot takes a parameter change:
+    /// what the tick and the outer step work with is made again by `Derived::new` (the tick's
+    /// rate loop and throttle map scaled by the gains in force), the gyro low-pass gets its new
+    /// coefficients and the supervisor its new numbers, and every stage keeps its state
+    /// (integrators, filters, estimate, heading, supervisor). Refused, with nothing changed,
+    /// when the configuration is invalid, when armed and more than the in-flight parameters
+    /// would change ([`crate::parameters::Applies::Anytime`]), or when a setting that no
+    /// parameter reaches would change.
+    pub fn apply_config(&mut self, cfg: Config) -> Result<(), ApplyError> {
+        check_change(&self.cfg, &cfg, self.armed())?;
+        self.control_tick.take_config(&cfg)?;
+        self.outer_step.take_config(&cfg);
+        self.cfg = cfg;
+        Ok(())
     }
 
     /// The edge decoder the capture interrupt should feed for this configuration.
@@ -282,6 +346,25 @@ impl ControlTick {
             },
             output: Output::new(),
         }
+    }
+
+    /// See [`FlightController::armed`].
+    pub fn armed(&self) -> bool {
+        matches!(self.supervision.in_force().decision.state, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel)
+    }
+
+    /// The tick's half of a change [`check_change`] allowed: its values made again by
+    /// `Derived::new`, the rate loop and throttle map scaled by the gains in force, the gyro
+    /// low-pass's coefficients and the supervisor's numbers replaced, every state kept. Refused
+    /// (nothing changed) for another kind of supervisor, which `check_change` refuses too.
+    pub fn take_config(&mut self, cfg: &Config) -> Result<(), ApplyError> {
+        if !self.supervision.set_config(cfg.supervisor) {
+            return Err(ApplyError::NeedsRestart);
+        }
+        self.params = Derived::new(cfg).tick;
+        self.params.rescale(Gains::UNITY, self.outer.gains);
+        self.sensors.set_gyro_filter(cfg.gyro_filter);
+        Ok(())
     }
 
     /// What the tick works with: the configuration's values, the rate loop and throttle map
@@ -435,6 +518,12 @@ impl OuterStep {
     pub fn set_battery_mv(&mut self, battery_mv: u32) {
         self.gains.set_battery_mv(battery_mv);
     }
+
+    /// The outer step's half of a change [`check_change`] allowed: its values made again by
+    /// `Derived::new` (the angle loop's gains, the stick limits), its state kept.
+    pub fn take_config(&mut self, cfg: &Config) {
+        self.params = Derived::new(cfg).outer;
+    }
 }
 
 #[cfg(test)]
@@ -472,6 +561,158 @@ mod tests {
         assert_eq!(params.mixer().throttle_slope, cfg.mixer.throttle_slope * g.thrust);
         let derived = Derived::new(&cfg).tick;
         assert_eq!((derived.rate_loop(), derived.mixer()), (&cfg.control, &cfg.mixer));
+    }
+
+    /// The default with the reference's supervisor (armed by the replay's flag) and no gain
+    /// schedule (the gains stay at one): a controller that can be flown by `ForcedRadio`.
+    fn flown() -> Config {
+        let d = Config::default();
+        Config {
+            supervisor: crate::supervisor::SupervisorConfig::Reference,
+            control: crate::control::ControlConfig { battery: None, thrust_curve: None, ..d.control },
+            ..d
+        }
+    }
+
+    const FLYING: ForcedRadio = ForcedRadio { width_counts: [6100, 5900, 8000, 6300], link: true, armed: true, cal_request: false };
+
+    /// Ticks `from..to`: at rest for the start-up calibration (2000 ticks), then a bumpy
+    /// flight, a reading that changes every tick.
+    fn fly(fc: &mut FlightController, from: usize, to: usize, radio: &ForcedRadio) -> std::vec::Vec<[u16; 4]> {
+        (from..to)
+            .map(|k| {
+                let imu = if k < 2000 {
+                    let n = (k % 3) as i16 - 1;
+                    RawImu { accel: sample(k).accel, gyro: [n, -n, n] }
+                } else {
+                    RawImu {
+                        accel: sample(k).accel,
+                        gyro: [(k % 17) as i16 * 40 - 320, (k % 13) as i16 * 30 - 180, (k % 7) as i16 * 20 - 60],
+                    }
+                };
+                let out = fc.tick_forced(imu, radio);
+                if let Some(job) = out.outer_job {
+                    fc.run_outer(&job);
+                }
+                out.compare
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_same_configuration_applied_in_flight_changes_nothing() {
+        // Every stage keeps its state: a controller given its own configuration again flies on
+        // bit for bit as one that was not.
+        let mut a = FlightController::new(flown()).unwrap();
+        let mut b = a.clone();
+        assert!(fly(&mut a, 0, 3000, &FLYING) == fly(&mut b, 0, 3000, &FLYING));
+        assert!(a.armed(), "{:?}", a.status().state);
+        assert!(a.control_tick.output.rate_integrators().iter().any(|&i| i != 0.0));
+        let st = a.status();
+        assert!(
+            st.compare.iter().all(|&c| c > 0),
+            "the motors run: {:?} {:?} {:?} {:?} {:?}",
+            st.state,
+            st.compare,
+            st.motor_command,
+            st.calibration,
+            st.fault
+        );
+        assert_eq!(a.apply_config(flown()), Ok(()));
+        assert!(fly(&mut a, 3000, 4000, &FLYING) == fly(&mut b, 3000, 4000, &FLYING), "applying the same configuration changed the flight");
+    }
+
+    #[test]
+    fn a_gain_change_in_flight_applies_at_once_and_keeps_the_integrators() {
+        let mut a = FlightController::new(flown()).unwrap();
+        fly(&mut a, 0, 3000, &FLYING);
+        let mut b = a.clone();
+        let mut cfg = flown();
+        let i = crate::parameters::index_of(b"RATE_RLL_P").unwrap();
+        crate::parameters::set(&mut cfg, i, 260.0, true).unwrap();
+        let integrators = a.control_tick.output.rate_integrators();
+        assert_eq!(a.apply_config(cfg), Ok(()));
+        assert_eq!(a.config(), &cfg);
+        assert_eq!(a.control_tick.params().rate_loop().roll.inner_kp, 260.0);
+        assert_eq!(a.outer_step.params.control.roll.inner_kp, 260.0);
+        assert_eq!(a.control_tick.output.rate_integrators(), integrators);
+        assert!(fly(&mut a, 3000, 3100, &FLYING) != fly(&mut b, 3000, 3100, &FLYING), "the new gain flies");
+    }
+
+    #[test]
+    fn while_armed_only_in_flight_parameters_change_and_a_refusal_changes_nothing() {
+        let mut fc = FlightController::new(flown()).unwrap();
+        fly(&mut fc, 0, 3000, &FLYING);
+        assert!(fc.armed());
+        let before = fc.clone();
+        let mut radio = flown();
+        let i = crate::parameters::index_of(b"RC1_TRIM").unwrap();
+        crate::parameters::set(&mut radio, i, 1470.0, false).unwrap();
+        assert_eq!(fc.apply_config(radio), Err(ApplyError::Armed));
+        let mut filter = flown();
+        let i = crate::parameters::index_of(b"GYRO_LPF_HZ").unwrap();
+        crate::parameters::set(&mut filter, i, 80.0, false).unwrap();
+        assert_eq!(fc.apply_config(filter), Err(ApplyError::Armed));
+        // Not a parameter at all, or not valid: refused armed or not.
+        let mut mixer = flown();
+        mixer.mixer.max_compare -= 1.0;
+        assert_eq!(fc.apply_config(mixer), Err(ApplyError::NeedsRestart));
+        let mut invalid = flown();
+        invalid.control.roll.inner_kp = -1.0;
+        assert_eq!(fc.apply_config(invalid), Err(ApplyError::Invalid(ConfigError::Control)));
+        assert_eq!(fc.apply_config(Config::default()), Err(ApplyError::NeedsRestart));
+        assert_eq!(fc.config(), before.config());
+        let (mut fc2, mut before2) = (fc.clone(), before.clone());
+        assert!(fly(&mut fc2, 3000, 3200, &FLYING) == fly(&mut before2, 3000, 3200, &FLYING), "a refusal changed the flight");
+
+        // Disarmed, the same changes apply, and reach the tick.
+        let landed = ForcedRadio { armed: false, ..FLYING };
+        fly(&mut fc, 3000, 3010, &landed);
+        assert!(!fc.armed(), "{:?}", fc.status().state);
+        let mut twin = fc.clone();
+        assert_eq!(fc.apply_config(radio), Ok(()));
+        assert_eq!(fc.control_tick.params().rc.inputs[0].trim_counts, 5880);
+        assert_eq!(fc.apply_config(filter), Ok(()));
+        assert_eq!(fc.config(), &filter);
+        // The gyro low-pass moved: armed again, the two fly differently.
+        assert!(fly(&mut fc, 3010, 3400, &FLYING) != fly(&mut twin, 3010, 3400, &FLYING), "the new filter flies");
+        assert_eq!(ApplyError::Armed.rule(), crate::parameters::RULE_ARMED);
+    }
+
+    #[test]
+    fn the_split_halves_take_a_change_as_the_whole_controller_does() {
+        let mut whole = FlightController::new(flown()).unwrap();
+        fly(&mut whole, 0, 3000, &FLYING);
+        let (mut tick, mut outer) = whole.clone().into_parts();
+        let mut cfg = flown();
+        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"ANG_PIT_P").unwrap(), 8.0, true).unwrap();
+        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"RATE_YAW_D").unwrap(), 40.0, true).unwrap();
+        assert_eq!(check_change(&flown(), &cfg, tick.armed()), Ok(()));
+        tick.take_config(&cfg).unwrap();
+        outer.take_config(&cfg);
+        whole.apply_config(cfg).unwrap();
+        let mut split = FlightController { control_tick: tick, outer_step: outer, cfg };
+        assert!(fly(&mut whole, 3000, 3500, &FLYING) == fly(&mut split, 3000, 3500, &FLYING));
+        // What check_change refuses armed, it refuses on its own too.
+        let mut radio = flown();
+        crate::parameters::set(&mut radio, crate::parameters::index_of(b"RCMAP_ROLL").unwrap(), 2.0, false).unwrap();
+        assert_eq!(check_change(&flown(), &radio, true), Err(ApplyError::Armed));
+        assert_eq!(check_change(&flown(), &radio, false), Ok(()));
+    }
+
+    #[test]
+    fn the_safe_supervisor_takes_new_failsafe_times_disarmed() {
+        let mut fc = FlightController::new(Config::default()).unwrap();
+        fly(&mut fc, 0, 100, &ForcedRadio { armed: false, ..FLYING });
+        let mut cfg = Config::default();
+        let i = crate::parameters::index_of(b"FS_OFF_MS").unwrap();
+        crate::parameters::set(&mut cfg, i, 2000.0, false).unwrap();
+        assert_eq!(fc.apply_config(cfg), Ok(()));
+        assert_eq!(fc.control_tick.supervision.safety().map(|s| s.failsafe_off_ticks), Some(1600));
+        // Another kind of supervisor is no parameter: a new controller.
+        let reference = Config { supervisor: crate::supervisor::SupervisorConfig::Reference, ..cfg };
+        assert_eq!(fc.apply_config(reference), Err(ApplyError::NeedsRestart));
+        assert_eq!(fc.config(), &cfg);
     }
 
     #[test]

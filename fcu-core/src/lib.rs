@@ -17,6 +17,8 @@
 //! | arming, disarming, failsafe stages, blockers | [`supervisor`]: the conditions and the transition's actions in [`supervisor::Supervisor::decide`], the state table in [`supervisor::transitions`] (every rule has tests named after it, the table its own), the numbers in [`supervisor::SafetyConfig`] |
 //! | when the last decision may simply stand | [`supervisor::Supervisor::steady`] (the rule) and the tick's command stage (`flight/supervision.rs`, the cache) |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
+//! | which input is which stick, endpoints, reversing | [`rc::RcMap`], [`rc::RcInput`] (`stick_from_width`) |
+//! | the parameters: names, bounds, when a change applies, the refusal rules, the flash format | [`parameters`] (the table), [`parameters::snapshot`], [`FlightController::apply_config`] |
 //! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
 //! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |
 //! | the attitude estimate | [`ahrs`] (the reference's Mahony, the default's VQF-style estimator) |
@@ -42,6 +44,9 @@
     )
 )]
 
+#[cfg(test)]
+extern crate std;
+
 pub mod ahrs;
 pub mod boot;
 pub mod config;
@@ -51,6 +56,7 @@ pub mod flight;
 pub mod imu;
 pub mod math;
 pub mod mixer;
+pub mod parameters;
 pub mod rc;
 pub mod supervisor;
 pub mod telemetry;

@@ -1,9 +1,11 @@
 //! Radio: capture edges → pulse widths → sticks → attitude targets, and stick gestures.
 //!
-//! Widths and sticks are in TIM2 counts of 0.25 µs (4000 = 1 ms). Channel order is the
-//! receiver wiring: 0 = AIL (PA0), 1 = ELE (PA1), 2 = THR (PA2), 3 = RUD (PA3).
-//! Sticks are the reference's `gAIL, gELE, gTHR, gRUD`: width minus the channel centre
-//! (throttle: minus the bottom, never negative).
+//! Widths and sticks are in TIM2 counts of 0.25 µs (4000 = 1 ms). Inputs are the captured
+//! pins, 0 = PA0 .. 3 = PA3; which stick each carries is the radio map ([`RcMap`], the
+//! reference's wiring AIL, ELE, THR, RUD by default). Sticks are the reference's
+//! `gAIL, gELE, gTHR, gRUD`: width minus the input's trim (throttle: minus its bottom, never
+//! negative), scaled so that the input's endpoints are full deflections ([`RcInput`]); with the
+//! reference's endpoints the scale is exactly one.
 
 /// Number of radio channels.
 pub const CHANNELS: usize = 4;
@@ -87,14 +89,152 @@ pub enum YawStick {
     Proportional,
 }
 
+/// What a stick does: the four functions a captured input can carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Function {
+    Roll,
+    Pitch,
+    Throttle,
+    Yaw,
+}
+
+/// Which captured input (0-based: 0 = PA0 .. 3 = PA3) carries each function. The parameters
+/// `RCMAP_*` are these plus one. A valid map is a permutation of the inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RcMap {
+    pub roll: u8,
+    pub pitch: u8,
+    pub throttle: u8,
+    pub yaw: u8,
+}
+
+impl RcMap {
+    /// The reference's wiring: AIL on PA0, ELE on PA1, THR on PA2, RUD on PA3.
+    pub const IDENTITY: RcMap = RcMap { roll: AIL as u8, pitch: ELE as u8, throttle: THR as u8, yaw: RUD as u8 };
+
+    /// The input carrying `f`.
+    pub fn input(&self, f: Function) -> u8 {
+        match f {
+            Function::Roll => self.roll,
+            Function::Pitch => self.pitch,
+            Function::Throttle => self.throttle,
+            Function::Yaw => self.yaw,
+        }
+    }
+
+    /// The function input `input` carries (yaw for an input no other function names, which a
+    /// valid map never leaves).
+    #[inline(always)]
+    pub fn function(&self, input: usize) -> Function {
+        if input == usize::from(self.roll) {
+            Function::Roll
+        } else if input == usize::from(self.pitch) {
+            Function::Pitch
+        } else if input == usize::from(self.throttle) {
+            Function::Throttle
+        } else {
+            Function::Yaw
+        }
+    }
+
+    /// Every input carries exactly one function.
+    pub fn is_permutation(&self) -> bool {
+        let mut seen = [false; CHANNELS];
+        for i in [self.roll, self.pitch, self.throttle, self.yaw] {
+            match seen.get_mut(usize::from(i)) {
+                Some(s) if !*s => *s = true,
+                _ => return false,
+            }
+        }
+        true
+    }
+
+    /// Give `f` to `input`; the function that had `input` takes `f`'s old input, so the map
+    /// stays a permutation. Returns the function moved that way, if any. An input out of range
+    /// is ignored (`None`, nothing moves).
+    pub fn assign(&mut self, f: Function, input: u8) -> Option<Function> {
+        if usize::from(input) >= CHANNELS {
+            return None;
+        }
+        let old = self.input(f);
+        if old == input {
+            return None;
+        }
+        let other = self.function(usize::from(input));
+        self.set(other, old);
+        self.set(f, input);
+        Some(other)
+    }
+
+    fn set(&mut self, f: Function, input: u8) {
+        match f {
+            Function::Roll => self.roll = input,
+            Function::Pitch => self.pitch = input,
+            Function::Throttle => self.throttle = input,
+            Function::Yaw => self.yaw = input,
+        }
+    }
+}
+
+/// One captured input's endpoints and sense, capture counts (the parameters `RCn_MIN`,
+/// `RCn_MAX`, `RCn_TRIM` are these in µs, `RCn_REV` the sense).
+///
+/// A centred function (roll, pitch, yaw) reads `width − trim`, scaled so that each endpoint
+/// is a full deflection: by `full_scale / (max − trim)` above the trim and
+/// `full_scale / (trim − min)` below it. The throttle reads `width − min` scaled by
+/// `2·full_scale / (max − min)` (reversed: `max − width`), never negative; its trim is not
+/// used. Integer arithmetic, so endpoints one full scale from the trim (the reference's fixed
+/// mapping) give a scale of exactly one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RcInput {
+    pub min_counts: u16,
+    pub trim_counts: u16,
+    pub max_counts: u16,
+    /// The stick moves the other way: a longer pulse is a smaller stick value.
+    pub reversed: bool,
+}
+
+impl RcInput {
+    /// A centred stick with `trim_counts` at its centre and one full scale each side
+    /// (saturated at the counter's range).
+    pub const fn centred(trim_counts: u16, full_scale: u16) -> RcInput {
+        RcInput {
+            min_counts: trim_counts.saturating_sub(full_scale),
+            trim_counts,
+            max_counts: trim_counts.saturating_add(full_scale),
+            reversed: false,
+        }
+    }
+
+    /// A throttle with its bottom at `min_counts` and two full scales of travel. The trim,
+    /// which the throttle does not read, at the centre: the input can then be given to a
+    /// centred function (`RCMAP_*`) with valid endpoints.
+    pub const fn throttle(min_counts: u16, full_scale: u16) -> RcInput {
+        RcInput {
+            min_counts,
+            trim_counts: min_counts.saturating_add(full_scale),
+            max_counts: min_counts.saturating_add(full_scale).saturating_add(full_scale),
+            reversed: false,
+        }
+    }
+}
+
+/// The shortest span from a centred input's trim to either endpoint, and the shortest
+/// throttle travel, counts (100 µs): a stick scaled up by at most 4.5 (18× for the throttle's
+/// travel), so a pulse of jitter stays a small stick move.
+pub const MIN_ENDPOINT_SPAN_COUNTS: u16 = 400;
+
+/// The largest stick full scale, counts: widths times twice this stay inside an `i32`.
+pub const MAX_FULL_SCALE: StickCounts = StickCounts(8192);
+
 /// Radio calibration and stick mapping.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RcConfig {
-    pub ail_center: i16,
-    pub ele_center: i16,
-    pub thr_bottom: i16,
-    pub rud_center: i16,
-    /// Stick full scale, counts (1800 = 450 µs).
+    /// Which input carries which function.
+    pub map: RcMap,
+    /// Each captured input's endpoints and sense, by input.
+    pub inputs: [RcInput; CHANNELS],
+    /// Stick full scale, counts (1800 = 450 µs): a centred stick at an endpoint.
     pub full_scale: StickCounts,
     /// Gesture threshold, counts (strict inequality, 1200).
     pub gesture_threshold: StickCounts,
@@ -114,12 +254,11 @@ pub struct RcConfig {
 }
 
 impl RcConfig {
-    /// The reference's R release, Walkera Devo 7E centres.
+    /// The reference's R release: Walkera Devo 7E centres (AIL 5862, ELE 6151, RUD 6397, the
+    /// throttle's bottom 4450) in its fixed channel order, unscaled.
     pub const REFERENCE: RcConfig = RcConfig {
-        ail_center: 5862,
-        ele_center: 6151,
-        thr_bottom: 4450,
-        rud_center: 6397,
+        map: RcMap::IDENTITY,
+        inputs: [RcInput::centred(5862, 1800), RcInput::centred(6151, 1800), RcInput::throttle(4450, 1800), RcInput::centred(6397, 1800)],
         full_scale: StickCounts(1800),
         gesture_threshold: StickCounts(1200),
         min_throttle: StickCounts(200),
@@ -133,54 +272,141 @@ impl RcConfig {
     };
 
     pub fn is_valid(&self) -> bool {
+        self.problem().is_none()
+    }
+
+    /// The first rule this configuration breaks, in words short enough for a ground station's
+    /// status line (at most 32 characters), or `None`.
+    pub fn problem(&self) -> Option<&'static str> {
         let pulses_ok = match self.pulses {
             PulseRules::Reference { .. } => true,
             PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } => {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        self.full_scale > StickCounts::ZERO
-            && self.gesture_threshold > StickCounts::ZERO
-            && self.min_throttle >= StickCounts::ZERO
-            && self.max_tilt_rad.is_finite()
-            && self.max_tilt_rad > 0.0
-            && self.max_tilt_rad < 1.5
-            && self.yaw_deadband >= StickCounts::ZERO
-            && self.yaw_deadband < self.full_scale
-            && self.yaw_max_step_rad.is_finite()
-            && self.yaw_max_step_rad >= 0.0
-            && self.link_timeout_ticks > 0
-            && pulses_ok
+        let rules: [(bool, &'static str); 11] = [
+            (self.map.is_permutation(), "RCMAP: each input once"),
+            (self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"),
+            (self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"),
+            (self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"),
+            // A gesture is a stick beyond the threshold while the others are centred: it must
+            // be reachable, and a centred stick must not make one.
+            (self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"),
+            (
+                self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
+                "THR_MIN past the throttle travel",
+            ),
+            (self.max_tilt_rad.is_finite() && self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"),
+            (self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale"),
+            (self.yaw_max_step_rad.is_finite() && self.yaw_max_step_rad >= 0.0, "yaw rate out of range"),
+            (self.link_timeout_ticks > 0, "radio timeout is zero"),
+            (pulses_ok, "pulse limits invalid"),
+        ];
+        rules.into_iter().find(|(ok, _)| !ok).map(|(_, rule)| rule)
     }
 
-    /// The reference's `update_rc_data` for one channel: width → stick (int16).
-    pub fn stick_from_width(&self, channel: usize, width_counts: u16) -> StickCounts {
+    /// Every input: `min <= trim <= max`, inside the capture wrap.
+    fn endpoints_ordered(&self) -> bool {
+        self.inputs.iter().all(|e| e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP)
+    }
+
+    /// A centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
+    /// either end, the throttle's that much travel.
+    fn endpoints_span(&self) -> bool {
+        let span = i32::from(MIN_ENDPOINT_SPAN_COUNTS);
+        self.inputs.iter().enumerate().all(|(i, e)| {
+            let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
+            match self.map.function(i) {
+                Function::Throttle => max - min >= span,
+                _ => trim - min >= span && max - trim >= span,
+            }
+        })
+    }
+
+    /// The endpoints of the input that carries `f` (a map naming no input, which
+    /// [`is_valid`](Self::is_valid) refuses, reads as a centred stick at 1500 µs).
+    pub fn input_for(&self, f: Function) -> RcInput {
+        self.inputs.get(usize::from(self.map.input(f))).copied().unwrap_or(RcInput::centred(6000, 1800))
+    }
+
+    /// The reference's `update_rc_data` for one input: width → stick (int16), through the map
+    /// and the input's endpoints. An input out of range is read as input 3.
+    #[inline]
+    pub fn stick_from_width(&self, input: usize, width_counts: u16) -> StickCounts {
+        let f = self.map.function(input);
+        let e = self.inputs.get(input).copied().unwrap_or_else(|| self.input_for(f));
         let w = i32::from(width_counts);
-        let v = match channel {
-            AIL => w - i32::from(self.ail_center),
-            ELE => w - i32::from(self.ele_center),
-            THR => {
-                if w > i32::from(self.thr_bottom) {
-                    w - i32::from(self.thr_bottom)
+        let fs = i32::from(self.full_scale);
+        let v = match f {
+            Function::Throttle => {
+                let travel = if e.reversed { i32::from(e.max_counts) - w } else { w - i32::from(e.min_counts) };
+                if travel > 0 {
+                    // In i32: at most 65 535 × 2 × MAX_FULL_SCALE.
+                    travel * (2 * fs) / (i32::from(e.max_counts) - i32::from(e.min_counts)).max(1)
                 } else {
                     0
                 }
             }
-            _ => w - i32::from(self.rud_center),
+            _ => {
+                let d = w - i32::from(e.trim_counts);
+                let span = if d > 0 {
+                    i32::from(e.max_counts) - i32::from(e.trim_counts)
+                } else {
+                    i32::from(e.trim_counts) - i32::from(e.min_counts)
+                };
+                let scaled = d * fs / span.max(1);
+                if e.reversed {
+                    -scaled
+                } else {
+                    scaled
+                }
+            }
         };
         // Saturated, not wrapped: a width far past the centre stays a full deflection. (The
         // decoder's widths, below 32 768 counts, never reach either bound.)
         StickCounts(v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16)
     }
 
-    /// Store a width into the sticks (one channel), as `update_rc_data`.
-    pub fn apply_width(&self, sticks: &mut Sticks, channel: usize, width_counts: u16) {
-        let v = self.stick_from_width(channel, width_counts);
-        match channel {
-            AIL => sticks.ail = v,
-            ELE => sticks.ele = v,
-            THR => sticks.thr = v,
-            _ => sticks.rud = v,
+    /// The width, counts, that input `input` must carry for the sticks `s`: the inverse of
+    /// [`stick_from_width`](Self::stick_from_width), exact where the scale is one (a throttle
+    /// of 0 is sent at the bottom of its travel). For the simulator's transmitters.
+    pub fn width_for_sticks(&self, input: usize, s: &Sticks) -> u16 {
+        let Some(e) = self.inputs.get(input) else { return 0 };
+        let fs = i64::from(self.full_scale.0.max(1));
+        let (min, trim, max) = (i64::from(e.min_counts), i64::from(e.trim_counts), i64::from(e.max_counts));
+        let w = match self.map.function(input) {
+            Function::Throttle => {
+                let travel = i64::from(s.thr.0.max(0)) * (max - min) / (2 * fs);
+                if e.reversed {
+                    max - travel
+                } else {
+                    min + travel
+                }
+            }
+            f => {
+                let v = i64::from(match f {
+                    Function::Roll => s.ail.0,
+                    Function::Pitch => s.ele.0,
+                    _ => s.rud.0,
+                });
+                let v = if e.reversed { -v } else { v };
+                let span = if v > 0 { max - trim } else { trim - min };
+                trim + v * span / fs
+            }
+        };
+        w.clamp(1, i64::from(u16::MAX)) as u16
+    }
+
+    /// Store a width into the sticks (one input, the function the map gives it), as
+    /// `update_rc_data`.
+    #[inline(never)] // Once per pulse, on a few ticks in sixteen: kept out of the tick's body.
+    pub fn apply_width(&self, sticks: &mut Sticks, input: usize, width_counts: u16) {
+        let v = self.stick_from_width(input, width_counts);
+        match self.map.function(input) {
+            Function::Roll => sticks.ail = v,
+            Function::Pitch => sticks.ele = v,
+            Function::Throttle => sticks.thr = v,
+            Function::Yaw => sticks.rud = v,
         }
     }
 
@@ -514,25 +740,26 @@ impl Receiver {
     pub fn update(&mut self, cfg: &RcConfig, batch: &PulseBatch, mut on_stick_update: impl FnMut(&Sticks)) -> RadioState {
         self.now += 1;
         let now = self.now;
-        // Written out per channel, in channel order as the reference's gestures need
-        // (docs/performance.md, «channels written out»).
         let [w0, w1, w2, w3] = batch.width_counts;
-        let [t0, t1, t2, t3] = &mut self.last_pulse_at;
-        let sticks = &mut self.sticks;
-        let mut channel = |at: &mut u64, width: Option<u16>, index: usize| {
-            if let Some(w) = width {
-                *at = now;
-                cfg.apply_width(sticks, index, w);
-                on_stick_update(sticks);
-            }
-        };
-        channel(t0, w0, AIL);
-        channel(t1, w1, ELE);
-        channel(t2, w2, THR);
-        channel(t3, w3, RUD);
         let timeout = u64::from(cfg.link_timeout_ticks);
         let any_width = w0.is_some() | w1.is_some() | w2.is_some() | w3.is_some();
+        // Most ticks bring no width: everything a width needs is behind this one test.
         if any_width {
+            // Written out per channel, in channel order as the reference's gestures need
+            // (docs/performance.md, «channels written out»).
+            let [t0, t1, t2, t3] = &mut self.last_pulse_at;
+            let sticks = &mut self.sticks;
+            let mut channel = |at: &mut u64, width: Option<u16>, index: usize| {
+                if let Some(w) = width {
+                    *at = now;
+                    cfg.apply_width(sticks, index, w);
+                    on_stick_update(sticks);
+                }
+            };
+            channel(t0, w0, AIL);
+            channel(t1, w1, ELE);
+            channel(t2, w2, THR);
+            channel(t3, w3, RUD);
             if let PulseRules::Validated { .. } = cfg.pulses {
                 self.link_until = (*t0).min(*t1).min(*t2).min(*t3) + timeout;
             }
@@ -582,6 +809,149 @@ mod tests {
         assert_eq!(s, Sticks::new(138, -151, 1550, -397));
         REF.apply_width(&mut s, THR, 4450);
         assert_eq!(s.thr, StickCounts::ZERO);
+    }
+
+    /// Another transmitter: throttle on input 0, roll on 1, yaw on 2, pitch on 3; pitch
+    /// reversed; endpoints 1000..2000 µs with the trims at 1500 (throttle 1000..2000).
+    fn other_radio() -> RcConfig {
+        let mut c = RcConfig { map: RcMap { roll: 1, pitch: 3, throttle: 0, yaw: 2 }, ..REF };
+        let e = RcInput { min_counts: 4000, trim_counts: 6000, max_counts: 8000, reversed: false };
+        c.inputs = [RcInput { trim_counts: 4000, ..e }, e, e, RcInput { reversed: true, ..e }];
+        c
+    }
+
+    #[test]
+    fn the_reference_endpoints_give_each_width_minus_its_centre_unscaled() {
+        // Every width the 15-bit capture can produce, on every input: the fixed mapping.
+        let centres = [5862, 6151, 4450, 6397];
+        for (input, centre) in centres.into_iter().enumerate() {
+            for w in 0..=u16::MAX {
+                let d = i32::from(w) - centre;
+                let want = if input == THR { d.max(0) } else { d }.clamp(-32768, 32767) as i16;
+                assert_eq!(REF.stick_from_width(input, w), StickCounts(want), "input {input} width {w}");
+            }
+        }
+    }
+
+    #[test]
+    fn another_transmitter_maps_orders_reverses_and_scales() {
+        let c = other_radio();
+        assert!(c.is_valid());
+        let mut s = Sticks::default();
+        // 2000 µs on the roll input (1): a full right roll, 500 µs = 1800 counts.
+        c.apply_width(&mut s, 1, 8000);
+        assert_eq!(s, Sticks::new(1800, 0, 0, 0));
+        // Half way down on the reversed pitch input (3): pitch forward half.
+        c.apply_width(&mut s, 3, 5000);
+        assert_eq!(s.ele, StickCounts(900));
+        // The throttle on input 0: 1000 µs is the bottom, 2000 µs full travel (3600).
+        c.apply_width(&mut s, 0, 4000);
+        assert_eq!(s.thr, StickCounts::ZERO);
+        c.apply_width(&mut s, 0, 3900);
+        assert_eq!(s.thr, StickCounts::ZERO);
+        c.apply_width(&mut s, 0, 7000);
+        assert_eq!(s.thr, StickCounts(2700));
+        // Yaw on input 2, left half.
+        c.apply_width(&mut s, 2, 5000);
+        assert_eq!(s.rud, StickCounts(-900));
+        // Asymmetric endpoints: each side is a full scale at its endpoint.
+        let mut a = REF;
+        a.inputs[AIL] = RcInput { min_counts: 5000, trim_counts: 6000, max_counts: 8000, reversed: false };
+        assert_eq!(a.stick_from_width(AIL, 5000), StickCounts(-1800));
+        assert_eq!(a.stick_from_width(AIL, 8000), StickCounts(1800));
+        assert_eq!(a.stick_from_width(AIL, 7000), StickCounts(900));
+        // A reversed throttle: the longest pulse is the bottom.
+        let mut r = REF;
+        r.inputs[THR].reversed = true;
+        assert_eq!(r.stick_from_width(THR, 8050), StickCounts::ZERO);
+        assert_eq!(r.stick_from_width(THR, 4450), StickCounts(3600));
+    }
+
+    #[test]
+    fn widths_for_sticks_invert_the_mapping_where_the_scale_is_one_and_near_it_elsewhere() {
+        for c in [REF, other_radio()] {
+            for s in [
+                Sticks::new(0, 0, 0, 0),
+                Sticks::new(1800, -1800, 3600, 900),
+                Sticks::new(-1300, -1300, 0, 1300),
+                Sticks::new(7, -3, 101, -599),
+            ] {
+                let mut got = Sticks::default();
+                for input in 0..CHANNELS {
+                    c.apply_width(&mut got, input, c.width_for_sticks(input, &s));
+                }
+                let close = |a: StickCounts, b: StickCounts| (i32::from(a) - i32::from(b)).abs() <= 1;
+                assert!(
+                    close(got.ail, s.ail) && close(got.ele, s.ele) && close(got.thr, s.thr) && close(got.rud, s.rud),
+                    "{s:?} -> {got:?}"
+                );
+                if c == REF {
+                    assert_eq!(got, s);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_map_that_is_not_a_permutation_is_refused() {
+        for map in [
+            RcMap { roll: 0, pitch: 0, throttle: 2, yaw: 3 },
+            RcMap { roll: 0, pitch: 1, throttle: 2, yaw: 4 },
+            RcMap { roll: 3, pitch: 3, throttle: 3, yaw: 3 },
+        ] {
+            assert!(!map.is_permutation(), "{map:?}");
+            assert!(!RcConfig { map, ..REF }.is_valid(), "{map:?}");
+        }
+        assert!(other_radio().map.is_permutation());
+    }
+
+    #[test]
+    fn assigning_an_input_swaps_with_the_function_that_had_it() {
+        let mut m = RcMap::IDENTITY;
+        assert_eq!(m.assign(Function::Roll, 2), Some(Function::Throttle));
+        assert_eq!(m, RcMap { roll: 2, pitch: 1, throttle: 0, yaw: 3 });
+        assert_eq!(m.assign(Function::Roll, 2), None);
+        assert_eq!(m.assign(Function::Yaw, 4), None);
+        assert_eq!(m, RcMap { roll: 2, pitch: 1, throttle: 0, yaw: 3 });
+        assert!(m.is_permutation());
+    }
+
+    #[test]
+    fn endpoints_that_make_no_sense_are_refused() {
+        let with = |input: usize, f: &dyn Fn(&mut RcInput)| {
+            let mut c = REF;
+            f(&mut c.inputs[input]);
+            c.is_valid()
+        };
+        assert!(with(AIL, &|_| {}));
+        // Trim outside min..max, min above max, a side shorter than 100 µs.
+        assert!(!with(AIL, &|e| e.trim_counts = e.max_counts + 1));
+        assert!(!with(AIL, &|e| e.trim_counts = e.min_counts - 1));
+        assert!(!with(AIL, &|e| core::mem::swap(&mut e.min_counts, &mut e.max_counts)));
+        assert!(!with(AIL, &|e| e.max_counts = e.trim_counts + MIN_ENDPOINT_SPAN_COUNTS - 1));
+        assert!(with(AIL, &|e| e.max_counts = e.trim_counts + MIN_ENDPOINT_SPAN_COUNTS));
+        assert!(!with(ELE, &|e| e.min_counts = e.trim_counts - MIN_ENDPOINT_SPAN_COUNTS + 1));
+        // The throttle needs only travel: its trim may sit at the bottom, not its max.
+        assert!(with(THR, &|e| e.trim_counts = e.min_counts));
+        assert!(!with(THR, &|e| e.max_counts = e.min_counts + MIN_ENDPOINT_SPAN_COUNTS - 1));
+        assert!(!with(THR, &|e| e.trim_counts = e.max_counts + 1));
+        // Past the capture wrap no width can reach it.
+        assert!(!with(RUD, &|e| e.max_counts = CAPTURE_WRAP as u16));
+        // Endpoints that suit a throttle (trim at the bottom) do not suit a centred stick.
+        let mut c = REF;
+        c.inputs[THR].trim_counts = c.inputs[THR].min_counts;
+        assert!(c.is_valid());
+        c.map.assign(Function::Roll, THR as u8);
+        assert!(!c.is_valid());
+    }
+
+    #[test]
+    fn gesture_thresholds_that_no_stick_can_reach_or_a_centred_one_makes_are_refused() {
+        assert!(!RcConfig { gesture_threshold: StickCounts(1800), ..REF }.is_valid());
+        assert!(!RcConfig { gesture_threshold: CENTRED_COUNTS, ..REF }.is_valid());
+        assert!(RcConfig { gesture_threshold: StickCounts(1799), ..REF }.is_valid());
+        assert!(!RcConfig { full_scale: StickCounts(MAX_FULL_SCALE.0 + 1), ..REF }.is_valid());
+        assert!(!RcConfig { min_throttle: StickCounts(3600), ..REF }.is_valid());
     }
 
     #[test]

@@ -68,6 +68,12 @@ impl Output {
         self.motor_command
     }
 
+    /// The rate loop's integrators (tests: what a run-time change keeps).
+    #[cfg(test)]
+    pub(super) fn rate_integrators(&self) -> [f32; 3] {
+        self.rate_loop.integrators()
+    }
+
     pub(super) fn compare(&self) -> [u16; 4] {
         self.compare
     }

@@ -48,6 +48,11 @@ impl Sensors {
         }
     }
 
+    /// The gyro low-pass's new coefficients, its memory kept.
+    pub(super) fn set_gyro_filter(&mut self, c: crate::filter::BiquadCoeffs) {
+        self.gyro_lpf.set_coefficients(c);
+    }
+
     /// A reading arrived this tick.
     pub(super) fn sample_arrived(&mut self) {
         self.missing_samples = 0;

@@ -89,6 +89,28 @@ impl Supervision {
         }
     }
 
+    /// The safe supervisor's numbers in force (tests).
+    #[cfg(test)]
+    pub(super) fn safety(&self) -> Option<SafetyConfig> {
+        match &self.machine {
+            Machine::Safe { cfg, .. } => Some(*cfg),
+            Machine::Reference(_) => None,
+        }
+    }
+
+    /// The safe supervisor's new numbers, its state kept. `false` (nothing changed) when the
+    /// kind of supervisor would change: only a new controller can do that.
+    pub(super) fn set_config(&mut self, cfg: SupervisorConfig) -> bool {
+        match (&mut self.machine, cfg) {
+            (Machine::Safe { cfg: c, .. }, SupervisorConfig::Safe(new)) => {
+                *c = new;
+                true
+            }
+            (Machine::Reference(_), SupervisorConfig::Reference) => true,
+            _ => false,
+        }
+    }
+
     /// One tick's capture pulses.
     #[inline(always)]
     pub(super) fn receive(&mut self, p: &TickParams, pulses: &PulseBatch) -> RadioFlags {

@@ -2,7 +2,7 @@
 //! in exact counts, and a level, still IMU.
 
 use fcu_core::imu::RawImu;
-use fcu_core::rc::{CaptureEdge, RcConfig, StickCounts, Sticks, CAPTURE_WRAP, CHANNELS};
+use fcu_core::rc::{CaptureEdge, RcConfig, Sticks, CAPTURE_WRAP, CHANNELS};
 
 use crate::sim::rng::Rng;
 
@@ -25,11 +25,7 @@ impl RadioFrame {
 
     /// The widths that decode to `s` (throttle 0 is sent at the bottom of the range).
     pub fn from_sticks(rc: &RcConfig, s: Sticks) -> RadioFrame {
-        let w = |centre: i16, v: StickCounts| (i32::from(centre) + i32::from(v)).clamp(1, i32::from(u16::MAX)) as u16;
-        RadioFrame {
-            width_counts: [w(rc.ail_center, s.ail), w(rc.ele_center, s.ele), w(rc.thr_bottom, s.thr), w(rc.rud_center, s.rud)],
-            link: true,
-        }
+        RadioFrame { width_counts: core::array::from_fn(|input| rc.width_for_sticks(input, &s)), link: true }
     }
 }
 

@@ -348,19 +348,9 @@ impl SafetyMonitor {
                     if let Some(a) = self.channel_age.get_mut(ch) {
                         *a = 0;
                     }
-                    let w = i32::from(w);
-                    let v = match ch {
-                        0 => w - i32::from(self.rc.ail_center),
-                        1 => w - i32::from(self.rc.ele_center),
-                        2 => (w - i32::from(self.rc.thr_bottom)).max(0),
-                        _ => w - i32::from(self.rc.rud_center),
-                    } as i16;
-                    match ch {
-                        0 => self.sticks.ail = StickCounts(v),
-                        1 => self.sticks.ele = StickCounts(v),
-                        2 => self.sticks.thr = StickCounts(v),
-                        _ => self.sticks.rud = StickCounts(v),
-                    }
+                    // The core's own mapping (radio map, endpoints, senses): the monitor
+                    // checks what the sticks lead to, not how a width becomes one.
+                    self.rc.apply_width(&mut self.sticks, ch, w);
                 }
                 None => {
                     if let Some(a) = self.channel_age.get_mut(ch) {

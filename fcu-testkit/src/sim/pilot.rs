@@ -79,6 +79,6 @@ impl Pilot {
         // Never below MIN_THR + margin: below it the core cuts the motors (a pilot flying
         // knows not to pull the stick to the bottom).
         let g_thr = g_thr.max(f64::from(cfg.rc.min_throttle.get()) + 40.0);
-        (f64::from(cfg.rc.thr_bottom) + g_thr) / 4.0
+        (f64::from(cfg.rc.input_for(fcu_core::rc::Function::Throttle).min_counts) + g_thr) / 4.0
     }
 }

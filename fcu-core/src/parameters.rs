@@ -1,0 +1,954 @@
+//! The parameter table: every setting a ground station may read and change, one definition
+//! for the firmware, the simulator and the tests.
+//!
+//! Each parameter is a name (at most [`NAME_LEN`] characters, upper case, as MAVLink's
+//! `param_id` carries it and MAVProxy writes it), a unit, bounds, a step (any value, whole
+//! numbers, or quarter microseconds, the capture clock's resolution), when a change may apply
+//! ([`Applies`]), and a getter and a setter on [`Config`]. Every value is an `f32` (MAVLink's
+//! `REAL32`); whole-number parameters stay far below 2^24, so they are exact.
+//!
+//! A change goes through [`set`]: a value that is not finite, out of bounds, off its step, not
+//! allowed while armed, or that makes [`Config::validate`] fail is refused with the rule it
+//! breaks (a short text for a `STATUSTEXT`), and the configuration is left as it was. The
+//! configuration is only the source of the values: the flight controller takes a changed one
+//! through [`FlightController::apply_config`](crate::FlightController::apply_config).
+//!
+//! [`Config::default()`] is the default set. The reference profile keeps no parameters: its
+//! values are the C code's, some of them (the 31.25 ms radio timeout, the Mahony filter's
+//! constants) not on the table's steps.
+//!
+//! [`snapshot`] is the whole set as it is kept in flash.
+//!
+//! # For a link
+//!
+//! - `PARAM_REQUEST_LIST` / `PARAM_REQUEST_READ`: [`count`], [`name`], [`value`] by index,
+//!   [`index_of`] for a `param_id` (16 bytes, NUL-terminated when shorter).
+//! - `PARAM_SET`: copy the configuration in force, [`set`] it with the motors' armed flag
+//!   ([`FlightController::armed`](crate::FlightController::armed)); taken, give the copy to
+//!   [`FlightController::apply_config`](crate::FlightController::apply_config) (or, with the
+//!   halves in two tasks, [`check_change`](crate::flight::check_change) and each half's
+//!   `take_config`), echo [`Applied::value`] and, if [`Applied::also_changed`] names one, that
+//!   parameter too; refused, echo [`Refusal::value_in_force`] and send the name and
+//!   [`Refusal::rule`] as a `STATUSTEXT`. An unknown name has no value to echo.
+//! - Saving: [`values`] into [`snapshot::plan_save`]; at boot [`snapshot::load_config`].
+//! - Files in MAVProxy's format: [`write_file`], [`apply_file`].
+
+pub mod snapshot;
+
+use crate::config::{Config, LinkProtocol};
+use crate::filter::BiquadCoeffs;
+use crate::rc::{Function, RcInput, StickCounts, COUNTS_PER_US};
+use crate::supervisor::{SafetyConfig, SupervisorConfig};
+
+/// The longest name: MAVLink's `param_id` is 16 bytes, NUL-terminated only when shorter.
+pub const NAME_LEN: usize = 16;
+
+/// When a change may be made and when it takes effect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Applies {
+    /// At any time, armed too, at once (in RAM; saved after disarming): gains, angle and rate
+    /// limits, telemetry rates.
+    Anytime,
+    /// Only while disarmed, at once: the radio, gestures, failsafe times, filters, battery.
+    /// Changing how the sticks read or when the failsafe acts mid-flight could move the
+    /// motors in ways the pilot did not command.
+    Disarmed,
+    /// Only while disarmed, in force from the next boot: the link's protocol.
+    Reboot,
+}
+
+impl Applies {
+    /// As the parameter list says it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Applies::Anytime => "any time",
+            Applies::Disarmed => "disarmed",
+            Applies::Reboot => "after reboot",
+        }
+    }
+}
+
+/// The values a parameter may take between its bounds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Step {
+    Any,
+    /// Whole numbers.
+    Integer,
+    /// Multiples of a quarter microsecond: one radio capture count.
+    QuarterUs,
+}
+
+/// A parameter's unit, as the list prints it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unit {
+    None,
+    Microseconds,
+    Milliseconds,
+    Hertz,
+    Degrees,
+    DegreesPerSecond,
+}
+
+impl Unit {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Unit::None => "",
+            Unit::Microseconds => "us",
+            Unit::Milliseconds => "ms",
+            Unit::Hertz => "Hz",
+            Unit::Degrees => "deg",
+            Unit::DegreesPerSecond => "deg/s",
+        }
+    }
+}
+
+/// A setter's own refusal (bounds and steps are checked before it runs).
+type SetResult = Result<(), &'static str>;
+
+/// One parameter: what the firmware keeps of it (its description stays in the definition,
+/// for the parameter list: [`description`]).
+#[derive(Clone, Copy)]
+pub struct Param {
+    pub name: &'static str,
+    pub unit: Unit,
+    pub min: f32,
+    pub max: f32,
+    pub step: Step,
+    pub applies: Applies,
+    get: fn(&Config) -> f32,
+    set: fn(&mut Config, f32) -> SetResult,
+}
+
+/// A parameter as the table defines it: itself and one line for the parameter list.
+#[derive(Clone, Copy)]
+struct Definition {
+    param: Param,
+    description: &'static str,
+}
+
+impl core::fmt::Debug for Param {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Param").field("name", &self.name).finish_non_exhaustive()
+    }
+}
+
+impl Param {
+    /// The value in `cfg`.
+    pub fn get(&self, cfg: &Config) -> f32 {
+        (self.get)(cfg)
+    }
+}
+
+/// Why a set was refused. Every rule is at most [`RULE_LEN`] characters, so that a
+/// `STATUSTEXT` (50) holds the parameter's name, ": " and the rule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refusal {
+    pub rule: &'static str,
+    /// The parameter's value in force (unchanged), `None` for an unknown parameter.
+    pub value_in_force: Option<f32>,
+}
+
+/// The longest refusal rule, characters.
+pub const RULE_LEN: usize = 32;
+
+/// A set that was taken.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Applied {
+    /// The value now in force (what a `PARAM_VALUE` echoes).
+    pub value: f32,
+    /// Another parameter the set moved with it (a radio map entry gives its input to the
+    /// function that had it, which takes the old one): the ground station must be told.
+    pub also_changed: Option<usize>,
+}
+
+pub const RULE_NOT_FINITE: &str = "not a finite number";
+pub const RULE_BELOW_MIN: &str = "below the minimum";
+pub const RULE_ABOVE_MAX: &str = "above the maximum";
+pub const RULE_NOT_WHOLE: &str = "not a whole number";
+pub const RULE_NOT_QUARTER_US: &str = "not a multiple of 0.25 us";
+pub const RULE_UNKNOWN: &str = "unknown parameter";
+pub const RULE_ARMED: &str = "only while disarmed";
+pub const RULE_NOT_TICKS: &str = "not a whole number of ticks";
+pub const RULE_REV: &str = "REV must be 1 or -1";
+pub const RULE_NO_SAFETY: &str = "not used by this profile";
+pub const RULE_FILTER: &str = "cut-off: 40..300 Hz in 10s";
+pub const RULE_FILTER_TICK: &str = "cut-offs are for an 800 Hz tick";
+
+/// The number of parameters.
+pub fn count() -> usize {
+    TABLE.len()
+}
+
+/// The parameter at `index`.
+pub fn param(index: usize) -> Option<&'static Param> {
+    TABLE.get(index)
+}
+
+/// One line on what the parameter at `index` does (for the parameter list).
+pub fn description(index: usize) -> Option<&'static str> {
+    DESCRIPTIONS.get(index).copied()
+}
+
+/// The name of the parameter at `index`.
+pub fn name(index: usize) -> Option<&'static str> {
+    param(index).map(|p| p.name)
+}
+
+/// The value of the parameter at `index` in `cfg`.
+pub fn value(cfg: &Config, index: usize) -> Option<f32> {
+    param(index).map(|p| p.get(cfg))
+}
+
+/// The index of the parameter named `id`: MAVLink's `param_id` as it arrives (up to 16 bytes,
+/// ended by the first NUL if shorter) or a plain name. Names are matched exactly (upper case).
+/// An id longer than 16 bytes with no NUL in its first 16 is no name: `None`.
+pub fn index_of(id: &[u8]) -> Option<usize> {
+    let end = id.iter().position(|&b| b == 0).unwrap_or(id.len());
+    if end > NAME_LEN {
+        return None;
+    }
+    let name = id.get(..end)?;
+    TABLE.iter().position(|p| p.name.as_bytes() == name)
+}
+
+/// Set the parameter at `index` to `value` in `cfg`, with the motors `armed` or not: the value
+/// in force afterwards, or the rule that refused it (and `cfg` as it was). The value a
+/// parameter already reads is taken at any time, and changes nothing.
+pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Applied, Refusal> {
+    let Some(p) = param(index) else {
+        return Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None });
+    };
+    let refuse = |rule| Refusal { rule, value_in_force: Some(p.get(cfg)) };
+    check_value(p, value).map_err(refuse)?;
+    if value.to_bits() == p.get(cfg).to_bits() {
+        // Nothing moves (a file pushed whole while armed sets every value it already has).
+        return Ok(Applied { value, also_changed: None });
+    }
+    if armed && p.applies != Applies::Anytime {
+        return Err(refuse(RULE_ARMED));
+    }
+    let mut next = *cfg;
+    (p.set)(&mut next, value).map_err(refuse)?;
+    if let Err(e) = next.validate() {
+        let rule = match e {
+            crate::ConfigError::Rc => next.rc.problem().unwrap_or(e.rule()),
+            _ => e.rule(),
+        };
+        return Err(refuse(rule));
+    }
+    let also_changed = TABLE.iter().enumerate().position(|(i, q)| i != index && q.get(&next).to_bits() != q.get(cfg).to_bits());
+    *cfg = next;
+    Ok(Applied { value: p.get(cfg), also_changed })
+}
+
+/// [`set`] by name (see [`index_of`]).
+pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, armed: bool) -> Result<Applied, Refusal> {
+    match index_of(id) {
+        Some(i) => set(cfg, i, value, armed),
+        None => Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None }),
+    }
+}
+
+/// Finite, within bounds, on the step.
+fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
+    if !v.is_finite() {
+        return Err(RULE_NOT_FINITE);
+    }
+    if v < p.min {
+        return Err(RULE_BELOW_MIN);
+    }
+    if v > p.max {
+        return Err(RULE_ABOVE_MAX);
+    }
+    match p.step {
+        Step::Any => Ok(()),
+        // Bounded by |max| < 2^24: the fraction test is exact.
+        Step::Integer if libm::truncf(v) != v => Err(RULE_NOT_WHOLE),
+        Step::QuarterUs if libm::truncf(v * 4.0) != v * 4.0 => Err(RULE_NOT_QUARTER_US),
+        _ => Ok(()),
+    }
+}
+
+/// Every parameter's value in `cfg`, in table order.
+pub fn values(cfg: &Config) -> [f32; COUNT] {
+    core::array::from_fn(|i| value(cfg, i).unwrap_or(0.0))
+}
+
+/// `base` with every parameter set to `values` (table order), checked as a whole: the
+/// configuration, or the first rule broken (a value off its bounds or step, or a whole that
+/// does not validate). For a snapshot loaded at boot: one parameter at a time could pass
+/// through invalid combinations.
+pub fn with_values(base: &Config, values: &[f32; COUNT]) -> Result<Config, &'static str> {
+    let mut cfg = *base;
+    for (p, &v) in TABLE.iter().zip(values) {
+        check_value(p, v)?;
+        (p.set)(&mut cfg, v)?;
+    }
+    cfg.validate().map_err(|e| e.rule())?;
+    Ok(cfg)
+}
+
+/// A parameter file's line that could not be taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileError {
+    /// 1-based; 0 when the lines are each fine but the set they make is refused.
+    pub line: usize,
+    pub rule: &'static str,
+}
+
+/// The set in MAVProxy's `param save` format: a `NAME VALUE` line per parameter, in table
+/// order, each value as the shortest text that reads back as the same `f32`.
+pub fn write_file(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
+    for p in TABLE.iter() {
+        writeln!(out, "{} {}", p.name, p.get(cfg))?;
+    }
+    Ok(())
+}
+
+/// `base` with the parameters a file in MAVProxy's `param save` format names (`NAME VALUE`
+/// lines, separated by spaces, tabs or a comma; `#` starts a comment; blank lines skipped),
+/// checked as a whole as [`with_values`] does: a file sets a whole radio, whose endpoints
+/// are valid together but not necessarily one at a time. An unknown name, a value that does
+/// not parse, or a line with more than a name and a value is refused with its line.
+pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
+    let mut v = values(base);
+    for (n, raw) in text.lines().enumerate() {
+        let err = |rule| FileError { line: n + 1, rule };
+        let line = raw.split('#').next().unwrap_or("");
+        let mut words = line.split(|c: char| c.is_whitespace() || c == ',').filter(|w| !w.is_empty());
+        let (Some(name), value, extra) = (words.next(), words.next(), words.next()) else { continue };
+        let (Some(value), None) = (value, extra) else { return Err(err("expected NAME VALUE")) };
+        let i = index_of(name.as_bytes()).ok_or(err(RULE_UNKNOWN))?;
+        let x: f32 = value.parse().map_err(|_| err("value is not a number"))?;
+        if let Some(slot) = v.get_mut(i) {
+            *slot = x;
+        }
+    }
+    with_values(base, &v).map_err(|rule| FileError { line: 0, rule })
+}
+
+/// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
+/// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
+pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
+    let mut c = with_in_flight_fields_of(base, src);
+    let (r, s) = (&mut c.rc, &src.rc);
+    r.map = s.map;
+    r.inputs = s.inputs;
+    r.link_timeout_ticks = s.link_timeout_ticks;
+    r.gesture_threshold = s.gesture_threshold;
+    r.min_throttle = s.min_throttle;
+    r.yaw_deadband = s.yaw_deadband;
+    if let (SupervisorConfig::Safe(b), SupervisorConfig::Safe(s)) = (&mut c.supervisor, src.supervisor) {
+        b.arm_hold_ticks = s.arm_hold_ticks;
+        b.disarm_hold_ticks = s.disarm_hold_ticks;
+        b.auto_disarm_ticks = s.auto_disarm_ticks;
+        b.failsafe_off_ticks = s.failsafe_off_ticks;
+        b.recovery_ticks = s.recovery_ticks;
+    }
+    c.gyro_filter = src.gyro_filter;
+    c.control.d_filter_k = src.control.d_filter_k;
+    c.battery_sense = src.battery_sense;
+    c.link.protocol = src.link.protocol;
+    c
+}
+
+/// `base` with the fields of the parameters that may change while armed
+/// ([`Applies::Anytime`]) taken from `src`.
+pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
+    let mut c = *base;
+    c.rc.max_tilt_rad = src.rc.max_tilt_rad;
+    c.rc.yaw_max_step_rad = src.rc.yaw_max_step_rad;
+    for (b, s) in
+        [(&mut c.control.roll, src.control.roll), (&mut c.control.pitch, src.control.pitch), (&mut c.control.yaw, src.control.yaw)]
+    {
+        b.outer_kp = s.outer_kp;
+        b.inner_kp = s.inner_kp;
+        b.inner_ki = s.inner_ki;
+        b.inner_kd = s.inner_kd;
+    }
+    c.control.yaw_rate_feedforward = src.control.yaw_rate_feedforward;
+    c.link.attitude_hz = src.link.attitude_hz;
+    c.link.rc_hz = src.link.rc_hz;
+    c
+}
+
+/// The parameter list as Markdown, with `cfg`'s values as the defaults: what
+/// `docs/parameters.md` holds (a test regenerates it and compares).
+pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
+    writeln!(out, "| Name | Default | Unit | Range | Step | Change | Meaning |")?;
+    writeln!(out, "|---|---|---|---|---|---|---|")?;
+    for (p, description) in TABLE.iter().zip(DESCRIPTIONS) {
+        let step = match p.step {
+            Step::Any => "any",
+            Step::Integer => "1",
+            Step::QuarterUs => "0.25",
+        };
+        writeln!(
+            out,
+            "| `{}` | {} | {} | {} .. {} | {} | {} | {} |",
+            p.name,
+            p.get(cfg),
+            p.unit.symbol(),
+            p.min,
+            p.max,
+            step,
+            p.applies.describe(),
+            description
+        )?;
+    }
+    Ok(())
+}
+
+/// A hash of the table's names in order (FNV-1a, 32 bits, each name followed by a NUL): a
+/// snapshot saved by a firmware with another table is refused, never read into the wrong
+/// parameters.
+pub const LAYOUT_HASH: u32 = layout_hash(&DEFINITION);
+
+/// FNV-1a over the names of `table`, each followed by a NUL.
+// Evaluated by the compiler for the table: an index out of bounds would fail the build.
+#[allow(clippy::indexing_slicing)]
+const fn layout_hash(table: &[Definition]) -> u32 {
+    let mut h: u32 = 0x811c_9dc5;
+    let mut i = 0;
+    while i < table.len() {
+        let name = table[i].param.name.as_bytes();
+        let mut j = 0;
+        while j <= name.len() {
+            let b = if j < name.len() { name[j] } else { 0 };
+            h = (h ^ b as u32).wrapping_mul(0x0100_0193);
+            j += 1;
+        }
+        i += 1;
+    }
+    h
+}
+
+// --- conversions -------------------------------------------------------------------------
+
+fn us_from_counts(c: u16) -> f32 {
+    f32::from(c) / COUNTS_PER_US as f32
+}
+
+/// Bounds and step checked: `us` is a multiple of 0.25 within 16 384 µs.
+fn counts_from_us(us: f32) -> u16 {
+    (us * COUNTS_PER_US as f32) as u16
+}
+
+fn stick_us(s: StickCounts) -> f32 {
+    f32::from(s.0) / COUNTS_PER_US as f32
+}
+
+fn stick_from_us(us: f32) -> StickCounts {
+    StickCounts((us * COUNTS_PER_US as f32) as i16)
+}
+
+/// The tick rate as a whole number, for exact conversions (validated configurations tick at
+/// a whole rate; 0 otherwise, which no conversion accepts).
+fn tick_hz(cfg: &Config) -> u32 {
+    let hz = cfg.timing.integration_hz;
+    if hz.is_finite() && hz > 0.0 && libm::truncf(hz) == hz && hz < 1.0e6 {
+        hz as u32
+    } else {
+        0
+    }
+}
+
+fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
+    let hz = tick_hz(cfg);
+    if hz == 0 {
+        return 0.0;
+    }
+    (ticks as f32 * 1000.0) / hz as f32
+}
+
+/// Whole milliseconds (checked) to ticks, refused unless exact.
+fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
+    let product = (ms as u64) * u64::from(tick_hz(cfg));
+    if product == 0 || product % 1000 != 0 {
+        return Err(RULE_NOT_TICKS);
+    }
+    u32::try_from(product / 1000).map_err(|_| RULE_NOT_TICKS)
+}
+
+fn safety(cfg: &Config) -> SafetyConfig {
+    match cfg.supervisor {
+        SupervisorConfig::Safe(s) => s,
+        SupervisorConfig::Reference => SafetyConfig::DEFAULT,
+    }
+}
+
+/// One of the safe supervisor's times, `field`, to `ms` (checked whole). One copy for every
+/// such parameter: each table entry passes only its field.
+#[inline(never)]
+fn set_safety_ms(cfg: &mut Config, ms: f32, field: fn(&mut SafetyConfig) -> &mut u32) -> SetResult {
+    let ticks = ticks_from_ms(cfg, ms)?;
+    match &mut cfg.supervisor {
+        SupervisorConfig::Safe(s) => {
+            *field(s) = ticks;
+            Ok(())
+        }
+        SupervisorConfig::Reference => Err(RULE_NO_SAFETY),
+    }
+}
+
+/// The gyro filter's cut-off: the table's for a design it lists, else the Butterworth cut-off
+/// its coefficients give, whole hertz (for a design at `fs` with `k = tan(π·fc/fs)`,
+/// `(1 − a1 − a2) / (1 + a1 − a2) = k²`, the stored `a` being pre-negated).
+fn gyro_cutoff_hz(cfg: &Config) -> f32 {
+    let c = &cfg.gyro_filter;
+    let listed = GYRO_DESIGNS_800_HZ.iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
+    if let (Some(d), true) = (listed, cfg.timing.integration_hz == 800.0) {
+        return f32::from(d.0);
+    }
+    let k2 = (1.0 - c.a1 - c.a2) / (1.0 + c.a1 - c.a2);
+    if !(k2.is_finite() && k2 > 0.0) {
+        return 0.0;
+    }
+    libm::roundf(libm::atanf(libm::sqrtf(k2)) * cfg.timing.integration_hz / core::f32::consts::PI)
+}
+
+fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
+    if cfg.timing.integration_hz != 800.0 {
+        return Err(RULE_FILTER_TICK);
+    }
+    cfg.gyro_filter = gyro_design_800_hz(hz).ok_or(RULE_FILTER)?;
+    Ok(())
+}
+
+/// The gyro low-pass a cut-off of `hz` gives at an 800 Hz tick, from [`GYRO_DESIGNS_800_HZ`].
+fn gyro_design_800_hz(hz: f32) -> Option<BiquadCoeffs> {
+    let &(_, a1, a2, b0) = GYRO_DESIGNS_800_HZ.iter().find(|d| f32::from(d.0) == hz)?;
+    let b0 = f32::from_bits(b0);
+    Some(BiquadCoeffs { a1: f32::from_bits(a1), a2: f32::from_bits(a2), b0, b1: 2.0 * b0, b2: b0 })
+}
+
+/// The cut-offs `GYRO_LPF_HZ` offers at the 800 Hz tick, with the bits of what
+/// [`BiquadCoeffs::butterworth_lowpass`] designs for them (`a1`, `a2`, `b0`; `b1 = 2·b0`,
+/// `b2 = b0`): tested equal, bit for bit. A table, because the design's double-precision
+/// tangent would bring the soft-double routines into the firmware (some 8 KB of flash).
+const GYRO_DESIGNS_800_HZ: [(u16, u32, u32, u32); 27] = [
+    (40, 0x3fc7cf71, 0xbf242f9d, 0x3ca485d8),
+    (50, 0x3fba24a7, 0xbf12f5b9, 0x3cf56358),
+    (60, 0x3facaafa, 0xbf039451, 0x3d28f974),
+    (70, 0x3f9f6355, 0xbeebbd1e, 0x3d5c5f94),
+    (80, 0x3f924d2f, 0xbed35abb, 0x3d8a25ff),
+    (90, 0x3f8566e2, 0xbebdbd8a, 0x3da82202),
+    (100, 0x3f715bef, 0xbeaaaaab, 0x3dc7f2cd),
+    (110, 0x3f583eb9, 0xbe99ef4b, 0x3de971d9),
+    (120, 0x3f3f6f1d, 0xbe8b5fc2, 0x3e0640c4),
+    (130, 0x3f26e570, 0xbe7dad98, 0x3e1885f6),
+    (140, 0x3f0e9995, 0xbe6869d4, 0x3e2b80e0),
+    (150, 0x3eed0636, 0xbe56bf9f, 0x3e3f2ccd),
+    (160, 0x3ebd32b1, 0xbe4883ea, 0x3e5387a2),
+    (170, 0x3e8da6fc, 0xbe3d946a, 0x3e68919c),
+    (180, 0x3e3ca28b, 0xbe35d70a, 0x3e7e4d20),
+    (190, 0x3dbc7e75, 0xbe313975, 0x3e8a5f47),
+    (200, 0x2515f61a, 0xbe2fb0cd, 0x3e95f61a),
+    (210, 0xbdbc7e75, 0xbe313975, 0x3ea1ef16),
+    (220, 0xbe3ca28b, 0xbe35d70a, 0x3eae4f33),
+    (230, 0xbe8da6fc, 0xbe3d946a, 0x3ebb1c4c),
+    (240, 0xbebd32b1, 0xbe4883ea, 0x3ec85d2a),
+    (250, 0xbeed0636, 0xbe56bf9f, 0x3ed61981),
+    (260, 0xbf0e9995, 0xbe6869d4, 0x3ee45a05),
+    (270, 0xbf26e570, 0xbe7dad98, 0x3ef3286b),
+    (280, 0xbf3f6f1d, 0xbe8b5fc2, 0x3f0147c0),
+    (290, 0xbf583eb9, 0xbe99ef4b, 0x3f094d98),
+    (300, 0xbf715bef, 0xbeaaaaab, 0x3f11ac51),
+];
+
+// --- the table ----------------------------------------------------------------------------
+
+macro_rules! rc_map {
+    ($name:literal, $f:expr, $what:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: 1.0,
+                max: 4.0,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| f32::from(c.rc.map.input($f)) + 1.0,
+                set: |c, v| {
+                    c.rc.map.assign($f, (v as u8).saturating_sub(1));
+                    Ok(())
+                },
+            },
+            description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
+        }
+    };
+}
+
+macro_rules! rc_endpoint {
+    ($name:literal, $input:literal, $field:ident, $what:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Microseconds,
+                min: 500.0,
+                max: 2500.0,
+                step: Step::QuarterUs,
+                applies: Applies::Disarmed,
+                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
+                set: |c, v| {
+                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
+                        e.$field = counts_from_us(v);
+                    }
+                    Ok(())
+                },
+            },
+            description: concat!("radio input ", $input, ": ", $what),
+        }
+    };
+}
+
+macro_rules! rc_rev {
+    ($name:literal, $input:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: -1.0,
+                max: 1.0,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e: &RcInput| if e.reversed { -1.0 } else { 1.0 }),
+                set: |c, v| {
+                    if v == 0.0 {
+                        return Err(RULE_REV);
+                    }
+                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
+                        e.reversed = v < 0.0;
+                    }
+                    Ok(())
+                },
+            },
+            description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
+        }
+    };
+}
+
+macro_rules! rc_input {
+    ($min:literal, $trim:literal, $max:literal, $rev:literal, $input:literal) => {
+        [
+            rc_endpoint!($min, $input, min_counts, "shortest pulse (a full deflection, or the throttle's bottom)"),
+            rc_endpoint!($trim, $input, trim_counts, "centre pulse (unused on the throttle)"),
+            rc_endpoint!($max, $input, max_counts, "longest pulse (a full deflection, or full throttle)"),
+            rc_rev!($rev, $input),
+        ]
+    };
+}
+
+macro_rules! gain {
+    ($name:literal, $axis:ident . $field:ident, $max:literal, $what:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::None,
+                min: 0.0,
+                max: $max,
+                step: Step::Any,
+                applies: Applies::Anytime,
+                get: |c| c.control.$axis.$field,
+                set: |c, v| {
+                    c.control.$axis.$field = v;
+                    Ok(())
+                },
+            },
+            description: $what,
+        }
+    };
+}
+
+macro_rules! safety_ms {
+    ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Milliseconds,
+                min: $min,
+                max: $max,
+                step: Step::Integer,
+                applies: Applies::Disarmed,
+                get: |c| ms_from_ticks(c, safety(c).$field),
+                set: |c, v| set_safety_ms(c, v, |s| &mut s.$field),
+            },
+            description: $what,
+        }
+    };
+}
+
+macro_rules! stick_us {
+    ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
+        Definition {
+            param: Param {
+                name: $name,
+                unit: Unit::Microseconds,
+                min: $min,
+                max: $max,
+                step: Step::QuarterUs,
+                applies: Applies::Disarmed,
+                get: |c| stick_us(c.rc.$field),
+                set: |c, v| {
+                    c.rc.$field = stick_from_us(v);
+                    Ok(())
+                },
+            },
+            description: $what,
+        }
+    };
+}
+
+const RC: [[Definition; 4]; 4] = [
+    rc_input!("RC1_MIN", "RC1_TRIM", "RC1_MAX", "RC1_REV", 1),
+    rc_input!("RC2_MIN", "RC2_TRIM", "RC2_MAX", "RC2_REV", 2),
+    rc_input!("RC3_MIN", "RC3_TRIM", "RC3_MAX", "RC3_REV", 3),
+    rc_input!("RC4_MIN", "RC4_TRIM", "RC4_MAX", "RC4_REV", 4),
+];
+
+/// The number of parameters.
+pub const COUNT: usize = 50;
+
+/// The table, in the order of indices, of `PARAM_VALUE`'s `param_index` and of a snapshot.
+/// Appending keeps every index; any change of names or order changes [`LAYOUT_HASH`].
+pub static TABLE: [Param; COUNT] = params_of(&DEFINITION);
+
+/// The descriptions, in table order: only the parameter list reads them, so an image that
+/// never writes one leaves them out.
+const DESCRIPTIONS: [&str; COUNT] = descriptions_of(&DEFINITION);
+
+// Evaluated by the compiler: an index out of bounds would fail the build.
+#[allow(clippy::indexing_slicing)]
+const fn params_of(d: &[Definition; COUNT]) -> [Param; COUNT] {
+    let mut out = [d[0].param; COUNT];
+    let mut i = 0;
+    while i < COUNT {
+        out[i] = d[i].param;
+        i += 1;
+    }
+    out
+}
+
+#[allow(clippy::indexing_slicing)]
+const fn descriptions_of(d: &[Definition; COUNT]) -> [&'static str; COUNT] {
+    let mut out = [""; COUNT];
+    let mut i = 0;
+    while i < COUNT {
+        out[i] = d[i].description;
+        i += 1;
+    }
+    out
+}
+
+/// The table with its descriptions, as defined; [`LAYOUT_HASH`] reads it.
+const DEFINITION: [Definition; COUNT] = [
+    rc_map!("RCMAP_ROLL", Function::Roll, "roll (aileron)"),
+    rc_map!("RCMAP_PITCH", Function::Pitch, "pitch (elevator)"),
+    rc_map!("RCMAP_THROTTLE", Function::Throttle, "throttle"),
+    rc_map!("RCMAP_YAW", Function::Yaw, "yaw (rudder)"),
+    RC[0][0],
+    RC[0][1],
+    RC[0][2],
+    RC[0][3],
+    RC[1][0],
+    RC[1][1],
+    RC[1][2],
+    RC[1][3],
+    RC[2][0],
+    RC[2][1],
+    RC[2][2],
+    RC[2][3],
+    RC[3][0],
+    RC[3][1],
+    RC[3][2],
+    RC[3][3],
+    Definition {
+        param: Param {
+            name: "RC_TIMEOUT_MS",
+            unit: Unit::Milliseconds,
+            min: 25.0,
+            max: 500.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            get: |c| ms_from_ticks(c, c.rc.link_timeout_ticks),
+            set: |c, v| {
+                c.rc.link_timeout_ticks = ticks_from_ms(c, v)?;
+                Ok(())
+            },
+        },
+        description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
+    },
+    stick_us!(
+        "GESTURE_US",
+        gesture_threshold,
+        100.0,
+        449.0,
+        "stick travel from centre (or the throttle's bottom) that counts for a gesture"
+    ),
+    stick_us!("THR_MIN_US", min_throttle, 0.0, 400.0, "throttle travel below which the throttle is low (motors stop, disarm gesture)"),
+    stick_us!("YAW_DEADBAND_US", yaw_deadband, 0.0, 300.0, "yaw stick travel from centre that asks for no turn"),
+    safety_ms!("ARM_HOLD_MS", arm_hold_ticks, 100.0, 5000.0, "the arm gesture must be held this long, then released"),
+    safety_ms!("DISARM_HOLD_MS", disarm_hold_ticks, 100.0, 5000.0, "the disarm gesture must be held this long"),
+    safety_ms!("DISARM_DELAY_MS", auto_disarm_ticks, 1000.0, 60000.0, "armed with the throttle low this long disarms"),
+    safety_ms!("FS_OFF_MS", failsafe_off_ticks, 200.0, 10000.0, "lost radio time over a flight that stops the motors (failsafe stage 2)"),
+    safety_ms!("FS_RECOVER_MS", recovery_ticks, 200.0, 10000.0, "a good link must last this long to hand control back"),
+    Definition {
+        param: Param {
+            name: "ANGLE_MAX",
+            unit: Unit::Degrees,
+            min: 5.0,
+            max: 60.0,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| c.rc.max_tilt_rad.to_degrees(),
+            set: |c, v| {
+                c.rc.max_tilt_rad = v.to_radians();
+                Ok(())
+            },
+        },
+        description: "roll and pitch at full stick",
+    },
+    Definition {
+        param: Param {
+            name: "YAW_RATE_MAX",
+            unit: Unit::DegreesPerSecond,
+            min: 10.0,
+            max: 720.0,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| (c.rc.yaw_max_step_rad * c.timing.outer_hz()).to_degrees(),
+            set: |c, v| {
+                c.rc.yaw_max_step_rad = v.to_radians() / c.timing.outer_hz();
+                Ok(())
+            },
+        },
+        description: "yaw rate at full stick",
+    },
+    gain!("ANG_RLL_P", roll.outer_kp, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
+    gain!("ANG_PIT_P", pitch.outer_kp, 20.0, "pitch angle loop: rate demand per angle error, 1/s"),
+    gain!("ANG_YAW_P", yaw.outer_kp, 20.0, "heading loop: yaw rate demand per heading error, 1/s"),
+    gain!("RATE_RLL_P", roll.inner_kp, 5000.0, "roll rate loop P, compare counts per rad/s"),
+    gain!("RATE_RLL_I", roll.inner_ki, 5000.0, "roll rate loop I, counts per rad"),
+    gain!("RATE_RLL_D", roll.inner_kd, 500.0, "roll rate loop D, counts per rad/s^2"),
+    gain!("RATE_PIT_P", pitch.inner_kp, 5000.0, "pitch rate loop P, compare counts per rad/s"),
+    gain!("RATE_PIT_I", pitch.inner_ki, 5000.0, "pitch rate loop I, counts per rad"),
+    gain!("RATE_PIT_D", pitch.inner_kd, 500.0, "pitch rate loop D, counts per rad/s^2"),
+    gain!("RATE_YAW_P", yaw.inner_kp, 5000.0, "yaw rate loop P, compare counts per rad/s"),
+    gain!("RATE_YAW_I", yaw.inner_ki, 5000.0, "yaw rate loop I, counts per rad"),
+    gain!("RATE_YAW_D", yaw.inner_kd, 500.0, "yaw rate loop D, counts per rad/s^2"),
+    Definition {
+        param: Param {
+            name: "YAW_FF",
+            unit: Unit::None,
+            min: 0.0,
+            max: 1.5,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            get: |c| c.control.yaw_rate_feedforward,
+            set: |c, v| {
+                c.control.yaw_rate_feedforward = v;
+                Ok(())
+            },
+        },
+        description: "share of the yaw stick's rate fed straight to the yaw rate loop",
+    },
+    Definition {
+        param: Param {
+            name: "GYRO_LPF_HZ",
+            unit: Unit::Hertz,
+            min: 40.0,
+            max: 300.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            get: gyro_cutoff_hz,
+            set: set_gyro_cutoff,
+        },
+        description: "gyro low-pass cut-off, 40..300 Hz in steps of 10 (second-order Butterworth at the 800 Hz tick)",
+    },
+    Definition {
+        param: Param {
+            name: "RATE_D_LPF_K",
+            unit: Unit::None,
+            min: 0.01,
+            max: 1.0,
+            step: Step::Any,
+            applies: Applies::Disarmed,
+            get: |c| c.control.d_filter_k,
+            set: |c, v| {
+                c.control.d_filter_k = v;
+                Ok(())
+            },
+        },
+        description: "rate loop D low-pass: share of each new sample, 1 = unfiltered (0.4: ~65 Hz at 800 Hz)",
+    },
+    Definition {
+        param: Param {
+            name: "BATT_VOLT_MULT",
+            unit: Unit::None,
+            min: 1.0,
+            max: 10.0,
+            step: Step::Any,
+            applies: Applies::Disarmed,
+            get: |c| c.battery_sense.volt_mult,
+            set: |c, v| {
+                c.battery_sense.volt_mult = v;
+                Ok(())
+            },
+        },
+        description: "battery volts per volt at the ADC pin (the board's divider: 1.5)",
+    },
+    Definition {
+        param: Param {
+            name: "LINK_PROTOCOL",
+            unit: Unit::None,
+            min: 0.0,
+            max: 1.0,
+            step: Step::Integer,
+            applies: Applies::Reboot,
+            get: |c| match c.link.protocol {
+                LinkProtocol::TextLines => 0.0,
+                LinkProtocol::Mavlink => 1.0,
+            },
+            set: |c, v| {
+                c.link.protocol = if v == 0.0 { LinkProtocol::TextLines } else { LinkProtocol::Mavlink };
+                Ok(())
+            },
+        },
+        description: "USART1: 0 text lines (serial plotter), 1 MAVLink",
+    },
+    Definition {
+        param: Param {
+            name: "LINK_ATT_HZ",
+            unit: Unit::Hertz,
+            min: 1.0,
+            max: 50.0,
+            step: Step::Integer,
+            applies: Applies::Anytime,
+            get: |c| f32::from(c.link.attitude_hz),
+            set: |c, v| {
+                c.link.attitude_hz = v as u8;
+                Ok(())
+            },
+        },
+        description: "attitude messages per second",
+    },
+    Definition {
+        param: Param {
+            name: "LINK_RC_HZ",
+            unit: Unit::Hertz,
+            min: 1.0,
+            max: 50.0,
+            step: Step::Integer,
+            applies: Applies::Anytime,
+            get: |c| f32::from(c.link.rc_hz),
+            set: |c, v| {
+                c.link.rc_hz = v as u8;
+                Ok(())
+            },
+        },
+        description: "radio input and motor output messages per second",
+    },
+];
+
+#[cfg(test)]
+mod tests;

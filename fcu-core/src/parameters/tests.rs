@@ -1,0 +1,438 @@
+use super::*;
+use crate::config::ConfigError;
+use crate::rc::{RcMap, CHANNELS};
+
+fn idx(name: &str) -> usize {
+    index_of(name.as_bytes()).unwrap_or_else(|| panic!("no parameter {name}"))
+}
+
+fn get(cfg: &Config, name: &str) -> f32 {
+    value(cfg, idx(name)).unwrap()
+}
+
+#[test]
+fn names_are_unique_upper_case_and_fit_a_param_id() {
+    assert_eq!(count(), COUNT);
+    for (i, p) in TABLE.iter().enumerate() {
+        assert!(!p.name.is_empty() && p.name.len() <= NAME_LEN, "{}", p.name);
+        assert!(p.name.bytes().all(|b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_'), "{}", p.name);
+        assert_eq!(index_of(p.name.as_bytes()), Some(i), "{} is not unique", p.name);
+        assert!(p.min < p.max && description(i).is_some_and(|d| !d.is_empty()), "{}", p.name);
+        // Whole-number parameters are exact as f32.
+        assert!(p.min.abs() < 16_777_216.0 && p.max.abs() < 16_777_216.0);
+    }
+}
+
+#[test]
+fn every_rule_fits_a_statustext_with_the_name() {
+    let rules = [
+        RULE_NOT_FINITE,
+        RULE_BELOW_MIN,
+        RULE_ABOVE_MAX,
+        RULE_NOT_WHOLE,
+        RULE_NOT_QUARTER_US,
+        RULE_UNKNOWN,
+        RULE_ARMED,
+        RULE_NOT_TICKS,
+        RULE_REV,
+        RULE_NO_SAFETY,
+        RULE_FILTER,
+        RULE_FILTER_TICK,
+    ];
+    let errors = [
+        ConfigError::ReferenceArithmetic,
+        ConfigError::Timing,
+        ConfigError::ImuSensitivity,
+        ConfigError::Calibration,
+        ConfigError::Health,
+        ConfigError::GyroFilter,
+        ConfigError::Estimator,
+        ConfigError::Rc,
+        ConfigError::Control,
+        ConfigError::Mixer,
+        ConfigError::Supervisor,
+        ConfigError::BatterySense,
+        ConfigError::Link,
+    ];
+    // Every rule RcConfig::problem can name: break each in turn.
+    let mut rc_rules = std::vec::Vec::new();
+    let d = Config::default().rc;
+    for f in [
+        &(|c: &mut crate::rc::RcConfig| c.map.roll = 1) as &dyn Fn(&mut crate::rc::RcConfig),
+        &|c| c.full_scale = StickCounts(0),
+        &|c| c.inputs[0].trim_counts = 9000,
+        &|c| c.inputs[0].max_counts = c.inputs[0].trim_counts + 1,
+        &|c| c.gesture_threshold = StickCounts(0),
+        &|c| c.min_throttle = StickCounts(-1),
+        &|c| c.max_tilt_rad = 2.0,
+        &|c| c.yaw_deadband = StickCounts(-1),
+        &|c| c.yaw_max_step_rad = -1.0,
+        &|c| c.link_timeout_ticks = 0,
+        &|c| c.pulses = crate::rc::PulseRules::Validated { min_counts: 1, max_counts: 0, max_pulse_ticks: 1 },
+    ] {
+        let mut c = d;
+        f(&mut c);
+        rc_rules.push(c.problem().expect("a broken radio configuration names its rule"));
+    }
+    assert_eq!(rc_rules.len(), 11);
+    const { assert!(NAME_LEN + 2 + RULE_LEN <= 50) };
+    for rule in rules.into_iter().chain(errors.map(ConfigError::rule)).chain(rc_rules) {
+        assert!(!rule.is_empty() && rule.len() <= RULE_LEN, "{rule:?}");
+    }
+}
+
+#[test]
+fn the_default_set_is_on_its_bounds_and_steps_and_reads_back_bit_for_bit() {
+    for base in [Config::default(), Config::esc()] {
+        let v = values(&base);
+        for (p, &x) in TABLE.iter().zip(&v) {
+            assert_eq!(check_value(p, x), Ok(()), "{} = {x}", p.name);
+        }
+        // Loading the whole set, and setting each parameter to the value it reads: the very
+        // same configuration (the golden vectors fly it).
+        assert_eq!(with_values(&base, &v), Ok(base));
+        for i in 0..count() {
+            let mut c = base;
+            let got = set(&mut c, i, v[i], false).unwrap_or_else(|r| panic!("{}: {r:?}", TABLE[i].name));
+            assert_eq!(got, Applied { value: v[i], also_changed: None });
+            assert_eq!(c, base, "{}", TABLE[i].name);
+        }
+    }
+}
+
+#[test]
+fn the_defaults_read_as_the_profile_says() {
+    let d = Config::default();
+    let want = [
+        ("RCMAP_ROLL", 1.0),
+        ("RCMAP_THROTTLE", 3.0),
+        ("RC1_TRIM", 1465.5),
+        ("RC1_MIN", 1015.5),
+        ("RC1_MAX", 1915.5),
+        ("RC3_MIN", 1112.5),
+        ("RC3_TRIM", 1562.5),
+        ("RC3_MAX", 2012.5),
+        ("RC4_REV", 1.0),
+        ("RC_TIMEOUT_MS", 100.0),
+        ("GESTURE_US", 300.0),
+        ("THR_MIN_US", 50.0),
+        ("YAW_DEADBAND_US", 150.0),
+        ("ARM_HOLD_MS", 1000.0),
+        ("DISARM_DELAY_MS", 5000.0),
+        ("FS_OFF_MS", 1000.0),
+        ("FS_RECOVER_MS", 1000.0),
+        ("ANG_RLL_P", 6.5),
+        ("RATE_YAW_P", 1500.0),
+        ("RATE_PIT_D", 7.0),
+        ("GYRO_LPF_HZ", 150.0),
+        ("RATE_D_LPF_K", 0.4),
+        ("BATT_VOLT_MULT", 1.5),
+        ("LINK_PROTOCOL", 1.0),
+        ("LINK_ATT_HZ", 25.0),
+        ("LINK_RC_HZ", 10.0),
+    ];
+    for (name, v) in want {
+        assert_eq!(get(&d, name), v, "{name}");
+    }
+    assert!((get(&d, "ANGLE_MAX") - 20.0).abs() < 1e-5);
+    assert!((get(&d, "YAW_RATE_MAX") - 120.0).abs() < 1e-4);
+}
+
+#[test]
+fn every_parameter_sets_what_it_reads() {
+    // Each parameter to another valid value: the getter reads what was set, the configuration
+    // moved, and nothing else read differently (but a radio map entry's partner).
+    let base = Config::default();
+    for (i, p) in TABLE.iter().enumerate() {
+        let old = p.get(&base);
+        let candidates = [p.min, p.max, libm::roundf((p.min + p.max) / 2.0), old + 1.0, old - 1.0, old * 1.1, old * 0.9];
+        let mut moved = false;
+        for v in candidates {
+            if v == old || check_value(p, v).is_err() {
+                continue;
+            }
+            let mut c = base;
+            if let Ok(a) = set(&mut c, i, v, false) {
+                assert!((a.value - v).abs() <= 1e-4 * v.abs().max(1.0), "{} set {v} reads {}", p.name, a.value);
+                assert_eq!(p.get(&c), a.value);
+                assert_ne!(c, base, "{}", p.name);
+                for (j, q) in TABLE.iter().enumerate() {
+                    if j != i && q.get(&c) != q.get(&base) {
+                        assert!(p.name.starts_with("RCMAP") && a.also_changed == Some(j), "{} moved {}", p.name, q.name);
+                    }
+                }
+                moved = true;
+            }
+        }
+        assert!(moved, "{}: no other value could be set", p.name);
+    }
+}
+
+#[test]
+fn bad_values_are_refused_with_their_rule_and_nothing_moves() {
+    let base = Config::default();
+    let cases: [(&str, f32, &str); 12] = [
+        ("RATE_RLL_P", f32::NAN, RULE_NOT_FINITE),
+        ("RATE_RLL_P", f32::INFINITY, RULE_NOT_FINITE),
+        ("RATE_RLL_P", f32::NEG_INFINITY, RULE_NOT_FINITE),
+        ("RATE_RLL_P", -1.0, RULE_BELOW_MIN),
+        ("RATE_RLL_P", 5000.5, RULE_ABOVE_MAX),
+        ("RCMAP_ROLL", 2.5, RULE_NOT_WHOLE),
+        ("RC1_TRIM", 1500.1, RULE_NOT_QUARTER_US),
+        ("RC1_REV", 0.0, RULE_REV),
+        ("RC_TIMEOUT_MS", 101.0, RULE_NOT_TICKS),
+        // Past its own endpoint: Config::validate's radio rule, named.
+        ("RC1_TRIM", 1950.0, "RCn: need MIN <= TRIM <= MAX"),
+        ("RC1_MAX", 1500.0, "RCn: MIN/TRIM/MAX too close"),
+        ("GESTURE_US", 449.75, RULE_ABOVE_MAX),
+    ];
+    for (name, v, rule) in cases {
+        let mut c = base;
+        let r = set(&mut c, idx(name), v, false);
+        assert_eq!(r, Err(Refusal { rule, value_in_force: Some(get(&base, name)) }), "{name} = {v}");
+        assert_eq!(c, base, "{name} = {v}");
+    }
+    // The same values by name, and unknown names.
+    let mut c = base;
+    assert_eq!(set_by_name(&mut c, b"RATE_RLL_P", f32::NAN, false).map_err(|r| r.rule), Err(RULE_NOT_FINITE));
+    for id in [&b"NO_SUCH_PARAM"[..], b"rate_rll_p", b"", b"RATE_RLL_P_AND_MORE_THAN_16"] {
+        assert_eq!(set_by_name(&mut c, id, 1.0, false), Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None }));
+    }
+    assert_eq!(set(&mut c, COUNT, 1.0, false), Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None }));
+    assert_eq!(c, base);
+    // A radio timeout as long as the failsafe's stage-2 time: the supervisor's rule.
+    let mut short = base;
+    set(&mut short, idx("FS_OFF_MS"), 250.0, false).unwrap();
+    let before = short;
+    let r = set(&mut short, idx("RC_TIMEOUT_MS"), 250.0, false);
+    assert_eq!(r, Err(Refusal { rule: "FS_* must exceed RC_TIMEOUT_MS", value_in_force: Some(100.0) }));
+    assert_eq!(short, before);
+    assert!(set(&mut short, idx("RC_TIMEOUT_MS"), 245.0, false).is_ok());
+    // The cut-offs are designs for the 800 Hz tick.
+    let mut slow = base;
+    slow.timing.integration_hz = 600.0;
+    let before = slow;
+    assert_eq!(set(&mut slow, idx("GYRO_LPF_HZ"), 100.0, false).map_err(|r| r.rule), Err(RULE_FILTER_TICK));
+    assert_eq!(slow, before);
+}
+
+#[test]
+fn a_param_id_is_read_up_to_its_nul_or_all_sixteen_bytes() {
+    let mut id = [0u8; 16];
+    id[..10].copy_from_slice(b"ANG_RLL_P\0");
+    assert_eq!(index_of(&id), Some(idx("ANG_RLL_P")));
+    // Sixteen characters fill the field with no NUL.
+    let full = *b"RATE_D_LPF_K\0\0\0\0";
+    assert_eq!(index_of(&full), Some(idx("RATE_D_LPF_K")));
+    let sixteen = TABLE.iter().find(|p| p.name.len() == NAME_LEN).map(|p| p.name);
+    if let Some(n) = sixteen {
+        assert_eq!(index_of(n.as_bytes()), Some(idx(n)));
+    }
+    // Garbage after the NUL does not matter; no NUL within 16 bytes of a longer field is no name.
+    assert_eq!(index_of(b"ANG_RLL_P\0XXXXXX"), Some(idx("ANG_RLL_P")));
+    assert_eq!(index_of(b"ANG_RLL_PXXXXXXXY"), None);
+    assert_eq!(index_of(b"ANG_RLL_"), None);
+}
+
+#[test]
+fn while_armed_only_gains_and_rates_change() {
+    let base = Config::default();
+    for (i, p) in TABLE.iter().enumerate() {
+        let old = p.get(&base);
+        let v = if p.max > old { libm::floorf(old + 1.0).min(p.max) } else { libm::ceilf(old - 1.0).max(p.min) };
+        let mut c = base;
+        let r = set(&mut c, i, v, true);
+        match p.applies {
+            Applies::Anytime => assert!(r.is_ok(), "{}: {r:?}", p.name),
+            Applies::Disarmed | Applies::Reboot => {
+                assert_eq!(r, Err(Refusal { rule: RULE_ARMED, value_in_force: Some(old) }), "{}", p.name);
+                assert_eq!(c, base);
+                // The value it already has is no change: taken.
+                assert_eq!(set(&mut c, i, old, true), Ok(Applied { value: old, also_changed: None }), "{}", p.name);
+            }
+        }
+    }
+    // What may change armed: the gains, the angle and yaw-rate limits, the telemetry rates.
+    let anytime: std::vec::Vec<&str> = TABLE.iter().filter(|p| p.applies == Applies::Anytime).map(|p| p.name).collect();
+    assert!(
+        anytime.iter().all(|n| n.starts_with("ANG_")
+            || n.starts_with("RATE_")
+            || n.starts_with("LINK_")
+            || ["ANGLE_MAX", "YAW_RATE_MAX", "YAW_FF"].contains(n)),
+        "{anytime:?}"
+    );
+    assert!(!anytime.contains(&"RATE_D_LPF_K") && !anytime.contains(&"LINK_PROTOCOL"));
+}
+
+#[test]
+fn a_radio_map_entry_swaps_with_the_function_that_had_the_input() {
+    let mut c = Config::default();
+    let a = set(&mut c, idx("RCMAP_ROLL"), 3.0, false).unwrap();
+    assert_eq!(a, Applied { value: 3.0, also_changed: Some(idx("RCMAP_THROTTLE")) });
+    assert_eq!(c.rc.map, RcMap { roll: 2, pitch: 1, throttle: 0, yaw: 3 });
+    assert_eq!(c.validate(), Ok(()));
+    // The endpoints stay with their inputs: an input whose trim sits at its bottom (as a
+    // radio calibration leaves the throttle's) cannot carry a centred stick.
+    let mut d = Config::default();
+    set(&mut d, idx("RC3_TRIM"), 1112.5, false).unwrap();
+    let before = d;
+    assert_eq!(set(&mut d, idx("RCMAP_ROLL"), 3.0, false).map_err(|r| r.rule), Err("RCn: MIN/TRIM/MAX too close"));
+    assert_eq!(d, before);
+}
+
+#[test]
+fn another_transmitter_is_set_up_through_parameters_alone() {
+    // Throttle on input 1, roll on 2, yaw on 3, pitch on 4 reversed; 1000..2000 us, trims
+    // 1500 (the throttle's 1000). Sent as a ground station would, a parameter at a time,
+    // with the endpoints first widened so that every step is valid.
+    let mut c = Config::default();
+    let steps: &[(&str, f32)] = &[
+        ("RC1_MIN", 1000.0),
+        ("RC1_MAX", 2000.0),
+        ("RC1_TRIM", 1500.0),
+        ("RC2_MIN", 1000.0),
+        ("RC2_MAX", 2000.0),
+        ("RC2_TRIM", 1500.0),
+        ("RC3_MAX", 2000.0),
+        ("RC3_TRIM", 1500.0),
+        ("RC3_MIN", 1000.0),
+        ("RC4_MIN", 1000.0),
+        ("RC4_MAX", 2000.0),
+        ("RC4_TRIM", 1500.0),
+        ("RC4_REV", -1.0),
+        ("RCMAP_THROTTLE", 1.0),
+        ("RC1_TRIM", 1000.0),
+        ("RCMAP_ROLL", 2.0),
+        ("RCMAP_YAW", 3.0),
+        ("RCMAP_PITCH", 4.0),
+    ];
+    for &(name, v) in steps {
+        let r = set(&mut c, idx(name), v, false);
+        assert!(r.is_ok(), "{name} = {v}: {r:?}");
+    }
+    assert_eq!(c.rc.map, RcMap { roll: 1, pitch: 3, throttle: 0, yaw: 2 });
+    let mut s = crate::rc::Sticks::default();
+    for (input, w_us) in [(0, 1500u16), (1, 2000), (2, 1250), (3, 1250)] {
+        c.rc.apply_width(&mut s, input, w_us * 4);
+    }
+    assert_eq!(s, crate::rc::Sticks::new(1800, 900, 1800, -900));
+    assert_eq!(c.validate(), Ok(()));
+    let _ = CHANNELS;
+}
+
+#[test]
+fn times_are_whole_ticks_and_the_reference_supervisor_has_none_to_set() {
+    let mut c = Config::default();
+    assert_eq!(set(&mut c, idx("RC_TIMEOUT_MS"), 105.0, false).map(|a| a.value), Ok(105.0));
+    assert_eq!(c.rc.link_timeout_ticks, 84);
+    assert_eq!(set(&mut c, idx("FS_OFF_MS"), 2000.0, false).map(|a| a.value), Ok(2000.0));
+    assert_eq!(safety(&c).failsafe_off_ticks, 1600);
+    assert_eq!(set(&mut c, idx("ARM_HOLD_MS"), 1001.0, false).map_err(|r| r.rule), Err(RULE_NOT_TICKS));
+    let mut r = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
+    let before = r;
+    assert_eq!(set(&mut r, idx("ARM_HOLD_MS"), 2000.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
+    assert_eq!(r, before);
+}
+
+#[test]
+fn the_gyro_cut_off_is_designed_as_the_profile_designs_it() {
+    // The table is the design, bit for bit.
+    for &(hz, a1, a2, b0) in GYRO_DESIGNS_800_HZ.iter() {
+        let c = BiquadCoeffs::butterworth_lowpass(f32::from(hz), 800.0).unwrap();
+        assert_eq!([c.a1, c.a2, c.b0, c.b1, c.b2].map(f32::to_bits), [a1, a2, b0, (2.0 * f32::from_bits(b0)).to_bits(), b0], "{hz} Hz");
+    }
+    let mut c = Config::default();
+    assert_eq!(get(&c, "GYRO_LPF_HZ"), 150.0);
+    set(&mut c, idx("GYRO_LPF_HZ"), 100.0, false).unwrap();
+    assert_eq!(Some(c.gyro_filter), BiquadCoeffs::butterworth_lowpass(100.0, 800.0));
+    assert_eq!(get(&c, "GYRO_LPF_HZ"), 100.0);
+    set(&mut c, idx("GYRO_LPF_HZ"), 150.0, false).unwrap();
+    assert_eq!(c.gyro_filter, BiquadCoeffs::GYRO_150_HZ_AT_800_HZ);
+    // Every cut-off offered reads back as itself; any other is refused.
+    for hz in 40..=300 {
+        let r = set(&mut c, idx("GYRO_LPF_HZ"), hz as f32, false);
+        if hz % 10 == 0 {
+            assert!(r.is_ok(), "{hz}");
+            assert_eq!(get(&c, "GYRO_LPF_HZ"), hz as f32);
+        } else {
+            assert_eq!(r.map_err(|r| r.rule), Err(RULE_FILTER), "{hz}");
+        }
+    }
+    // A design the table does not list reads as its Butterworth cut-off.
+    c.gyro_filter = BiquadCoeffs::butterworth_lowpass(123.0, 800.0).unwrap();
+    assert_eq!(get(&c, "GYRO_LPF_HZ"), 123.0);
+}
+
+#[test]
+fn the_layout_hash_follows_names_and_order() {
+    let mut swapped = DEFINITION;
+    swapped.swap(0, 1);
+    assert_ne!(layout_hash(&swapped), LAYOUT_HASH);
+    let mut renamed = DEFINITION;
+    renamed[5].param.name = "RC1_TRIX";
+    assert_ne!(layout_hash(&renamed), LAYOUT_HASH);
+    assert_ne!(layout_hash(&DEFINITION[..COUNT - 1]), LAYOUT_HASH);
+    assert_eq!(layout_hash(&DEFINITION), LAYOUT_HASH);
+}
+
+#[test]
+fn a_whole_set_is_checked_as_a_whole() {
+    let base = Config::default();
+    let mut v = values(&base);
+    // Endpoints that are only valid together: loaded at once, they pass.
+    v[idx("RC1_MIN")] = 1000.0;
+    v[idx("RC1_TRIM")] = 1500.0;
+    v[idx("RC1_MAX")] = 2000.0;
+    let c = with_values(&base, &v).unwrap();
+    assert_eq!(c.rc.inputs[0].trim_counts, 6000);
+    v[idx("RC1_TRIM")] = 2100.0;
+    assert_eq!(with_values(&base, &v), Err(ConfigError::Rc.rule()));
+    v[idx("RC1_TRIM")] = f32::NAN;
+    assert_eq!(with_values(&base, &v), Err(RULE_NOT_FINITE));
+}
+
+#[test]
+fn the_field_lists_cover_exactly_the_table_and_its_in_flight_part() {
+    // Each parameter moved on its own: the whole change is in the parameter fields, and in
+    // the in-flight fields exactly when the parameter may change armed.
+    let old = Config::default();
+    for (i, p) in TABLE.iter().enumerate() {
+        let v = p.get(&old);
+        let moved = [p.max, p.min, v + 1.0, v - 1.0, v * 1.1].into_iter().find_map(|x| {
+            let mut c = old;
+            set(&mut c, i, x, false).ok().map(|_| c).filter(|c| *c != old)
+        });
+        let new = moved.unwrap_or_else(|| panic!("{} could not be moved", p.name));
+        assert_eq!(with_parameter_fields_of(&new, &old), old, "{}: a field outside the parameter fields moved", p.name);
+        assert_eq!(with_parameter_fields_of(&old, &new), new, "{}", p.name);
+        let in_flight = with_in_flight_fields_of(&old, &new) == new;
+        assert_eq!(in_flight, p.applies == Applies::Anytime, "{}", p.name);
+    }
+    // A field no parameter sets is outside both.
+    let mut other = old;
+    other.mixer.max_compare += 1.0;
+    assert_ne!(with_parameter_fields_of(&other, &old), old);
+}
+
+#[test]
+fn a_parameter_file_round_trips_and_bad_lines_are_named() {
+    let base = Config::default();
+    let mut text = std::string::String::new();
+    write_file(&mut text, &base).unwrap();
+    assert_eq!(text.lines().count(), COUNT);
+    assert!(text.starts_with("RCMAP_ROLL 1\nRCMAP_PITCH 2\n"), "{text}");
+    assert_eq!(apply_file(&base, &text), Ok(base));
+    // MAVProxy's own layout: padded names, six decimals, comments; a whole radio at once in
+    // an order that one set at a time would refuse (the trim past the old maximum first).
+    let other = "# from another board\nRC1_TRIM      1950.000000\nRC1_MAX 2100\n\nRATE_RLL_P,250.5 # tuned\n";
+    let c = apply_file(&base, other).unwrap();
+    assert_eq!((c.rc.inputs[0].trim_counts, c.rc.inputs[0].max_counts, c.control.roll.inner_kp), (7800, 8400, 250.5));
+    let mut one_at_a_time = base;
+    assert!(set(&mut one_at_a_time, idx("RC1_TRIM"), 1950.0, false).is_err());
+    assert_eq!(apply_file(&base, "ANG_RLL_P 5\nNO_SUCH 1\n"), Err(FileError { line: 2, rule: RULE_UNKNOWN }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P five\n"), Err(FileError { line: 1, rule: "value is not a number" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P 1 2\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
+    assert_eq!(apply_file(&base, "ANG_RLL_P nan\n"), Err(FileError { line: 0, rule: RULE_NOT_FINITE }));
+    assert_eq!(apply_file(&base, "RC1_TRIM 2400\n").map_err(|e| e.line), Err(0));
+}
