@@ -53,6 +53,8 @@ const MOTOR_PIN_0: u8 = 6;
 const SPI2_SCK: (usize, u8) = (1, 13);
 const SPI2_DATA: (usize, u8) = (1, 15);
 const USART1_TX: (usize, u8) = (0, 9);
+/// PA10: USART1_RX (AF7), the line from the host.
+const USART1_RX: (usize, u8) = (0, 10);
 /// PB1: ADC1_IN9, the battery divider.
 const BATTERY_PIN: (usize, u8) = (1, 1);
 
@@ -78,6 +80,9 @@ pub struct Records {
     /// was not in AF7 for the whole frame, BRR changed during it, or its baud rate was more
     /// than [`HOST_BAUD_TOLERANCE`] off [`HOST_BAUD`].
     pub uart_lost: Vec<(Time, u8)>,
+    /// Bytes the host sent on PA10 that USART1's receiver never saw, with the end of their stop
+    /// bit: PA10 was not USART1_RX (AF7) for the whole frame, or USART1's clock was off.
+    pub uart_rx_lost: Vec<(Time, u8)>,
     /// Time TIM9 was started (the control tick), each boot.
     pub tick_timer_starts: Vec<Time>,
     /// The last peripheral register read: (time, address, value). A firmware stuck in a
@@ -91,7 +96,7 @@ pub fn register_name(addr: u32) -> String {
     /// The registers a report names in a peripheral: (offset, name).
     type Registers = &'static [(u32, &'static str)];
     /// (base, peripheral, its named registers).
-    const PERIPHERALS: [(u32, &str, Registers); 15] = [
+    const PERIPHERALS: [(u32, &str, Registers); 16] = [
         (tim::TimerKind::Tim2.base(), "TIM2", &[]),
         (tim::TimerKind::Tim4.base(), "TIM4", &[]),
         (iwdg::BASE, "IWDG", &[(0x0, "KR"), (0x4, "PR"), (0x8, "RLR"), (0xC, "SR")]),
@@ -106,6 +111,7 @@ pub fn register_name(addr: u32) -> String {
         (rcc::BASE, "RCC", &[(0x0, "CR"), (0x4, "PLLCFGR"), (0x8, "CFGR"), (0xC, "CIR"), (0x74, "CSR")]),
         (flash::BASE, "FLASH", &[(0x0, "ACR"), (0x4, "KEYR"), (0x8, "OPTKEYR"), (0xC, "SR"), (0x10, "CR")]),
         (dma::BASE, "DMA1", &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")]),
+        (dma::DMA2_BASE, "DMA2", &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")]),
         (dbgmcu::BASE, "DBGMCU", &[(0x0, "IDCODE"), (0x4, "CR"), (0x8, "APB1_FZ"), (0xC, "APB2_FZ")]),
     ];
     let (base, offset) = (addr & !0x3FF, addr & 0x3FF);
@@ -130,6 +136,7 @@ pub struct Board {
     pub usart1: usart::Usart,
     pub iwdg: iwdg::Iwdg,
     pub dma1: dma::Dma,
+    pub dma2: dma::Dma,
     pub adc: adc::Adc,
     pub dbgmcu: dbgmcu::Dbgmcu,
     /// Radio edges still to happen: (time, channel, level after the edge).
@@ -142,6 +149,20 @@ pub struct Board {
     uart_tx_routed_since: Option<Time>,
     /// The battery divider's output (None until the harness sets a battery voltage).
     battery_divider_volts: Option<f64>,
+    /// The host's side of USART1's receive line: frames still to arrive, in time order.
+    uart_rx_line: VecDeque<RxFrame>,
+    /// The burst the host is sending: its first frame's start and the frames scheduled in it.
+    uart_rx_burst: Option<(Time, u64)>,
+    /// Since when PA10 has been USART1_RX (None: it is not now).
+    uart_rx_routed_since: Option<Time>,
+}
+
+/// A frame the host sends on PA10: start of its start bit, end of its stop bit, the byte.
+#[derive(Clone, Copy, Debug)]
+struct RxFrame {
+    start: Time,
+    end: Time,
+    byte: u8,
 }
 
 impl Default for Board {
@@ -164,6 +185,7 @@ impl Board {
             usart1: usart::Usart::new(),
             iwdg: iwdg::Iwdg::new(),
             dma1: dma::Dma::new(),
+            dma2: dma::Dma::dma2(),
             adc: adc::Adc::new(),
             dbgmcu: dbgmcu::Dbgmcu::new(),
             edges: VecDeque::new(),
@@ -172,6 +194,9 @@ impl Board {
             tim9_was_running: false,
             uart_tx_routed_since: None,
             battery_divider_volts: None,
+            uart_rx_line: VecDeque::new(),
+            uart_rx_burst: None,
+            uart_rx_routed_since: None,
         }
     }
 
@@ -244,6 +269,7 @@ impl Board {
             (true, since) => since.or(Some(now)),
             (false, _) => None,
         };
+        self.track_uart_rx_pin(now);
         self.refresh_battery_pin();
         let (l1, l2) = self.leds();
         if self.records.leds.last().is_none_or(|&(_, a, b)| (a, b) != (l1, l2)) {
@@ -373,6 +399,7 @@ impl Board {
                 Op::Write(v) => self.rcc.write(offset, v, now).map(|()| 0),
             },
             0x4002_6000 => dev!("DMA1", Ahb1, 21, self.dma1),
+            0x4002_6400 => dev!("DMA2", Ahb1, 22, self.dma2),
             0x4002_3C00 => match op {
                 Op::Read => self.flash.read(offset, now),
                 Op::Write(v) => self.flash.write(offset, v, now).map(|()| 0),
@@ -411,6 +438,7 @@ impl Board {
             self.dma1.spi2_rx(byte);
         }
         self.spi2.set_dma_budget(self.dma1.spi2_rx_capacity());
+        self.serve_usart1_rx_dma();
     }
 
     fn after_access(&mut self, now: Time) -> Result<(), Unmodelled> {
@@ -446,7 +474,77 @@ impl Board {
             (Apb2, 8) => self.adc.reset_registers(),
             (Apb2, 16) => self.tim9 = tim::Timer::new(tim::TimerKind::Tim9),
             (Ahb1, 21) => self.dma1 = dma::Dma::new(),
+            (Ahb1, 22) => self.dma2 = dma::Dma::dma2(),
             _ => {}
+        }
+    }
+}
+
+/// USART1's receive side: the host's line on PA10, and DMA2 serving the receiver.
+impl Board {
+    /// The host sends `bytes` on PA10 at [`HOST_BAUD`], 8N1, back to back, from `not_before`
+    /// or right after what it is still sending.
+    pub fn push_uart_rx(&mut self, bytes: &[u8], not_before: Time) {
+        /// Ten bits (start, 8 data, stop) per frame, in time units times the baud rate.
+        const FRAME_UNITS_X_BAUD: u64 = 10 * periph::TIME_HZ;
+        let baud = HOST_BAUD as u64;
+        let line_end = self.uart_rx_line.back().map(|f| f.end);
+        let (t0, mut k) = match (self.uart_rx_burst, line_end) {
+            (Some(burst), Some(end)) if end >= not_before => burst,
+            _ => (not_before, 0),
+        };
+        for &byte in bytes {
+            let start = t0 + k * FRAME_UNITS_X_BAUD / baud;
+            let end = t0 + (k + 1) * FRAME_UNITS_X_BAUD / baud;
+            self.uart_rx_line.push_back(RxFrame { start, end, byte });
+            k += 1;
+        }
+        self.uart_rx_burst = Some((t0, k));
+    }
+
+    /// Whether the host is still sending (frames not yet ended).
+    pub fn uart_rx_pending(&self) -> usize {
+        self.uart_rx_line.len()
+    }
+
+    fn track_uart_rx_pin(&mut self, now: Time) {
+        let (port, pin) = USART1_RX;
+        self.uart_rx_routed_since = match (self.gpio[port].routes(pin, AF_USART1), self.uart_rx_routed_since) {
+            (true, since) => since.or(Some(now)),
+            (false, _) => None,
+        };
+    }
+
+    /// The frames whose stop bits ended by `now` reach USART1's receiver if PA10 was AF7 from
+    /// their start bit on and USART1's clock runs; a frame that lands with DMAR set goes on to
+    /// DMA2 at once, one byte at a time, so a stalled CPU loses nothing a circular stream keeps.
+    fn deliver_uart_rx(&mut self, now: Time) -> Result<(), Unmodelled> {
+        while let Some(&frame) = self.uart_rx_line.front() {
+            if frame.end > now {
+                break;
+            }
+            self.uart_rx_line.pop_front();
+            let on_pin = self.uart_rx_routed_since.is_some_and(|since| since <= frame.start);
+            if !on_pin || !self.rcc.is_enabled(rcc::Bus::Apb2, 4) {
+                self.records.uart_rx_lost.push((frame.end, frame.byte));
+                continue;
+            }
+            let clocks = self.rcc.clocks()?;
+            let line_bit = (periph::TIME_HZ as f64 / HOST_BAUD).round() as Time;
+            self.usart1.receive(frame.byte, frame.end, line_bit, clocks);
+            self.serve_usart1_rx_dma();
+        }
+        Ok(())
+    }
+
+    /// USART1's pending receive DMA request, served if a DMA2 stream takes it.
+    fn serve_usart1_rx_dma(&mut self) {
+        if self.usart1.rx_dma_request()
+            && self.rcc.is_enabled(rcc::Bus::Ahb1, 22)
+            && self.dma2.capacity(dma::Request::Usart1Rx) > 0
+        {
+            let byte = self.usart1.dma_read();
+            self.dma2.serve(dma::Request::Usart1Rx, byte);
         }
     }
 }
@@ -460,6 +558,7 @@ enum Op {
 impl Peripherals for Board {
     fn read(&mut self, addr: u32, size: u32, now: Time) -> Result<u32, Unmodelled> {
         self.deliver_edges(now);
+        self.deliver_uart_rx(now)?;
         let word = self.route(addr & !3, now, Op::Read)?;
         self.records.last_read = Some((now, addr & !3, word));
         self.after_access(now)?;
@@ -470,6 +569,7 @@ impl Peripherals for Board {
 
     fn write(&mut self, addr: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.deliver_edges(now);
+        self.deliver_uart_rx(now)?;
         self.collect_uart(now)?;
         let word = if size >= 4 {
             value
@@ -492,6 +592,7 @@ impl Peripherals for Board {
     fn next_event(&self) -> Option<Time> {
         [
             self.edges.front().map(|e| e.0),
+            self.uart_rx_line.front().map(|f| f.end),
             self.rcc.next_event(),
             self.tim2.next_event(),
             self.tim4.next_event(),
@@ -515,6 +616,8 @@ impl Peripherals for Board {
         self.tim4.advance(now);
         self.tim9.advance(now);
         self.spi2.advance(now, clocks);
+        self.deliver_uart_rx(now)?;
+        self.usart1.advance(now, clocks);
         self.serve_dma();
         self.collect_uart(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
@@ -527,11 +630,15 @@ impl Peripherals for Board {
         lines(periph::irq::USART1, self.usart1.irq_line());
         lines(periph::irq::ADC, self.adc.irq_line());
         lines(periph::irq::DMA1_STREAM3, self.dma1.irq_line(dma::SPI2_RX_STREAM));
+        lines(periph::irq::DMA2_STREAM2, self.dma2.irq_line(2));
+        lines(periph::irq::DMA2_STREAM5, self.dma2.irq_line(5));
         Ok(self.iwdg.expired(now))
     }
 
     fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
-        self.dma1.take_memory_writes()
+        let mut writes = self.dma1.take_memory_writes();
+        writes.extend(self.dma2.take_memory_writes());
+        writes
     }
 
     fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
@@ -548,6 +655,9 @@ impl Peripherals for Board {
         rcc.system_reset();
         let records = std::mem::take(&mut self.records);
         let edges = std::mem::take(&mut self.edges);
+        // The host keeps sending through a reset.
+        let rx_line = std::mem::take(&mut self.uart_rx_line);
+        let rx_burst = self.uart_rx_burst;
         let sensors = self.spi2.take_sensors();
         let adc_inputs = self.adc.clone();
         // DBGMCU_CR, _APB1_FZ and _APB2_FZ are reset by a power-on reset only, not by a system
@@ -560,6 +670,8 @@ impl Peripherals for Board {
         self.rcc = rcc;
         self.records = records;
         self.edges = edges;
+        self.uart_rx_line = rx_line;
+        self.uart_rx_burst = rx_burst;
         // The sensors are powered by the board, not reset with the MCU.
         self.spi2.put_sensors(sensors);
         self.adc.copy_inputs_from(&adc_inputs);

@@ -1134,6 +1134,123 @@ mod gpio {
     }
 }
 
+/// USART1's receiver and DMA2 (RM0368 §19.3.3 "Receiver", §19.6.1 USART_SR, §9.3.9
+/// "Circular mode", table 28 DMA2 request mapping), with bytes from the host on PA10 at 115 200
+/// baud.
+mod usart1_rx {
+    use super::*;
+
+    const RXNE: u32 = 1 << 5;
+    const ORE: u32 = 1 << 3;
+    const RXNEIE: u32 = 1 << 5;
+    const DMAR: u32 = 1 << 6;
+    const DMA2: u32 = 0x4002_6400;
+    const S5CR: u32 = DMA2 + 0x10 + 5 * 0x18;
+    const BUF: u32 = 0x2000_4000;
+    /// One 8N1 frame at 115 200 baud: 10 bits.
+    const FRAME: Time = 10 * TIME_HZ / 115_200;
+
+    /// `uart_setup` with PA10 to `af` too (stm32f4xx-hal `Serial::new` converts both pins).
+    fn receiver(af: u32) -> Bench {
+        let mut b = uart_setup(7);
+        b.pin_to_alternate(PA, 10, af);
+        b
+    }
+
+    fn received(b: &mut Bench) -> Option<u8> {
+        (b.read(USART1 + usart::SR) & RXNE != 0).then(|| b.read(USART1 + usart::DR) as u8)
+    }
+
+    /// A byte from the host reaches USART1 only with PA10 in AF mode on AF7 (USART1_RX). Wrong:
+    /// AF8 or the pin left an input: the receiver never sees it.
+    #[test]
+    fn a_byte_reaches_usart1_only_on_pa10_in_af7() {
+        for (what, af, arrives) in [("AF7", Some(7), true), ("AF8", Some(8), false), ("input", None, false)] {
+            let mut b = receiver(af.unwrap_or(7));
+            if af.is_none() {
+                b.set_mode(PA, 10, 0b00);
+            }
+            let t = b.t;
+            b.board.push_uart_rx(b"Z", t);
+            b.wait(2 * FRAME);
+            let lost: Vec<u8> = b.board.records.uart_rx_lost.iter().map(|&(_, x)| x).collect();
+            if arrives {
+                assert_eq!((received(&mut b), lost), (Some(b'Z'), vec![]), "{what}");
+            } else {
+                assert_eq!((received(&mut b), lost), (None, b"Z".to_vec()), "{what}");
+            }
+        }
+    }
+
+    /// The host's bytes come at its baud rate: RXNE sets at the end of the first frame's stop
+    /// bit, 86.8 µs after its start, and the receive interrupt with it (RXNEIE).
+    #[test]
+    fn bytes_arrive_at_115200_baud_and_raise_rxne_with_its_interrupt() {
+        let mut b = receiver(7);
+        b.write(USART1 + usart::CR1, usart::UE | usart::TE | usart::RE | RXNEIE);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"ab", t0);
+        b.run_to(t0 + FRAME - 1);
+        assert!(!b.line(irq::USART1));
+        assert_eq!(b.board.usart1.rx_counts().0, 0, "the stop bit has not ended");
+        b.run_to(t0 + FRAME);
+        assert!(b.line(irq::USART1));
+        assert_eq!(received(&mut b), Some(b'a'));
+        b.run_to(t0 + 2 * FRAME);
+        assert_eq!(received(&mut b), Some(b'b'));
+    }
+
+    /// The wrong sequence: the CPU does not read DR for 1 ms (a flash erase stalls it for far
+    /// longer) while ten bytes arrive. Without DMA the first byte stays in RDR, ORE sets and the
+    /// other nine are lost; it takes an SR read then a DR read to clear ORE.
+    #[test]
+    fn bytes_arriving_while_the_cpu_does_not_read_are_lost_to_an_overrun() {
+        let mut b = receiver(7);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"0123456789", t0);
+        b.wait(MS);
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), RXNE | ORE);
+        assert_eq!(b.read(USART1 + usart::DR), u32::from(b'0'));
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), 0);
+        assert_eq!(b.board.usart1.rx_counts(), (10, 9, 0));
+    }
+
+    /// The right one: DMA2 stream 5, channel 4 (table 28), circular into an SRAM ring, with
+    /// DMAR: every byte lands in memory while the CPU reads nothing, and the ring wraps.
+    #[test]
+    fn a_circular_dma2_stream_keeps_every_byte_while_the_cpu_does_not_read() {
+        let mut b = receiver(7);
+        b.enable(RCC_AHB1ENR, 22);
+        b.write(S5CR + 0x08, USART1 + usart::DR);
+        b.write(S5CR + 0x0C, BUF);
+        b.write(S5CR + 0x04, 8);
+        b.write(S5CR, (4 << 25) | (1 << 10) | (1 << 8) | (1 << 4) | 1);
+        b.write(USART1 + usart::CR3, DMAR);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"0123456789", t0);
+        b.wait(MS);
+        let writes = b.board.take_memory_writes();
+        let expected: Vec<(u32, u8)> = (0..10u32).map(|i| (BUF + i % 8, b'0' + i as u8)).collect();
+        assert_eq!(writes, expected);
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), 0);
+        assert_eq!(b.read(S5CR + 0x04), 6, "NDTR: 8 reloaded at the wrap, 2 moved since");
+        assert!(b.line(irq::DMA2_STREAM5), "TCIE: the wrap raised the stream's interrupt");
+    }
+
+    /// The same stream on the wrong channel (0) is refused at EN; with DMA2's clock off the
+    /// registers are refused.
+    #[test]
+    fn dma2_on_the_wrong_channel_or_without_its_clock_is_refused() {
+        let mut b = receiver(7);
+        assert!(b.try_write(S5CR + 0x04, 8).is_err(), "DMA2 clock (AHB1ENR bit 22) off");
+        b.enable(RCC_AHB1ENR, 22);
+        b.write(S5CR + 0x08, USART1 + usart::DR);
+        b.write(S5CR + 0x0C, BUF);
+        b.write(S5CR + 0x04, 8);
+        assert!(b.try_write(S5CR, (1 << 10) | (1 << 8) | 1).is_err());
+    }
+}
+
 /// `fcu-pil/RULES.md` names only tests that exist, and names every test of this file.
 #[test]
 fn the_rules_index_matches_the_tests() {
