@@ -599,6 +599,7 @@ impl Peripherals for Board {
             self.tim9.next_event(),
             self.spi2.next_event(),
             self.usart1.next_event(),
+            self.flash.next_event(),
             self.iwdg.next_event(),
             self.adc.next_event(),
         ]
@@ -623,6 +624,8 @@ impl Peripherals for Board {
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
         self.iwdg.advance(now);
         self.adc.advance(now, clocks);
+        self.flash.advance(now);
+        lines(periph::irq::FLASH, self.flash.irq_line());
         lines(periph::irq::TIM2, self.tim2.irq_line());
         lines(periph::irq::TIM4, self.tim4.irq_line());
         lines(periph::irq::TIM1_BRK_TIM9, self.tim9.irq_line());
@@ -639,6 +642,43 @@ impl Peripherals for Board {
         let mut writes = self.dma1.take_memory_writes();
         writes.extend(self.dma2.take_memory_writes());
         writes
+    }
+
+    fn flash_memory_write(&mut self, offset: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        self.flash.write_memory(offset, size, value, now)?;
+        // The store went into the machine's copy too: it gets the model's bytes back.
+        self.flash.touch(offset & !3, 4);
+        Ok(())
+    }
+
+    fn take_flash_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
+        self.flash.take_changes()
+    }
+
+    fn flash_busy_until(&self) -> Option<Time> {
+        self.flash.busy_until()
+    }
+
+    /// A sector the image programs (any byte not 0xFF) is the image's, as a flash tool that
+    /// erases only the sectors it writes leaves it; the other sectors keep what the flash
+    /// model holds (loaded from a file, or kept from an earlier boot).
+    fn power_on_flash(&mut self, image: Vec<u8>) -> Vec<u8> {
+        let mut contents = self.flash.memory().to_vec();
+        for (offset, len) in flash::SECTORS {
+            let range = offset as usize..(offset + len) as usize;
+            if let (Some(src), Some(dst)) = (image.get(range.clone()), contents.get_mut(range)) {
+                if src.iter().any(|&b| b != 0xFF) {
+                    dst.copy_from_slice(src);
+                }
+            }
+        }
+        self.flash.load_memory(&contents);
+        self.flash.take_changes();
+        contents
+    }
+
+    fn take_bus_error(&mut self) -> Option<&'static str> {
+        self.flash.take_bus_error()
     }
 
     fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
@@ -664,7 +704,11 @@ impl Peripherals for Board {
         // reset (RM0368 §23, their register descriptions).
         let dbgmcu = std::mem::take(&mut self.dbgmcu);
         let battery = self.battery_divider_volts;
+        // The flash memory keeps its contents; an operation in progress is cut.
+        let mut flash = std::mem::take(&mut self.flash);
+        flash.system_reset();
         *self = Board::new();
+        self.flash = flash;
         self.dbgmcu = dbgmcu;
         self.battery_divider_volts = battery;
         self.rcc = rcc;

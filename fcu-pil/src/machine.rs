@@ -73,6 +73,28 @@ pub trait Peripherals {
     fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
         Vec::new()
     }
+    /// A CPU write of `size` bytes into the flash memory, `offset` bytes from [`FLASH_BASE`]
+    /// (or from its boot alias at 0). The default refuses it: a board without a flash model.
+    fn flash_memory_write(&mut self, offset: u32, _size: u32, _value: u32, _now: Time) -> Result<(), Unmodelled> {
+        Err(Unmodelled::new(format!("flash +{offset:#07x}"), "a write to flash, and no flash interface is modelled"))
+    }
+    /// The flash memory's ranges changed since the last call: (offset, contents). The machine
+    /// copies them into the guest's flash and its boot alias.
+    fn take_flash_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
+        Vec::new()
+    }
+    /// While a flash operation runs (BSY), until when: instruction fetches from flash stall.
+    fn flash_busy_until(&self) -> Option<Time> {
+        None
+    }
+    /// The flash contents at power-on, given the image's (the ELF over erased flash).
+    fn power_on_flash(&mut self, image: Vec<u8>) -> Vec<u8> {
+        image
+    }
+    /// A bus error the last register write caused (a wrong flash key), once.
+    fn take_bus_error(&mut self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// Why a run ended early.
@@ -179,6 +201,8 @@ impl MaskingStats {
 const CFSR_IBUSERR: u32 = 1 << 8;
 const CFSR_PRECISERR: u32 = 1 << 9;
 const CFSR_STKERR: u32 = 1 << 12;
+/// CFSR IMPRECISERR: a bus error on a buffered write (a wrong flash key).
+const CFSR_IMPRECISERR: u32 = 1 << 10;
 
 #[derive(Clone, Debug)]
 enum Stop {
@@ -347,6 +371,10 @@ pub struct State<P: Peripherals> {
     pub instructions: u64,
     /// Time spent in WFI or in the `b .` idle loop.
     pub idle_time: Time,
+    /// Time the core spent stalled on a flash fetch while a program or erase ran.
+    pub flash_stall_time: Time,
+    /// A store into flash went through Unicorn: its copy must be restored from the model.
+    flash_dirty: bool,
     stop: Option<Stop>,
     code: Code,
     /// How the clock prices what runs, with the caches and bus state it needs.
@@ -461,6 +489,8 @@ impl<P: Peripherals + 'static> Machine<P> {
                 }
             }
         }
+        let mut board = board;
+        let flash = board.power_on_flash(flash);
         let sysmem = board.system_memory_page();
         let scs = Scs::new(board.units_per_cycle().map_err(|e| Fault::Unmodelled { error: e, pc: 0, at: 0 })?);
         let upc = board.units_per_cycle().unwrap_or(21);
@@ -494,6 +524,8 @@ impl<P: Peripherals + 'static> Machine<P> {
             masking: None,
             pending_since: vec![None; scs::EXCEPTIONS],
             lines_sampled_at: 0,
+            flash_stall_time: 0,
+            flash_dirty: false,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
@@ -569,7 +601,12 @@ impl<P: Peripherals + 'static> Machine<P> {
             HookType::MEM_UNMAPPED | HookType::MEM_PROT,
             1,
             0,
-            |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64| {
+            |uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, size: usize, value: i64| {
+                if kind == MemType::WRITE_PROT {
+                    if let Some(offset) = flash_offset(addr as u32) {
+                        return flash_write(uc, offset, size as u32, value as u32);
+                    }
+                }
                 // Nothing answers at a reserved address: the bus returns an error, a BusFault
                 // (precise for a data access, ARMv7-M B3.2.15; an instruction fetch faults when
                 // the instruction would execute). An address where the chip has something the
@@ -990,6 +1027,7 @@ impl<P: Peripherals + 'static> Machine<P> {
             st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         st.sample_lines(now, &lines);
         store_memory_writes(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
+        sync_flash(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         let st = self.uc.get_data_mut();
         match st.board.units_per_cycle() {
             Ok(u) if u != st.units_per_cycle => {
@@ -1106,7 +1144,13 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// came closer together than the block was long: an edge every 0.5 µs against a 50-instruction
 /// block never let it run.)
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
-    if stop_before_block(uc) {
+    if uc.get_data().flash_dirty {
+        if let Err(e) = sync_flash(uc) {
+            fail(uc, e);
+            return;
+        }
+    }
+    if stall_on_flash(uc, address as u32) || stop_before_block(uc) {
         return;
     }
     if uc.get_data().masking.is_some() {
@@ -1356,8 +1400,78 @@ fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
     }
 }
 
+/// The flash memory: an offset from [`FLASH_BASE`] for an address in flash or its boot alias.
+fn flash_offset(addr: u32) -> Option<u32> {
+    [FLASH_BASE, 0].into_iter().find_map(|base| addr.checked_sub(base).filter(|&o| o < FLASH_SIZE))
+}
+
+/// A CPU store into flash (mapped read-only, so Unicorn calls the protection hook; no memory
+/// hook covers flash: one there corrupted registers in Unicorn 2.1.5). The flash model decides
+/// what the write does; returning true lets Unicorn complete the store into its own copy, which
+/// [`sync_flash`] then overwrites with the model's contents before anything else runs (a load
+/// of the same address later in the same translation block would see the raw store: code that
+/// programs flash polls FLASH_SR between, which syncs). A store while BSY waits for the
+/// operation in progress to end.
+fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size: u32, value: u32) -> bool {
+    let st = uc.get_data_mut();
+    // A store while an operation runs waits on the bus for it to end (RM0368 §3.5).
+    if let Some(until) = st.board.flash_busy_until().filter(|&t| t > st.now) {
+        let upc = st.units_per_cycle;
+        let stall = (until - st.now).div_ceil(upc) * upc;
+        st.now += stall;
+        st.flash_stall_time += stall;
+    }
+    let now = st.now;
+    match st.board.flash_memory_write(offset, size, value, now) {
+        Ok(()) => {
+            st.flash_dirty = true;
+            pull_deadline(st);
+            true
+        }
+        Err(e) => {
+            fail(uc, e);
+            false
+        }
+    }
+}
+
+/// Copies the flash model's changes into the guest's flash and its boot alias.
+fn sync_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
+    let st = uc.get_data_mut();
+    st.flash_dirty = false;
+    let changes = st.board.take_flash_changes();
+    for (offset, bytes) in changes {
+        for base in [FLASH_BASE, 0] {
+            uc.mem_write(u64::from(base + offset), &bytes)
+                .map_err(|e| Unmodelled::new("FLASH", format!("copying flash +{offset:#07x} failed in the emulator: {e:?}")))?;
+        }
+    }
+    Ok(())
+}
+
+/// An instruction fetch from flash while a program or erase runs waits for it to end
+/// (RM0368 §3.5): the clock jumps to the end of BSY and the emulation stops before the block,
+/// so the run loop brings the models (DMA, the UART, the watchdog) up to that instant first.
+fn stall_on_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, pc: u32) -> bool {
+    let st = uc.get_data_mut();
+    let Some(until) = st.board.flash_busy_until() else { return false };
+    if flash_offset(pc).is_none() || until <= st.now {
+        return false;
+    }
+    let upc = st.units_per_cycle;
+    let stall = (until - st.now).div_ceil(upc) * upc;
+    st.now += stall;
+    st.flash_stall_time += stall;
+    st.stop = Some(Stop::Deadline);
+    let _ = uc.emu_stop();
+    true
+}
+
 /// Stores in the guest's RAM what another bus master (DMA) wrote since the last call.
 fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
+    if uc.get_data().flash_dirty {
+        sync_flash(uc)?;
+    }
     let writes = uc.get_data_mut().board.take_memory_writes();
     for (addr, byte) in writes {
         uc.mem_write(u64::from(addr), &[byte])
@@ -1395,6 +1509,14 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
                 None => value << (8 * (addr & 3)),
             };
             follow_timing_registers(st, target & !3, written, now);
+            if let Some(kind) = st.board.take_bus_error() {
+                // A buffered write's bus error: an imprecise BusFault, escalated to HardFault.
+                if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+                    st.stop = Some(Stop::Memory { kind, address: target, bus_fault: Some(CFSR_IMPRECISERR) });
+                }
+                let _ = uc.emu_stop();
+                return;
+            }
             // A write may bring a model's next event closer (an interrupt enable set while a
             // byte is shifting): the emulation must stop for it, not at the deadline set
             // before the write.

@@ -1251,6 +1251,152 @@ mod usart1_rx {
     }
 }
 
+/// The flash interface on the core (RM0368 §3.5): hand-assembled programs run from flash in the
+/// emulated Cortex-M4 with the board's models. Writes into flash reach the flash model through
+/// Unicorn's write-protection hook (flash is mapped read-only; see `machine.rs`).
+mod flash_program {
+    use super::*;
+    use fcu_pil::elf::{Image, Segment};
+    use fcu_pil::machine::Machine;
+    use fcu_pil::timing::TimingProfile;
+
+    const FLASH: u32 = 0x4002_3C00;
+    const SECTOR1: u32 = 0x0800_4000;
+    const RESULTS: u32 = 0x2000_0000;
+
+    fn movw(rd: u16, imm: u32) -> [u16; 2] {
+        let (imm4, i, imm3, imm8) = ((imm >> 12) & 0xF, (imm >> 11) & 1, (imm >> 8) & 7, imm & 0xFF);
+        [0xF240 | ((i as u16) << 10) | imm4 as u16, ((imm3 as u16) << 12) | (rd << 8) | imm8 as u16]
+    }
+
+    fn movt(rd: u16, imm: u32) -> [u16; 2] {
+        let [a, b] = movw(rd, imm);
+        [a | 0x0080, b]
+    }
+
+    fn mov32(rd: u16, v: u32) -> Vec<u16> {
+        [movw(rd, v & 0xFFFF), movt(rd, v >> 16)].concat()
+    }
+
+    /// `str rt, [rn, #imm]` / `ldr rt, [rn, #imm]` (T1, word offsets).
+    fn str_(rt: u16, rn: u16, imm: u16) -> u16 {
+        0x6000 | ((imm / 4) << 6) | (rn << 3) | rt
+    }
+
+    fn ldr(rt: u16, rn: u16, imm: u16) -> u16 {
+        0x6800 | ((imm / 4) << 6) | (rn << 3) | rt
+    }
+
+    /// Unlocks with `keys`, writes CR = `cr`, stores 0x1234_5678 at the start of sector 1 (r4 and
+    /// r7 hold markers across it), waits for BSY to clear, reads the word back; stores the word,
+    /// r4 and r7 at `RESULTS`; then `b .`.
+    fn program(keys: [u32; 2], cr: u32) -> Image {
+        let mut code: Vec<u16> = Vec::new();
+        code.extend(mov32(0, FLASH));
+        for key in keys {
+            code.extend(mov32(1, key));
+            code.push(str_(1, 0, 0x04));
+        }
+        code.extend(mov32(1, cr));
+        code.push(str_(1, 0, 0x10));
+        code.extend(mov32(2, SECTOR1));
+        code.extend(mov32(3, 0x1234_5678));
+        code.extend(mov32(4, 0x4444_4444));
+        code.extend(mov32(7, 0x7777_7777));
+        code.push(str_(3, 2, 0));
+        // Wait while BSY (SR bit 16): ldr r5, [r0, #0xC]; lsls r5, r5, #15; bmi back.
+        code.extend([ldr(5, 0, 0x0C), 0x03ED, 0xD4FC]);
+        code.push(ldr(6, 2, 0));
+        code.extend(mov32(1, RESULTS));
+        code.extend([str_(6, 1, 0), str_(4, 1, 4), str_(7, 1, 8)]);
+        code.push(0xE7FE);
+        let mut flash = vec![0u8; 0x400];
+        let mut word = |at: usize, w: u32| flash[at..at + 4].copy_from_slice(&w.to_le_bytes());
+        word(0, 0x2001_0000);
+        word(4, 0x0800_0101);
+        // HardFault: a `b .` at 0x300.
+        word(12, 0x0800_0301);
+        for (i, h) in code.iter().enumerate() {
+            flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
+        }
+        flash[0x300..0x302].copy_from_slice(&0xE7FEu16.to_le_bytes());
+        Image {
+            path: "flash_program".into(),
+            segments: vec![Segment { address: 0x0800_0000, data: flash }],
+            initial_sp: 0x2001_0000,
+            symbols: HashMap::new(),
+            functions: Vec::new(),
+            flash_bytes: 0x400,
+            ram_bytes: 0,
+        }
+    }
+
+    fn run(image: Image, profile: TimingProfile, until: Time) -> Machine<Board> {
+        let mut m = Machine::new(image, Board::new(), profile).expect("machine");
+        m.run_until(until).unwrap_or_else(|f| panic!("{f}"));
+        m
+    }
+
+    fn words(m: &Machine<Board>, addr: u32, n: usize) -> Vec<u32> {
+        let bytes = m.read_memory(addr, 4 * n).expect("memory");
+        bytes.chunks(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
+    }
+
+    const PG_X32: u32 = 1 | (0b10 << 8);
+
+    /// RM0368 §3.5.4 on the core: the store programs the word (16 µs, the fetch after it stalled
+    /// until BSY cleared), the read-back and the flash's boot alias see it, and the registers
+    /// around the store survive (the reason no memory hook covers flash), under both timing
+    /// profiles.
+    #[test]
+    fn a_word_programmed_by_the_cpu_reads_back_and_the_registers_survive() {
+        for profile in [TimingProfile::Optimistic, TimingProfile::Pessimistic] {
+            let m = run(program([0x4567_0123, 0xCDEF_89AB], PG_X32), profile, MS);
+            assert_eq!(words(&m, RESULTS, 3), vec![0x1234_5678, 0x4444_4444, 0x7777_7777], "{profile}");
+            assert_eq!(words(&m, SECTOR1, 1), vec![0x1234_5678]);
+            assert_eq!(words(&m, SECTOR1 - 0x0800_0000, 1), vec![0x1234_5678], "boot alias");
+            assert_eq!(m.board().flash.memory()[0x4000..0x4004], 0x1234_5678u32.to_le_bytes());
+            let stall = m.state().flash_stall_time;
+            assert!(stall > 0 && stall <= 16 * US, "{profile}: stalled {stall} units");
+            assert!(m.state().hard_faults.is_empty());
+        }
+    }
+
+    /// The wrong sequence: the store without PG. PGSERR, and the word stays erased in the model
+    /// and in the core's view of it (Unicorn's copy is restored from the model).
+    #[test]
+    fn a_store_into_flash_without_pg_sets_pgserr_and_leaves_the_word_erased() {
+        let mut m = run(program([0x4567_0123, 0xCDEF_89AB], 0b10 << 8), TimingProfile::Optimistic, MS);
+        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF]);
+        assert_eq!(words(&m, SECTOR1, 1), vec![0xFFFF_FFFF]);
+        assert_eq!(m.board_mut().read(FLASH + 0x0C, 4, MS).unwrap() & 0x80, 0x80, "PGSERR");
+    }
+
+    /// The wrong sequence: the keys in the wrong order. A bus error (HardFault) on the core, and
+    /// CR stays locked until the next reset.
+    #[test]
+    fn a_wrong_key_order_is_a_hard_fault_and_leaves_cr_locked() {
+        let mut m = run(program([0xCDEF_89AB, 0x4567_0123], PG_X32), TimingProfile::Optimistic, MS);
+        assert_eq!(m.state().hard_faults.len(), 1, "{:?}", m.state().hard_faults);
+        assert!(m.state().hard_faults[0].cause.contains("FLASH_KEYR"));
+        assert_eq!(m.board_mut().read(FLASH + 0x10, 4, MS).unwrap() >> 31, 1, "LOCK");
+        assert_eq!(words(&m, SECTOR1, 1), vec![0xFFFF_FFFF]);
+    }
+
+    /// A sector erase started from flash stalls the core for DS9716's 250 ms (x32, typical):
+    /// the next instruction fetch waits for BSY to clear.
+    #[test]
+    fn a_sector_erase_stalls_the_core_for_250_ms() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        let m = run(program([0x4567_0123, 0xCDEF_89AB], cr), TimingProfile::Optimistic, 300 * MS);
+        let stall = m.state().flash_stall_time;
+        assert!((249 * MS..=250 * MS).contains(&stall), "stalled {stall} units");
+        // The program's own store waited for the erase's end and then had PG clear: PGSERR,
+        // the word erased.
+        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF]);
+    }
+}
+
 /// `fcu-pil/RULES.md` names only tests that exist, and names every test of this file.
 #[test]
 fn the_rules_index_matches_the_tests() {

@@ -258,6 +258,14 @@ impl Flash {
         self.generation += 1;
     }
 
+    /// Marks `len` bytes at `offset` for the machine to copy again (a store it let through).
+    pub fn touch(&mut self, offset: u32, len: u32) {
+        let end = (offset + len).min(MEMORY_SIZE as u32);
+        if offset < end {
+            self.changed.push((offset, end - offset));
+        }
+    }
+
     /// Completed (or cut) operations so far: it changes when the memory did.
     pub fn generation(&self) -> u64 {
         self.generation
