@@ -25,6 +25,31 @@ enum Command {
     /// latencies, the longest stretch with the radio capture interrupt masked, CPU load,
     /// stack, and the harness's own speed.
     Measure(MeasureArgs),
+    /// Run the board at real time on the bench (level; the scenario's sticks, or centred with
+    /// the throttle low) with USART1 bridged to one TCP client: the client's bytes enter
+    /// USART1 RX (PA10) at 115200 baud, USART1's TX bytes go to the client. Reboots keep the
+    /// flash; --flash FILE loads it at power-on and saves it as it changes.
+    Serve(ServeArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct ServeArgs {
+    /// Where to listen: tcp:HOST:PORT (e.g. tcp:127.0.0.1:5760).
+    #[arg(long)]
+    link: String,
+    /// A scenario whose sticks the simulated pilot plays (default: centred, throttle low).
+    #[arg(long)]
+    scenario: Option<String>,
+    /// The flash memory's contents: loaded at power-on if the file exists, saved as it changes.
+    #[arg(long)]
+    flash: Option<PathBuf>,
+    /// Emulated seconds to serve after boot (default one hour).
+    #[arg(long, default_value_t = 3600.0)]
+    duration: f64,
+    #[arg(long)]
+    elf: Option<PathBuf>,
+    #[command(flatten)]
+    timing: TimingArg,
 }
 
 #[derive(clap::Args, Debug)]
@@ -93,6 +118,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Fly(a) => fly(&a),
         Command::Measure(a) => measure_cmd(&a),
+        Command::Serve(a) => serve_cmd(&a),
     };
     match result {
         Ok(code) => code,
@@ -138,6 +164,18 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
     let sc = fcu_testkit::cli::fly::prepare_scenario(&a.scenario, None, a.duration).map_err(|e| e.0)?;
     let opts = fcu_testkit::sim::RunOptions { seed: a.seed, duration_s: a.duration, progress: true, ..Default::default() };
     let report = measure::measure(&elf, &sc, &opts, &setup)?;
+    print!("{report}");
+    Ok(ExitCode::SUCCESS)
+}
+
+fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
+    let setup = a.timing.setup()?;
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    let listener = fcu_pil::serve::listen(&a.link)?;
+    println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
+    let opts =
+        fcu_pil::serve::ServeOptions { elf, scenario: a.scenario.clone(), flash: a.flash.clone(), duration_s: a.duration, setup };
+    let report = fcu_pil::serve::serve_on(listener, &opts)?;
     print!("{report}");
     Ok(ExitCode::SUCCESS)
 }
