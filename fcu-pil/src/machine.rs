@@ -1450,8 +1450,10 @@ fn sync_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmo
 }
 
 /// An instruction fetch from flash while a program or erase runs waits for it to end
-/// (RM0368 §3.5): the clock jumps to the end of BSY and the emulation stops before the block,
-/// so the run loop brings the models (DMA, the UART, the watchdog) up to that instant first.
+/// (RM0368 §3.5): the clock moves on to the end of BSY, or to the emulation's deadline if that
+/// comes first (an event, the end of the run: a power cut or the watchdog can land mid-erase),
+/// and the emulation stops before the block, so the run loop brings the models (DMA, the UART,
+/// the watchdog) up to that instant; the block's next start stalls again while BSY lasts.
 fn stall_on_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, pc: u32) -> bool {
     let st = uc.get_data_mut();
     let Some(until) = st.board.flash_busy_until() else { return false };
@@ -1459,9 +1461,12 @@ fn stall_on_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, pc: u32) -> bo
         return false;
     }
     let upc = st.units_per_cycle;
-    let stall = (until - st.now).div_ceil(upc) * upc;
-    st.now += stall;
-    st.flash_stall_time += stall;
+    let limit = until.min(st.deadline);
+    if limit > st.now {
+        let stall = (limit - st.now).div_ceil(upc) * upc;
+        st.now += stall;
+        st.flash_stall_time += stall;
+    }
     st.stop = Some(Stop::Deadline);
     let _ = uc.emu_stop();
     true

@@ -1287,9 +1287,9 @@ mod flash_program {
         0x6800 | ((imm / 4) << 6) | (rn << 3) | rt
     }
 
-    /// Unlocks with `keys`, writes CR = `cr`, stores 0x1234_5678 at the start of sector 1 (r4 and
-    /// r7 hold markers across it), waits for BSY to clear, reads the word back; stores the word,
-    /// r4 and r7 at `RESULTS`; then `b .`.
+    /// Unlocks with `keys`, writes CR = `cr`, stores 0x1234_5678 at the start of sector 1 unless
+    /// `cr` starts an erase (r4 and r7 hold markers across it), waits for BSY to clear, reads the
+    /// word back; stores the word, r4 and r7 at `RESULTS`; then `b .`.
     fn program(keys: [u32; 2], cr: u32) -> Image {
         let mut code: Vec<u16> = Vec::new();
         code.extend(mov32(0, FLASH));
@@ -1303,7 +1303,9 @@ mod flash_program {
         code.extend(mov32(3, 0x1234_5678));
         code.extend(mov32(4, 0x4444_4444));
         code.extend(mov32(7, 0x7777_7777));
-        code.push(str_(3, 2, 0));
+        if cr & (1 << 16) == 0 {
+            code.push(str_(3, 2, 0));
+        }
         // Wait while BSY (SR bit 16): ldr r5, [r0, #0xC]; lsls r5, r5, #15; bmi back.
         code.extend([ldr(5, 0, 0x0C), 0x03ED, 0xD4FC]);
         code.push(ldr(6, 2, 0));
@@ -1383,6 +1385,53 @@ mod flash_program {
         assert_eq!(words(&m, SECTOR1, 1), vec![0xFFFF_FFFF]);
     }
 
+    /// A power cut at every eighth of a sector erase started on the core: the memory the next
+    /// power-on finds holds the sweep up to that point (erased words, then the word under
+    /// erase part-way, then the old contents), and a new board powered on with it keeps it.
+    #[test]
+    fn a_power_cut_at_each_eighth_of_an_erase_leaves_the_sector_part_erased() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        for eighth in 1..8u64 {
+            let mut board = Board::new();
+            board.flash.load_memory(&vec![0u8; 0x8000]);
+            let mut m = Machine::new(program([0x4567_0123, 0xCDEF_89AB], cr), board, TimingProfile::Optimistic).expect("machine");
+            m.run_until(MS).unwrap_or_else(|f| panic!("{f}"));
+            let (start, end, erase) = m.board().flash.operation().expect("erasing");
+            assert!(erase);
+            let at = start + (end - start) * eighth / 8;
+            m.run_until(at).unwrap_or_else(|f| panic!("{f}"));
+            m.board_mut().flash.power_cut(at);
+            let contents = m.board().flash.memory().to_vec();
+            let sector = &contents[0x4000..0x8000];
+            let erased = sector.iter().position(|&b| b != 0xFF).unwrap_or(sector.len());
+            let expected = 0x4000 * eighth as usize / 8;
+            assert!(erased.abs_diff(expected) <= 4, "eighth {eighth}: {erased} bytes erased, expected about {expected}");
+            assert!(sector[(erased + 4).min(0x4000)..].iter().all(|&b| b == 0), "eighth {eighth}: the rest intact");
+            // Power on again with what the cut left: the image's sector 0 is the image's, sector 1
+            // is the cut's.
+            let mut board = Board::new();
+            board.flash.load_memory(&contents);
+            let again = Machine::new(program([0, 0], 0), board, TimingProfile::Optimistic).expect("machine");
+            assert_eq!(again.read_memory(SECTOR1, 0x4000).unwrap(), sector, "eighth {eighth}");
+        }
+    }
+
+    /// A reboot (the watchdog, the firmware's reset request) keeps what the flash holds; the
+    /// flash interface's registers go back to reset (locked).
+    #[test]
+    fn a_reboot_keeps_the_flash_contents_and_relocks_cr() {
+        let mut b = Bench::new();
+        b.write(FLASH + 0x04, 0x4567_0123);
+        b.write(FLASH + 0x04, 0xCDEF_89AB);
+        b.write(FLASH + 0x10, PG_X32);
+        let t = b.step();
+        b.board.flash_memory_write(0x4000, 4, 0xCAFE_F00D, t).expect("program");
+        b.wait(MS);
+        b.board.system_reset(true);
+        assert_eq!(b.board.flash.memory()[0x4000..0x4004], 0xCAFE_F00Du32.to_le_bytes());
+        assert_eq!(b.read(FLASH + 0x10) >> 31, 1, "LOCK after the reset");
+    }
+
     /// A sector erase started from flash stalls the core for DS9716's 250 ms (x32, typical):
     /// the next instruction fetch waits for BSY to clear.
     #[test]
@@ -1391,9 +1440,7 @@ mod flash_program {
         let m = run(program([0x4567_0123, 0xCDEF_89AB], cr), TimingProfile::Optimistic, 300 * MS);
         let stall = m.state().flash_stall_time;
         assert!((249 * MS..=250 * MS).contains(&stall), "stalled {stall} units");
-        // The program's own store waited for the erase's end and then had PG clear: PGSERR,
-        // the word erased.
-        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF]);
+        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF], "read back erased");
     }
 }
 
