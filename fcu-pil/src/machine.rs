@@ -1415,13 +1415,7 @@ fn flash_offset(addr: u32) -> Option<u32> {
 fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size: u32, value: u32) -> bool {
     let st = uc.get_data_mut();
     // A store while an operation runs waits on the bus for it to end (RM0368 §3.5).
-    if let Some(until) = st.board.flash_busy_until().filter(|&t| t > st.now) {
-        let upc = st.units_per_cycle;
-        let stall = (until - st.now).div_ceil(upc) * upc;
-        st.now += stall;
-        st.flash_stall_time += stall;
-    }
-    let now = st.now;
+    let now = stall_while_flash_busy(st, st.now);
     match st.board.flash_memory_write(offset, size, value, now) {
         Ok(()) => {
             st.flash_dirty = true;
@@ -1433,6 +1427,23 @@ fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size
             false
         }
     }
+}
+
+/// FLASH_CR (RM0368 §3.8.5): "not accessible in write mode when the BSY bit is set": a write
+/// stalls the AHB until BSY clears.
+const FLASH_CR: u32 = flash::BASE + 0x10;
+
+/// An access that waits on the bus for a flash operation to end: the clock moves on to BSY's
+/// end (the write then lands there). Returns the instant the access completes.
+fn stall_while_flash_busy<P: Peripherals>(st: &mut State<P>, at: Time) -> Time {
+    if let Some(until) = st.board.flash_busy_until().filter(|&t| t > at) {
+        let upc = st.units_per_cycle;
+        let stall = (until - at).div_ceil(upc) * upc;
+        st.now = st.now.max(at + stall);
+        st.flash_stall_time += stall;
+        return at + stall;
+    }
+    at
 }
 
 /// Copies the flash model's changes into the guest's flash and its boot alias.
@@ -1489,7 +1500,10 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     let st = uc.get_data_mut();
     let band = bit_band(addr);
     let (target, transfers) = band.map_or((addr, 1), |(word, _)| (word, 2));
-    let now = access_time(st, target, transfers);
+    let mut now = access_time(st, target, transfers);
+    if target & !3 == FLASH_CR {
+        now = stall_while_flash_busy(st, now);
+    }
     let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
         match size {
             4 => st.scs.write(addr & 0xFFF, value, now),

@@ -1291,19 +1291,26 @@ mod flash_program {
     /// `cr` starts an erase (r4 and r7 hold markers across it), waits for BSY to clear, reads the
     /// word back; stores the word, r4 and r7 at `RESULTS`; then `b .`.
     fn program(keys: [u32; 2], cr: u32) -> Image {
+        program_crs(keys, &[cr])
+    }
+
+    /// [`program`] with several CR writes in a row (no instruction between but the loads).
+    fn program_crs(keys: [u32; 2], crs: &[u32]) -> Image {
         let mut code: Vec<u16> = Vec::new();
         code.extend(mov32(0, FLASH));
         for key in keys {
             code.extend(mov32(1, key));
             code.push(str_(1, 0, 0x04));
         }
-        code.extend(mov32(1, cr));
-        code.push(str_(1, 0, 0x10));
+        for &cr in crs {
+            code.extend(mov32(1, cr));
+            code.push(str_(1, 0, 0x10));
+        }
         code.extend(mov32(2, SECTOR1));
         code.extend(mov32(3, 0x1234_5678));
         code.extend(mov32(4, 0x4444_4444));
         code.extend(mov32(7, 0x7777_7777));
-        if cr & (1 << 16) == 0 {
+        if crs.iter().all(|cr| cr & (1 << 16) == 0) {
             code.push(str_(3, 2, 0));
         }
         // Wait while BSY (SR bit 16): ldr r5, [r0, #0xC]; lsls r5, r5, #15; bmi back.
@@ -1414,6 +1421,19 @@ mod flash_program {
             let again = Machine::new(program([0, 0], 0), board, TimingProfile::Optimistic).expect("machine");
             assert_eq!(again.read_memory(SECTOR1, 0x4000).unwrap(), sector, "eighth {eighth}");
         }
+    }
+
+    /// The wrong sequence: CR written again right after STRT, without waiting for BSY. The
+    /// write stalls the bus until the erase ends (RM0368 §3.8.5), then takes effect: the core
+    /// stands still for the whole erase.
+    #[test]
+    fn a_cr_write_during_an_erase_stalls_until_it_ends() {
+        let erase = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10;
+        let mut m = run(program_crs([0x4567_0123, 0xCDEF_89AB], &[erase, 1 << 31]), TimingProfile::Pessimistic, 300 * MS);
+        let stall = m.state().flash_stall_time;
+        assert!((249 * MS..=250 * MS).contains(&stall), "stalled {stall} units");
+        assert_eq!(m.board_mut().read(FLASH + 0x10, 4, 300 * MS).unwrap() >> 31, 1, "LOCK written after the erase");
+        assert!(m.board().flash.memory()[0x4000..0x8000].iter().all(|&b| b == 0xFF));
     }
 
     /// A reboot (the watchdog, the firmware's reset request) keeps what the flash holds; the

@@ -41,8 +41,11 @@
 //!
 //! **The stall (§3.5, "a Flash memory read during a write/erase operation stalls the bus").**
 //! While BSY, the machine holds the CPU at its next instruction fetch from flash
-//! ([`Flash::busy_until`]); DMA and the peripherals run on. A CR or memory write while BSY
-//! (possible only from code in RAM) would stall the bus too: refused, not modelled.
+//! ([`Flash::busy_until`]); DMA and the peripherals run on. A store into flash or a CR write
+//! while BSY (§3.8.5: "any attempt to write to it with the BSY bit set will cause the AHB bus
+//! to stall until the BSY bit is cleared") waits on the bus: the machine completes it at BSY's
+//! end, so the model itself refuses one that reaches it while busy. Data reads from flash while
+//! BSY (from code in RAM) are not stalled: the machine has no read hook on flash.
 //!
 //! **A power cut** ([`Flash::power_cut`]) or a system reset during an operation leaves the
 //! memory part-way: an erase is modelled as a sweep through the sector's words in address order
