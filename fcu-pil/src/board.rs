@@ -539,10 +539,7 @@ impl Board {
 
     /// USART1's pending receive DMA request, served if a DMA2 stream takes it.
     fn serve_usart1_rx_dma(&mut self) {
-        if self.usart1.rx_dma_request()
-            && self.rcc.is_enabled(rcc::Bus::Ahb1, 22)
-            && self.dma2.capacity(dma::Request::Usart1Rx) > 0
-        {
+        if self.usart1.rx_dma_request() && self.rcc.is_enabled(rcc::Bus::Ahb1, 22) && self.dma2.capacity(dma::Request::Usart1Rx) > 0 {
             let byte = self.usart1.dma_read();
             self.dma2.serve(dma::Request::Usart1Rx, byte);
         }

@@ -173,8 +173,7 @@ fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
     let elf = firmware::resolve_elf(a.elf.as_deref())?;
     let listener = fcu_pil::serve::listen(&a.link)?;
     println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
-    let opts =
-        fcu_pil::serve::ServeOptions { elf, scenario: a.scenario.clone(), flash: a.flash.clone(), duration_s: a.duration, setup };
+    let opts = fcu_pil::serve::ServeOptions { elf, scenario: a.scenario.clone(), flash: a.flash.clone(), duration_s: a.duration, setup };
     let report = fcu_pil::serve::serve_on(listener, &opts)?;
     print!("{report}");
     Ok(ExitCode::SUCCESS)

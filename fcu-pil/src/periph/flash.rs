@@ -37,6 +37,7 @@
 //!   into narrower accesses; an assumption, the RM names only the row crossing);
 //! - OPERR additionally, only with ERRIE; WRPERR never (the option bytes, all sectors
 //!   unprotected at delivery, are not modelled).
+//!
 //! SR's flags clear by writing 1 (rc_w1); BSY is read-only.
 //!
 //! **The stall (§3.5, "a Flash memory read during a write/erase operation stalls the bus").**
@@ -276,10 +277,7 @@ impl Flash {
 
     /// The ranges changed since the last call, with their contents, for the machine's copy.
     pub fn take_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
-        std::mem::take(&mut self.changed)
-            .into_iter()
-            .map(|(o, n)| (o, self.memory[o as usize..(o + n) as usize].to_vec()))
-            .collect()
+        std::mem::take(&mut self.changed).into_iter().map(|(o, n)| (o, self.memory[o as usize..(o + n) as usize].to_vec())).collect()
     }
 
     /// Until when BSY stays set (None: idle).

@@ -324,9 +324,10 @@ impl Usart {
 
     fn sr(&self) -> u32 {
         let r = &self.rx;
-        let mut sr = [(r.fe, SR_FE), (r.ore, SR_ORE), (r.idle, SR_IDLE), (r.rxne, SR_RXNE)]
-            .into_iter()
-            .fold(0, |acc, (set, bit)| if set { acc | bit } else { acc });
+        let mut sr =
+            [(r.fe, SR_FE), (r.ore, SR_ORE), (r.idle, SR_IDLE), (r.rxne, SR_RXNE)]
+                .into_iter()
+                .fold(0, |acc, (set, bit)| if set { acc | bit } else { acc });
         if self.tdr.is_none() {
             sr |= SR_TXE;
         }
