@@ -1436,6 +1436,76 @@ mod flash_program {
         assert!(m.board().flash.memory()[0x4000..0x8000].iter().all(|&b| b == 0xFF));
     }
 
+    /// A program of register writes (r0 = address, r1 = value, `str r1, [r0]`), then `b .`.
+    fn register_writes(writes: &[(u32, u32)]) -> Image {
+        let mut image = program([0, 0], 0);
+        let mut code: Vec<u16> = Vec::new();
+        for &(addr, value) in writes {
+            code.extend(mov32(0, addr));
+            code.extend(mov32(1, value));
+            code.push(str_(1, 0, 0));
+        }
+        code.push(0xE7FE);
+        let flash = &mut image.segments[0].data;
+        flash[0x100..].fill(0);
+        for (i, h) in code.iter().enumerate() {
+            flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
+        }
+        image
+    }
+
+    /// The reason for circular DMA on USART1 RX (issue 21's flash stall): the core starts a
+    /// 250 ms sector erase and stalls on its next fetch while the host sends 40 bytes. With
+    /// DMA2 stream 5 circular into a 16-byte ring every byte is stored (the ring holds the last
+    /// 16, in ring order); without DMA (the wrong set-up) the first byte waits in RDR, ORE is
+    /// set, the other 39 are lost.
+    #[test]
+    fn bytes_arriving_during_an_erase_stall_are_kept_by_circular_dma_and_lost_without() {
+        const RING: u32 = 0x2000_8000;
+        let s5 = 0x4002_6400 + 0x10 + 5 * 0x18;
+        for dma in [true, false] {
+            let mut writes = vec![
+                // AHB1ENR resets with CCMDATARAMEN (bit 20) set.
+                (RCC_AHB1ENR, 1 | (1 << 20) | (1 << 22)),
+                (RCC_APB2ENR, 1 << 4),
+                (GPIO[PA] + AFRH, 7 << 8),
+                (GPIO[PA] + MODER, 0b10 << 20),
+                // 115 200 baud from the 16 MHz HSI: 16e6 / 115200 = 138.9.
+                (USART1 + usart::BRR, 139),
+                (USART1 + usart::CR1, usart::UE | usart::RE),
+            ];
+            if dma {
+                writes.extend([
+                    (s5 + 0x08, USART1 + usart::DR),
+                    (s5 + 0x0C, RING),
+                    (s5 + 0x04, 16),
+                    (s5, (4 << 25) | (1 << 10) | (1 << 8) | 1),
+                    (USART1 + usart::CR3, 1 << 6),
+                ]);
+            }
+            let erase = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10;
+            writes.extend([(FLASH + 0x04, 0x4567_0123), (FLASH + 0x04, 0xCDEF_89AB), (FLASH + 0x10, erase)]);
+            let mut m = Machine::new(register_writes(&writes), Board::new(), TimingProfile::Pessimistic).expect("machine");
+            m.run_until(MS).unwrap_or_else(|f| panic!("{f}"));
+            assert!(m.board().flash.busy_until().is_some(), "erasing");
+            let sent: Vec<u8> = (0..40).map(|i| b'A' + i).collect();
+            m.board_mut().push_uart_rx(&sent, MS);
+            m.run_until(300 * MS).unwrap_or_else(|f| panic!("{f}"));
+            assert!(m.state().flash_stall_time >= 249 * MS, "the core stalled through the bytes");
+            let (received, overrun, _) = m.board().usart1.rx_counts();
+            let sr = m.board_mut().read(USART1 + usart::SR, 4, 300 * MS).unwrap();
+            if dma {
+                let ring = m.read_memory(RING, 16).unwrap();
+                let expected: Vec<u8> = (0..16).map(|k| sent[if k < 8 { 32 + k } else { 16 + k }]).collect();
+                assert_eq!(ring, expected, "bytes 24..39 in ring order");
+                assert_eq!((received, overrun, sr & (1 << 3)), (40, 0, 0));
+            } else {
+                assert_eq!((received, overrun, sr & (1 << 3)), (40, 39, 1 << 3), "ORE");
+                assert_eq!(m.board_mut().read(USART1 + usart::DR, 4, 300 * MS).unwrap(), u32::from(b'A'));
+            }
+        }
+    }
+
     /// A reboot (the watchdog, the firmware's reset request) keeps what the flash holds; the
     /// flash interface's registers go back to reset (locked).
     #[test]
