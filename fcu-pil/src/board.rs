@@ -678,6 +678,17 @@ impl Peripherals for Board {
         self.flash.take_bus_error()
     }
 
+    fn take_power_cut(&mut self) -> bool {
+        self.flash.take_power_lost()
+    }
+
+    /// A system reset, and what only a power-on resets: RCC's reset flags, DBGMCU.
+    fn power_on_reset(&mut self) {
+        self.system_reset(false);
+        self.rcc.power_on_reset();
+        self.dbgmcu = dbgmcu::Dbgmcu::new();
+    }
+
     fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
         let hz = self.rcc.clocks()?.hclk_hz;
         periph::units_per_cycle(hz)

@@ -95,6 +95,14 @@ pub trait Peripherals {
     fn take_bus_error(&mut self) -> Option<&'static str> {
         None
     }
+    /// Whether the board lost its power (an injected cut), once: the machine powers it on again.
+    fn take_power_cut(&mut self) -> bool {
+        false
+    }
+    /// Every model back to power-on, except what keeps without power (the flash memory).
+    fn power_on_reset(&mut self) {
+        self.system_reset(false);
+    }
 }
 
 /// Why a run ended early.
@@ -634,11 +642,17 @@ impl<P: Peripherals + 'static> Machine<P> {
 
         let stack_top = image.initial_sp;
         let mut m = Machine { uc, image, stack_bottom: SRAM_BASE, stack_top };
-        // Paint the stack region so its high-water mark can be read later.
-        let paint = vec![STACK_PAINT; stack_top.saturating_sub(SRAM_BASE) as usize];
-        m.uc.mem_write(u64::from(SRAM_BASE), &paint).map_err(emu)?;
+        m.power_on_ram()?;
         m.reset_core()?;
         Ok(m)
+    }
+
+    /// SRAM as at power-on: zero (an assumption: real SRAM powers up with arbitrary contents),
+    /// with the stack region painted so its high-water mark can be read later.
+    fn power_on_ram(&mut self) -> Result<(), Fault> {
+        self.uc.mem_write(u64::from(SRAM_BASE), &vec![0; SRAM_SIZE as usize]).map_err(emu)?;
+        let paint = vec![STACK_PAINT; self.stack_top.saturating_sub(SRAM_BASE) as usize];
+        self.uc.mem_write(u64::from(SRAM_BASE), &paint).map_err(emu)
     }
 
     pub fn state(&self) -> &State<P> {
@@ -1038,7 +1052,15 @@ impl<P: Peripherals + 'static> Machine<P> {
             Err(error) => return Err(Fault::Unmodelled { error, pc, at: now }),
         }
         let software = std::mem::take(&mut st.scs.reset_requested);
-        if watchdog || software {
+        let power = st.board.take_power_cut();
+        if power {
+            st.resets.push((now, "power cut"));
+            st.board.power_on_reset();
+            let u = st.board.units_per_cycle().unwrap_or(21);
+            st.units_per_cycle = u;
+            self.power_on_ram()?;
+            self.reset_core()?;
+        } else if watchdog || software {
             st.resets.push((now, if watchdog { "watchdog" } else { "software (SYSRESETREQ)" }));
             st.board.system_reset(watchdog);
             let u = st.board.units_per_cycle().unwrap_or(21);

@@ -43,6 +43,11 @@ struct ServeArgs {
     /// The flash memory's contents: loaded at power-on if the file exists, saved as it changes.
     #[arg(long)]
     flash: Option<PathBuf>,
+    /// Cut the power at a fraction of a flash operation to come: erase|program:FRACTION[@N]
+    /// (e.g. erase:3/8, program:1/2@4 for the fourth word programmed); the board powers on
+    /// again with what the cut left in flash.
+    #[arg(long)]
+    power_cut: Option<String>,
     /// Emulated seconds to serve after boot (default one hour).
     #[arg(long, default_value_t = 3600.0)]
     duration: f64,
@@ -173,7 +178,15 @@ fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
     let elf = firmware::resolve_elf(a.elf.as_deref())?;
     let listener = fcu_pil::serve::listen(&a.link)?;
     println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
-    let opts = fcu_pil::serve::ServeOptions { elf, scenario: a.scenario.clone(), flash: a.flash.clone(), duration_s: a.duration, setup };
+    let power_cut = a.power_cut.as_deref().map(fcu_pil::serve::parse_power_cut).transpose()?;
+    let opts = fcu_pil::serve::ServeOptions {
+        elf,
+        scenario: a.scenario.clone(),
+        flash: a.flash.clone(),
+        duration_s: a.duration,
+        setup,
+        power_cut,
+    };
     let report = fcu_pil::serve::serve_on(listener, &opts)?;
     print!("{report}");
     Ok(ExitCode::SUCCESS)

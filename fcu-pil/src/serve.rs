@@ -27,6 +27,7 @@ use fcu_testkit::sim::{ComputerView, FlightComputer, RunOptions, SimError};
 
 use crate::board::Board;
 use crate::elf::Image;
+use crate::periph::flash::ArmedCut;
 use crate::rig::{self, BoardSetup, EmulatedBoard};
 
 /// What to serve.
@@ -40,6 +41,38 @@ pub struct ServeOptions {
     /// Emulated seconds to run after boot.
     pub duration_s: f64,
     pub setup: BoardSetup,
+    /// A power cut armed at a fraction of a flash operation to come ([`parse_power_cut`]).
+    pub power_cut: Option<ArmedCut>,
+}
+
+/// Parses `erase:3/8`, `program:0.5`, `erase:1/8@2` (the second erase from boot on): the kind
+/// of flash operation, the fraction of it at which the power fails, and which one.
+pub fn parse_power_cut(text: &str) -> Result<ArmedCut, String> {
+    let bad = || format!("--power-cut {text}: expected erase|program:FRACTION[@N], e.g. erase:3/8 or program:0.5@2");
+    let (kind, rest) = text.split_once(':').ok_or_else(bad)?;
+    let erase = match kind {
+        "erase" => true,
+        "program" => false,
+        _ => return Err(bad()),
+    };
+    let (fraction, nth) = match rest.split_once('@') {
+        Some((f, n)) => (f, n.parse::<u32>().map_err(|_| bad())?),
+        None => (rest, 1),
+    };
+    let fraction = match fraction.split_once('/') {
+        Some((a, b)) => {
+            let (a, b) = (a.parse::<f64>().map_err(|_| bad())?, b.parse::<f64>().map_err(|_| bad())?);
+            if b == 0.0 {
+                return Err(bad());
+            }
+            a / b
+        }
+        None => fraction.parse::<f64>().map_err(|_| bad())?,
+    };
+    if !(0.0..=1.0).contains(&fraction) || nth == 0 {
+        return Err(bad());
+    }
+    Ok(ArmedCut { erase, nth, fraction })
 }
 
 /// What a session moved, for the operator and the tests.
@@ -54,8 +87,9 @@ pub struct ServeReport {
     pub rx_ignored: u32,
     /// Bytes on PA10 the receiver never saw (pin not on AF7, clock off).
     pub rx_lost_on_pin: usize,
-    /// Board resets (watchdog, software) during the session.
+    /// Board resets (watchdog, software, power cut) during the session, and of them power cuts.
     pub resets: usize,
+    pub power_cuts: usize,
     pub clients: u32,
 }
 
@@ -67,7 +101,7 @@ impl std::fmt::Display for ServeReport {
             "USART1 RX: {} bytes received, {} lost to overrun, {} ignored (receiver off), {} not on PA10",
             self.rx_received, self.rx_overrun, self.rx_ignored, self.rx_lost_on_pin
         )?;
-        writeln!(f, "board resets: {}", self.resets)
+        writeln!(f, "board resets: {} ({} power cuts)", self.resets, self.power_cuts)
     }
 }
 
@@ -208,6 +242,9 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
     }
     board.faults_expected = true;
     board.raw_uart = true;
+    if let Some(cut) = opts.power_cut {
+        board.machine.board_mut().flash.arm_power_cut(cut);
+    }
     let mut bridge = Bridge {
         board: &mut board,
         listener,
@@ -227,8 +264,23 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
     (report.rx_received, report.rx_overrun, report.rx_ignored) = b.usart1.rx_counts();
     report.rx_lost_on_pin = b.records.uart_rx_lost.len();
     report.resets = board.machine.state().resets.len();
+    report.power_cuts = board.machine.state().resets.iter().filter(|r| r.1 == "power cut").count();
     if let Some(f) = board.fault_report() {
         eprintln!("fcu-pil serve: {f}");
     }
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_cuts_parse_with_a_kind_a_fraction_and_an_index() {
+        assert_eq!(parse_power_cut("erase:3/8"), Ok(ArmedCut { erase: true, nth: 1, fraction: 0.375 }));
+        assert_eq!(parse_power_cut("program:0.5@2"), Ok(ArmedCut { erase: false, nth: 2, fraction: 0.5 }));
+        for bad in ["erase", "write:1/2", "erase:9/8", "erase:1/0", "program:0.5@0", "erase:x"] {
+            assert!(parse_power_cut(bad).is_err(), "{bad}");
+        }
+    }
 }

@@ -633,6 +633,7 @@ fn serve_bridges_usart1_to_a_tcp_client() {
         flash: Some(flash.clone()),
         duration_s: 2.0,
         setup: BoardSetup::default(),
+        power_cut: None,
     };
     let server = std::thread::spawn(move || fcu_pil::serve::serve_on(listener, &opts));
     let mut client = std::net::TcpStream::connect(addr).expect("connect");

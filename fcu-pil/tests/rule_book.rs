@@ -1506,6 +1506,31 @@ mod flash_program {
         }
     }
 
+    /// A power cut armed at 3/8 of the next erase: the board loses power there (the machine
+    /// records it and powers on again: the program runs from its reset vector and starts the
+    /// erase anew), and the sector holds what the cut left until the new erase ends.
+    #[test]
+    fn an_armed_power_cut_falls_at_its_fraction_and_the_board_powers_on_again() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        let mut board = Board::new();
+        board.flash.load_memory(&vec![0u8; 0x8000]);
+        board.flash.arm_power_cut(fcu_pil::periph::flash::ArmedCut { erase: true, nth: 1, fraction: 0.375 });
+        let mut m = Machine::new(program([0x4567_0123, 0xCDEF_89AB], cr), board, TimingProfile::Optimistic).expect("machine");
+        m.run_until(100 * MS).unwrap_or_else(|f| panic!("{f}"));
+        let resets = m.state().resets.clone();
+        assert_eq!(resets.len(), 1, "{resets:?}");
+        assert_eq!(resets[0].1, "power cut");
+        let (start, end, _) = m.board().flash.operation().expect("the erase restarted after power-on");
+        assert!(start > resets[0].0);
+        let cut_s = resets[0].0 as f64 / TIME_HZ as f64;
+        assert!((cut_s - 0.375 * 0.25).abs() < 1e-4, "cut at {cut_s} s, 3/8 of 250 ms after the erase began");
+        assert!((end - start) as f64 / TIME_HZ as f64 > 0.249);
+        let sector = &m.board().flash.memory()[0x4000..0x8000];
+        let erased = sector.iter().position(|&b| b != 0xFF).unwrap_or(sector.len());
+        assert!(erased.abs_diff(0x4000 * 3 / 8) <= 4, "{erased} bytes erased");
+        assert_eq!(m.read_memory(SECTOR1, 0x4000).unwrap(), sector, "the core sees the cut's contents");
+    }
+
     /// A reboot (the watchdog, the firmware's reset request) keeps what the flash holds; the
     /// flash interface's registers go back to reset (locked).
     #[test]

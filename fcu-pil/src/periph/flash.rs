@@ -202,6 +202,19 @@ pub struct Flash {
     seen: Time,
     /// Counts completed or cut operations, so a caller can tell the memory changed.
     generation: u64,
+    /// A power cut armed for an operation to come (see [`Flash::arm_power_cut`]).
+    armed_cut: Option<ArmedCut>,
+    /// When the armed cut falls, once its operation has started.
+    cut_at: Option<Time>,
+    power_lost: bool,
+}
+
+/// A power cut armed at a fraction of the `nth` operation of a kind from now on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ArmedCut {
+    pub erase: bool,
+    pub nth: u32,
+    pub fraction: f64,
 }
 
 impl Default for Flash {
@@ -227,6 +240,9 @@ impl Flash {
             ignored_writes: 0,
             seen: 0,
             generation: 0,
+            armed_cut: None,
+            cut_at: None,
+            power_lost: false,
         }
     }
 
@@ -235,11 +251,36 @@ impl Flash {
     pub fn system_reset(&mut self) {
         self.power_cut(self.seen);
         let memory = std::mem::take(&mut self.memory);
-        let (timing, generation) = (self.timing, self.generation);
+        let (timing, generation, armed_cut) = (self.timing, self.generation, self.armed_cut);
         *self = Flash::new();
         self.memory = memory;
         self.timing = timing;
         self.generation = generation;
+        self.armed_cut = armed_cut;
+    }
+
+    /// Arms a power cut at `fraction` (0..1) of the `nth` (1 = the next) erase, or program,
+    /// that starts from now on: the board loses power there ([`Flash::take_power_lost`]).
+    pub fn arm_power_cut(&mut self, cut: ArmedCut) {
+        self.armed_cut = Some(cut);
+    }
+
+    /// Whether an armed power cut fell (once).
+    pub fn take_power_lost(&mut self) -> bool {
+        std::mem::take(&mut self.power_lost)
+    }
+
+    /// An operation starts: the armed cut, if it is this one, gets its instant.
+    fn starting(&mut self, op: Operation) {
+        if let Some(cut) = self.armed_cut.as_mut().filter(|c| c.erase == op.erase) {
+            cut.nth = cut.nth.saturating_sub(1);
+            if cut.nth == 0 {
+                let span = (op.end - op.start) as f64;
+                self.cut_at = Some(op.start + (span * cut.fraction.clamp(0.0, 1.0)).round() as Time);
+                self.armed_cut = None;
+            }
+        }
+        self.op = Some(op);
     }
 
     /// Takes DS9716's typical or maximum times from now on.
@@ -305,14 +346,19 @@ impl Flash {
         (self.flags & SR_EOP != 0 && self.cr & CR_EOPIE != 0) || (self.flags & SR_OPERR != 0 && self.cr & CR_ERRIE != 0)
     }
 
-    /// End of the operation in progress.
+    /// End of the operation in progress, or an armed power cut.
     pub fn next_event(&self) -> Option<Time> {
-        self.busy_until()
+        [self.busy_until(), self.cut_at].into_iter().flatten().min()
     }
 
-    /// Completes the operation that ends by `now`.
+    /// Completes the operation that ends by `now`, or cuts the power where an armed cut falls.
     pub fn advance(&mut self, now: Time) {
         self.seen = self.seen.max(now);
+        if let Some(at) = self.cut_at.filter(|&t| t <= now) {
+            self.cut_at = None;
+            self.cut(at);
+            self.power_lost = true;
+        }
         if let Some(op) = self.op.take_if(|op| op.end <= now) {
             self.memory[op.offset as usize..(op.offset + op.len) as usize].copy_from_slice(&op.target);
             self.changed.push((op.offset, op.len));
@@ -327,6 +373,10 @@ impl Flash {
     /// module's comment for what that leaves).
     pub fn power_cut(&mut self, now: Time) {
         self.advance(now);
+        self.cut(now);
+    }
+
+    fn cut(&mut self, now: Time) {
         let Some(op) = self.op.take() else { return };
         let span = (op.end - op.start).max(1) as f64;
         let fraction = ((now.saturating_sub(op.start)) as f64 / span).clamp(0.0, 1.0);
@@ -415,7 +465,7 @@ impl Flash {
         let range = offset as usize..(offset + size) as usize;
         let target: Vec<u8> = self.memory[range].iter().zip(value.to_le_bytes()).map(|(&old, new)| old & new).collect();
         let end = now + super::time_from_s(self.program_time_s());
-        self.op = Some(Operation { offset, len: size, target, erase: false, start: now, end });
+        self.starting(Operation { offset, len: size, target, erase: false, start: now, end });
         Ok(())
     }
 
@@ -468,7 +518,7 @@ impl Flash {
             (false, false) => return Err(Unmodelled::new("FLASH.CR", "STRT with neither SER nor MER: no operation")),
         };
         let end = now + super::time_from_s(self.erase_time_s(sector));
-        self.op = Some(Operation { offset, len, target: vec![0xFF; len as usize], erase: true, start: now, end });
+        self.starting(Operation { offset, len, target: vec![0xFF; len as usize], erase: true, start: now, end });
         Ok(())
     }
 

@@ -226,6 +226,17 @@ impl Rcc {
         self.hsi_ready_at = Some(last);
     }
 
+    /// A power-on reset: everything back to power-on, the reset flags too (the HSE fault, the
+    /// board's, stays).
+    pub fn power_on_reset(&mut self) {
+        let last = self.last;
+        let hse_dead = self.hse_dead;
+        *self = Rcc::new();
+        self.last = last;
+        self.hse_dead = hse_dead;
+        self.hsi_ready_at = Some(last);
+    }
+
     /// Records an independent-watchdog reset in CSR; the machine calls this before
     /// [`Rcc::system_reset`]. Sets IWDGRSTF and also PINRSTF: on the F4 every internal reset
     /// source drives the NRST pin low through the reset pulse generator (RM0368 §6.1, figure
