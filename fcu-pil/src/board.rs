@@ -2,7 +2,8 @@
 //! table 1), gated by their RCC clock enables, and the board's wiring between them: the radio
 //! receiver on PA0..PA3 (TIM2 CH1..4), the motors on TIM4 CH1..4, the three sensors' chip
 //! selects on PA8, PB12 and PC13 for SPI2, the LEDs on PB5 and PB4, the battery divider on
-//! PB1 (ADC1 channel 9) and the debug UART on USART1.
+//! PB1 (ADC1 channel 9) and the debug UART on USART1 (TX on PA9; RX on PA10, fed by the host
+//! with [`Board::push_uart_rx`] and served by DMA2 when the firmware asks).
 //!
 //! Pins reach their peripherals through GPIO as on the chip (RM0368 §8.3.2, §8.3.7): only in
 //! alternate-function mode with the peripheral's AF number (STM32F401xB/C datasheet, table
@@ -18,6 +19,11 @@
 //!   otherwise it is recorded in [`Records::uart_lost`], not in [`Records::uart`]. So is a frame
 //!   the host cannot read: sent at a baud rate more than [`HOST_BAUD_TOLERANCE`] off its
 //!   115 200, or garbled by a BRR write during it.
+//! - a byte the host sends reaches USART1's receiver only if PA10 was AF7 from its start bit on
+//!   and USART1's clock runs; otherwise it is recorded in [`Records::uart_rx_lost`].
+//!
+//! The flash memory (the FLASH model's) survives a reset, and a power cut; a power-on takes
+//! the image's sectors from the ELF and the others from the model (a saved file).
 //!
 //! The ADC's path is wired to the pad whatever the pin's mode (RM0368 §8.3.12 and the I/O
 //! structure figures of §8.3: the analog connection is taken ahead of the Schmitt trigger and the

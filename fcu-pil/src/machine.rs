@@ -22,7 +22,14 @@
 //! while the HardFault handler runs locks the core up ([`LockupEvent`]): nothing executes and
 //! no interrupt is taken until a reset (the watchdog's), while the peripherals run on. What the
 //! chip does but the model does not know (an access to memory the chip has and the model lacks,
-//! a write to flash, an unstacking failure) ends the run with an error instead.
+//! an unstacking failure) ends the run with an error instead.
+//!
+//! **Flash** is mapped read-only; a store into it reaches the board's flash model through
+//! Unicorn's write-protection hook ([`Peripherals::flash_memory_write`]), and the model's
+//! contents are copied back into the guest ([`Peripherals::take_flash_changes`]). While the
+//! model is busy (a program or erase), instruction fetches from flash, stores into it and
+//! FLASH_CR writes wait for the end ([`Peripherals::flash_busy_until`]). An injected power cut
+//! ([`Peripherals::take_power_cut`]) powers the board on again with RAM cleared.
 
 use std::collections::HashMap;
 
@@ -111,7 +118,7 @@ pub enum Fault {
     /// An access to a register or bit the models do not implement.
     Unmodelled { error: Unmodelled, pc: u32, at: Time },
     /// An access to memory the chip has and the model lacks (the SRAM bit-band alias, an
-    /// unmodelled peripheral), a write to flash, an instruction fetch from RAM: what the chip
+    /// unmodelled peripheral), a write to system memory, an instruction fetch from RAM: what the chip
     /// does with these is not modelled, so the run stops. (An access to reserved memory is a
     /// BusFault, taken as silicon takes it.)
     Memory { kind: &'static str, address: u32, pc: u32, at: Time },
@@ -627,7 +634,7 @@ impl<P: Peripherals + 'static> Machine<P> {
                     MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
                         ("access to memory the chip has and the model does not", None)
                     }
-                    MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
+                    MemType::WRITE_PROT => ("write to read-only memory (system memory)", None),
                     MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
                     _ => ("memory access fault", None),
                 };
