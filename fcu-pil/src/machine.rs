@@ -1048,7 +1048,6 @@ impl<P: Peripherals + 'static> Machine<P> {
             st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         st.sample_lines(now, &lines);
         store_memory_writes(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
-        sync_flash(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         let st = self.uc.get_data_mut();
         match st.board.units_per_cycle() {
             Ok(u) if u != st.units_per_cycle => {
@@ -1512,11 +1511,11 @@ fn stall_on_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, pc: u32) -> bo
     true
 }
 
-/// Stores in the guest's RAM what another bus master (DMA) wrote since the last call.
+/// Stores in the guest's RAM what another bus master (DMA) wrote since the last call, and in
+/// its flash what the flash model changed.
 fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
-    if uc.get_data().flash_dirty {
-        sync_flash(uc)?;
-    }
+    // An operation the access completed (a FLASH_SR poll at BSY's end), or a store let through.
+    sync_flash(uc)?;
     let writes = uc.get_data_mut().board.take_memory_writes();
     for (addr, byte) in writes {
         uc.mem_write(u64::from(addr), &[byte])
