@@ -508,7 +508,7 @@ impl Board {
         self.uart_rx_burst = Some((t0, k));
     }
 
-    /// Whether the host is still sending (frames not yet ended).
+    /// How many of the host's frames have not ended yet.
     pub fn uart_rx_pending(&self) -> usize {
         self.uart_rx_line.len()
     }

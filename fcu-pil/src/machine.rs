@@ -118,9 +118,9 @@ pub enum Fault {
     /// An access to a register or bit the models do not implement.
     Unmodelled { error: Unmodelled, pc: u32, at: Time },
     /// An access to memory the chip has and the model lacks (the SRAM bit-band alias, an
-    /// unmodelled peripheral), a write to system memory, an instruction fetch from RAM: what the chip
-    /// does with these is not modelled, so the run stops. (An access to reserved memory is a
-    /// BusFault, taken as silicon takes it.)
+    /// unmodelled peripheral), a write to system memory, an instruction fetch from RAM: what
+    /// the chip does with these is not modelled, so the run stops. (An access to reserved
+    /// memory is a BusFault, taken as silicon takes it.)
     Memory { kind: &'static str, address: u32, pc: u32, at: Time },
     /// Unstacking an exception frame failed (a handler moved SP out of RAM): the UNSTKERR
     /// BusFault on return is not modelled.
