@@ -621,7 +621,6 @@ impl Peripherals for Board {
         self.tim9.advance(now);
         self.spi2.advance(now, clocks);
         self.deliver_uart_rx(now)?;
-        self.usart1.advance(now, clocks);
         self.serve_dma();
         self.collect_uart(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());

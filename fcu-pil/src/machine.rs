@@ -390,6 +390,9 @@ pub struct State<P: Peripherals> {
     pub flash_stall_time: Time,
     /// A store into flash went through Unicorn: its copy must be restored from the model.
     flash_dirty: bool,
+    /// The flash interface was written since the block hook last found it idle: the hook looks
+    /// at it (a program or erase may be running) only then, to keep its own cost down.
+    flash_watch: bool,
     stop: Option<Stop>,
     code: Code,
     /// How the clock prices what runs, with the caches and bus state it needs.
@@ -541,6 +544,7 @@ impl<P: Peripherals + 'static> Machine<P> {
             lines_sampled_at: 0,
             flash_stall_time: 0,
             flash_dirty: false,
+            flash_watch: false,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32).map_err(emu)?;
@@ -1172,13 +1176,20 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// came closer together than the block was long: an edge every 0.5 µs against a 50-instruction
 /// block never let it run.)
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
-    if uc.get_data().flash_dirty {
-        if let Err(e) = sync_flash(uc) {
-            fail(uc, e);
+    if uc.get_data().flash_watch {
+        if uc.get_data().flash_dirty {
+            if let Err(e) = sync_flash(uc) {
+                fail(uc, e);
+                return;
+            }
+        }
+        if stall_on_flash(uc, address as u32) {
             return;
         }
+        let st = uc.get_data_mut();
+        st.flash_watch = st.board.flash_busy_until().is_some();
     }
-    if stall_on_flash(uc, address as u32) || stop_before_block(uc) {
+    if stop_before_block(uc) {
         return;
     }
     if uc.get_data().masking.is_some() {
@@ -1447,6 +1458,7 @@ fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size
     match st.board.flash_memory_write(offset, size, value, now) {
         Ok(()) => {
             st.flash_dirty = true;
+            st.flash_watch = true;
             pull_deadline(st);
             true
         }
@@ -1529,8 +1541,11 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     let band = bit_band(addr);
     let (target, transfers) = band.map_or((addr, 1), |(word, _)| (word, 2));
     let mut now = access_time(st, target, transfers);
-    if target & !3 == FLASH_CR {
-        now = stall_while_flash_busy(st, now);
+    if target & !0x3FF == flash::BASE {
+        st.flash_watch = true;
+        if target & !3 == FLASH_CR {
+            now = stall_while_flash_busy(st, now);
+        }
     }
     let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
         match size {
