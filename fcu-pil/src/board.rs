@@ -2,7 +2,8 @@
 //! table 1), gated by their RCC clock enables, and the board's wiring between them: the radio
 //! receiver on PA0..PA3 (TIM2 CH1..4), the motors on TIM4 CH1..4, the three sensors' chip
 //! selects on PA8, PB12 and PC13 for SPI2, the LEDs on PB5 and PB4, the battery divider on
-//! PB1 (ADC1 channel 9) and the debug UART on USART1.
+//! PB1 (ADC1 channel 9) and the debug UART on USART1 (TX on PA9; RX on PA10, fed by the host
+//! with [`Board::push_uart_rx`] and served by DMA2 when the firmware asks).
 //!
 //! Pins reach their peripherals through GPIO as on the chip (RM0368 §8.3.2, §8.3.7): only in
 //! alternate-function mode with the peripheral's AF number (STM32F401xB/C datasheet, table
@@ -18,6 +19,11 @@
 //!   otherwise it is recorded in [`Records::uart_lost`], not in [`Records::uart`]. So is a frame
 //!   the host cannot read: sent at a baud rate more than [`HOST_BAUD_TOLERANCE`] off its
 //!   115 200, or garbled by a BRR write during it.
+//! - a byte the host sends reaches USART1's receiver only if PA10 was AF7 from its start bit on
+//!   and USART1's clock runs; otherwise it is recorded in [`Records::uart_rx_lost`].
+//!
+//! The flash memory (the FLASH model's) survives a reset, and a power cut; a power-on takes
+//! the image's sectors from the ELF and the others from the model (a saved file).
 //!
 //! The ADC's path is wired to the pad whatever the pin's mode (RM0368 §8.3.12 and the I/O
 //! structure figures of §8.3: the analog connection is taken ahead of the Schmitt trigger and the
@@ -54,6 +60,8 @@ const MOTOR_PIN_0: u8 = 6;
 const SPI2_SCK: (usize, u8) = (1, 13);
 const SPI2_DATA: (usize, u8) = (1, 15);
 const USART1_TX: (usize, u8) = (0, 9);
+/// PA10: USART1_RX (AF7), the line from the host.
+const USART1_RX: (usize, u8) = (0, 10);
 /// PB1: ADC1_IN9, the battery divider.
 const BATTERY_PIN: (usize, u8) = (1, 1);
 
@@ -79,6 +87,9 @@ pub struct Records {
     /// was not in AF7 for the whole frame, BRR changed during it, or its baud rate was more
     /// than [`HOST_BAUD_TOLERANCE`] off [`HOST_BAUD`].
     pub uart_lost: Vec<(Time, u8)>,
+    /// Bytes the host sent on PA10 that USART1's receiver never saw, with the end of their stop
+    /// bit: PA10 was not USART1_RX (AF7) for the whole frame, or USART1's clock was off.
+    pub uart_rx_lost: Vec<(Time, u8)>,
     /// Time TIM9 was started (the control tick), each boot.
     pub tick_timer_starts: Vec<Time>,
     /// The last peripheral register read: (time, address, value). A firmware stuck in a
@@ -117,7 +128,7 @@ const TIM4_BASE: u32 = tim::TimerKind::Tim4.base();
 /// The peripherals at their addresses (RM0368 table 1), with their RCC bits (the enable
 /// registers, RM0368 §6.3.9 to §6.3.12, and the matching reset registers) and their interrupt
 /// lines (RM0368 table 38).
-const SLOTS: [Slot; 15] = [
+const SLOTS: [Slot; 16] = [
     Slot {
         base: TIM2_BASE,
         name: "TIM2",
@@ -242,7 +253,7 @@ const SLOTS: [Slot; 15] = [
         base: flash::BASE,
         name: "FLASH",
         rcc: None,
-        irqs: &[],
+        irqs: &[(irq::FLASH, 0)],
         registers: &[(0x0, "ACR"), (0x4, "KEYR"), (0x8, "OPTKEYR"), (0xC, "SR"), (0x10, "CR")],
         data_register: None,
         model: |b| &b.flash,
@@ -257,6 +268,16 @@ const SLOTS: [Slot; 15] = [
         data_register: None,
         model: |b| &b.dma1,
         model_mut: |b| &mut b.dma1,
+    },
+    Slot {
+        base: dma::DMA2_BASE,
+        name: "DMA2",
+        rcc: Some((Ahb1, 22)),
+        irqs: &[(irq::DMA2_STREAM2, 2), (irq::DMA2_STREAM5, 5)],
+        registers: &[(0x0, "LISR"), (0x4, "HISR"), (0x8, "LIFCR"), (0xC, "HIFCR")],
+        data_register: None,
+        model: |b| &b.dma2,
+        model_mut: |b| &mut b.dma2,
     },
     Slot {
         base: dbgmcu::BASE,
@@ -303,6 +324,7 @@ pub struct Board {
     pub usart1: usart::Usart,
     pub iwdg: iwdg::Iwdg,
     pub dma1: dma::Dma,
+    pub dma2: dma::Dma,
     pub adc: adc::Adc,
     pub dbgmcu: dbgmcu::Dbgmcu,
     /// Radio edges still to happen: (time, channel, level after the edge).
@@ -315,6 +337,20 @@ pub struct Board {
     uart_tx_routed_since: Option<Time>,
     /// The battery divider's output (None until the harness sets a battery voltage).
     battery_divider_volts: Option<f64>,
+    /// The host's side of USART1's receive line: frames still to arrive, in time order.
+    uart_rx_line: VecDeque<RxFrame>,
+    /// The burst the host is sending: its first frame's start and the frames scheduled in it.
+    uart_rx_burst: Option<(Time, u64)>,
+    /// Since when PA10 has been USART1_RX (None: it is not now).
+    uart_rx_routed_since: Option<Time>,
+}
+
+/// A frame the host sends on PA10: start of its start bit, end of its stop bit, the byte.
+#[derive(Clone, Copy, Debug)]
+struct RxFrame {
+    start: Time,
+    end: Time,
+    byte: u8,
 }
 
 impl Default for Board {
@@ -337,6 +373,7 @@ impl Board {
             usart1: usart::Usart::new(),
             iwdg: iwdg::Iwdg::new(),
             dma1: dma::Dma::new(),
+            dma2: dma::Dma::dma2(),
             adc: adc::Adc::new(),
             dbgmcu: dbgmcu::Dbgmcu::new(),
             edges: VecDeque::new(),
@@ -345,6 +382,9 @@ impl Board {
             tim9_was_running: false,
             uart_tx_routed_since: None,
             battery_divider_volts: None,
+            uart_rx_line: VecDeque::new(),
+            uart_rx_burst: None,
+            uart_rx_routed_since: None,
         }
     }
 
@@ -414,6 +454,7 @@ impl Board {
             (true, since) => since.or(Some(now)),
             (false, _) => None,
         };
+        self.track_uart_rx_pin(now);
         self.refresh_battery_pin();
         let (l1, l2) = self.leds();
         if self.records.leds.last().is_none_or(|&(_, a, b)| (a, b) != (l1, l2)) {
@@ -521,6 +562,7 @@ impl Board {
             self.dma1.spi2_rx(byte);
         }
         self.spi2.set_dma_budget(self.dma1.spi2_rx_capacity());
+        self.serve_usart1_rx_dma();
     }
 
     fn after_access(&mut self, now: Time) -> Result<(), Unmodelled> {
@@ -548,6 +590,72 @@ impl Board {
     }
 }
 
+/// USART1's receive side: the host's line on PA10, and DMA2 serving the receiver.
+impl Board {
+    /// The host sends `bytes` on PA10 at [`HOST_BAUD`], 8N1, back to back, from `not_before`
+    /// or right after what it is still sending.
+    pub fn push_uart_rx(&mut self, bytes: &[u8], not_before: Time) {
+        /// Ten bits (start, 8 data, stop) per frame, in time units times the baud rate.
+        const FRAME_UNITS_X_BAUD: u64 = 10 * periph::TIME_HZ;
+        let baud = HOST_BAUD as u64;
+        let line_end = self.uart_rx_line.back().map(|f| f.end);
+        let (t0, mut k) = match (self.uart_rx_burst, line_end) {
+            (Some(burst), Some(end)) if end >= not_before => burst,
+            _ => (not_before, 0),
+        };
+        for &byte in bytes {
+            let start = t0 + k * FRAME_UNITS_X_BAUD / baud;
+            let end = t0 + (k + 1) * FRAME_UNITS_X_BAUD / baud;
+            self.uart_rx_line.push_back(RxFrame { start, end, byte });
+            k += 1;
+        }
+        self.uart_rx_burst = Some((t0, k));
+    }
+
+    /// How many of the host's frames have not ended yet.
+    pub fn uart_rx_pending(&self) -> usize {
+        self.uart_rx_line.len()
+    }
+
+    fn track_uart_rx_pin(&mut self, now: Time) {
+        let (port, pin) = USART1_RX;
+        self.uart_rx_routed_since = match (self.gpio[port].routes(pin, AF_USART1), self.uart_rx_routed_since) {
+            (true, since) => since.or(Some(now)),
+            (false, _) => None,
+        };
+    }
+
+    /// The frames whose stop bits ended by `now` reach USART1's receiver if PA10 was AF7 from
+    /// their start bit on and USART1's clock runs; a frame that lands with DMAR set goes on to
+    /// DMA2 at once, one byte at a time, so a stalled CPU loses nothing a circular stream keeps.
+    fn deliver_uart_rx(&mut self, now: Time) -> Result<(), Unmodelled> {
+        while let Some(&frame) = self.uart_rx_line.front() {
+            if frame.end > now {
+                break;
+            }
+            self.uart_rx_line.pop_front();
+            let on_pin = self.uart_rx_routed_since.is_some_and(|since| since <= frame.start);
+            if !on_pin || !self.is_clocked(usart::BASE) {
+                self.records.uart_rx_lost.push((frame.end, frame.byte));
+                continue;
+            }
+            let clocks = self.rcc.clocks()?;
+            let line_bit = (periph::TIME_HZ as f64 / HOST_BAUD).round() as Time;
+            self.usart1.receive(frame.byte, frame.end, line_bit, clocks);
+            self.serve_usart1_rx_dma();
+        }
+        Ok(())
+    }
+
+    /// USART1's pending receive DMA request, served if a DMA2 stream takes it.
+    fn serve_usart1_rx_dma(&mut self) {
+        if self.usart1.rx_dma_request() && self.is_clocked(dma::DMA2_BASE) && self.dma2.capacity(dma::Request::Usart1Rx) > 0 {
+            let byte = self.usart1.dma_read();
+            self.dma2.serve(dma::Request::Usart1Rx, byte);
+        }
+    }
+}
+
 #[derive(Clone, Copy)]
 enum Op {
     Read,
@@ -557,6 +665,7 @@ enum Op {
 impl Peripherals for Board {
     fn read(&mut self, addr: u32, size: u32, now: Time) -> Result<u32, Unmodelled> {
         self.deliver_edges(now);
+        self.deliver_uart_rx(now)?;
         let word = self.route(addr & !3, now, Op::Read)?;
         self.records.last_read = Some((now, addr & !3, word));
         self.after_access(now)?;
@@ -567,6 +676,7 @@ impl Peripherals for Board {
 
     fn write(&mut self, addr: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.deliver_edges(now);
+        self.deliver_uart_rx(now)?;
         self.collect_uart(now)?;
         let word = if size >= 4 {
             value
@@ -588,7 +698,8 @@ impl Peripherals for Board {
 
     fn next_event(&self) -> Option<Time> {
         let models = SLOTS.iter().filter_map(|slot| (slot.model)(self).next_event());
-        self.edges.front().map(|e| e.0).into_iter().chain(models).min()
+        let host_rx = self.uart_rx_line.front().map(|f| f.end);
+        self.edges.front().map(|e| e.0).into_iter().chain(host_rx).chain(models).min()
     }
 
     fn advance(&mut self, now: Time, lines: &mut dyn FnMut(u32, bool)) -> Result<bool, Unmodelled> {
@@ -598,6 +709,9 @@ impl Peripherals for Board {
         self.rcc.advance(now);
         let clocks = self.sync_clocks(now)?;
         self.iwdg.set_lsi(self.rcc.lsi_ready_at());
+        // The host's frames reach the receiver at their own instants, before USART1 catches up
+        // to `now` (an idle line is flagged only if no frame came meanwhile).
+        self.deliver_uart_rx(now)?;
         for slot in &SLOTS {
             (slot.model_mut)(self).advance(now, clocks);
         }
@@ -612,7 +726,57 @@ impl Peripherals for Board {
     }
 
     fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
-        self.dma1.take_memory_writes()
+        let mut writes = self.dma1.take_memory_writes();
+        writes.extend(self.dma2.take_memory_writes());
+        writes
+    }
+
+    fn flash_memory_write(&mut self, offset: u32, size: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        self.flash.write_memory(offset, size, value, now)?;
+        // The store went into the machine's copy too: it gets the model's bytes back.
+        self.flash.touch(offset & !3, 4);
+        Ok(())
+    }
+
+    fn take_flash_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
+        self.flash.take_changes()
+    }
+
+    fn flash_busy_until(&self) -> Option<Time> {
+        self.flash.busy_until()
+    }
+
+    /// A sector the image programs (any byte not 0xFF) is the image's, as a flash tool that
+    /// erases only the sectors it writes leaves it; the other sectors keep what the flash
+    /// model holds (loaded from a file, or kept from an earlier boot).
+    fn power_on_flash(&mut self, image: Vec<u8>) -> Vec<u8> {
+        let mut contents = self.flash.memory().to_vec();
+        for (offset, len) in flash::SECTORS {
+            let range = offset as usize..(offset + len) as usize;
+            if let (Some(src), Some(dst)) = (image.get(range.clone()), contents.get_mut(range)) {
+                if src.iter().any(|&b| b != 0xFF) {
+                    dst.copy_from_slice(src);
+                }
+            }
+        }
+        self.flash.load_memory(&contents);
+        self.flash.take_changes();
+        contents
+    }
+
+    fn take_bus_error(&mut self) -> Option<&'static str> {
+        self.flash.take_bus_error()
+    }
+
+    fn take_power_cut(&mut self) -> bool {
+        self.flash.take_power_lost()
+    }
+
+    /// A system reset, and what only a power-on resets: RCC's reset flags, DBGMCU.
+    fn power_on_reset(&mut self) {
+        self.system_reset(false);
+        self.rcc.power_on_reset();
+        self.dbgmcu = dbgmcu::Dbgmcu::new();
     }
 
     fn units_per_cycle(&self) -> Result<u64, Unmodelled> {
@@ -629,18 +793,27 @@ impl Peripherals for Board {
         rcc.system_reset();
         let records = std::mem::take(&mut self.records);
         let edges = std::mem::take(&mut self.edges);
+        // The host keeps sending through a reset.
+        let rx_line = std::mem::take(&mut self.uart_rx_line);
+        let rx_burst = self.uart_rx_burst;
         let sensors = self.spi2.take_sensors();
         let adc_inputs = self.adc.clone();
         // DBGMCU_CR, _APB1_FZ and _APB2_FZ are reset by a power-on reset only, not by a system
         // reset (RM0368 §23, their register descriptions).
         let dbgmcu = std::mem::take(&mut self.dbgmcu);
         let battery = self.battery_divider_volts;
+        // The flash memory keeps its contents; an operation in progress is cut.
+        let mut flash = std::mem::take(&mut self.flash);
+        flash.system_reset();
         *self = Board::new();
+        self.flash = flash;
         self.dbgmcu = dbgmcu;
         self.battery_divider_volts = battery;
         self.rcc = rcc;
         self.records = records;
         self.edges = edges;
+        self.uart_rx_line = rx_line;
+        self.uart_rx_burst = rx_burst;
         // The sensors are powered by the board, not reset with the MCU.
         self.spi2.put_sensors(sensors);
         self.adc.copy_inputs_from(&adc_inputs);

@@ -7,7 +7,8 @@
 //! - [`board`]: the STEVAL-FCU001V1's wiring between them (radio, motors, sensors, LEDs, UART);
 //! - [`rig`]: the board as a `fcu_testkit::sim::FlightComputer`, so every scenario flies it;
 //! - [`timing`]: the two timing profiles (optimistic, pessimistic) that bracket the board's;
-//! - [`telemetry`]: the firmware's UART lines read back; [`measure`]: costs on the image.
+//! - [`telemetry`]: the firmware's UART lines read back; [`measure`]: costs on the image;
+//! - [`serve`]: the board at real time with USART1 bridged to a TCP client (`cargo pil serve`).
 
 pub mod board;
 pub mod elf;
@@ -17,5 +18,6 @@ pub mod measure;
 pub mod periph;
 pub mod rig;
 pub mod scs;
+pub mod serve;
 pub mod telemetry;
 pub mod timing;

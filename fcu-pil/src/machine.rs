@@ -22,7 +22,14 @@
 //! while the HardFault handler runs locks the core up ([`LockupEvent`]): nothing executes and
 //! no interrupt is taken until a reset (the watchdog's), while the peripherals run on. What the
 //! chip does but the model does not know (an access to memory the chip has and the model lacks,
-//! a write to flash, an unstacking failure) ends the run with an error instead.
+//! an unstacking failure) ends the run with an error instead.
+//!
+//! **Flash** is mapped read-only; a store into it reaches the board's flash model through
+//! Unicorn's write-protection hook ([`Peripherals::flash_memory_write`]), and the model's
+//! contents are copied back into the guest ([`Peripherals::take_flash_changes`]). While the
+//! model is busy (a program or erase), instruction fetches from flash, stores into it and
+//! FLASH_CR writes wait for the end ([`Peripherals::flash_busy_until`]). An injected power cut
+//! ([`Peripherals::take_power_cut`]) powers the board on again with RAM cleared.
 
 use std::collections::HashMap;
 
@@ -73,6 +80,36 @@ pub trait Peripherals {
     fn take_memory_writes(&mut self) -> Vec<(u32, u8)> {
         Vec::new()
     }
+    /// A CPU write of `size` bytes into the flash memory, `offset` bytes from [`FLASH_BASE`]
+    /// (or from its boot alias at 0). The default refuses it: a board without a flash model.
+    fn flash_memory_write(&mut self, offset: u32, _size: u32, _value: u32, _now: Time) -> Result<(), Unmodelled> {
+        Err(Unmodelled::new(format!("flash +{offset:#07x}"), "a write to flash, and no flash interface is modelled"))
+    }
+    /// The flash memory's ranges changed since the last call: (offset, contents). The machine
+    /// copies them into the guest's flash and its boot alias.
+    fn take_flash_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
+        Vec::new()
+    }
+    /// While a flash operation runs (BSY), until when: instruction fetches from flash stall.
+    fn flash_busy_until(&self) -> Option<Time> {
+        None
+    }
+    /// The flash contents at power-on, given the image's (the ELF over erased flash).
+    fn power_on_flash(&mut self, image: Vec<u8>) -> Vec<u8> {
+        image
+    }
+    /// A bus error the last register write caused (a wrong flash key), once.
+    fn take_bus_error(&mut self) -> Option<&'static str> {
+        None
+    }
+    /// Whether the board lost its power (an injected cut), once: the machine powers it on again.
+    fn take_power_cut(&mut self) -> bool {
+        false
+    }
+    /// Every model back to power-on, except what keeps without power (the flash memory).
+    fn power_on_reset(&mut self) {
+        self.system_reset(false);
+    }
 }
 
 /// Why a run ended early.
@@ -81,9 +118,9 @@ pub enum Fault {
     /// An access to a register or bit the models do not implement.
     Unmodelled { error: Unmodelled, pc: u32, at: Time },
     /// An access to memory the chip has and the model lacks (the SRAM bit-band alias, an
-    /// unmodelled peripheral), a write to flash, an instruction fetch from RAM: what the chip
-    /// does with these is not modelled, so the run stops. (An access to reserved memory is a
-    /// BusFault, taken as silicon takes it.)
+    /// unmodelled peripheral), a write to system memory, an instruction fetch from RAM: what
+    /// the chip does with these is not modelled, so the run stops. (An access to reserved
+    /// memory is a BusFault, taken as silicon takes it.)
     Memory { kind: &'static str, address: u32, pc: u32, at: Time },
     /// Unstacking an exception frame failed (a handler moved SP out of RAM): the UNSTKERR
     /// BusFault on return is not modelled.
@@ -179,6 +216,8 @@ impl MaskingStats {
 const CFSR_IBUSERR: u32 = 1 << 8;
 const CFSR_PRECISERR: u32 = 1 << 9;
 const CFSR_STKERR: u32 = 1 << 12;
+/// CFSR IMPRECISERR: a bus error on a buffered write (a wrong flash key).
+const CFSR_IMPRECISERR: u32 = 1 << 10;
 /// CFSR bits (ARMv7-M B3.2.15): UsageFault UNDEFINSTR, INVSTATE.
 const CFSR_UNDEFINSTR: u32 = 1 << 16;
 const CFSR_INVSTATE: u32 = 1 << 17;
@@ -362,6 +401,13 @@ pub struct State<P: Peripherals> {
     pub instructions: u64,
     /// Time spent in WFI or in the `b .` idle loop.
     pub idle_time: Time,
+    /// Time the core spent stalled on a flash fetch while a program or erase ran.
+    pub flash_stall_time: Time,
+    /// A store into flash went through Unicorn: its copy must be restored from the model.
+    flash_dirty: bool,
+    /// The flash interface was written since the block hook last found it idle: the hook looks
+    /// at it (a program or erase may be running) only then, to keep its own cost down.
+    flash_watch: bool,
     stop: Option<Stop>,
     code: Code,
     /// How the clock prices what runs, with the caches and bus state it needs.
@@ -418,6 +464,9 @@ impl<P: Peripherals> State<P> {
             units_per_cycle,
             instructions: 0,
             idle_time: 0,
+            flash_stall_time: 0,
+            flash_dirty: false,
+            flash_watch: false,
             stop: None,
             code,
             timing,
@@ -566,11 +615,17 @@ fn add_hooks<P: Peripherals + 'static>(uc: &mut Unicorn<'static, State<P>>) -> R
     Ok(())
 }
 
-/// Nothing answers at a reserved address: the bus returns an error, a BusFault (precise for a
+/// A store into flash (mapped read-only) goes to the flash model ([`flash_write`]). Otherwise
+/// nothing answers at a reserved address: the bus returns an error, a BusFault (precise for a
 /// data access, ARMv7-M B3.2.15; an instruction fetch faults when the instruction would
 /// execute). An address where the chip has something the model lacks, and the rest, are
 /// refused.
-fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, _size: usize, _value: i64) -> bool {
+fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemType, addr: u64, size: usize, value: i64) -> bool {
+    if kind == MemType::WRITE_PROT {
+        if let Some(offset) = flash_offset(addr as u32) {
+            return flash_write(uc, offset, size as u32, value as u32);
+        }
+    }
     let reserved = !implemented_but_unmodelled(addr as u32);
     let (kind, bus_fault) = match kind {
         MemType::READ_UNMAPPED if reserved => ("read of reserved memory", Some(CFSR_PRECISERR)),
@@ -579,7 +634,7 @@ fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemTy
         MemType::READ_UNMAPPED | MemType::WRITE_UNMAPPED | MemType::FETCH_UNMAPPED => {
             ("access to memory the chip has and the model does not", None)
         }
-        MemType::WRITE_PROT => ("write to read-only memory (flash)", None),
+        MemType::WRITE_PROT => ("write to read-only memory (system memory)", None),
         MemType::FETCH_PROT => ("instruction fetch from non-executable memory", None),
         _ => ("memory access fault", None),
     };
@@ -593,7 +648,8 @@ fn memory_fault_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, kind: MemTy
 impl<P: Peripherals + 'static> Machine<P> {
     /// Powers on the board with `image` in flash, its time priced by `profile`.
     pub fn new(image: Image, board: P, profile: TimingProfile) -> Result<Self, Fault> {
-        let flash = flash_contents(&image)?;
+        let mut board = board;
+        let flash = board.power_on_flash(flash_contents(&image)?);
         let sysmem = board.system_memory_page();
         let state = State::power_on(board, Code::new(flash.clone()), Timing::new(profile))?;
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, state).map_err(emu)?;
@@ -603,11 +659,17 @@ impl<P: Peripherals + 'static> Machine<P> {
         add_hooks(&mut uc)?;
         let stack_top = image.initial_sp;
         let mut m = Machine { uc, image, stack_bottom: SRAM_BASE, stack_top };
-        // Paint the stack region so its high-water mark can be read later.
-        let paint = vec![STACK_PAINT; stack_top.saturating_sub(SRAM_BASE) as usize];
-        m.uc.mem_write(u64::from(SRAM_BASE), &paint).map_err(emu)?;
+        m.power_on_ram()?;
         m.reset_core()?;
         Ok(m)
+    }
+
+    /// SRAM as at power-on: zero (an assumption: real SRAM powers up with arbitrary contents),
+    /// with the stack region painted so its high-water mark can be read later.
+    fn power_on_ram(&mut self) -> Result<(), Fault> {
+        self.uc.mem_write(u64::from(SRAM_BASE), &vec![0; SRAM_SIZE as usize]).map_err(emu)?;
+        let paint = vec![STACK_PAINT; self.stack_top.saturating_sub(SRAM_BASE) as usize];
+        self.uc.mem_write(u64::from(SRAM_BASE), &paint).map_err(emu)
     }
 
     pub fn state(&self) -> &State<P> {
@@ -1006,7 +1068,15 @@ impl<P: Peripherals + 'static> Machine<P> {
             Err(error) => return Err(Fault::Unmodelled { error, pc, at: now }),
         }
         let software = std::mem::take(&mut st.scs.reset_requested);
-        if watchdog || software {
+        let power = st.board.take_power_cut();
+        if power {
+            st.resets.push((now, "power cut"));
+            st.board.power_on_reset();
+            let u = st.board.units_per_cycle().unwrap_or(21);
+            st.units_per_cycle = u;
+            self.power_on_ram()?;
+            self.reset_core()?;
+        } else if watchdog || software {
             st.resets.push((now, if watchdog { "watchdog" } else { "software (SYSRESETREQ)" }));
             st.board.system_reset(watchdog);
             let u = st.board.units_per_cycle().unwrap_or(21);
@@ -1109,6 +1179,19 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// block twice whenever an event fell inside it, and never let a block run that is longer than
 /// the spacing of the events.
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
+    if uc.get_data().flash_watch {
+        if uc.get_data().flash_dirty {
+            if let Err(e) = sync_flash(uc) {
+                fail(uc, e);
+                return;
+            }
+        }
+        if stall_on_flash(uc, address as u32) {
+            return;
+        }
+        let st = uc.get_data_mut();
+        st.flash_watch = st.board.flash_busy_until().is_some();
+    }
     if stop_before_block(uc) {
         return;
     }
@@ -1356,8 +1439,95 @@ fn pull_deadline<P: Peripherals>(st: &mut State<P>) {
     }
 }
 
-/// Stores in the guest's RAM what another bus master (DMA) wrote since the last call.
+/// The flash memory: an offset from [`FLASH_BASE`] for an address in flash or its boot alias.
+fn flash_offset(addr: u32) -> Option<u32> {
+    [FLASH_BASE, 0].into_iter().find_map(|base| addr.checked_sub(base).filter(|&o| o < FLASH_SIZE))
+}
+
+/// A CPU store into flash (mapped read-only, so Unicorn calls the protection hook; no memory
+/// hook covers flash: one there corrupted registers in Unicorn 2.1.5). The flash model decides
+/// what the write does; returning true lets Unicorn complete the store into its own copy, which
+/// [`sync_flash`] then overwrites with the model's contents before anything else runs (a load
+/// of the same address later in the same translation block would see the raw store: code that
+/// programs flash polls FLASH_SR between, which syncs). A store while BSY waits for the
+/// operation in progress to end.
+fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size: u32, value: u32) -> bool {
+    let st = uc.get_data_mut();
+    // A store while an operation runs waits on the bus for it to end (RM0368 §3.5).
+    let now = stall_while_flash_busy(st, st.now);
+    match st.board.flash_memory_write(offset, size, value, now) {
+        Ok(()) => {
+            st.flash_dirty = true;
+            st.flash_watch = true;
+            pull_deadline(st);
+            true
+        }
+        Err(e) => {
+            fail(uc, e);
+            false
+        }
+    }
+}
+
+/// FLASH_CR (RM0368 §3.8.5): "not accessible in write mode when the BSY bit is set": a write
+/// stalls the AHB until BSY clears.
+const FLASH_CR: u32 = flash::BASE + 0x10;
+
+/// An access that waits on the bus for a flash operation to end: the clock moves on to BSY's
+/// end (the write then lands there). Returns the instant the access completes.
+fn stall_while_flash_busy<P: Peripherals>(st: &mut State<P>, at: Time) -> Time {
+    if let Some(until) = st.board.flash_busy_until().filter(|&t| t > at) {
+        let upc = st.units_per_cycle;
+        let stall = (until - at).div_ceil(upc) * upc;
+        st.now = st.now.max(at + stall);
+        st.flash_stall_time += stall;
+        return at + stall;
+    }
+    at
+}
+
+/// Copies the flash model's changes into the guest's flash and its boot alias.
+fn sync_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
+    let st = uc.get_data_mut();
+    st.flash_dirty = false;
+    let changes = st.board.take_flash_changes();
+    for (offset, bytes) in changes {
+        for base in [FLASH_BASE, 0] {
+            uc.mem_write(u64::from(base + offset), &bytes)
+                .map_err(|e| Unmodelled::new("FLASH", format!("copying flash +{offset:#07x} failed in the emulator: {e:?}")))?;
+        }
+    }
+    Ok(())
+}
+
+/// An instruction fetch from flash while a program or erase runs waits for it to end
+/// (RM0368 §3.5): the clock moves on to the end of BSY, or to the emulation's deadline if that
+/// comes first (an event, the end of the run: a power cut or the watchdog can land mid-erase),
+/// and the emulation stops before the block, so the run loop brings the models (DMA, the UART,
+/// the watchdog) up to that instant; the block's next start stalls again while BSY lasts.
+fn stall_on_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, pc: u32) -> bool {
+    let st = uc.get_data_mut();
+    let Some(until) = st.board.flash_busy_until() else { return false };
+    if flash_offset(pc).is_none() || until <= st.now {
+        return false;
+    }
+    let upc = st.units_per_cycle;
+    let limit = until.min(st.deadline);
+    if limit > st.now {
+        let stall = (limit - st.now).div_ceil(upc) * upc;
+        st.now += stall;
+        st.flash_stall_time += stall;
+    }
+    st.stop = Some(Stop::Deadline);
+    let _ = uc.emu_stop();
+    true
+}
+
+/// Stores in the guest's RAM what another bus master (DMA) wrote since the last call, and in
+/// its flash what the flash model changed.
 fn store_memory_writes<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) -> Result<(), Unmodelled> {
+    // An operation the access completed (a FLASH_SR poll at BSY's end), or a store let through.
+    sync_flash(uc)?;
     let writes = uc.get_data_mut().board.take_memory_writes();
     for (addr, byte) in writes {
         uc.mem_write(u64::from(addr), &[byte])
@@ -1370,7 +1540,13 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     let st = uc.get_data_mut();
     let band = bit_band(addr);
     let (target, transfers) = band.map_or((addr, 1), |(word, _)| (word, 2));
-    let now = access_time(st, target, transfers);
+    let mut now = access_time(st, target, transfers);
+    if target & !0x3FF == flash::BASE {
+        st.flash_watch = true;
+        if target & !3 == FLASH_CR {
+            now = stall_while_flash_busy(st, now);
+        }
+    }
     let result = if (scs::SCS_BASE..scs::SCS_BASE + 0x1000).contains(&addr) {
         match size {
             4 => st.scs.write(addr & 0xFFF, value, now),
@@ -1395,6 +1571,14 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
                 None => value << (8 * (addr & 3)),
             };
             follow_timing_registers(st, target & !3, written, now);
+            if let Some(kind) = st.board.take_bus_error() {
+                // A buffered write's bus error: an imprecise BusFault, escalated to HardFault.
+                if st.stop.is_none() || matches!(st.stop, Some(Stop::Deadline | Stop::Interrupt)) {
+                    st.stop = Some(Stop::Memory { kind, address: target, bus_fault: Some(CFSR_IMPRECISERR) });
+                }
+                let _ = uc.emu_stop();
+                return;
+            }
             // A write may bring a model's next event closer (an interrupt enable set while a
             // byte is shifting): the emulation must stop for it, not at the deadline set
             // before the write.

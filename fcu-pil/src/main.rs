@@ -25,6 +25,36 @@ enum Command {
     /// latencies, the longest stretch with the radio capture interrupt masked, CPU load,
     /// stack, and the harness's own speed.
     Measure(MeasureArgs),
+    /// Run the board at real time on the bench (level; the scenario's sticks, or centred with
+    /// the throttle low) with USART1 bridged to one TCP client: the client's bytes enter
+    /// USART1 RX (PA10) at 115200 baud, USART1's TX bytes go to the client. Reboots keep the
+    /// flash; --flash FILE loads it at power-on and saves it as it changes.
+    Serve(ServeArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct ServeArgs {
+    /// Where to listen: tcp:HOST:PORT (e.g. tcp:127.0.0.1:5760).
+    #[arg(long)]
+    link: String,
+    /// A scenario whose sticks the simulated pilot plays (default: centred, throttle low).
+    #[arg(long)]
+    scenario: Option<String>,
+    /// The flash memory's contents: loaded at power-on if the file exists, saved as it changes.
+    #[arg(long)]
+    flash: Option<PathBuf>,
+    /// Cut the power at a fraction of a flash operation to come: erase|program:FRACTION[@N]
+    /// (e.g. erase:3/8, program:1/2@4 for the fourth word programmed); the board powers on
+    /// again with what the cut left in flash.
+    #[arg(long)]
+    power_cut: Option<String>,
+    /// Emulated seconds to serve after boot (default one hour).
+    #[arg(long, default_value_t = 3600.0)]
+    duration: f64,
+    #[arg(long)]
+    elf: Option<PathBuf>,
+    #[command(flatten)]
+    timing: TimingArg,
 }
 
 #[derive(clap::Args, Debug)]
@@ -97,6 +127,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Fly(a) => fly(&a),
         Command::Measure(a) => measure_cmd(&a),
+        Command::Serve(a) => serve_cmd(&a),
     };
     match result {
         Ok(code) => code,
@@ -156,4 +187,23 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
     } else {
         Ok(ExitCode::from(1))
     }
+}
+
+fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
+    let setup = a.timing.setup()?;
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    let listener = fcu_pil::serve::listen(&a.link)?;
+    println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
+    let power_cut = a.power_cut.as_deref().map(fcu_pil::serve::parse_power_cut).transpose()?;
+    let opts = fcu_pil::serve::ServeOptions {
+        elf,
+        scenario: a.scenario.clone(),
+        flash: a.flash.clone(),
+        duration_s: a.duration,
+        setup,
+        power_cut,
+    };
+    let report = fcu_pil::serve::serve_on(listener, &opts)?;
+    print!("{report}");
+    Ok(ExitCode::SUCCESS)
 }

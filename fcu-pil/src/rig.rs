@@ -46,6 +46,8 @@ pub struct BoardSetup {
     /// Measure interrupt masking against this exception, and every interrupt's wait from its
     /// line to its entry, from the end of boot ([`Machine::measure_masking_against`]).
     pub measure_masking_against: Option<usize>,
+    /// The flash memory's contents at power-on (a saved image); the ELF's sectors replace theirs.
+    pub flash_contents: Option<Vec<u8>>,
 }
 
 impl BoardSetup {
@@ -79,6 +81,9 @@ pub struct EmulatedBoard {
     /// A HardFault or a lockup fails the flight ([`FlightComputer::step`]) unless this is set:
     /// a test that injects one sets it to watch what follows.
     pub faults_expected: bool,
+    /// The UART carries something other than the firmware's text lines (a binary protocol):
+    /// its bytes are not parsed as lines.
+    pub raw_uart: bool,
 }
 
 impl EmulatedBoard {
@@ -93,6 +98,9 @@ impl EmulatedBoard {
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
         board.rcc.set_hse_dead(setup.hse_dead);
         board.rcc.set_pll_dead(setup.pll_dead);
+        if let Some(contents) = &setup.flash_contents {
+            board.flash.load_memory(contents);
+        }
         let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,
@@ -104,6 +112,7 @@ impl EmulatedBoard {
             view: ComputerView::default(),
             line_errors: Vec::new(),
             faults_expected: false,
+            raw_uart: false,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -192,6 +201,9 @@ impl EmulatedBoard {
         let uart = &self.machine.board().records.uart;
         let new: Vec<(Time, u8)> = uart.get(self.uart_read..).map(<[_]>::to_vec).unwrap_or_default();
         self.uart_read = uart.len();
+        if self.raw_uart {
+            return;
+        }
         for (at, byte) in new {
             if let Some(text) = self.splitter.push(byte) {
                 match telemetry::parse(&text) {

@@ -624,3 +624,52 @@ fn an_image_that_waits_for_pvu_before_starting_the_watchdog_hangs_at_iwdg_sr() {
     assert!(stall.contains("IWDG.SR = 0x00000003") && stall.contains("__rtic_init_resources"), "{stall}");
     assert!(!b.machine.board().iwdg.is_started(), "{stall}");
 }
+
+/// `cargo pil serve`'s bridge on the image: a TCP client receives the firmware's UART text
+/// (bytes out), and the bytes it sends go onto PA10 at the line's rate (bytes in). Today's
+/// image sets up USART1 with `Serial::tx`, which leaves PA10 an input: the bytes reach the pin
+/// and not the receiver, as on the chip (when the link's receive path routes PA10 to AF7 they
+/// reach it, and this test's counts change with it). The flash file is written with the image
+/// in it.
+#[test]
+fn serve_bridges_usart1_to_a_tcp_client() {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().expect("address");
+    let flash = std::env::temp_dir().join(format!("fcu-pil-serve-{}.bin", std::process::id()));
+    let _ = std::fs::remove_file(&flash);
+    let opts = fcu_pil::serve::ServeOptions {
+        elf: elf().to_path_buf(),
+        scenario: None,
+        flash: Some(flash.clone()),
+        duration_s: 2.0,
+        setup: BoardSetup::default(),
+        power_cut: None,
+    };
+    let server = std::thread::spawn(move || fcu_pil::serve::serve_on(listener, &opts));
+    let mut client = std::net::TcpStream::connect(addr).expect("connect");
+    client.set_read_timeout(Some(std::time::Duration::from_secs(30))).expect("timeout");
+    client.write_all(b"0123456789").expect("send");
+    let mut received = Vec::new();
+    let mut buf = [0u8; 1024];
+    while let Ok(n) = client.read(&mut buf) {
+        if n == 0 {
+            break;
+        }
+        received.extend_from_slice(&buf[..n]);
+        if String::from_utf8_lossy(&received).contains("STATUS") {
+            break;
+        }
+    }
+    let report = server.join().expect("server thread").expect("serve");
+    assert!(String::from_utf8_lossy(&received).contains("STATUS"), "the client got: {:?}", String::from_utf8_lossy(&received));
+    assert_eq!(report.bytes_in, 10);
+    assert!(report.bytes_out >= received.len() as u64);
+    assert_eq!((report.rx_received, report.rx_lost_on_pin), (0, 10), "{report}");
+    let saved = std::fs::read(&flash).expect("flash file");
+    let _ = std::fs::remove_file(&flash);
+    assert_eq!(saved.len(), 256 * 1024);
+    let segment = &image().segments[0];
+    let at = (segment.address - 0x0800_0000) as usize;
+    assert_eq!(&saved[at..at + segment.data.len()], segment.data.as_slice(), "the image is in the saved flash");
+}

@@ -1134,6 +1134,433 @@ mod gpio {
     }
 }
 
+/// USART1's receiver and DMA2 (RM0368 §19.3.3 "Receiver", §19.6.1 USART_SR, §9.3.9
+/// "Circular mode", table 28 DMA2 request mapping), with bytes from the host on PA10 at 115 200
+/// baud.
+mod usart1_rx {
+    use super::*;
+
+    const RXNE: u32 = 1 << 5;
+    const ORE: u32 = 1 << 3;
+    const RXNEIE: u32 = 1 << 5;
+    const DMAR: u32 = 1 << 6;
+    const DMA2: u32 = 0x4002_6400;
+    const S5CR: u32 = DMA2 + 0x10 + 5 * 0x18;
+    const BUF: u32 = 0x2000_4000;
+    /// One 8N1 frame at 115 200 baud: 10 bits.
+    const FRAME: Time = 10 * TIME_HZ / 115_200;
+
+    /// `uart_setup` with PA10 to `af` too (stm32f4xx-hal `Serial::new` converts both pins).
+    fn receiver(af: u32) -> Bench {
+        let mut b = uart_setup(7);
+        b.pin_to_alternate(PA, 10, af);
+        b
+    }
+
+    fn received(b: &mut Bench) -> Option<u8> {
+        (b.read(USART1 + usart::SR) & RXNE != 0).then(|| b.read(USART1 + usart::DR) as u8)
+    }
+
+    /// A byte from the host reaches USART1 only with PA10 in AF mode on AF7 (USART1_RX). Wrong:
+    /// AF8 or the pin left an input: the receiver never sees it.
+    #[test]
+    fn a_byte_reaches_usart1_only_on_pa10_in_af7() {
+        for (what, af, arrives) in [("AF7", Some(7), true), ("AF8", Some(8), false), ("input", None, false)] {
+            let mut b = receiver(af.unwrap_or(7));
+            if af.is_none() {
+                b.set_mode(PA, 10, 0b00);
+            }
+            let t = b.t;
+            b.board.push_uart_rx(b"Z", t);
+            b.wait(2 * FRAME);
+            let lost: Vec<u8> = b.board.records.uart_rx_lost.iter().map(|&(_, x)| x).collect();
+            if arrives {
+                assert_eq!((received(&mut b), lost), (Some(b'Z'), vec![]), "{what}");
+            } else {
+                assert_eq!((received(&mut b), lost), (None, b"Z".to_vec()), "{what}");
+            }
+        }
+    }
+
+    /// The host's bytes come at its baud rate: RXNE sets at the end of the first frame's stop
+    /// bit, 86.8 µs after its start, and the receive interrupt with it (RXNEIE).
+    #[test]
+    fn bytes_arrive_at_115200_baud_and_raise_rxne_with_its_interrupt() {
+        let mut b = receiver(7);
+        b.write(USART1 + usart::CR1, usart::UE | usart::TE | usart::RE | RXNEIE);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"ab", t0);
+        b.run_to(t0 + FRAME - 1);
+        assert!(!b.line(irq::USART1));
+        assert_eq!(b.board.usart1.rx_counts().0, 0, "the stop bit has not ended");
+        b.run_to(t0 + FRAME);
+        assert!(b.line(irq::USART1));
+        assert_eq!(received(&mut b), Some(b'a'));
+        b.run_to(t0 + 2 * FRAME);
+        assert_eq!(received(&mut b), Some(b'b'));
+    }
+
+    /// The wrong sequence: the CPU does not read DR for 1 ms (a flash erase stalls it for far
+    /// longer) while ten bytes arrive. Without DMA the first byte stays in RDR, ORE sets and the
+    /// other nine are lost; it takes an SR read then a DR read to clear ORE.
+    #[test]
+    fn bytes_arriving_while_the_cpu_does_not_read_are_lost_to_an_overrun() {
+        let mut b = receiver(7);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"0123456789", t0);
+        b.wait(MS);
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), RXNE | ORE);
+        assert_eq!(b.read(USART1 + usart::DR), u32::from(b'0'));
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), 0);
+        assert_eq!(b.board.usart1.rx_counts(), (10, 9, 0));
+    }
+
+    /// The right one: DMA2 stream 5, channel 4 (table 28), circular into an SRAM ring, with
+    /// DMAR: every byte lands in memory while the CPU reads nothing, and the ring wraps.
+    #[test]
+    fn a_circular_dma2_stream_keeps_every_byte_while_the_cpu_does_not_read() {
+        let mut b = receiver(7);
+        b.enable(RCC_AHB1ENR, 22);
+        b.write(S5CR + 0x08, USART1 + usart::DR);
+        b.write(S5CR + 0x0C, BUF);
+        b.write(S5CR + 0x04, 8);
+        b.write(S5CR, (4 << 25) | (1 << 10) | (1 << 8) | (1 << 4) | 1);
+        b.write(USART1 + usart::CR3, DMAR);
+        let t0 = b.t;
+        b.board.push_uart_rx(b"0123456789", t0);
+        b.wait(MS);
+        let writes = b.board.take_memory_writes();
+        let expected: Vec<(u32, u8)> = (0..10u32).map(|i| (BUF + i % 8, b'0' + i as u8)).collect();
+        assert_eq!(writes, expected);
+        assert_eq!(b.read(USART1 + usart::SR) & (RXNE | ORE), 0);
+        assert_eq!(b.read(S5CR + 0x04), 6, "NDTR: 8 reloaded at the wrap, 2 moved since");
+        assert!(b.line(irq::DMA2_STREAM5), "TCIE: the wrap raised the stream's interrupt");
+    }
+
+    /// The same stream on the wrong channel (0) is refused at EN; with DMA2's clock off the
+    /// registers are refused.
+    #[test]
+    fn dma2_on_the_wrong_channel_or_without_its_clock_is_refused() {
+        let mut b = receiver(7);
+        assert!(b.try_write(S5CR + 0x04, 8).is_err(), "DMA2 clock (AHB1ENR bit 22) off");
+        b.enable(RCC_AHB1ENR, 22);
+        b.write(S5CR + 0x08, USART1 + usart::DR);
+        b.write(S5CR + 0x0C, BUF);
+        b.write(S5CR + 0x04, 8);
+        assert!(b.try_write(S5CR, (1 << 10) | (1 << 8) | 1).is_err());
+    }
+}
+
+/// The flash interface on the core (RM0368 §3.5): hand-assembled programs run from flash in the
+/// emulated Cortex-M4 with the board's models. Writes into flash reach the flash model through
+/// Unicorn's write-protection hook (flash is mapped read-only; see `machine.rs`).
+mod flash_program {
+    use super::*;
+    use fcu_pil::elf::{Image, Segment};
+    use fcu_pil::machine::Machine;
+    use fcu_pil::timing::TimingProfile;
+
+    const FLASH: u32 = 0x4002_3C00;
+    const SECTOR1: u32 = 0x0800_4000;
+    const RESULTS: u32 = 0x2000_0000;
+
+    fn movw(rd: u16, imm: u32) -> [u16; 2] {
+        let (imm4, i, imm3, imm8) = ((imm >> 12) & 0xF, (imm >> 11) & 1, (imm >> 8) & 7, imm & 0xFF);
+        [0xF240 | ((i as u16) << 10) | imm4 as u16, ((imm3 as u16) << 12) | (rd << 8) | imm8 as u16]
+    }
+
+    fn movt(rd: u16, imm: u32) -> [u16; 2] {
+        let [a, b] = movw(rd, imm);
+        [a | 0x0080, b]
+    }
+
+    fn mov32(rd: u16, v: u32) -> Vec<u16> {
+        [movw(rd, v & 0xFFFF), movt(rd, v >> 16)].concat()
+    }
+
+    /// `str rt, [rn, #imm]` / `ldr rt, [rn, #imm]` (T1, word offsets).
+    fn str_(rt: u16, rn: u16, imm: u16) -> u16 {
+        0x6000 | ((imm / 4) << 6) | (rn << 3) | rt
+    }
+
+    fn ldr(rt: u16, rn: u16, imm: u16) -> u16 {
+        0x6800 | ((imm / 4) << 6) | (rn << 3) | rt
+    }
+
+    /// Unlocks with `keys`, writes CR = `cr`, stores 0x1234_5678 at the start of sector 1 unless
+    /// `cr` starts an erase (r4 and r7 hold markers across it), waits for BSY to clear, reads the
+    /// word back; stores the word, r4 and r7 at `RESULTS`; then `b .`.
+    fn program(keys: [u32; 2], cr: u32) -> Image {
+        program_crs(keys, &[cr])
+    }
+
+    /// [`program`] with several CR writes in a row (no instruction between but the loads).
+    fn program_crs(keys: [u32; 2], crs: &[u32]) -> Image {
+        let mut code: Vec<u16> = Vec::new();
+        code.extend(mov32(0, FLASH));
+        for key in keys {
+            code.extend(mov32(1, key));
+            code.push(str_(1, 0, 0x04));
+        }
+        for &cr in crs {
+            code.extend(mov32(1, cr));
+            code.push(str_(1, 0, 0x10));
+        }
+        code.extend(mov32(2, SECTOR1));
+        code.extend(mov32(3, 0x1234_5678));
+        code.extend(mov32(4, 0x4444_4444));
+        code.extend(mov32(7, 0x7777_7777));
+        if crs.iter().all(|cr| cr & (1 << 16) == 0) {
+            code.push(str_(3, 2, 0));
+        }
+        // Wait while BSY (SR bit 16): ldr r5, [r0, #0xC]; lsls r5, r5, #15; bmi back.
+        code.extend([ldr(5, 0, 0x0C), 0x03ED, 0xD4FC]);
+        code.push(ldr(6, 2, 0));
+        code.extend(mov32(1, RESULTS));
+        code.extend([str_(6, 1, 0), str_(4, 1, 4), str_(7, 1, 8)]);
+        code.push(0xE7FE);
+        let mut flash = vec![0u8; 0x400];
+        let mut word = |at: usize, w: u32| flash[at..at + 4].copy_from_slice(&w.to_le_bytes());
+        word(0, 0x2001_0000);
+        word(4, 0x0800_0101);
+        // HardFault: a `b .` at 0x300.
+        word(12, 0x0800_0301);
+        for (i, h) in code.iter().enumerate() {
+            flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
+        }
+        flash[0x300..0x302].copy_from_slice(&0xE7FEu16.to_le_bytes());
+        Image {
+            path: "flash_program".into(),
+            segments: vec![Segment { address: 0x0800_0000, data: flash }],
+            initial_sp: 0x2001_0000,
+            symbols: HashMap::new(),
+            functions: Vec::new(),
+            flash_bytes: 0x400,
+            ram_bytes: 0,
+        }
+    }
+
+    fn run(image: Image, profile: TimingProfile, until: Time) -> Machine<Board> {
+        let mut m = Machine::new(image, Board::new(), profile).expect("machine");
+        m.run_until(until).unwrap_or_else(|f| panic!("{f}"));
+        m
+    }
+
+    fn words(m: &Machine<Board>, addr: u32, n: usize) -> Vec<u32> {
+        let bytes = m.read_memory(addr, 4 * n).expect("memory");
+        bytes.chunks(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
+    }
+
+    const PG_X32: u32 = 1 | (0b10 << 8);
+
+    /// RM0368 §3.5.4 on the core: the store programs the word (16 µs, the fetch after it stalled
+    /// until BSY cleared), the read-back and the flash's boot alias see it, and the registers
+    /// around the store survive (the reason no memory hook covers flash), under both timing
+    /// profiles.
+    #[test]
+    fn a_word_programmed_by_the_cpu_reads_back_and_the_registers_survive() {
+        for profile in [TimingProfile::Optimistic, TimingProfile::Pessimistic] {
+            let m = run(program([0x4567_0123, 0xCDEF_89AB], PG_X32), profile, MS);
+            assert_eq!(words(&m, RESULTS, 3), vec![0x1234_5678, 0x4444_4444, 0x7777_7777], "{profile}");
+            assert_eq!(words(&m, SECTOR1, 1), vec![0x1234_5678]);
+            assert_eq!(words(&m, SECTOR1 - 0x0800_0000, 1), vec![0x1234_5678], "boot alias");
+            assert_eq!(m.board().flash.memory()[0x4000..0x4004], 0x1234_5678u32.to_le_bytes());
+            let stall = m.state().flash_stall_time;
+            assert!(stall > 0 && stall <= 16 * US, "{profile}: stalled {stall} units");
+            assert!(m.state().hard_faults.is_empty());
+        }
+    }
+
+    /// The wrong sequence: the store without PG. PGSERR, and the word stays erased in the model
+    /// and in the core's view of it (Unicorn's copy is restored from the model).
+    #[test]
+    fn a_store_into_flash_without_pg_sets_pgserr_and_leaves_the_word_erased() {
+        let mut m = run(program([0x4567_0123, 0xCDEF_89AB], 0b10 << 8), TimingProfile::Optimistic, MS);
+        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF]);
+        assert_eq!(words(&m, SECTOR1, 1), vec![0xFFFF_FFFF]);
+        assert_eq!(m.board_mut().read(FLASH + 0x0C, 4, MS).unwrap() & 0x80, 0x80, "PGSERR");
+    }
+
+    /// The wrong sequence: the keys in the wrong order. A bus error (HardFault) on the core, and
+    /// CR stays locked until the next reset.
+    #[test]
+    fn a_wrong_key_order_is_a_hard_fault_and_leaves_cr_locked() {
+        let mut m = run(program([0xCDEF_89AB, 0x4567_0123], PG_X32), TimingProfile::Optimistic, MS);
+        assert_eq!(m.state().hard_faults.len(), 1, "{:?}", m.state().hard_faults);
+        assert!(m.state().hard_faults[0].cause.contains("FLASH_KEYR"));
+        assert_eq!(m.board_mut().read(FLASH + 0x10, 4, MS).unwrap() >> 31, 1, "LOCK");
+        assert_eq!(words(&m, SECTOR1, 1), vec![0xFFFF_FFFF]);
+    }
+
+    /// A power cut at every eighth of a sector erase started on the core: the memory the next
+    /// power-on finds holds the sweep up to that point (erased words, then the word under
+    /// erase part-way, then the old contents), and a new board powered on with it keeps it.
+    #[test]
+    fn a_power_cut_at_each_eighth_of_an_erase_leaves_the_sector_part_erased() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        for eighth in 1..8u64 {
+            let mut board = Board::new();
+            board.flash.load_memory(&vec![0u8; 0x8000]);
+            let mut m = Machine::new(program([0x4567_0123, 0xCDEF_89AB], cr), board, TimingProfile::Optimistic).expect("machine");
+            m.run_until(MS).unwrap_or_else(|f| panic!("{f}"));
+            let (start, end, erase) = m.board().flash.operation().expect("erasing");
+            assert!(erase);
+            let at = start + (end - start) * eighth / 8;
+            m.run_until(at).unwrap_or_else(|f| panic!("{f}"));
+            m.board_mut().flash.power_cut(at);
+            let contents = m.board().flash.memory().to_vec();
+            let sector = &contents[0x4000..0x8000];
+            let erased = sector.iter().position(|&b| b != 0xFF).unwrap_or(sector.len());
+            let expected = 0x4000 * eighth as usize / 8;
+            assert!(erased.abs_diff(expected) <= 4, "eighth {eighth}: {erased} bytes erased, expected about {expected}");
+            assert!(sector[(erased + 4).min(0x4000)..].iter().all(|&b| b == 0), "eighth {eighth}: the rest intact");
+            // Power on again with what the cut left: the image's sector 0 is the image's, sector 1
+            // is the cut's.
+            let mut board = Board::new();
+            board.flash.load_memory(&contents);
+            let again = Machine::new(program([0, 0], 0), board, TimingProfile::Optimistic).expect("machine");
+            assert_eq!(again.read_memory(SECTOR1, 0x4000).unwrap(), sector, "eighth {eighth}");
+        }
+    }
+
+    /// The wrong sequence: CR written again right after STRT, without waiting for BSY. The
+    /// write stalls the bus until the erase ends (RM0368 §3.8.5), then takes effect: the core
+    /// stands still for the whole erase.
+    #[test]
+    fn a_cr_write_during_an_erase_stalls_until_it_ends() {
+        let erase = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10;
+        let mut m = run(program_crs([0x4567_0123, 0xCDEF_89AB], &[erase, 1 << 31]), TimingProfile::Pessimistic, 300 * MS);
+        let stall = m.state().flash_stall_time;
+        assert!((249 * MS..=250 * MS).contains(&stall), "stalled {stall} units");
+        assert_eq!(m.board_mut().read(FLASH + 0x10, 4, 300 * MS).unwrap() >> 31, 1, "LOCK written after the erase");
+        assert!(m.board().flash.memory()[0x4000..0x8000].iter().all(|&b| b == 0xFF));
+    }
+
+    /// A program of register writes (r0 = address, r1 = value, `str r1, [r0]`), then `b .`.
+    fn register_writes(writes: &[(u32, u32)]) -> Image {
+        let mut image = program([0, 0], 0);
+        let mut code: Vec<u16> = Vec::new();
+        for &(addr, value) in writes {
+            code.extend(mov32(0, addr));
+            code.extend(mov32(1, value));
+            code.push(str_(1, 0, 0));
+        }
+        code.push(0xE7FE);
+        let flash = &mut image.segments[0].data;
+        flash[0x100..].fill(0);
+        for (i, h) in code.iter().enumerate() {
+            flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
+        }
+        image
+    }
+
+    /// The reason for circular DMA on USART1 RX (issue 21's flash stall): the core starts a
+    /// 250 ms sector erase and stalls on its next fetch while the host sends 40 bytes. With
+    /// DMA2 stream 5 circular into a 16-byte ring every byte is stored (the ring holds the last
+    /// 16, in ring order); without DMA (the wrong set-up) the first byte waits in RDR, ORE is
+    /// set, the other 39 are lost.
+    #[test]
+    fn bytes_arriving_during_an_erase_stall_are_kept_by_circular_dma_and_lost_without() {
+        const RING: u32 = 0x2000_8000;
+        let s5 = 0x4002_6400 + 0x10 + 5 * 0x18;
+        for dma in [true, false] {
+            let mut writes = vec![
+                // AHB1ENR resets with CCMDATARAMEN (bit 20) set.
+                (RCC_AHB1ENR, 1 | (1 << 20) | (1 << 22)),
+                (RCC_APB2ENR, 1 << 4),
+                (GPIO[PA] + AFRH, 7 << 8),
+                (GPIO[PA] + MODER, 0b10 << 20),
+                // 115 200 baud from the 16 MHz HSI: 16e6 / 115200 = 138.9.
+                (USART1 + usart::BRR, 139),
+                (USART1 + usart::CR1, usart::UE | usart::RE),
+            ];
+            if dma {
+                writes.extend([
+                    (s5 + 0x08, USART1 + usart::DR),
+                    (s5 + 0x0C, RING),
+                    (s5 + 0x04, 16),
+                    (s5, (4 << 25) | (1 << 10) | (1 << 8) | 1),
+                    (USART1 + usart::CR3, 1 << 6),
+                ]);
+            }
+            let erase = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10;
+            writes.extend([(FLASH + 0x04, 0x4567_0123), (FLASH + 0x04, 0xCDEF_89AB), (FLASH + 0x10, erase)]);
+            let mut m = Machine::new(register_writes(&writes), Board::new(), TimingProfile::Pessimistic).expect("machine");
+            m.run_until(MS).unwrap_or_else(|f| panic!("{f}"));
+            assert!(m.board().flash.busy_until().is_some(), "erasing");
+            let sent: Vec<u8> = (0..40).map(|i| b'A' + i).collect();
+            m.board_mut().push_uart_rx(&sent, MS);
+            m.run_until(300 * MS).unwrap_or_else(|f| panic!("{f}"));
+            assert!(m.state().flash_stall_time >= 249 * MS, "the core stalled through the bytes");
+            let (received, overrun, _) = m.board().usart1.rx_counts();
+            let sr = m.board_mut().read(USART1 + usart::SR, 4, 300 * MS).unwrap();
+            if dma {
+                let ring = m.read_memory(RING, 16).unwrap();
+                let expected: Vec<u8> = (0..16).map(|k| sent[if k < 8 { 32 + k } else { 16 + k }]).collect();
+                assert_eq!(ring, expected, "bytes 24..39 in ring order");
+                assert_eq!((received, overrun, sr & (1 << 3)), (40, 0, 0));
+            } else {
+                assert_eq!((received, overrun, sr & (1 << 3)), (40, 39, 1 << 3), "ORE");
+                assert_eq!(m.board_mut().read(USART1 + usart::DR, 4, 300 * MS).unwrap(), u32::from(b'A'));
+            }
+        }
+    }
+
+    /// A power cut armed at 3/8 of the next erase: the board loses power there (the machine
+    /// records it and powers on again: the program runs from its reset vector and starts the
+    /// erase anew), and the sector holds what the cut left until the new erase ends.
+    #[test]
+    fn an_armed_power_cut_falls_at_its_fraction_and_the_board_powers_on_again() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        let mut board = Board::new();
+        board.flash.load_memory(&vec![0u8; 0x8000]);
+        board.flash.arm_power_cut(fcu_pil::periph::flash::ArmedCut { erase: true, nth: 1, fraction: 0.375 });
+        let mut m = Machine::new(program([0x4567_0123, 0xCDEF_89AB], cr), board, TimingProfile::Optimistic).expect("machine");
+        m.run_until(100 * MS).unwrap_or_else(|f| panic!("{f}"));
+        let resets = m.state().resets.clone();
+        assert_eq!(resets.len(), 1, "{resets:?}");
+        assert_eq!(resets[0].1, "power cut");
+        let (start, end, _) = m.board().flash.operation().expect("the erase restarted after power-on");
+        // The optimistic profile dates the first block's register writes at its start: the
+        // power-on instant itself.
+        assert!(start >= resets[0].0, "a new erase, not the cut one: {start} {resets:?}");
+        let cut_s = resets[0].0 as f64 / TIME_HZ as f64;
+        assert!((cut_s - 0.375 * 0.25).abs() < 1e-4, "cut at {cut_s} s, 3/8 of 250 ms after the erase began");
+        assert!((end - start) as f64 / TIME_HZ as f64 > 0.249);
+        let sector = &m.board().flash.memory()[0x4000..0x8000];
+        let erased = sector.iter().position(|&b| b != 0xFF).unwrap_or(sector.len());
+        assert!(erased.abs_diff(0x4000 * 3 / 8) <= 4, "{erased} bytes erased");
+        assert_eq!(m.read_memory(SECTOR1, 0x4000).unwrap(), sector, "the core sees the cut's contents");
+    }
+
+    /// A reboot (the watchdog, the firmware's reset request) keeps what the flash holds; the
+    /// flash interface's registers go back to reset (locked).
+    #[test]
+    fn a_reboot_keeps_the_flash_contents_and_relocks_cr() {
+        let mut b = Bench::new();
+        b.write(FLASH + 0x04, 0x4567_0123);
+        b.write(FLASH + 0x04, 0xCDEF_89AB);
+        b.write(FLASH + 0x10, PG_X32);
+        let t = b.step();
+        b.board.flash_memory_write(0x4000, 4, 0xCAFE_F00D, t).expect("program");
+        b.wait(MS);
+        b.board.system_reset(true);
+        assert_eq!(b.board.flash.memory()[0x4000..0x4004], 0xCAFE_F00Du32.to_le_bytes());
+        assert_eq!(b.read(FLASH + 0x10) >> 31, 1, "LOCK after the reset");
+    }
+
+    /// A sector erase started from flash stalls the core for DS9716's 250 ms (x32, typical):
+    /// the next instruction fetch waits for BSY to clear.
+    #[test]
+    fn a_sector_erase_stalls_the_core_for_250_ms() {
+        let cr = (1 << 16) | (0b10 << 8) | (1 << 3) | 0b10; // STRT, x32, SNB 1, SER
+        let m = run(program([0x4567_0123, 0xCDEF_89AB], cr), TimingProfile::Optimistic, 300 * MS);
+        let stall = m.state().flash_stall_time;
+        assert!((249 * MS..=250 * MS).contains(&stall), "stalled {stall} units");
+        assert_eq!(words(&m, RESULTS, 1), vec![0xFFFF_FFFF], "read back erased");
+    }
+}
+
 /// `fcu-pil/RULES.md` names only tests that exist, and names every test of this file.
 #[test]
 fn the_rules_index_matches_the_tests() {

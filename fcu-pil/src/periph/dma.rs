@@ -1,5 +1,9 @@
-//! DMA1 (0x4002_6000, AHB1, RM0368 §9) as the board uses it: stream 3, channel 0, SPI2_RX
-//! (RM0368 table 27, DMA1 request mapping), peripheral to memory, byte by byte, into SRAM.
+//! DMA1 (0x4002_6000) and DMA2 (0x4002_6400), both on AHB1 (RM0368 §9), as the board uses
+//! them: peripheral to memory, byte by byte, into SRAM, for the requests of RM0368 §9.3.3
+//! tables 27 and 28 (DMA1 and DMA2 request mapping) that the firmware may use:
+//! - DMA1 stream 3, channel 0: SPI2_RX (the IMU burst);
+//! - DMA2 stream 2, channel 4, and DMA2 stream 5, channel 4: USART1_RX (table 28 maps USART1_RX
+//!   to both; either serves it).
 //!
 //! Register layout from the `stm32f4` PAC (`dma2`): LISR 0x00, HISR 0x04 (read-only flags),
 //! LIFCR 0x08, HIFCR 0x0C (write 1 to clear), then per stream x at 0x10 + 0x18·x: SxCR, SxNDTR,
@@ -12,22 +16,29 @@
 //! - before EN is set, the stream's event flags must have been cleared (RM0368 §9.3.18 "Stream
 //!   configuration procedure", step 9 and the SxCR EN description): setting EN with a flag still
 //!   up is refused here (the RM does not say what the stream then does);
-//! - each request from the peripheral moves one data item; SxNDTR counts down; at 0 the
-//!   transfer is complete: TCIF set, EN cleared (not circular); HTIF at the half;
+//! - each request from the peripheral moves one data item; SxNDTR counts down; HTIF at the
+//!   half; at 0 TCIF. Normal mode: the stream then stops (EN cleared) and further requests wait
+//!   in the peripheral. Circular mode (CIRC, RM0368 §9.3.9 "Circular mode"): NDTR reloads with
+//!   the value programmed at EN and the memory address restarts at M0AR, the stream stays
+//!   enabled, and HTIF/TCIF set again on every lap: a ring buffer the peripheral keeps filling
+//!   whatever the CPU does (a flash erase stalls the CPU, not the DMA: RM0368 §3.5, the AHB bus
+//!   matrix gives the DMA its own path to SRAM);
 //! - EN cleared by software during a transfer stops the stream and sets TCIF (SxCR EN: "when
 //!   cleared by software … the transfer complete flag is set").
 //!
-//! Modelled: stream 3, channel 0 (SPI2_RX), peripheral to memory, PSIZE = MSIZE = byte, direct
-//! mode (FCR.DMDIS = 0), no circular or double-buffer mode, single transfers, the memory in
-//! SRAM with or without increment, the peripheral address fixed at SPI2's DR. Any other stream
-//! or setting is refused when EN is set (an [`Unmodelled`] error names it), so a wrong set-up
-//! cannot pass as a transfer. Memory writes are handed to the machine, which stores them in the
-//! guest's RAM.
+//! Modelled: the three routes above, peripheral to memory, PSIZE = MSIZE = byte, direct mode
+//! (FCR.DMDIS = 0), normal or circular mode, no double-buffer mode, single transfers, the
+//! memory in SRAM with or without increment, the peripheral address fixed at the request's
+//! data register. Any other stream, channel or setting is refused when EN is set (an
+//! [`Unmodelled`] error names it), so a wrong set-up cannot pass as a transfer. Memory writes
+//! are handed to the machine, which stores them in the guest's RAM.
 
 use super::{Time, Unmodelled};
 
+/// DMA1's base address (RM0368 table 1).
 pub const BASE: u32 = 0x4002_6000;
-const NAME: &str = "DMA1";
+/// DMA2's base address (RM0368 table 1).
+pub const DMA2_BASE: u32 = 0x4002_6400;
 
 const LISR: u32 = 0x00;
 const HISR: u32 = 0x04;
@@ -65,11 +76,36 @@ pub const FLAG_HTIF: u32 = 1 << 4;
 pub const FLAG_TCIF: u32 = 1 << 5;
 const FLAGS: u32 = 0b11_1101;
 
-/// The stream and channel of SPI2_RX.
+/// The stream of SPI2_RX on DMA1.
 pub const SPI2_RX_STREAM: usize = 3;
-const SPI2_RX_CHANNEL: u32 = 0;
-/// SPI2's data register, the only peripheral address modelled.
+/// SPI2's data register.
 pub const SPI2_DR: u32 = 0x4000_380C;
+/// USART1's data register.
+pub const USART1_DR: u32 = 0x4001_1004;
+/// The DMA2 streams table 28 maps USART1_RX to (channel 4 on both).
+pub const USART1_RX_STREAMS: [usize; 2] = [2, 5];
+
+/// The two DMA controllers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Controller {
+    Dma1,
+    Dma2,
+}
+
+/// A peripheral's DMA request the board wires.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Request {
+    Spi2Rx,
+    Usart1Rx,
+}
+
+/// The modelled routes (RM0368 tables 27 and 28): controller, stream, channel, request, the
+/// peripheral's data register.
+const ROUTES: [(Controller, usize, u32, Request, u32); 3] = [
+    (Controller::Dma1, 3, 0, Request::Spi2Rx, SPI2_DR),
+    (Controller::Dma2, 2, 4, Request::Usart1Rx, USART1_DR),
+    (Controller::Dma2, 5, 4, Request::Usart1Rx, USART1_DR),
+];
 
 /// Where a stream's flags sit in LISR/HISR: (high register, bit shift).
 fn flag_position(stream: usize) -> (bool, u32) {
@@ -92,9 +128,10 @@ struct Stream {
     started_with: u32,
 }
 
-/// The DMA1 model.
+/// A DMA controller's model.
 #[derive(Clone, Debug)]
 pub struct Dma {
+    controller: Controller,
     streams: [Stream; 8],
     writes: Vec<(u32, u8)>,
     ignored_writes: u32,
@@ -107,12 +144,75 @@ impl Default for Dma {
 }
 
 impl Dma {
+    /// DMA1 at reset.
     pub fn new() -> Dma {
-        let mut d = Dma { streams: Default::default(), writes: Vec::new(), ignored_writes: 0 };
+        Dma::of(Controller::Dma1)
+    }
+
+    /// DMA2 at reset.
+    pub fn dma2() -> Dma {
+        Dma::of(Controller::Dma2)
+    }
+
+    fn of(controller: Controller) -> Dma {
+        let mut d = Dma { controller, streams: Default::default(), writes: Vec::new(), ignored_writes: 0 };
         for s in &mut d.streams {
             s.fcr = FCR_RESET;
         }
         d
+    }
+
+    fn name(&self) -> &'static str {
+        match self.controller {
+            Controller::Dma1 => "DMA1",
+            Controller::Dma2 => "DMA2",
+        }
+    }
+
+    /// The enabled stream serving `request` now, if any (the lowest-numbered one if the
+    /// firmware enabled two for the same request).
+    fn serving(&self, request: Request) -> Option<usize> {
+        ROUTES.iter().find_map(|&(c, stream, channel, r, _)| {
+            let s = &self.streams[stream];
+            (c == self.controller && r == request && s.cr & CR_EN != 0 && (s.cr & CR_CHSEL) >> 25 == channel).then_some(stream)
+        })
+    }
+
+    /// How many more items of `request` the controller takes now without the CPU: the
+    /// stream's NDTR, unbounded for a circular stream, 0 if no stream serves it.
+    pub fn capacity(&self, request: Request) -> u32 {
+        match self.serving(request) {
+            Some(i) if self.streams[i].cr & CR_CIRC != 0 => u32::MAX,
+            Some(i) => self.streams[i].ndtr,
+            None => 0,
+        }
+    }
+
+    /// One request served: `byte`, read from the peripheral's data register, goes to memory.
+    /// Returns false (nothing moved) if no stream serves the request.
+    pub fn serve(&mut self, request: Request, byte: u8) -> bool {
+        let Some(i) = self.serving(request) else { return false };
+        let s = &mut self.streams[i];
+        if s.ndtr == 0 {
+            return false;
+        }
+        let offset = if s.cr & CR_MINC != 0 { s.moved } else { 0 };
+        self.writes.push((s.m0ar.wrapping_add(offset), byte));
+        s.moved += 1;
+        s.ndtr -= 1;
+        if s.started_with >= 2 && s.ndtr == s.started_with / 2 {
+            s.flags |= FLAG_HTIF;
+        }
+        if s.ndtr == 0 {
+            s.flags |= FLAG_TCIF;
+            if s.cr & CR_CIRC != 0 {
+                s.ndtr = s.started_with;
+                s.moved = 0;
+            } else {
+                s.cr &= !CR_EN;
+            }
+        }
+        true
     }
 
     /// Configuration writes ignored because their stream was enabled.
@@ -127,31 +227,12 @@ impl Dma {
 
     /// How many more SPI2_RX requests stream 3 serves now (0 unless it is enabled for them).
     pub fn spi2_rx_capacity(&self) -> u32 {
-        let s = &self.streams[SPI2_RX_STREAM];
-        if s.cr & CR_EN != 0 && (s.cr & CR_CHSEL) >> 25 == SPI2_RX_CHANNEL {
-            s.ndtr
-        } else {
-            0
-        }
+        self.capacity(Request::Spi2Rx)
     }
 
     /// One SPI2_RX request served: the byte read from SPI2's DR goes to memory.
     pub fn spi2_rx(&mut self, byte: u8) {
-        let s = &mut self.streams[SPI2_RX_STREAM];
-        if s.cr & CR_EN == 0 || s.ndtr == 0 {
-            return;
-        }
-        let offset = if s.cr & CR_MINC != 0 { s.moved } else { 0 };
-        self.writes.push((s.m0ar.wrapping_add(offset), byte));
-        s.moved += 1;
-        s.ndtr -= 1;
-        if s.started_with >= 2 && s.ndtr == s.started_with / 2 {
-            s.flags |= FLAG_HTIF;
-        }
-        if s.ndtr == 0 {
-            s.flags |= FLAG_TCIF;
-            s.cr &= !CR_EN;
-        }
+        self.serve(Request::Spi2Rx, byte);
     }
 
     /// The interrupt line of stream `stream`: a flag up with its enable.
@@ -176,7 +257,7 @@ impl Dma {
             HISR => Ok(self.flags_register(true)),
             LIFCR | HIFCR => Ok(0),
             _ => {
-                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(NAME, offset, false))?;
+                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(self.name(), offset, false))?;
                 let s = &self.streams[stream];
                 Ok(match reg {
                     0x00 => s.cr,
@@ -202,10 +283,11 @@ impl Dma {
                 Ok(())
             }
             _ => {
-                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(NAME, offset, true))?;
+                let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(self.name(), offset, true))?;
                 if reg == 0x00 {
                     return self.write_cr(stream, value);
                 }
+                let name = self.name();
                 let s = &mut self.streams[stream];
                 if s.cr & CR_EN != 0 {
                     self.ignored_writes += 1;
@@ -217,7 +299,7 @@ impl Dma {
                     0x0C => s.m0ar = value,
                     0x10 => s.m1ar = value,
                     _ => {
-                        Unmodelled::check_bits(&format!("DMA1.S{stream}FCR"), value, 0xBF)?;
+                        Unmodelled::check_bits(&format!("{name}.S{stream}FCR"), value, 0xBF)?;
                         s.fcr = value & 0xBF;
                     }
                 }
@@ -227,8 +309,9 @@ impl Dma {
     }
 
     fn write_cr(&mut self, stream: usize, value: u32) -> Result<(), Unmodelled> {
-        let name = format!("DMA1.S{stream}CR");
+        let name = format!("{}.S{stream}CR", self.name());
         Unmodelled::check_bits(&name, value, CR_FIELDS)?;
+        let controller = self.controller;
         let s = &mut self.streams[stream];
         if s.cr & CR_EN != 0 {
             // Enabled: only EN can change; clearing it stops the stream (TCIF set).
@@ -250,17 +333,16 @@ impl Dma {
                 format!("EN set with the stream's event flags {:#04x} still up (RM0368 §9.3.18: clear them first)", s.flags),
             ));
         }
+        let route = ROUTES.iter().find(|&&(c, st, _, _, _)| c == controller && st == stream);
+        let channel = (value & CR_CHSEL) >> 25;
         let unsupported = [
-            (stream != SPI2_RX_STREAM, "a stream other than 3 (SPI2_RX)"),
-            ((value & CR_CHSEL) >> 25 != SPI2_RX_CHANNEL, "a channel other than 0 on stream 3"),
+            (route.is_none(), "a stream no modelled request uses (DMA1 stream 3, DMA2 streams 2 and 5)"),
+            (route.is_some_and(|r| r.2 != channel), "a channel other than the modelled request's on this stream"),
             (value & CR_DIR != 0, "a direction other than peripheral to memory"),
             (value & (CR_PSIZE | CR_MSIZE) != 0, "a data size other than a byte"),
-            (
-                value & (CR_PFCTRL | CR_CIRC | CR_DBM | CR_BURSTS | CR_PINC) != 0,
-                "flow control, circular, double-buffer, bursts or a peripheral increment",
-            ),
+            (value & (CR_PFCTRL | CR_DBM | CR_BURSTS | CR_PINC) != 0, "flow control, double-buffer, bursts or a peripheral increment"),
             (s.fcr & FCR_DMDIS != 0, "FIFO mode (FCR.DMDIS = 1)"),
-            (s.par != SPI2_DR, "a peripheral address other than SPI2's DR"),
+            (route.is_some_and(|r| s.par != r.4), "a peripheral address other than the request's data register"),
             (s.ndtr == 0, "NDTR = 0"),
         ];
         if let Some((_, what)) = unsupported.iter().find(|(bad, _)| *bad) {
@@ -299,8 +381,9 @@ impl super::Peripheral for Dma {
         Dma::irq_line(self, stream)
     }
 
+    /// Back to reset, still the same controller (DMA1 and DMA2 have their own reset bits).
     fn reset(&mut self) {
-        *self = Dma::new();
+        *self = Dma::of(self.controller);
     }
 }
 
@@ -389,7 +472,7 @@ mod tests {
             (S3, CR_EN | (1 << 25)),    // channel 1
             (S3, CR_EN | (0b01 << 6)),  // memory to peripheral
             (S3, CR_EN | (0b01 << 11)), // half-word peripheral
-            (S3, CR_EN | CR_CIRC),      // circular
+            (S3, CR_EN | CR_DBM),       // double buffer
         ] {
             let mut d = Dma::new();
             d.write(S3 + 0x08, SPI2_DR, 0).unwrap();
@@ -402,5 +485,80 @@ mod tests {
         d.write(S3 + 0x0C, 0x0800_0000, 0).unwrap();
         d.write(S3 + 0x04, 4, 0).unwrap();
         assert!(d.write(S3, CR_EN | CR_MINC, 0).is_err(), "memory in flash");
+        // DMA2: USART1_RX is channel 4 on streams 2 and 5 only, from USART1's DR.
+        for (stream, channel, par) in [(2u32, 3u32, USART1_DR), (3, 4, USART1_DR), (5, 4, SPI2_DR)] {
+            let mut d = Dma::dma2();
+            let base = STREAM0 + stream * STREAM_STRIDE;
+            d.write(base + 0x08, par, 0).unwrap();
+            d.write(base + 0x0C, BUF, 0).unwrap();
+            d.write(base + 0x04, 4, 0).unwrap();
+            assert!(d.write(base, CR_EN | CR_MINC | (channel << 25), 0).is_err(), "stream {stream} channel {channel}");
+        }
+    }
+
+    const S5: u32 = STREAM0 + 5 * STREAM_STRIDE;
+
+    /// USART1_RX on DMA2 stream 5, channel 4, circular over `n` bytes at `BUF`.
+    fn usart1_rx_circular(d: &mut Dma, n: u32) {
+        d.write(S5 + 0x08, USART1_DR, 0).unwrap();
+        d.write(S5 + 0x0C, BUF, 0).unwrap();
+        d.write(S5 + 0x04, n, 0).unwrap();
+        d.write(S5, (4 << 25) | CR_MINC | CR_CIRC | CR_HTIE | CR_TCIE | CR_EN, 0).unwrap();
+    }
+
+    /// Circular mode (RM0368 §9.3.9): NDTR reloads and the memory address wraps to M0AR; HTIF
+    /// and TCIF on every lap; the stream stays enabled, so no byte waits for the CPU.
+    #[test]
+    fn a_circular_stream_wraps_reloads_ndtr_and_flags_every_lap() {
+        let mut d = Dma::dma2();
+        usart1_rx_circular(&mut d, 4);
+        assert_eq!(d.capacity(Request::Usart1Rx), u32::MAX);
+        for b in 0..6u8 {
+            assert!(d.serve(Request::Usart1Rx, b));
+        }
+        let writes = d.take_memory_writes();
+        assert_eq!(writes, vec![(BUF, 0), (BUF + 1, 1), (BUF + 2, 2), (BUF + 3, 3), (BUF, 4), (BUF + 1, 5)]);
+        // Stream 5's flags: HISR bit 6 upward.
+        assert_eq!(d.read(HISR, 0).unwrap() >> 6 & FLAGS, FLAG_TCIF | FLAG_HTIF);
+        assert_eq!(d.read(S5 + 0x04, 0), Ok(2), "NDTR reloaded to 4 at the wrap, then 2 more moved");
+        assert_ne!(d.read(S5, 0).unwrap() & CR_EN, 0, "still enabled");
+        assert!(d.irq_line(5));
+        d.write(HIFCR, (FLAG_TCIF | FLAG_HTIF) << 6, 0).unwrap();
+        assert!(!d.irq_line(5));
+        d.serve(Request::Usart1Rx, 6);
+        assert_eq!(d.read(HISR, 0).unwrap() >> 6 & FLAGS, 0);
+        d.serve(Request::Usart1Rx, 7);
+        assert_eq!(d.read(HISR, 0).unwrap() >> 6 & FLAGS, FLAG_TCIF, "the end of the second lap");
+    }
+
+    /// A reset through RCC (AHB1RSTR: bit 21 for DMA1, bit 22 for DMA2) takes the controller
+    /// back to its own reset state: DMA2's streams stop and it still routes USART1_RX.
+    #[test]
+    fn a_reset_stops_the_streams_and_keeps_the_controller() {
+        use crate::periph::Peripheral;
+        let mut d = Dma::dma2();
+        usart1_rx_circular(&mut d, 4);
+        Peripheral::reset(&mut d);
+        assert_eq!(d.read(S5, 0), Ok(0), "stream 5 disabled");
+        assert_eq!(d.capacity(Request::Usart1Rx), 0);
+        // DMA1 has no USART1_RX route: enabling this stream would be refused.
+        usart1_rx_circular(&mut d, 4);
+        assert_eq!(d.capacity(Request::Usart1Rx), u32::MAX);
+    }
+
+    /// The wrong sequence: the same ring in normal mode stops at NDTR = 0 and takes nothing
+    /// more until the CPU re-arms it.
+    #[test]
+    fn a_normal_stream_stops_at_its_end_and_takes_no_more_requests() {
+        let mut d = Dma::dma2();
+        d.write(S5 + 0x08, USART1_DR, 0).unwrap();
+        d.write(S5 + 0x0C, BUF, 0).unwrap();
+        d.write(S5 + 0x04, 2, 0).unwrap();
+        d.write(S5, (4 << 25) | CR_MINC | CR_EN, 0).unwrap();
+        assert!(d.serve(Request::Usart1Rx, 1));
+        assert!(d.serve(Request::Usart1Rx, 2));
+        assert_eq!(d.capacity(Request::Usart1Rx), 0);
+        assert!(!d.serve(Request::Usart1Rx, 3), "the third byte stays in the peripheral");
+        assert_eq!(d.take_memory_writes().len(), 2);
     }
 }

@@ -160,4 +160,7 @@ pub mod irq {
     pub const USART1: u32 = 37;
     pub const ADC: u32 = 18;
     pub const DMA1_STREAM3: u32 = 14;
+    pub const DMA2_STREAM2: u32 = 58;
+    pub const DMA2_STREAM5: u32 = 68;
+    pub const FLASH: u32 = 4;
 }

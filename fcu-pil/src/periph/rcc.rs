@@ -230,6 +230,18 @@ impl Rcc {
         self.hsi_ready_at = Some(last);
     }
 
+    /// A power-on reset: everything back to power-on, the reset flags too (the injected HSE
+    /// and PLL faults stay: they are the board's and the chip's).
+    pub fn power_on_reset(&mut self) {
+        let last = self.last;
+        let (hse_dead, pll_dead) = (self.hse_dead, self.pll_dead);
+        *self = Rcc::new();
+        self.last = last;
+        self.hse_dead = hse_dead;
+        self.pll_dead = pll_dead;
+        self.hsi_ready_at = Some(last);
+    }
+
     /// Records an independent-watchdog reset in CSR; the machine calls this before
     /// [`Rcc::system_reset`]. Sets IWDGRSTF and also PINRSTF: on the F4 every internal reset
     /// source drives the NRST pin low through the reset pulse generator (RM0368 §6.1, figure
@@ -902,6 +914,19 @@ mod tests {
         rcc.write(CR, CR_RESET | CR_HSEON, much_later).unwrap();
         assert_eq!(read(&mut rcc, CR, 2 * much_later) & CR_HSERDY, 0, "still dead after a reset");
         assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
+    }
+
+    /// The injected faults are the board's crystal and the chip's PLL: a power cut and the
+    /// power-on after it keep them.
+    #[test]
+    fn a_power_on_reset_keeps_the_injected_clock_faults() {
+        let mut rcc = Rcc::new();
+        rcc.set_hse_dead(true);
+        rcc.set_pll_dead(true);
+        rcc.power_on_reset();
+        rcc.write(CR, CR_RESET | CR_HSEON | CR_PLLON, 0).unwrap();
+        let much_later = 1000 * PLL_LOCK;
+        assert_eq!(read(&mut rcc, CR, much_later) & (CR_HSERDY | CR_PLLRDY), 0);
     }
 
     #[test]

@@ -1,16 +1,34 @@
-//! USART1 (RM0368 §19) at 0x4001_1000, transmitter only.
+//! USART1 (RM0368 §19) at 0x4001_1000: transmitter and receiver, 8N1.
 //!
-//! Modelled: SR (TXE, TC; TC and the other rc_w0 flags cleared by writing 0), DR (transmit data
-//! register TDR; reads return the receive data register, which stays 0: nothing is ever
-//! received), BRR (both oversampling modes), CR1 UE, TE, TXEIE, TCIE, OVER8, and RE (see below),
-//! CR2 STOP. Not modelled (an [`Unmodelled`] error when set): 9-bit words (M), parity (PCE, PS),
-//! send break, mute mode and wake-up, the receive interrupts (RXNEIE, IDLEIE, PEIE), LIN, the
-//! synchronous clock output, everything in CR3 (DMA, flow control, IrDA, smartcard, half-duplex,
-//! error interrupt) and GTPR.
+//! Modelled: SR (TXE, TC, RXNE, ORE, IDLE, FE; TC and RXNE cleared by writing 0), DR (TDR on
+//! write, RDR on read), BRR (both oversampling modes), CR1 UE, TE, RE, TXEIE, TCIE, RXNEIE,
+//! IDLEIE, OVER8, CR2 STOP, CR3 DMAR (receive DMA). Not modelled (an [`Unmodelled`] error when
+//! set): 9-bit words (M), parity (PCE, PS, PEIE), send break, mute mode and wake-up, LIN, the
+//! synchronous clock output, the rest of CR3 (transmit DMA, flow control, IrDA, smartcard,
+//! half-duplex, EIE) and GTPR.
 //!
-//! RE: the HAL's `Serial::tx` (stm32f4xx-hal 0.23 `serial.rs`, `Serial::_new`) always writes CR1
-//! with RE = 1, even for a transmit-only serial. The model accepts RE as a receiver whose line
-//! stays idle: no start bit ever arrives, so RXNE, ORE, FE, NF, PE and IDLE stay 0.
+//! Reception (RM0368 §19.3.3 "Receiver"): with UE and RE set, a frame on the RX line (the board
+//! decides whether PA10 carries it, see `crate::board`) lands at the end of its stop bit:
+//! - RDR empty (RXNE = 0): the byte goes to RDR and RXNE sets;
+//! - RXNE still set: the byte is lost and ORE sets ("the RDR content will not be lost … the
+//!   shift register will be overwritten"); RDR keeps the unread byte;
+//! - a frame whose baud rate is more than 3.75 % off the receiver's (RM0368 §19.3.5, 16×
+//!   oversampling, 8 bits, no fraction) sets FE with RXNE; what RDR holds then is not predicted
+//!   (the model stores 0, an assumption);
+//! - with UE or RE clear the receiver ignores the line: the byte is counted in
+//!   [`Usart::rx_ignored`].
+//!
+//! RXNE clears by a DR read or by writing 0 to it. ORE, IDLE and FE clear only by an SR read
+//! followed by a DR read (RM0368 §19.6.1): a write to SR does not touch them. IDLE sets when the
+//! line stays idle for a whole frame (10 bits at the receiver's rate) after a received byte, and
+//! not again until another byte has set RXNE. The interrupt line adds RXNEIE·(RXNE + ORE) and
+//! IDLEIE·IDLE (RM0368 §19.7, "USART interrupt requests"). With DMAR (RM0368 §19.3.13
+//! "Continuous communication using DMA") RXNE raises a DMA request; the DMA's read of DR clears
+//! RXNE.
+//!
+//! RE and the HAL: stm32f4xx-hal's `Serial::tx` (0.23 `serial.rs`, `Serial::_new`) writes CR1
+//! with RE = 1 even for a transmit-only serial, so the receiver runs and a byte arriving on PA10
+//! sets RXNE (and ORE with the next one) whether the firmware reads them or not.
 //!
 //! Transmission (RM0368 §19.3.2 "Transmitter"): setting TE (with UE) first sends an idle frame
 //! (a frame of 1s). A DR write with the shift register empty moves the byte there at once (TXE
@@ -51,6 +69,10 @@ const CR2: u32 = 0x10;
 const CR3: u32 = 0x14;
 const GTPR: u32 = 0x18;
 
+const SR_FE: u32 = 1 << 1;
+const SR_ORE: u32 = 1 << 3;
+const SR_IDLE: u32 = 1 << 4;
+const SR_RXNE: u32 = 1 << 5;
 const SR_TC: u32 = 1 << 6;
 const SR_TXE: u32 = 1 << 7;
 /// TC, RXNE, LBD, CTS: rc_w0 (PAC: ZERO_TO_MODIFY_FIELDS_BITMAP 0x0360).
@@ -58,13 +80,21 @@ const SR_RC_W0: u32 = 0x0360;
 /// PE, FE, NF, ORE, IDLE, TXE: read-only, writes ignored.
 const SR_READ_ONLY: u32 = 0x009F;
 
-const CR1_RE: u32 = 1 << 2;
-const CR1_TE: u32 = 1 << 3;
-const CR1_TCIE: u32 = 1 << 6;
-const CR1_TXEIE: u32 = 1 << 7;
-const CR1_UE: u32 = 1 << 13;
+pub const CR1_RE: u32 = 1 << 2;
+pub const CR1_TE: u32 = 1 << 3;
+pub const CR1_IDLEIE: u32 = 1 << 4;
+pub const CR1_RXNEIE: u32 = 1 << 5;
+pub const CR1_TCIE: u32 = 1 << 6;
+pub const CR1_TXEIE: u32 = 1 << 7;
+pub const CR1_UE: u32 = 1 << 13;
 const CR1_OVER8: u32 = 1 << 15;
-const CR1_MODELLED: u32 = CR1_RE | CR1_TE | CR1_TCIE | CR1_TXEIE | CR1_UE | CR1_OVER8;
+const CR1_MODELLED: u32 = CR1_RE | CR1_TE | CR1_IDLEIE | CR1_RXNEIE | CR1_TCIE | CR1_TXEIE | CR1_UE | CR1_OVER8;
+/// CR3.DMAR: DMA enable receiver.
+pub const CR3_DMAR: u32 = 1 << 6;
+
+/// How far a received frame's baud rate may be off the receiver's (RM0368 §19.3.5, 8-bit
+/// frames, 16× oversampling, DIV_Fraction = 0, noise counted as an error).
+pub const RX_BAUD_TOLERANCE: f64 = 0.0375;
 
 const CR2_STOP: u32 = 0b11 << 12;
 
@@ -120,6 +150,26 @@ pub struct Usart {
     sr_read: bool,
     output: Vec<SentFrame>,
     lost_bytes: u32,
+    cr3: u32,
+    rx: Receiver,
+}
+
+/// The receiver's state.
+#[derive(Clone, Debug, Default)]
+struct Receiver {
+    rdr: u8,
+    rxne: bool,
+    ore: bool,
+    idle: bool,
+    fe: bool,
+    /// When IDLE sets if no start bit comes first (armed by a received byte).
+    idle_at: Option<Time>,
+    /// SR was read while ORE, IDLE or FE was set: the next DR read clears them.
+    clear_armed: bool,
+    /// Bytes the receiver took (RDR or lost to ORE), lost to ORE, and ignored (UE/RE off).
+    received: u32,
+    overrun_lost: u32,
+    ignored: u32,
 }
 
 impl Default for Usart {
@@ -131,7 +181,19 @@ impl Default for Usart {
 impl Usart {
     /// Reset state: SR = 0x00C0 (TXE, TC), all other registers 0.
     pub fn new() -> Self {
-        Usart { tc: true, cr1: 0, cr2: 0, brr: 0, tdr: None, shift: None, sr_read: false, output: Vec::new(), lost_bytes: 0 }
+        Usart {
+            tc: true,
+            cr1: 0,
+            cr2: 0,
+            brr: 0,
+            tdr: None,
+            shift: None,
+            sr_read: false,
+            output: Vec::new(),
+            lost_bytes: 0,
+            cr3: 0,
+            rx: Receiver::default(),
+        }
     }
 
     /// Registers back to reset (RCC USART1RST or a system reset); bytes already finished and not
@@ -162,20 +224,84 @@ impl Usart {
         }
     }
 
-    /// The USART1 interrupt line: TXE·TXEIE + TC·TCIE (the receive sources are not modelled).
+    /// The USART1 interrupt line: TXE·TXEIE + TC·TCIE + (RXNE + ORE)·RXNEIE + IDLE·IDLEIE.
     pub fn irq_line(&self) -> bool {
-        (self.tdr.is_none() && self.cr1 & CR1_TXEIE != 0) || (self.tc && self.cr1 & CR1_TCIE != 0)
+        (self.tdr.is_none() && self.cr1 & CR1_TXEIE != 0)
+            || (self.tc && self.cr1 & CR1_TCIE != 0)
+            || ((self.rx.rxne || self.rx.ore) && self.cr1 & CR1_RXNEIE != 0)
+            || (self.rx.idle && self.cr1 & CR1_IDLEIE != 0)
     }
 
-    /// End of the frame in the shift register (TXE and TC may change then).
+    /// End of the frame in the shift register (TXE and TC may change then), or the instant the
+    /// receiver flags an idle line.
     pub fn next_event(&self) -> Option<Time> {
-        self.shift.map(|f| f.end)
+        [self.shift.map(|f| f.end), self.rx.idle_at].into_iter().flatten().min()
     }
 
     /// Finishes the frames that end by `now` (frame lengths were fixed when their bytes were
-    /// written, so `clocks` is not used).
+    /// written, so `clocks` is not used) and flags an idle line.
     pub fn advance(&mut self, now: Time, _clocks: Clocks) {
         self.complete(now);
+        self.detect_idle(now);
+    }
+
+    fn detect_idle(&mut self, now: Time) {
+        if self.rx.idle_at.is_some_and(|t| t <= now) {
+            self.rx.idle_at = None;
+            self.rx.idle = true;
+        }
+    }
+
+    fn receiver_enabled(&self) -> bool {
+        self.cr1 & (CR1_UE | CR1_RE) == CR1_UE | CR1_RE
+    }
+
+    /// A frame on the RX line whose stop bit ended at `end`, sent at one bit per `line_bit`
+    /// time units. Returns whether the receiver took it (it may still be lost to ORE).
+    pub fn receive(&mut self, byte: u8, end: Time, line_bit: Time, clocks: Clocks) -> bool {
+        self.detect_idle(end);
+        if !self.receiver_enabled() {
+            self.rx.ignored = self.rx.ignored.saturating_add(1);
+            return false;
+        }
+        let own_bit = match (self.bit_cycles(), units_per_cycle(clocks.pclk2_hz)) {
+            (Ok(cycles), Some(units)) => cycles * units,
+            // No valid baud rate: the receiver samples nothing meaningful.
+            _ => 0,
+        };
+        let in_tolerance = own_bit > 0 && (line_bit as f64 / own_bit as f64 - 1.0).abs() <= RX_BAUD_TOLERANCE;
+        self.rx.received = self.rx.received.saturating_add(1);
+        if self.rx.rxne {
+            self.rx.ore = true;
+            self.rx.overrun_lost = self.rx.overrun_lost.saturating_add(1);
+        } else {
+            self.rx.rxne = true;
+            if in_tolerance {
+                self.rx.rdr = byte;
+            } else {
+                self.rx.rdr = 0;
+                self.rx.fe = true;
+            }
+        }
+        // The line must stay idle a whole frame at the receiver's own rate.
+        self.rx.idle_at = (own_bit > 0).then(|| end + 10 * own_bit);
+        true
+    }
+
+    /// Bytes the receiver took, of them lost to an overrun, and bytes it ignored (UE or RE off).
+    pub fn rx_counts(&self) -> (u32, u32, u32) {
+        (self.rx.received, self.rx.overrun_lost, self.rx.ignored)
+    }
+
+    /// The receiver's DMA request: DMAR with RXNE.
+    pub fn rx_dma_request(&self) -> bool {
+        self.cr3 & CR3_DMAR != 0 && self.rx.rxne
+    }
+
+    /// The DMA's read of DR: RDR, RXNE cleared.
+    pub fn dma_read(&mut self) -> u8 {
+        self.rx.rxne = false;
+        self.rx.rdr
     }
 
     fn complete(&mut self, now: Time) {
@@ -198,7 +324,11 @@ impl Usart {
     }
 
     fn sr(&self) -> u32 {
-        let mut sr = 0;
+        let r = &self.rx;
+        let mut sr =
+            [(r.fe, SR_FE), (r.ore, SR_ORE), (r.idle, SR_IDLE), (r.rxne, SR_RXNE)]
+                .into_iter()
+                .fold(0, |acc, (set, bit)| if set { acc | bit } else { acc });
         if self.tdr.is_none() {
             sr |= SR_TXE;
         }
@@ -252,17 +382,28 @@ impl Usart {
     /// [`Usart::write`].
     pub fn read(&mut self, offset: u32, now: Time, _clocks: Clocks) -> Result<u32, Unmodelled> {
         self.complete(now);
+        self.detect_idle(now);
         Ok(match offset {
             SR => {
                 self.sr_read = true;
+                self.rx.clear_armed = self.rx.ore || self.rx.idle || self.rx.fe;
                 self.sr()
             }
-            // The receive data register: nothing is ever received, it keeps its reset value.
-            DR => 0,
+            DR => {
+                // RM0368 §19.6.1: ORE, IDLE and FE clear by "a read to the USART_SR register
+                // followed by a read to the USART_DR register".
+                if std::mem::take(&mut self.rx.clear_armed) {
+                    self.rx.ore = false;
+                    self.rx.idle = false;
+                    self.rx.fe = false;
+                }
+                self.rx.rxne = false;
+                u32::from(self.rx.rdr)
+            }
             BRR => self.brr,
             CR1 => self.cr1,
             CR2 => self.cr2,
-            CR3 => 0,
+            CR3 => self.cr3,
             GTPR => 0,
             _ => return Err(Unmodelled::offset(NAME, offset, false)),
         })
@@ -271,11 +412,15 @@ impl Usart {
     /// `clocks` gives PCLK2 for the length of a frame started or queued by this write.
     pub fn write(&mut self, offset: u32, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
         self.complete(now);
+        self.detect_idle(now);
         match offset {
             SR => {
                 Unmodelled::check_bits("USART1.SR", value, SR_RC_W0 | SR_READ_ONLY)?;
                 if value & SR_TC == 0 {
                     self.tc = false;
+                }
+                if value & SR_RXNE == 0 {
+                    self.rx.rxne = false;
                 }
             }
             DR => {
@@ -344,7 +489,10 @@ impl Usart {
                 Unmodelled::check_bits("USART1.CR2", value, CR2_STOP)?;
                 self.cr2 = value;
             }
-            CR3 => Unmodelled::check_bits("USART1.CR3", value, 0)?,
+            CR3 => {
+                Unmodelled::check_bits("USART1.CR3", value, CR3_DMAR)?;
+                self.cr3 = value;
+            }
             GTPR => Unmodelled::check_bits("USART1.GTPR", value, 0)?,
             _ => return Err(Unmodelled::offset(NAME, offset, true)),
         }
@@ -578,8 +726,7 @@ mod tests {
             (CR1, 1 << 12),
             (CR1, 1 << 10),
             (CR1, 1 << 9),
-            (CR1, 1 << 5),
-            (CR1, 1 << 4),
+            (CR1, 1 << 8), // PEIE
             (CR1, 1),
             (CR2, 1 << 14),
             (CR2, 1 << 11),
@@ -613,5 +760,118 @@ mod tests {
         assert_eq!(u.read(SR, 2 * FRAME, clocks()), Ok(0xC0));
         assert_eq!(u.lost_bytes(), 1);
         assert_eq!(sent(&mut u), vec![(2 * FRAME, 2)]);
+    }
+
+    /// UE | RE with BRR for 115 200 baud: the receiver as the HAL leaves it.
+    fn receiver() -> Usart {
+        let mut u = Usart::new();
+        write(&mut u, BRR, BRR_115200, 0);
+        write(&mut u, CR1, CR1_UE | CR1_RE, 0);
+        u
+    }
+
+    fn sr(u: &mut Usart, now: Time) -> u32 {
+        u.read(SR, now, clocks()).unwrap()
+    }
+
+    fn dr(u: &mut Usart, now: Time) -> u32 {
+        u.read(DR, now, clocks()).unwrap()
+    }
+
+    #[test]
+    fn a_received_byte_sets_rxne_and_a_dr_read_takes_it() {
+        let mut u = receiver();
+        assert!(u.receive(0x5A, FRAME, BIT, clocks()));
+        assert_eq!(sr(&mut u, FRAME) & (SR_RXNE | SR_ORE), SR_RXNE);
+        assert_eq!(dr(&mut u, FRAME), 0x5A);
+        assert_eq!(sr(&mut u, FRAME) & SR_RXNE, 0);
+    }
+
+    /// Rule (RM0368 §19.3.3): a byte that ends while RXNE is still set is lost and sets ORE;
+    /// RDR keeps the unread byte.
+    #[test]
+    fn a_byte_arriving_while_rxne_is_set_is_lost_and_sets_ore() {
+        let mut u = receiver();
+        u.receive(1, FRAME, BIT, clocks());
+        u.receive(2, 2 * FRAME, BIT, clocks());
+        assert_eq!(sr(&mut u, 2 * FRAME) & (SR_RXNE | SR_ORE), SR_RXNE | SR_ORE);
+        assert_eq!(dr(&mut u, 2 * FRAME), 1, "the first byte survives, the second is gone");
+        assert_eq!(u.rx_counts(), (2, 1, 0));
+    }
+
+    /// Rule (RM0368 §19.6.1): ORE clears by an SR read followed by a DR read. A DR read alone, or
+    /// writing 0 to SR, leaves it set (and the receive interrupt with RXNEIE keeps firing).
+    #[test]
+    fn ore_survives_a_dr_read_without_an_sr_read_and_an_sr_write() {
+        let mut u = receiver();
+        write(&mut u, CR1, CR1_UE | CR1_RE | CR1_RXNEIE, 0);
+        u.receive(1, FRAME, BIT, clocks());
+        u.receive(2, 2 * FRAME, BIT, clocks());
+        write(&mut u, SR, 0, 2 * FRAME);
+        dr(&mut u, 2 * FRAME);
+        assert_ne!(sr(&mut u, 2 * FRAME) & SR_ORE, 0, "a DR read without an SR read first leaves ORE");
+        assert!(u.irq_line(), "ORE with RXNEIE holds the interrupt line up");
+        dr(&mut u, 2 * FRAME);
+        assert_eq!(sr(&mut u, 2 * FRAME) & SR_ORE, 0, "SR read, then DR read: cleared");
+        assert!(!u.irq_line());
+    }
+
+    /// IDLE sets a whole frame after the last byte, and not again until RXNE has set again.
+    #[test]
+    fn idle_sets_a_frame_after_the_last_byte_and_only_once() {
+        let mut u = receiver();
+        write(&mut u, CR1, CR1_UE | CR1_RE | CR1_IDLEIE, 0);
+        u.receive(7, FRAME, BIT, clocks());
+        assert_eq!(u.next_event(), Some(2 * FRAME));
+        u.advance(2 * FRAME - 1, clocks());
+        assert_eq!(sr(&mut u, 2 * FRAME - 1) & SR_IDLE, 0);
+        u.advance(2 * FRAME, clocks());
+        assert!(u.irq_line());
+        assert_ne!(sr(&mut u, 2 * FRAME) & SR_IDLE, 0);
+        dr(&mut u, 2 * FRAME);
+        assert_eq!(sr(&mut u, 2 * FRAME) & SR_IDLE, 0);
+        u.advance(10 * FRAME, clocks());
+        assert_eq!(sr(&mut u, 10 * FRAME) & SR_IDLE, 0, "no byte since: no second IDLE");
+        assert_eq!(u.next_event(), None);
+    }
+
+    /// The wrong sequence: RE (or UE) left off, the receiver ignores the line.
+    #[test]
+    fn with_re_off_a_byte_on_the_line_is_not_received() {
+        let mut u = Usart::new();
+        write(&mut u, BRR, BRR_115200, 0);
+        write(&mut u, CR1, CR1_UE | CR1_TE, 0);
+        assert!(!u.receive(9, FRAME, BIT, clocks()));
+        assert_eq!(sr(&mut u, FRAME) & SR_RXNE, 0);
+        assert_eq!(u.rx_counts(), (0, 0, 1));
+    }
+
+    /// A receiver set for another baud rate (BRR for 16 MHz, the clock not yet raised) takes a
+    /// 115 200 baud byte as a framing error.
+    #[test]
+    fn a_byte_at_another_baud_rate_is_a_framing_error() {
+        let mut u = Usart::new();
+        write(&mut u, BRR, 139, 0); // 115 200 baud from 16 MHz, run at 84 MHz
+        write(&mut u, CR1, CR1_UE | CR1_RE, 0);
+        u.receive(0x41, FRAME, BIT, clocks());
+        let s = sr(&mut u, FRAME);
+        assert_eq!(s & (SR_RXNE | SR_FE), SR_RXNE | SR_FE);
+        assert_ne!(dr(&mut u, FRAME), 0x41);
+        assert_eq!(sr(&mut u, FRAME) & SR_FE, 0);
+    }
+
+    /// With DMAR, RXNE is a DMA request; the DMA's DR read clears it, so no overrun follows.
+    #[test]
+    fn dmar_makes_rxne_a_dma_request_that_the_dma_read_clears() {
+        let mut u = receiver();
+        write(&mut u, CR3, CR3_DMAR, 0);
+        for (i, b) in [3u8, 4, 5].into_iter().enumerate() {
+            u.receive(b, (i as Time + 1) * FRAME, BIT, clocks());
+            assert!(u.rx_dma_request());
+            assert_eq!(u.dma_read(), b);
+            assert!(!u.rx_dma_request());
+        }
+        assert_eq!(sr(&mut u, 3 * FRAME) & SR_ORE, 0);
+        assert!(u.write(CR3, 1 << 7, 0, clocks()).is_err(), "DMAT is not modelled");
     }
 }

@@ -1,0 +1,286 @@
+//! `cargo pil serve`: the emulated board at real time on the bench, its USART1 bridged to one TCP
+//! client, so a ground station (MAVProxy, QGroundControl, pymavlink) talks to the release image
+//! as to a board on a USB-UART adapter.
+//!
+//! The board boots as in a flight (the drone level and still; boot runs as fast as the emulator
+//! goes), then flies the scenario's sticks (or sticks centred, throttle low: the drone sits on
+//! the bench) paced to the host's clock. Each control period: the client's bytes go onto PA10 at
+//! 115 200 baud ([`Board::push_uart_rx`], so a client that sends faster is held to the line's
+//! rate, as a USB-UART adapter's buffer holds it), and every byte USART1 put on PA9 goes to the
+//! client. Bytes sent while no client is connected are dropped, as with no cable. One client at
+//! a time; a new one is accepted when the last has gone.
+//!
+//! A reboot of the board (the firmware's reset request, the watchdog) keeps the flash contents
+//! (see `Board::system_reset`). With `--flash FILE` the flash starts from the file (256 KiB, a
+//! raw image of 0x0800_0000 on; the sectors the ELF programs are the ELF's) and the file is
+//! rewritten whenever a program or erase has changed the memory, and at the end.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use fcu_core::imu::RawImu;
+use fcu_testkit::sim::radio_model::TimedEdge;
+use fcu_testkit::sim::scenario::{self, StickRow, Timeline};
+use fcu_testkit::sim::{ComputerView, FlightComputer, RunOptions, SimError};
+
+use crate::board::Board;
+use crate::elf::Image;
+use crate::periph::flash::ArmedCut;
+use crate::rig::{self, BoardSetup, EmulatedBoard};
+
+/// What to serve.
+#[derive(Clone, Debug, Default)]
+pub struct ServeOptions {
+    pub elf: PathBuf,
+    /// A scenario's sticks; `None`: centred, throttle low.
+    pub scenario: Option<String>,
+    /// The flash's contents, loaded at power-on and saved as they change.
+    pub flash: Option<PathBuf>,
+    /// Emulated seconds to run after boot.
+    pub duration_s: f64,
+    pub setup: BoardSetup,
+    /// A power cut armed at a fraction of a flash operation to come ([`parse_power_cut`]).
+    pub power_cut: Option<ArmedCut>,
+}
+
+/// Parses `erase:3/8`, `program:0.5`, `erase:1/8@2` (the second erase from boot on): the kind
+/// of flash operation, the fraction of it at which the power fails, and which one.
+pub fn parse_power_cut(text: &str) -> Result<ArmedCut, String> {
+    let bad = || format!("--power-cut {text}: expected erase|program:FRACTION[@N], e.g. erase:3/8 or program:0.5@2");
+    let (kind, rest) = text.split_once(':').ok_or_else(bad)?;
+    let erase = match kind {
+        "erase" => true,
+        "program" => false,
+        _ => return Err(bad()),
+    };
+    let (fraction, nth) = match rest.split_once('@') {
+        Some((f, n)) => (f, n.parse::<u32>().map_err(|_| bad())?),
+        None => (rest, 1),
+    };
+    let fraction = match fraction.split_once('/') {
+        Some((a, b)) => {
+            let (a, b) = (a.parse::<f64>().map_err(|_| bad())?, b.parse::<f64>().map_err(|_| bad())?);
+            if b == 0.0 {
+                return Err(bad());
+            }
+            a / b
+        }
+        None => fraction.parse::<f64>().map_err(|_| bad())?,
+    };
+    if !(0.0..=1.0).contains(&fraction) || nth == 0 {
+        return Err(bad());
+    }
+    Ok(ArmedCut { erase, nth, fraction })
+}
+
+/// What a session moved, for the operator and the tests.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ServeReport {
+    /// Bytes from the client put on PA10, and bytes of USART1's sent to the client.
+    pub bytes_in: u64,
+    pub bytes_out: u64,
+    /// USART1's receiver: bytes it took, of them lost to an overrun, and bytes it ignored.
+    pub rx_received: u32,
+    pub rx_overrun: u32,
+    pub rx_ignored: u32,
+    /// Bytes on PA10 the receiver never saw (pin not on AF7, clock off).
+    pub rx_lost_on_pin: usize,
+    /// Board resets (watchdog, software, power cut) during the session, and of them power cuts.
+    pub resets: usize,
+    pub power_cuts: usize,
+    pub clients: u32,
+}
+
+impl std::fmt::Display for ServeReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "link: {} client(s), {} bytes in, {} bytes out", self.clients, self.bytes_in, self.bytes_out)?;
+        writeln!(
+            f,
+            "USART1 RX: {} bytes received, {} lost to overrun, {} ignored (receiver off), {} not on PA10",
+            self.rx_received, self.rx_overrun, self.rx_ignored, self.rx_lost_on_pin
+        )?;
+        writeln!(f, "board resets: {} ({} power cuts)", self.resets, self.power_cuts)
+    }
+}
+
+/// The emulated board between the simulation and the TCP client, paced to the host's clock.
+struct Bridge<'a> {
+    board: &'a mut EmulatedBoard,
+    listener: TcpListener,
+    client: Option<TcpStream>,
+    uart_sent: usize,
+    started: Option<Instant>,
+    flash: Option<PathBuf>,
+    flash_saved: u64,
+    report: ServeReport,
+}
+
+impl Bridge<'_> {
+    fn accept(&mut self) {
+        if self.client.is_some() {
+            return;
+        }
+        if let Ok((stream, _)) = self.listener.accept() {
+            if stream.set_nonblocking(true).is_ok() {
+                let _ = stream.set_nodelay(true);
+                self.client = Some(stream);
+                self.report.clients += 1;
+            }
+        }
+    }
+
+    /// The client's bytes onto PA10, from now on at the line's rate.
+    fn pump_in(&mut self) {
+        let Some(client) = self.client.as_mut() else { return };
+        let mut buf = [0u8; 4096];
+        match client.read(&mut buf) {
+            Ok(0) => self.client = None,
+            Ok(n) => {
+                let now = self.board.machine.now();
+                self.board.machine.board_mut().push_uart_rx(&buf[..n], now);
+                self.report.bytes_in += n as u64;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+            Err(_) => self.client = None,
+        }
+    }
+
+    /// What USART1 put on PA9 since the last call, to the client.
+    fn pump_out(&mut self) {
+        let uart = &self.board.machine.board().records.uart;
+        let new: Vec<u8> = uart.get(self.uart_sent..).unwrap_or_default().iter().map(|&(_, b)| b).collect();
+        self.uart_sent = uart.len();
+        if new.is_empty() {
+            return;
+        }
+        if let Some(client) = self.client.as_mut() {
+            // A non-blocking socket may take part of it; the rest waits a millisecond at a time
+            // (a client that stops reading stalls the bench, as a full adapter would).
+            let mut rest = new.as_slice();
+            while !rest.is_empty() {
+                match client.write(rest) {
+                    Ok(0) => break,
+                    Ok(n) => {
+                        self.report.bytes_out += n as u64;
+                        rest = &rest[n..];
+                    }
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(1)),
+                    Err(_) => {
+                        self.client = None;
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    fn save_flash(&mut self, force: bool) -> Result<(), SimError> {
+        let Some(path) = self.flash.as_ref() else { return Ok(()) };
+        let flash = &self.board.machine.board().flash;
+        if !force && (flash.generation() == self.flash_saved || flash.busy_until().is_some()) {
+            return Ok(());
+        }
+        self.flash_saved = flash.generation();
+        std::fs::write(path, flash.memory()).map_err(|e| SimError::Computer(format!("--flash {}: {e}", path.display())))
+    }
+
+    fn pace(&mut self, t_end_s: f64) {
+        let started = *self.started.get_or_insert_with(Instant::now);
+        let ahead = t_end_s - started.elapsed().as_secs_f64();
+        if ahead > 0.002 {
+            std::thread::sleep(Duration::from_secs_f64(ahead));
+        }
+    }
+}
+
+impl FlightComputer for Bridge<'_> {
+    fn tick_hz(&self) -> f64 {
+        self.board.tick_hz()
+    }
+
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        self.pace(t_end_s);
+        self.accept();
+        self.pump_in();
+        let compares = self.board.step(t_end_s, edges, imu, battery_v)?;
+        self.pump_out();
+        self.save_flash(false)?;
+        Ok(compares)
+    }
+
+    fn view(&self) -> ComputerView {
+        self.board.view()
+    }
+}
+
+/// Parses `tcp:HOST:PORT` into a listener.
+pub fn listen(link: &str) -> Result<TcpListener, String> {
+    let addr = link.strip_prefix("tcp:").ok_or_else(|| format!("--link {link}: expected tcp:HOST:PORT"))?;
+    TcpListener::bind(addr).map_err(|e| format!("--link {link}: {e}"))
+}
+
+/// Serves the board on `listener` until `duration_s` of emulated time after boot.
+pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeReport, String> {
+    listener.set_nonblocking(true).map_err(|e| format!("listener: {e}"))?;
+    let duration_s = opts.duration_s.max(0.0);
+    let sc = match &opts.scenario {
+        Some(name) => fcu_testkit::cli::fly::prepare_scenario(name, None, Some(duration_s)).map_err(|e| e.0)?,
+        None => scenario::from_timeline("bench", Timeline { rows: vec![StickRow::idle(0.0)] }, duration_s),
+    };
+    let mut setup = opts.setup.clone();
+    if let Some(path) = &opts.flash {
+        if path.exists() {
+            setup.flash_contents = Some(std::fs::read(path).map_err(|e| format!("--flash {}: {e}", path.display()))?);
+        }
+    }
+    let image = Image::load(&opts.elf)?;
+    let mut board = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).map_err(|e| format!("boot: {e}"))?;
+    if !board.flying() {
+        return Err(format!("{} (within the boot timeout)", board.boot_stall()));
+    }
+    board.faults_expected = true;
+    board.raw_uart = true;
+    if let Some(cut) = opts.power_cut {
+        board.machine.board_mut().flash.arm_power_cut(cut);
+    }
+    let mut bridge = Bridge {
+        board: &mut board,
+        listener,
+        client: None,
+        uart_sent: 0,
+        started: None,
+        flash: opts.flash.clone(),
+        flash_saved: u64::MAX,
+        report: ServeReport::default(),
+    };
+    let run = RunOptions { seed: 1, duration_s: Some(duration_s), ..Default::default() };
+    let flown = fcu_testkit::sim::run_with(&mut bridge, &sc, fcu_testkit::Profile::Default, &run).map(|_| ());
+    bridge.save_flash(true).map_err(|e| e.to_string())?;
+    let mut report = std::mem::take(&mut bridge.report);
+    flown.map_err(|e| e.to_string())?;
+    let b: &Board = board.machine.board();
+    (report.rx_received, report.rx_overrun, report.rx_ignored) = b.usart1.rx_counts();
+    report.rx_lost_on_pin = b.records.uart_rx_lost.len();
+    report.resets = board.machine.state().resets.len();
+    report.power_cuts = board.machine.state().resets.iter().filter(|r| r.1 == "power cut").count();
+    if let Some(f) = board.fault_report() {
+        eprintln!("fcu-pil serve: {f}");
+    }
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_cuts_parse_with_a_kind_a_fraction_and_an_index() {
+        assert_eq!(parse_power_cut("erase:3/8"), Ok(ArmedCut { erase: true, nth: 1, fraction: 0.375 }));
+        assert_eq!(parse_power_cut("program:0.5@2"), Ok(ArmedCut { erase: false, nth: 2, fraction: 0.5 }));
+        for bad in ["erase", "write:1/2", "erase:9/8", "erase:1/0", "program:0.5@0", "erase:x"] {
+            assert!(parse_power_cut(bad).is_err(), "{bad}");
+        }
+    }
+}
