@@ -16,12 +16,20 @@
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
+//! | ground_link  | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
+//! |              |                         |      | parameter changes → the control loop, saves  |
+//! |              |                         |      | to flash, frames → the UART queue (200 Hz)   |
 #![no_std]
 #![no_main]
 
 mod cycles;
+mod ground;
+#[cfg(feature = "mavlink")]
+mod param_flash;
 mod sensor_bus;
 mod timers;
+#[cfg(feature = "mavlink")]
+mod uart_rx;
 mod watchdog;
 
 use defmt_rtt as _;
@@ -106,16 +114,25 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
+    #[cfg(feature = "mavlink")]
+    use crate::param_flash::ParamFlash;
     use crate::sensor_bus::{BusError, SensorBus, BURST_BYTES};
     use crate::timers::{Motors, RcCapture, TickTimer};
+    #[cfg(feature = "mavlink")]
+    use crate::uart_rx::UartRx;
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
+    #[cfg(feature = "mavlink")]
+    use fcu_core::config::LinkProtocol;
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
+    #[cfg(feature = "mavlink")]
+    use fcu_core::parameters::snapshot;
     use fcu_core::rc::CaptureEdge;
     use fcu_core::rc::EdgeDecoder;
     use fcu_core::telemetry::{self as tlm, LedPattern, LineBuf, Reporter, StatusFields};
+    use fcu_core::Config;
     use heapless::spsc::{Consumer, Producer, Queue};
     use heapless::Deque;
     use rtic_monotonics::systick::prelude::*;
@@ -148,11 +165,14 @@ mod app {
     /// What the control task hands to telemetry.
     #[derive(Clone, Copy)]
     pub struct Snapshot {
-        status: Status,
+        pub(crate) status: Status,
         outer_overruns: u32,
         bus_errors: u32,
         /// Control ticks completed since boot.
         tick: u32,
+        /// Each radio input's latest pulse width, capture counts (0: none yet).
+        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
+        pub(crate) rc_widths_counts: [u16; 4],
     }
 
     /// The debug UART's transmit side and the bytes waiting for it.
@@ -164,7 +184,19 @@ mod app {
     }
 
     impl UartOut {
-        fn send(&mut self, bytes: &[u8]) {
+        /// Bytes the queue can still take.
+        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
+        pub(crate) fn room(&self) -> usize {
+            UART_QUEUE_BYTES.saturating_sub(self.queue.len())
+        }
+
+        /// Nothing waits in the queue.
+        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
+        pub(crate) fn is_idle(&self) -> bool {
+            self.queue.is_empty()
+        }
+
+        pub(crate) fn send(&mut self, bytes: &[u8]) {
             for &b in bytes {
                 if self.queue.push_back(b).is_err() {
                     self.dropped_bytes = self.dropped_bytes.saturating_add(1);
@@ -220,6 +252,16 @@ mod app {
         radio_mutes: u32,
         /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
         bus: SensorBus,
+        /// The latest status for the ground link (MAVLink), from `report`.
+        latest: Option<Snapshot>,
+        /// A configuration the ground link changed, for each half of the control loop.
+        tick_config: Option<Config>,
+        outer_config: Option<Config>,
+        /// Fed by the control tick; stretched by the ground link around a flash erase.
+        watchdog: Option<Watchdog>,
+        /// The UART speaks MAVLink: from boot (the link's protocol parameter), or from the first
+        /// valid MAVLink frame a ground station sent to a board set to text lines.
+        mavlink_on: bool,
     }
 
     #[local]
@@ -233,11 +275,12 @@ mod app {
         inner: ControlTick,
         outer: OuterStep,
         motors: Motors,
-        watchdog: Option<Watchdog>,
         leds: Leds,
         adc: Adc<ADC1>,
         battery_pin: PB1<Analog>,
         reporter: Reporter,
+        /// The ground link's own state (`crate::ground`).
+        ground: crate::ground::GroundLink,
     }
 
     /// Edges the capture may queue between two control ticks: its budget allows 4 × 16 per
@@ -280,7 +323,19 @@ mod app {
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
 
-        let cfg = crate::flight_config();
+        // The parameters saved in flash over the build's defaults, or the defaults alone (said on
+        // the link once it runs): never a mix.
+        let defaults = crate::flight_config();
+        #[cfg(feature = "mavlink")]
+        let param_flash = ParamFlash::new(dp.FLASH);
+        #[cfg(feature = "mavlink")]
+        let (cfg, params_source) = match (param_flash.sector(0), param_flash.sector(1)) {
+            (Some(a), Some(b)) => snapshot::load_config([a, b], &defaults),
+            _ => (defaults, snapshot::Source::NoSnapshot),
+        };
+        // Without the ground link nothing can change or save a parameter: the build's defaults.
+        #[cfg(not(feature = "mavlink"))]
+        let cfg = defaults;
 
         // Motors first: PB6..PB9 driven by TIM4 at compare 0 (off) from the very start.
         let _motor_pins = (
@@ -294,9 +349,19 @@ mod app {
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
 
-        let tx = serial::Serial::tx(dp.USART1, gpioa.pa9, serial::Config::default().baudrate(UART_BAUD.bps()), &mut rcc)
+        let serial = serial::Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), serial::Config::default().baudrate(UART_BAUD.bps()), &mut rcc)
             .unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
+        let (tx, _rx) = serial.split();
         let mut uart = UartOut { tx, queue: Deque::new(), dropped_bytes: 0 };
+        #[cfg(feature = "mavlink")]
+        {
+            use stm32f4xx_hal::rcc::Enable;
+            stm32f4xx_hal::pac::DMA2::enable(&mut rcc);
+        }
+        // SAFETY: USART1 belongs to the serial driver split above; the receiver's DMA request
+        // (CR3.DMAR) is a bit that driver never touches, set once here before any task runs.
+        #[cfg(feature = "mavlink")]
+        let uart_rx = UartRx::start(dp.DMA2, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() });
         uart.send(tlm::BOOT_BANNER.as_bytes());
         if cfg.mixer.off_compare() != crate::MOTORS_OFF_COMPARE {
             halt(&mut leds, Some(&mut uart.tx), "the build's motor-off compare disagrees with its flight configuration");
@@ -350,6 +415,10 @@ mod app {
         // Armed only once the sensors answered: from here a control tick that does not
         // complete within the timeout resets the board (motors off at reset).
         let watchdog = if boot.may_fly() { Watchdog::start(dp.IWDG, &dp.DBGMCU).ok() } else { None };
+        #[cfg(feature = "mavlink")]
+        let mavlink_on = cfg.link.protocol == LinkProtocol::Mavlink;
+        #[cfg(not(feature = "mavlink"))]
+        let mavlink_on = false;
         boot = boot.with_watchdog(watchdog.is_some());
         if boot.may_fly() {
             tick_timer.start();
@@ -366,9 +435,30 @@ mod app {
         if housekeeping::spawn().is_err() {
             defmt::error!("housekeeping already running");
         }
+        #[cfg(feature = "mavlink")]
+        if ground_link::spawn(boot).is_err() {
+            defmt::error!("ground link already running");
+        }
+        #[cfg(feature = "mavlink")]
+        let ground = crate::ground::GroundLink::new(cfg, defaults, uart_rx, param_flash, params_source);
+        #[cfg(not(feature = "mavlink"))]
+        let ground = crate::ground::GroundLink;
 
         (
-            Shared { outer_result: None, outer_job: None, uart, led_pattern, battery_mv: 0, radio_mutes: 0, bus },
+            Shared {
+                outer_result: None,
+                outer_job: None,
+                uart,
+                led_pattern,
+                battery_mv: 0,
+                radio_mutes: 0,
+                bus,
+                latest: None,
+                tick_config: None,
+                outer_config: None,
+                watchdog,
+                mavlink_on,
+            },
             Local {
                 capture,
                 edges_out,
@@ -378,11 +468,11 @@ mod app {
                 inner,
                 outer,
                 motors,
-                watchdog,
                 leds,
                 adc,
                 battery_pin,
                 reporter: Reporter::firmware(),
+                ground,
             },
         )
     }
@@ -548,8 +638,8 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [outer_result, outer_job, bus],
-        local = [tick_timer, edges_in, decoder, inner, motors, watchdog, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0]
+        shared = [outer_result, outer_job, bus, tick_config, watchdog],
+        local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
     )]
     fn control(mut cx: control::Context) {
         let events = cx.local.tick_timer.take_events();
@@ -563,6 +653,11 @@ mod app {
             if let Some(result) = cx.shared.outer_result.lock(Option::take) {
                 inner.apply_outer(&result);
             }
+            // A parameter change the ground link accepted (the core checked it against the
+            // armed state); taken between ticks, every stage keeping its state.
+            if let Some(cfg) = cx.shared.tick_config.lock(Option::take) {
+                let _refused = inner.take_config(&cfg);
+            }
             while let Some(edge) = cx.local.edges_in.dequeue() {
                 decoder.on_edge(edge);
             }
@@ -575,6 +670,11 @@ mod app {
             decoder.on_edge(edge);
         }
         let pulses = decoder.take();
+        for (width, latest) in pulses.width_counts.iter().zip(cx.local.rc_widths_counts.iter_mut()) {
+            if let Some(w) = width {
+                *latest = *w;
+            }
+        }
 
         let sample = if core::mem::take(cx.local.burst_started) { wait_for_burst(&mut cx.shared.bus) } else { Err(BusError::Timeout) };
         let out = match sample {
@@ -607,21 +707,27 @@ mod app {
                 outer_overruns: *cx.local.outer_overruns,
                 bus_errors: *cx.local.bus_errors,
                 tick: *cx.local.ticks,
+                rc_widths_counts: *cx.local.rc_widths_counts,
             };
             // A busy telemetry task means the UART side is behind: skipping a snapshot only
             // delays the next line by 5 ms.
             let _skipped = report::spawn(snapshot);
         }
 
-        if let Some(watchdog) = cx.local.watchdog.as_mut() {
-            watchdog.feed();
-        }
+        cx.shared.watchdog.lock(|w| {
+            if let Some(watchdog) = w.as_mut() {
+                watchdog.feed();
+            }
+        });
     }
 
     /// The outer step (estimator + angle loop) on each job's snapshot, as long as one waits.
-    #[task(priority = 2, shared = [outer_result, outer_job, battery_mv], local = [outer])]
+    #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, outer_config], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
         while let Some(job) = cx.shared.outer_job.lock(Option::take) {
+            if let Some(cfg) = cx.shared.outer_config.lock(Option::take) {
+                cx.local.outer.take_config(&cfg);
+            }
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);
@@ -632,11 +738,15 @@ mod app {
 
     /// Status snapshots → LED code and UART lines (status on every state change, debug line
     /// at its rate).
-    #[task(priority = 1, shared = [uart, led_pattern, battery_mv, radio_mutes], local = [reporter])]
+    #[task(priority = 1, shared = [uart, led_pattern, battery_mv, radio_mutes, latest, mavlink_on], local = [reporter])]
     async fn report(mut cx: report::Context, snapshot: Snapshot) {
         let status = &snapshot.status;
         let pattern = tlm::led_pattern(status);
         cx.shared.led_pattern.lock(|p| *p = pattern);
+        cx.shared.latest.lock(|l| *l = Some(snapshot));
+        if cx.shared.mavlink_on.lock(|on| *on) {
+            return;
+        }
 
         let emit = cx.local.reporter.observe(status.state);
         if emit.status_line {
@@ -662,6 +772,23 @@ mod app {
             tlm::write_debug_line(&mut line, &tlm::debug_fields(status));
             cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
         }
+    }
+
+    /// The ground station's link (`crate::ground`): MAVLink on USART1, with the `mavlink`
+    /// feature; without it, never spawned.
+    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, outer_config, watchdog, mavlink_on], local = [ground])]
+    async fn ground_link(cx: ground_link::Context, boot: BootVerdict) {
+        let s = cx.shared;
+        let links = crate::ground::Shared {
+            uart: s.uart,
+            latest: s.latest,
+            battery_mv: s.battery_mv,
+            tick_config: s.tick_config,
+            outer_config: s.outer_config,
+            watchdog: s.watchdog,
+            mavlink_on: s.mavlink_on,
+        };
+        crate::ground::run(cx.local.ground, links, boot).await;
     }
 
     /// USART1 transmit-empty: one queued byte out per interrupt.
@@ -691,13 +818,16 @@ mod app {
 
     /// A fatal boot fault, repeated on the UART until reset (`docs/safety.md#boot`: never a silent
     /// hang).
-    #[task(priority = 1, shared = [uart])]
+    #[task(priority = 1, shared = [uart, mavlink_on])]
     async fn fault_report(mut cx: fault_report::Context, verdict: BootVerdict) {
         let mut line = LineBuf::<96>::new();
         let _grounded = verdict.write_fatal_line(&mut line);
         loop {
             defmt::error!("{=str}", line.as_str());
-            cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+            // With MAVLink on the UART, the ground link sends it as a STATUSTEXT instead.
+            if !cx.shared.mavlink_on.lock(|on| *on) {
+                cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
+            }
             Mono::delay(FAULT_REPEAT_MS.millis()).await;
         }
     }

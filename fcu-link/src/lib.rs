@@ -57,6 +57,7 @@ mod motor_test;
 mod params;
 pub mod rates;
 pub mod reader;
+pub mod station;
 mod telemetry;
 pub mod text;
 pub mod tx;

@@ -1,0 +1,196 @@
+//! The ground station's link: MAVLink 2 on USART1, with the `mavlink` feature.
+//!
+//! Every decision is fcu-link's and fcu-core's (`fcu_link::station`: the parameter table's
+//! rules, what a command may do); this module moves bytes and words. Received bytes come from
+//! the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to both halves of the
+//! control loop; saves go to flash ([`crate::param_flash`]) once the changes settle, disarmed.
+//! On a board set to text lines it listens, and the first valid MAVLink frame turns the UART to
+//! MAVLink.
+
+use crate::app::{Snapshot, UartOut};
+use crate::watchdog::Watchdog;
+use fcu_core::boot::BootVerdict;
+use fcu_core::Config;
+
+/// The link task's view of the shared resources it uses.
+#[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
+pub struct Shared<U, L, B, T, O, W, M> {
+    pub uart: U,
+    pub latest: L,
+    pub battery_mv: B,
+    pub tick_config: T,
+    pub outer_config: O,
+    pub watchdog: W,
+    pub mavlink_on: M,
+}
+
+#[cfg(not(feature = "mavlink"))]
+/// Without the `mavlink` feature there is no link: nothing to keep.
+pub struct GroundLink;
+
+#[cfg(not(feature = "mavlink"))]
+pub async fn run<U, L, B, T, O, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, O, W, M>, _boot: BootVerdict)
+where
+    U: rtic::Mutex<T = UartOut>,
+    L: rtic::Mutex<T = Option<Snapshot>>,
+    B: rtic::Mutex<T = u32>,
+    T: rtic::Mutex<T = Option<Config>>,
+    O: rtic::Mutex<T = Option<Config>>,
+    W: rtic::Mutex<T = Option<Watchdog>>,
+    M: rtic::Mutex<T = bool>,
+{
+}
+
+#[cfg(feature = "mavlink")]
+pub use with_link::{run, GroundLink};
+
+#[cfg(feature = "mavlink")]
+mod with_link {
+    use super::*;
+    use crate::param_flash::{FlashError, ParamFlash, SECTORS};
+    use crate::uart_rx::UartRx;
+    use crate::Mono;
+    use fcu_core::parameters::snapshot;
+    use fcu_core::telemetry::LineBuf;
+    use fcu_link::station::Station;
+    use fcu_link::{Link, LinkConfig, Severity};
+    use rtic::Mutex;
+    use rtic_monotonics::systick::prelude::*;
+
+    /// Frames the link may hold before the UART queue takes them.
+    const LINK_TX_BYTES: usize = 512;
+    /// The link's period: 200 Hz, so a parameter download (one value per call) runs at its
+    /// 100 Hz and received bytes wait at most 5 ms.
+    const LINK_PERIOD_MS: u32 = 5;
+    /// How often a fatal boot fault is repeated as a STATUSTEXT.
+    const FAULT_REPEAT_MS: u32 = 2000;
+
+    pub struct GroundLink {
+        link: Link<LINK_TX_BYTES>,
+        station: Station,
+        uart_rx: UartRx,
+        flash: ParamFlash,
+        /// How the parameters were found at boot, said once the link runs.
+        params_source: snapshot::Source,
+    }
+
+    impl GroundLink {
+        pub fn new(cfg: Config, defaults: Config, uart_rx: UartRx, flash: ParamFlash, params_source: snapshot::Source) -> Self {
+            let station = Station::new(cfg, defaults);
+            let mut link = Link::new(LinkConfig::DEFAULT);
+            link.set_rates(station.rates());
+            GroundLink { link, station, uart_rx, flash, params_source }
+        }
+    }
+
+    pub async fn run<U, L, B, T, O, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, O, W, M>, boot: BootVerdict)
+    where
+        U: Mutex<T = UartOut>,
+        L: Mutex<T = Option<Snapshot>>,
+        B: Mutex<T = u32>,
+        T: Mutex<T = Option<Config>>,
+        O: Mutex<T = Option<Config>>,
+        W: Mutex<T = Option<Watchdog>>,
+        M: Mutex<T = bool>,
+    {
+        let mut announced = false;
+        let mut next_fatal_ms = 0u32;
+        loop {
+            let now_ms = Mono::now().duration_since_epoch().as_millis();
+            if let Some(snapshot) = s.latest.lock(Option::take) {
+                let battery_mv = s.battery_mv.lock(|mv| *mv);
+                g.station.observe(&snapshot.status, battery_mv, snapshot.rc_widths_counts, now_ms);
+            }
+            let mut bytes = [0u8; 64];
+            loop {
+                let n = g.uart_rx.take(&mut bytes);
+                if n == 0 {
+                    break;
+                }
+                g.link.receive(bytes.get(..n).unwrap_or_default(), now_ms, &mut g.station);
+            }
+            let heard = g.link.stats().reader.frames > 0;
+            if !s.mavlink_on.lock(|on| core::mem::replace(on, *on || heard) || heard) {
+                Mono::delay(LINK_PERIOD_MS.millis()).await;
+                continue;
+            }
+            if !announced {
+                announced = true;
+                announce_parameters(&mut g.link, &g.params_source);
+            }
+            if !boot.may_fly() && now_ms.wrapping_sub(next_fatal_ms) as i32 >= 0 {
+                next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
+                let mut line = LineBuf::<96>::new();
+                let _grounded = boot.write_fatal_line(&mut line);
+                let _queued = g.link.send_text(Severity::Critical, line.as_str().trim_end());
+            }
+            g.link.tick(now_ms, &mut g.station);
+            if let Some(cfg) = g.station.take_change() {
+                g.link.set_rates(g.station.rates());
+                s.tick_config.lock(|slot| *slot = Some(cfg));
+                s.outer_config.lock(|slot| *slot = Some(cfg));
+            }
+            let link = &mut g.link;
+            let uart_idle = s.uart.lock(|uart| {
+                let mut out = [0u8; 128];
+                let room = uart.room().min(out.len());
+                let n = link.poll_tx(out.get_mut(..room).unwrap_or_default());
+                uart.send(out.get(..n).unwrap_or_default());
+                uart.is_idle()
+            });
+            // Flash work stalls the CPU, the UART's interrupt included: only once every byte
+            // queued (a command's acknowledgement) is out.
+            if g.station.save_due() && uart_idle && g.link.tx_pending() == 0 {
+                let saved = save_parameters(&g.station, &mut g.flash, &mut s.watchdog);
+                g.station.saved(saved.is_ok());
+                let _queued = match saved {
+                    Ok(()) => g.link.send_text(Severity::Info, "parameters saved"),
+                    Err(_) => g.link.send_text(Severity::Error, "parameters NOT saved: flash error"),
+                };
+            }
+            if g.station.reboot_asked() && g.link.reboot_ready() && !g.station.unsaved() {
+                // The acknowledgement has left the link's queue; give the UART its 20 ms.
+                Mono::delay(20.millis()).await;
+                cortex_m::peripheral::SCB::sys_reset();
+            }
+            Mono::delay(LINK_PERIOD_MS.millis()).await;
+        }
+    }
+
+    /// Says where the parameters in force came from (a STATUSTEXT, once the link runs).
+    fn announce_parameters(link: &mut Link<LINK_TX_BYTES>, source: &snapshot::Source) {
+        let _queued = match source {
+            snapshot::Source::Snapshot { .. } => link.send_text(Severity::Info, "parameters loaded from flash"),
+            snapshot::Source::NoSnapshot => link.send_text(Severity::Notice, "no saved parameters: defaults"),
+            snapshot::Source::Refused(rule) => {
+                let mut text = LineBuf::<64>::new();
+                text.push_str("saved parameters refused (");
+                text.push_str(rule);
+                text.push_str("): defaults");
+                link.send_text(Severity::Warning, text.as_str())
+            }
+        };
+    }
+
+    /// Writes the parameters in force to flash as the station plans it: erase a sector if the
+    /// plan says so (the watchdog's timeout stretched over it: every fetch stalls meanwhile,
+    /// the control tick's included), then the snapshot's words, its commit word last.
+    fn save_parameters(
+        station: &Station,
+        flash: &mut ParamFlash,
+        watchdog: &mut impl Mutex<T = Option<Watchdog>>,
+    ) -> Result<(), FlashError> {
+        let (Some(a), Some(b)) = (flash.sector(0), flash.sector(1)) else {
+            return Err(FlashError::OutOfRange);
+        };
+        let plan = station.plan_save([a, b]);
+        if let Some(sector) = plan.erase {
+            watchdog.lock(|w| w.as_mut().map_or(Ok(()), Watchdog::stretch_for_flash)).map_err(|_| FlashError::Timeout)?;
+            let erased = flash.erase(sector);
+            watchdog.lock(|w| w.as_mut().map_or(Ok(()), Watchdog::restore)).map_err(|_| FlashError::Timeout)?;
+            erased?;
+        }
+        let &(_, base) = SECTORS.get(plan.sector).ok_or(FlashError::OutOfRange)?;
+        flash.program(base + 4 * plan.first_word as u32, &plan.words)
+    }
+}
