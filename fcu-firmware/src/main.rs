@@ -349,9 +349,13 @@ mod app {
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
 
-        let serial = serial::Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), serial::Config::default().baudrate(UART_BAUD.bps()), &mut rcc)
-            .unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
-        let (tx, _rx) = serial.split();
+        let uart_config = serial::Config::default().baudrate(UART_BAUD.bps());
+        // The receiver (PA10 in AF7) only for the ground link; without it PA10 stays an input.
+        #[cfg(feature = "mavlink")]
+        let tx = serial::Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), uart_config, &mut rcc).map(|serial| serial.split().0);
+        #[cfg(not(feature = "mavlink"))]
+        let tx = serial::Serial::tx(dp.USART1, gpioa.pa9, uart_config, &mut rcc);
+        let tx = tx.unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
         let mut uart = UartOut { tx, queue: Deque::new(), dropped_bytes: 0 };
         #[cfg(feature = "mavlink")]
         {
