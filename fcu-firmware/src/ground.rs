@@ -28,6 +28,34 @@ pub struct Shared<U, L, B, T, O, W, M> {
 /// Without the `mavlink` feature there is no link: nothing to keep.
 pub struct GroundLink;
 
+/// What the link would have in its place: no parameter store, no receiver.
+#[cfg(not(feature = "mavlink"))]
+pub struct Absent;
+
+#[cfg(not(feature = "mavlink"))]
+impl GroundLink {
+    pub fn new(_cfg: Config, _defaults: Config, _stored: Absent, _receiver: Absent) -> Self {
+        GroundLink
+    }
+
+    pub fn speaks_mavlink_from_boot(&self) -> bool {
+        false
+    }
+}
+
+/// The configuration to boot with. Without the ground link nothing can change or save a
+/// parameter: the build's defaults.
+#[cfg(not(feature = "mavlink"))]
+pub fn load_parameters(_flash: stm32f4xx_hal::pac::FLASH, defaults: Config) -> (Config, Absent) {
+    (defaults, Absent)
+}
+
+/// Without the ground link USART1 receives nothing.
+#[cfg(not(feature = "mavlink"))]
+pub fn start_receiver(_dma: stm32f4xx_hal::pac::DMA2, _rcc: &mut stm32f4xx_hal::rcc::Rcc) -> Absent {
+    Absent
+}
+
 #[cfg(not(feature = "mavlink"))]
 pub async fn run<U, L, B, T, O, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, O, W, M>, _boot: BootVerdict)
 where
@@ -42,7 +70,7 @@ where
 }
 
 #[cfg(feature = "mavlink")]
-pub use with_link::{run, GroundLink};
+pub use with_link::{load_parameters, run, start_receiver, GroundLink};
 
 #[cfg(feature = "mavlink")]
 mod with_link {
@@ -75,12 +103,39 @@ mod with_link {
     }
 
     impl GroundLink {
-        pub fn new(cfg: Config, defaults: Config, uart_rx: UartRx, flash: ParamFlash, params_source: snapshot::Source) -> Self {
+        pub fn new(cfg: Config, defaults: Config, stored: (ParamFlash, snapshot::Source), uart_rx: UartRx) -> Self {
             let station = Station::new(cfg, defaults);
             let mut link = Link::new(LinkConfig::DEFAULT);
             link.set_rates(station.rates());
+            let (flash, params_source) = stored;
             GroundLink { link, station, uart_rx, flash, params_source }
         }
+
+        /// MAVLink from boot, or text lines until a ground station speaks MAVLink (the link's
+        /// protocol parameter).
+        pub fn speaks_mavlink_from_boot(&self) -> bool {
+            self.station.config().link.protocol == fcu_core::config::LinkProtocol::Mavlink
+        }
+    }
+
+    /// The parameters saved in flash over the build's defaults, or the defaults alone (and
+    /// why, said on the link once it runs): never a mix.
+    pub fn load_parameters(flash: stm32f4xx_hal::pac::FLASH, defaults: Config) -> (Config, (ParamFlash, snapshot::Source)) {
+        let flash = ParamFlash::new(flash);
+        let (cfg, source) = match (flash.sector(0), flash.sector(1)) {
+            (Some(a), Some(b)) => snapshot::load_config([a, b], &defaults),
+            _ => (defaults, snapshot::Source::NoSnapshot),
+        };
+        (cfg, (flash, source))
+    }
+
+    /// USART1's receiver into the DMA ring. USART1 must be set up with its receiver on.
+    pub fn start_receiver(dma: stm32f4xx_hal::pac::DMA2, rcc: &mut stm32f4xx_hal::rcc::Rcc) -> UartRx {
+        use stm32f4xx_hal::rcc::Enable;
+        stm32f4xx_hal::pac::DMA2::enable(rcc);
+        // SAFETY: USART1 belongs to the serial driver `init` set up; the receiver's DMA request
+        // (CR3.DMAR) is a bit that driver never touches, set once here before any task runs.
+        UartRx::start(dma, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() })
     }
 
     pub async fn run<U, L, B, T, O, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, O, W, M>, boot: BootVerdict)

@@ -114,21 +114,13 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
-    #[cfg(feature = "mavlink")]
-    use crate::param_flash::ParamFlash;
     use crate::sensor_bus::{BusError, SensorBus, BURST_BYTES};
     use crate::timers::{Motors, RcCapture, TickTimer};
-    #[cfg(feature = "mavlink")]
-    use crate::uart_rx::UartRx;
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
-    #[cfg(feature = "mavlink")]
-    use fcu_core::config::LinkProtocol;
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
-    #[cfg(feature = "mavlink")]
-    use fcu_core::parameters::snapshot;
     use fcu_core::rc::CaptureEdge;
     use fcu_core::rc::EdgeDecoder;
     use fcu_core::telemetry::{self as tlm, LedPattern, LineBuf, Reporter, StatusFields};
@@ -289,28 +281,12 @@ mod app {
 
     #[init(local = [edge_queue: Queue<CaptureEdge, EDGE_QUEUE> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // The HAL prelude lives only here: its fugit 0.3 `.millis()` clashes with the
-        // monotonic's fugit 0.6 used by the tasks.
-        use stm32f4xx_hal::prelude::*;
-        use stm32f4xx_hal::{rcc, serial, spi};
-
+        // The HAL's GPIO split; its prelude stays out of the tasks (its fugit 0.3 `.millis()`
+        // clashes with the monotonic's fugit 0.6).
+        use stm32f4xx_hal::gpio::GpioExt;
         let dp = cx.device;
         let mut core = cx.core;
-        // The cycle counter times the boot waits in real units (`delay_ms`).
-        core.DCB.enable_trace();
-        core.DWT.enable_cycle_counter();
-        // HSE 16 MHz → 84 MHz SYSCLK/HCLK/PCLK2, 42 MHz PCLK1; the HAL sets 2 flash wait
-        // states. It picks M 8, N 168, P 4, Q 7: the reference's VCO (336 MHz) and outputs
-        // with a 2 MHz PLL input instead of 1 MHz. The HAL waits for HSERDY without a bound, so
-        // the crystal is started and checked here first: a dead one leaves the board on the
-        // 16 MHz HSI (same PLL settings, same clocks), able to say so, never dark.
-        let crystal_ready = start_crystal(&dp.RCC);
-        // The HAL's PLL wait has no bound either: the PLL is tried first, and one that does not
-        // lock leaves the board at its 16 MHz input, on the ground, saying so.
-        let pll_locked = pll_locks(&dp.RCC, crystal_ready);
-        let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
-        let sysclk_hz = if pll_locked { SYSCLK_HZ } else { INPUT_HZ };
-        let mut rcc = dp.RCC.freeze(source.sysclk(sysclk_hz.Hz()).hclk(sysclk_hz.Hz()).pclk1((sysclk_hz / 2).Hz()).pclk2(sysclk_hz.Hz()));
+        let (mut rcc, clocks) = start_clocks(dp.RCC, &mut core.DCB, &mut core.DWT);
         // The LED codes and the fault line keep their pace at either clock.
         Mono::start(core.SYST, rcc.clocks.sysclk().raw());
         // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
@@ -318,24 +294,12 @@ mod app {
         // its handler would delay the end-of-read interrupt and the radio capture; at the
         // lowest it delays only the LEDs and the fault line, which await it.
         unsafe { core.SCB.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, 0xF0) };
-
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
 
-        // The parameters saved in flash over the build's defaults, or the defaults alone (said on
-        // the link once it runs): never a mix.
         let defaults = crate::flight_config();
-        #[cfg(feature = "mavlink")]
-        let param_flash = ParamFlash::new(dp.FLASH);
-        #[cfg(feature = "mavlink")]
-        let (cfg, params_source) = match (param_flash.sector(0), param_flash.sector(1)) {
-            (Some(a), Some(b)) => snapshot::load_config([a, b], &defaults),
-            _ => (defaults, snapshot::Source::NoSnapshot),
-        };
-        // Without the ground link nothing can change or save a parameter: the build's defaults.
-        #[cfg(not(feature = "mavlink"))]
-        let cfg = defaults;
+        let (cfg, stored) = crate::ground::load_parameters(dp.FLASH, defaults);
 
         // Motors first: PB6..PB9 driven by TIM4 at compare 0 (off) from the very start.
         let _motor_pins = (
@@ -349,50 +313,20 @@ mod app {
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
 
-        let uart_config = serial::Config::default().baudrate(UART_BAUD.bps());
-        // The receiver (PA10 in AF7) only for the ground link; without it PA10 stays an input.
-        #[cfg(feature = "mavlink")]
-        let tx = serial::Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), uart_config, &mut rcc).map(|serial| serial.split().0);
-        #[cfg(not(feature = "mavlink"))]
-        let tx = serial::Serial::tx(dp.USART1, gpioa.pa9, uart_config, &mut rcc);
-        let tx = tx.unwrap_or_else(|_| halt(&mut leds, None, "USART1 rejected 115200 8N1"));
-        let mut uart = UartOut { tx, queue: Deque::new(), dropped_bytes: 0 };
-        #[cfg(feature = "mavlink")]
-        {
-            use stm32f4xx_hal::rcc::Enable;
-            stm32f4xx_hal::pac::DMA2::enable(&mut rcc);
-        }
-        // SAFETY: USART1 belongs to the serial driver split above; the receiver's DMA request
-        // (CR3.DMAR) is a bit that driver never touches, set once here before any task runs.
-        #[cfg(feature = "mavlink")]
-        let uart_rx = UartRx::start(dp.DMA2, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() });
+        let mut uart = start_uart(dp.USART1, gpioa.pa9, gpioa.pa10, &mut rcc, &mut leds);
+        let receiver = crate::ground::start_receiver(dp.DMA2, &mut rcc);
         uart.send(tlm::BOOT_BANNER.as_bytes());
         if cfg.mixer.off_compare() != crate::MOTORS_OFF_COMPARE {
             halt(&mut leds, Some(&mut uart.tx), "the build's motor-off compare disagrees with its flight configuration");
         }
 
-        // Sensor bus: all chip selects high before the bus is clocked.
         let cs = [
             gpioa.pa8.into_push_pull_output_in_state(true.into()).erase(),
             gpiob.pb12.into_push_pull_output_in_state(true.into()).erase(),
             gpioc.pc13.into_push_pull_output_in_state(true.into()).erase(),
         ];
-        let sck = gpiob.pb13.into_alternate::<5>().speed(stm32f4xx_hal::gpio::Speed::High);
-        let sda = gpiob.pb15.into_alternate::<5>().speed(stm32f4xx_hal::gpio::Speed::High);
-        let spi2 = spi::Spi::new_bidi(
-            dp.SPI2,
-            (Some(sck), Some(sda)),
-            spi::Mode { polarity: spi::Polarity::IdleHigh, phase: spi::Phase::CaptureOnSecondTransition },
-            crate::sensor_bus::SPI_HZ.Hz(),
-            &mut rcc,
-        );
-        let (spi2, _sensor_pins) = spi2.release();
-        {
-            use stm32f4xx_hal::rcc::Enable;
-            stm32f4xx_hal::pac::DMA1::enable(&mut rcc);
-        }
-        let mut bus = SensorBus::new(spi2, cs, dp.DMA1);
-        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(crystal_ready).with_pll(pll_locked);
+        let mut bus = start_sensor_bus(dp.SPI2, dp.DMA1, cs, gpiob.pb13, gpiob.pb15, &mut rcc);
+        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(clocks.crystal_ready).with_pll(clocks.pll_locked);
 
         let capture_pins = (
             gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
@@ -419,10 +353,6 @@ mod app {
         // Armed only once the sensors answered: from here a control tick that does not
         // complete within the timeout resets the board (motors off at reset).
         let watchdog = if boot.may_fly() { Watchdog::start(dp.IWDG, &dp.DBGMCU).ok() } else { None };
-        #[cfg(feature = "mavlink")]
-        let mavlink_on = cfg.link.protocol == LinkProtocol::Mavlink;
-        #[cfg(not(feature = "mavlink"))]
-        let mavlink_on = false;
         boot = boot.with_watchdog(watchdog.is_some());
         if boot.may_fly() {
             tick_timer.start();
@@ -439,14 +369,11 @@ mod app {
         if housekeeping::spawn().is_err() {
             defmt::error!("housekeeping already running");
         }
-        #[cfg(feature = "mavlink")]
         if ground_link::spawn(boot).is_err() {
             defmt::error!("ground link already running");
         }
-        #[cfg(feature = "mavlink")]
-        let ground = crate::ground::GroundLink::new(cfg, defaults, uart_rx, param_flash, params_source);
-        #[cfg(not(feature = "mavlink"))]
-        let ground = crate::ground::GroundLink;
+        let ground = crate::ground::GroundLink::new(cfg, defaults, stored, receiver);
+        let mavlink_on = ground.speaks_mavlink_from_boot();
 
         (
             Shared {
@@ -495,6 +422,88 @@ mod app {
         loop {
             cortex_m::asm::wfi();
         }
+    }
+
+    /// How the clock tree came up.
+    struct ClockCheck {
+        crystal_ready: bool,
+        pll_locked: bool,
+    }
+
+    /// HSE 16 MHz → 84 MHz SYSCLK/HCLK/PCLK2, 42 MHz PCLK1; the HAL sets 2 flash wait states
+    /// and picks M 8, N 168, P 4, Q 7: the reference's VCO (336 MHz) and outputs with a 2 MHz
+    /// PLL input instead of 1 MHz. The HAL waits for HSERDY and PLLRDY without a bound, so the
+    /// crystal and the PLL are tried here first: a dead crystal leaves the board on the 16 MHz
+    /// HSI (same PLL settings, same clocks), a PLL that does not lock at its 16 MHz input, on
+    /// the ground and saying so, never dark. The cycle counter, started first, times the waits.
+    fn start_clocks(
+        rcc: stm32f4xx_hal::pac::RCC,
+        dcb: &mut cortex_m::peripheral::DCB,
+        dwt: &mut cortex_m::peripheral::DWT,
+    ) -> (stm32f4xx_hal::rcc::Rcc, ClockCheck) {
+        // The HAL prelude only where the HAL is set up: its fugit 0.3 `.millis()` clashes with
+        // the monotonic's fugit 0.6 used by the tasks.
+        use stm32f4xx_hal::prelude::*;
+        use stm32f4xx_hal::rcc;
+        dcb.enable_trace();
+        dwt.enable_cycle_counter();
+        let crystal_ready = start_crystal(&rcc);
+        let pll_locked = pll_locks(&rcc, crystal_ready);
+        let source = if crystal_ready { rcc::Config::hse(HSE_HZ.Hz()) } else { rcc::Config::hsi() };
+        let sysclk_hz = if pll_locked { SYSCLK_HZ } else { INPUT_HZ };
+        let rcc = rcc.freeze(source.sysclk(sysclk_hz.Hz()).hclk(sysclk_hz.Hz()).pclk1((sysclk_hz / 2).Hz()).pclk2(sysclk_hz.Hz()));
+        (rcc, ClockCheck { crystal_ready, pll_locked })
+    }
+
+    /// USART1 at 115200 8N1: the transmit side for telemetry, and with the ground link the
+    /// receiver on PA10 (AF7), whose bytes DMA2 takes (`ground::start_receiver`); without it
+    /// PA10 stays an input.
+    fn start_uart(
+        usart: USART1,
+        tx_pin: stm32f4xx_hal::gpio::PA9,
+        rx_pin: stm32f4xx_hal::gpio::PA10,
+        rcc: &mut stm32f4xx_hal::rcc::Rcc,
+        leds: &mut Leds,
+    ) -> UartOut {
+        use stm32f4xx_hal::prelude::*;
+        use stm32f4xx_hal::serial;
+        let config = serial::Config::default().baudrate(UART_BAUD.bps());
+        #[cfg(feature = "mavlink")]
+        let tx = serial::Serial::new(usart, (tx_pin, rx_pin), config, rcc).map(|serial| serial.split().0);
+        #[cfg(not(feature = "mavlink"))]
+        let tx = {
+            let _unused = rx_pin;
+            serial::Serial::tx(usart, tx_pin, config, rcc)
+        };
+        let tx = tx.unwrap_or_else(|_| halt(leds, None, "USART1 rejected 115200 8N1"));
+        UartOut { tx, queue: Deque::new(), dropped_bytes: 0 }
+    }
+
+    /// SPI2 in 3-wire mode at `SPI_HZ` (CPOL 1, CPHA 1, the sensors' mode) with DMA1 for the
+    /// IMU burst. The chip selects are high (deselected) before the bus is clocked.
+    fn start_sensor_bus(
+        spi2: stm32f4xx_hal::pac::SPI2,
+        dma1: stm32f4xx_hal::pac::DMA1,
+        cs: [stm32f4xx_hal::gpio::AnyPin<Output>; 3],
+        sck: stm32f4xx_hal::gpio::PB13,
+        sda: stm32f4xx_hal::gpio::PB15,
+        rcc: &mut stm32f4xx_hal::rcc::Rcc,
+    ) -> SensorBus {
+        use stm32f4xx_hal::prelude::*;
+        use stm32f4xx_hal::rcc::Enable;
+        use stm32f4xx_hal::{gpio::Speed, spi};
+        let sck = sck.into_alternate::<5>().speed(Speed::High);
+        let sda = sda.into_alternate::<5>().speed(Speed::High);
+        let spi2 = spi::Spi::new_bidi(
+            spi2,
+            (Some(sck), Some(sda)),
+            spi::Mode { polarity: spi::Polarity::IdleHigh, phase: spi::Phase::CaptureOnSecondTransition },
+            crate::sensor_bus::SPI_HZ.Hz(),
+            rcc,
+        );
+        let (spi2, _sensor_pins) = spi2.release();
+        stm32f4xx_hal::pac::DMA1::enable(rcc);
+        SensorBus::new(spi2, cs, dma1)
     }
 
     /// Turns the HSE crystal on and waits for it, at most ST's `HSE_STARTUP_TIMEOUT` (100 ms;
