@@ -59,9 +59,7 @@ struct ServeArgs {
 
 #[derive(clap::Args, Debug)]
 struct FlyArgs {
-    /// Scenario name (hover, steps, sweeps, yaw, link-short, link-long, gust, weak-motor,
-    /// calibration-motion).
-    #[arg(long)]
+    #[arg(long, help = fcu_testkit::sim::scenario::help())]
     scenario: String,
     /// Seed for sensor noise, radio jitter and (with --spread) the airframe.
     #[arg(long, default_value_t = 1)]
@@ -106,7 +104,7 @@ impl TimingArg {
 
 #[derive(clap::Args, Debug)]
 struct MeasureArgs {
-    #[arg(long, default_value = "hover")]
+    #[arg(long, default_value = "hover", help = fcu_testkit::sim::scenario::help())]
     scenario: String,
     #[arg(long, default_value_t = 1)]
     seed: u64,
