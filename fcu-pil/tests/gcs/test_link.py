@@ -144,6 +144,42 @@ class Armed(unittest.TestCase):
             self.assertNotEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
 
 
+class Noise(unittest.TestCase):
+    def test_random_bytes_in_flight_change_nothing_and_the_link_works_after(self):
+        """Five seconds of random bytes at the line's full rate into USART1 while the hover
+        scenario's pilot flies: the board stays armed, its attitude stream keeps its rate,
+        no parameter moves, and the link answers afterwards."""
+        import random
+        with ServedBoard(scenario="hover") as board:
+            armed = board.recv("HEARTBEAT", 30.0, lambda m: m.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
+            self.assertIsNotNone(armed, "the scenario's pilot did not arm within 30 s")
+            before, count = board.download_params()
+            self.assertEqual(len(before), count)
+            rng = random.Random(7)
+            sock = board.conn.port
+            attitudes, end = 0, time.time() + 5.0
+            while time.time() < end:
+                # 1152 bytes every 0.1 s: 115200 baud.
+                sock.send(bytes(rng.randrange(256) for _ in range(1152)))
+                stop = time.time() + 0.1
+                while time.time() < stop:
+                    m = board.conn.recv_match(blocking=True, timeout=0.02)
+                    if m is not None and m.get_type() == "ATTITUDE":
+                        attitudes += 1
+            self.assertGreaterEqual(attitudes, 5 * 20, "the attitude stream fell below 20 Hz under noise")
+            hb = board.heartbeat(5.0)
+            self.assertTrue(hb.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED, "the noise disarmed the board")
+            # The line is back to the ground station once the last noise has been clocked in.
+            answered = None
+            deadline = time.time() + 15.0
+            while answered is None and time.time() < deadline:
+                answered = board.param_read("ANGLE_MAX")
+            self.assertIsNotNone(answered, "no answer within 15 s of the noise")
+            after, count_after = board.download_params()
+            self.assertEqual((count_after, after), (count, before), "a parameter moved")
+            self.assertAlmostEqual(board.param_set("ANG_YAW_P", 2.5).param_value, 2.5, places=5)
+
+
 class PowerCut(unittest.TestCase):
     """A power cut at every eighth of a save's erase, and in the first, a middle and the last
     (commit) word of its programming, leaves a valid set: the old values or the new, never a
