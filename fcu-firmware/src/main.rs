@@ -668,9 +668,14 @@ mod app {
             }
             // A parameter change the ground link accepted (the core checked it against the
             // armed state); taken between ticks, every stage keeping its state.
-            if let Some(cfg) = cx.shared.tick_config.lock(Option::take) {
-                let _refused = inner.take_config(&cfg);
-            }
+            // Read in place: moving the `Option<Config>` out would copy its 456 bytes every
+            // tick, change or not.
+            cx.shared.tick_config.lock(|slot| {
+                if let Some(cfg) = slot.as_ref() {
+                    let _refused = inner.take_config(cfg);
+                    *slot = None;
+                }
+            });
             while let Some(edge) = cx.local.edges_in.dequeue() {
                 decoder.on_edge(edge);
             }
@@ -738,9 +743,13 @@ mod app {
     #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, outer_config], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
         while let Some(job) = cx.shared.outer_job.lock(Option::take) {
-            if let Some(cfg) = cx.shared.outer_config.lock(Option::take) {
-                cx.local.outer.take_config(&cfg);
-            }
+            let outer = &mut *cx.local.outer;
+            cx.shared.outer_config.lock(|slot| {
+                if let Some(cfg) = slot.as_ref() {
+                    outer.take_config(cfg);
+                    *slot = None;
+                }
+            });
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);

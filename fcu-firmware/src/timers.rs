@@ -25,9 +25,9 @@ pub type CapturePins = (PA0<Alternate<1>>, PA1<Alternate<1>>, PA2<Alternate<1>>,
 /// the radio never decoded). `scripts/check-uninit-constants` guards the firmware's IR.
 pub struct RcCapture {
     tim: TIM2,
-    /// Owned so nothing else reconfigures them; read at interrupt time to tell a rising from
-    /// a falling edge, as the reference does.
-    pins: CapturePins,
+    /// Owned so nothing else reconfigures them; their levels, read at interrupt time (in one
+    /// read of GPIOA's IDR) tell a rising edge from a falling one, as the reference does.
+    _pins: CapturePins,
     /// Edges taken from each channel since TIM2's last update (one capture wrap, 8.192 ms).
     edges_in_window: [u8; CHANNELS],
     /// The channels whose capture interrupt is on, as DIER's CCxIE bits: DIER is written by
@@ -71,7 +71,7 @@ impl RcCapture {
             }
             w
         });
-        let capture = RcCapture { tim, pins, edges_in_window: [0; CHANNELS], enabled_mask: ALL_CAPTURES };
+        let capture = RcCapture { tim, _pins: pins, edges_in_window: [0; CHANNELS], enabled_mask: ALL_CAPTURES };
         // The capture interrupts and the wrap's, which reopens the edge budget.
         capture.write_interrupts();
         capture.tim.cr1().write(|w| w.cen().set_bit());
@@ -89,10 +89,11 @@ impl RcCapture {
     /// outranks the control tick: short and straight.
     pub fn take_edges(&mut self, mut sink: impl FnMut(CaptureEdge)) -> u32 {
         let mut muted = 0;
-        // A second look before returning: an edge captured while the first was handled (the
-        // next channel's, in a receiver's frame) is read now rather than after a return and
-        // a new entry.
-        for _ in 0..2 {
+        // Look again until a look finds nothing: an edge captured while the last ones were
+        // handled (the next channel's, in a receiver's frame) is read at once rather than after
+        // a return and a new entry, and whatever comes after the last look waits only for the
+        // return. Bounded: a storm on a pin spends its edge budget within a few looks.
+        for _ in 0..MAX_LOOKS {
             let (found, newly_muted) = self.take_pending(&mut sink);
             muted += newly_muted;
             if !found {
@@ -125,17 +126,16 @@ impl RcCapture {
                 *slot = ccr.read().ccr().bits() as u16;
             }
         }
+        // The four pins' levels in one read of GPIOA's IDR (PA0..PA3 are its bits 0..3).
+        // SAFETY: a read of an input data register, which no write reaches; the pins are this
+        // struct's own, in their alternate function, and IDR reflects them in any mode.
+        let levels = unsafe { (*stm32f4xx_hal::pac::GPIOA::ptr()).idr().read().bits() };
         let mut muted = 0;
         for (channel, &capture_counts) in captures.iter().enumerate() {
             if pending & (2 << channel) == 0 {
                 continue;
             }
-            let level_high = match channel {
-                0 => self.pins.0.is_high(),
-                1 => self.pins.1.is_high(),
-                2 => self.pins.2.is_high(),
-                _ => self.pins.3.is_high(),
-            };
+            let level_high = levels & (1 << channel) != 0;
             sink(CaptureEdge { channel, capture_counts, level_high });
             if let Some(count) = self.edges_in_window.get_mut(channel) {
                 *count = count.saturating_add(1);
@@ -177,6 +177,9 @@ impl RcCapture {
         self.tim.dier().write(|w| w.cc1ie().bit(on(0)).cc2ie().bit(on(1)).cc3ie().bit(on(2)).cc4ie().bit(on(3)).uie().set_bit());
     }
 }
+
+/// Looks at the capture flags in one interrupt at most.
+const MAX_LOOKS: usize = 4;
 
 /// CC1IE..CC4IE (the same bits as CC1IF..CC4IF in SR).
 const ALL_CAPTURES: u8 = 0b1_1110;
