@@ -496,7 +496,7 @@ fn set_safety_ms(cfg: &mut Config, ms: f32, field: fn(&mut SafetyConfig) -> &mut
 /// `(1 − a1 − a2) / (1 + a1 − a2) = k²`, the stored `a` being pre-negated).
 fn gyro_cutoff_hz(cfg: &Config) -> f32 {
     let c = &cfg.gyro_filter;
-    let listed = GYRO_DESIGNS_800_HZ.iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
+    let listed = gyro_designs().iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
     if let (Some(d), true) = (listed, cfg.timing.integration_hz == 800.0) {
         return f32::from(d.0);
     }
@@ -517,9 +517,16 @@ fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
 
 /// The gyro low-pass a cut-off of `hz` gives at an 800 Hz tick, from [`GYRO_DESIGNS_800_HZ`].
 fn gyro_design_800_hz(hz: f32) -> Option<BiquadCoeffs> {
-    let &(_, a1, a2, b0) = GYRO_DESIGNS_800_HZ.iter().find(|d| f32::from(d.0) == hz)?;
+    let &(_, a1, a2, b0) = gyro_designs().iter().find(|d| f32::from(d.0) == hz)?;
     let b0 = f32::from_bits(b0);
     Some(BiquadCoeffs { a1: f32::from_bits(a1), a2: f32::from_bits(a2), b0, b1: 2.0 * b0, b2: b0 })
+}
+
+/// [`GYRO_DESIGNS_800_HZ`] behind an optimisation barrier: fcu-core is built at opt-level 3
+/// for the control tick, which would unroll each search of the 27 designs into a kilobyte of
+/// compares; a search here runs once per parameter read or set.
+fn gyro_designs() -> &'static [(u16, u32, u32, u32)] {
+    core::hint::black_box(&GYRO_DESIGNS_800_HZ)
 }
 
 /// The cut-offs `GYRO_LPF_HZ` offers at the 800 Hz tick, with the bits of what
