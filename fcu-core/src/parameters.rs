@@ -429,6 +429,16 @@ fn us_from_counts(c: u16) -> f32 {
     f32::from(c) / COUNTS_PER_US as f32
 }
 
+/// One endpoint, `field` of radio input `input` (from 0), to `us`. One copy for the twelve
+/// endpoint parameters: each table entry passes only its input and field.
+#[inline(never)]
+fn set_endpoint_us(cfg: &mut Config, input: usize, us: f32, field: fn(&mut RcInput) -> &mut u16) -> SetResult {
+    if let Some(e) = cfg.rc.inputs.get_mut(input) {
+        *field(e) = counts_from_us(us);
+    }
+    Ok(())
+}
+
 /// Bounds and step checked: `us` is a multiple of 0.25 within 16 384 µs.
 fn counts_from_us(us: f32) -> u16 {
     (us * COUNTS_PER_US as f32) as u16
@@ -461,7 +471,9 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
     (ticks as f32 * 1000.0) / hz as f32
 }
 
-/// Whole milliseconds (checked) to ticks, refused unless exact.
+/// Whole milliseconds (checked) to ticks, refused unless exact. Out of line: its 64-bit
+/// division would otherwise be inlined into each caller at fcu-core's opt-level 3.
+#[inline(never)]
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
     let product = (ms as u64) * u64::from(tick_hz(cfg));
     if product == 0 || product % 1000 != 0 {
@@ -475,6 +487,13 @@ fn safety(cfg: &Config) -> SafetyConfig {
         SupervisorConfig::Safe(s) => s,
         SupervisorConfig::Reference => SafetyConfig::DEFAULT,
     }
+}
+
+/// One of the safe supervisor's times, `field`, in milliseconds. One copy for every such
+/// parameter, as for [`set_safety_ms`].
+#[inline(never)]
+fn safety_ms(cfg: &Config, field: fn(&SafetyConfig) -> u32) -> f32 {
+    ms_from_ticks(cfg, field(&safety(cfg)))
 }
 
 /// One of the safe supervisor's times, `field`, to `ms` (checked whole). One copy for every
@@ -597,12 +616,7 @@ macro_rules! rc_endpoint {
                 step: Step::QuarterUs,
                 applies: Applies::Disarmed,
                 get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
-                set: |c, v| {
-                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
-                        e.$field = counts_from_us(v);
-                    }
-                    Ok(())
-                },
+                set: |c, v| set_endpoint_us(c, $input - 1, v, |e| &mut e.$field),
             },
             description: concat!("radio input ", $input, ": ", $what),
         }
@@ -677,7 +691,7 @@ macro_rules! safety_ms {
                 max: $max,
                 step: Step::Integer,
                 applies: Applies::Disarmed,
-                get: |c| ms_from_ticks(c, safety(c).$field),
+                get: |c| safety_ms(c, |s| s.$field),
                 set: |c, v| set_safety_ms(c, v, |s| &mut s.$field),
             },
             description: $what,
