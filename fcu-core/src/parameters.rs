@@ -329,6 +329,9 @@ pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
 
 /// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
 /// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
+// Out of line, as `with_in_flight_fields_of`: inlined at fcu-core's opt-level 3, each copy
+// and the comparison after it become a kilobyte of field moves in `flight::check_change`.
+#[inline(never)]
 pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = with_in_flight_fields_of(base, src);
     let (r, s) = (&mut c.rc, &src.rc);
@@ -354,6 +357,7 @@ pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
 
 /// `base` with the fields of the parameters that may change while armed
 /// ([`Applies::Anytime`]) taken from `src`.
+#[inline(never)]
 pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = *base;
     c.rc.max_tilt_rad = src.rc.max_tilt_rad;
