@@ -24,9 +24,6 @@ pub struct AxisGains {
 }
 
 impl AxisGains {
-    // Out of line: at fcu-core's opt-level 3 each of the three axes' checks would be unrolled
-    // into `ControlConfig::is_valid`, which runs only when a configuration is checked.
-    #[inline(never)]
     fn is_valid(&self) -> bool {
         let v = [
             self.outer_kp,

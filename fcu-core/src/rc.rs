@@ -308,16 +308,12 @@ impl RcConfig {
     }
 
     /// Every input: `min <= trim <= max`, inside the capture wrap.
-    // Out of line (as `endpoints_span`): a check of a configuration, not of a tick, which
-    // opt-level 3 would otherwise unroll per input into `problem`.
-    #[inline(never)]
     fn endpoints_ordered(&self) -> bool {
         self.inputs.iter().all(|e| e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP)
     }
 
     /// A centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
     /// either end, the throttle's that much travel.
-    #[inline(never)]
     fn endpoints_span(&self) -> bool {
         let span = i32::from(MIN_ENDPOINT_SPAN_COUNTS);
         self.inputs.iter().enumerate().all(|(i, e)| {
