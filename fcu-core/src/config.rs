@@ -199,6 +199,14 @@ impl core::fmt::Display for ConfigError {
 }
 
 impl Config {
+    /// `self == other`, compiled once here: the derived comparison is `#[inline]`, so each
+    /// crate that compares two configurations would otherwise build its own copy of the whole
+    /// field-by-field compare (about 1.6 KB in the firmware).
+    #[inline(never)]
+    pub fn is_same_as(&self, other: &Config) -> bool {
+        self == other
+    }
+
     /// The ST reference firmware, R release (221117), DC motors, Devo 7E radio.
     pub fn reference() -> Config {
         Config {

@@ -329,6 +329,9 @@ pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
 
 /// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
 /// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
+// Out of line, as `with_in_flight_fields_of`: inlined at fcu-core's opt-level 3, each copy
+// and the comparison after it become a kilobyte of field moves in `flight::check_change`.
+#[inline(never)]
 pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = with_in_flight_fields_of(base, src);
     let (r, s) = (&mut c.rc, &src.rc);
@@ -354,6 +357,7 @@ pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
 
 /// `base` with the fields of the parameters that may change while armed
 /// ([`Applies::Anytime`]) taken from `src`.
+#[inline(never)]
 pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = *base;
     c.rc.max_tilt_rad = src.rc.max_tilt_rad;
@@ -429,6 +433,16 @@ fn us_from_counts(c: u16) -> f32 {
     f32::from(c) / COUNTS_PER_US as f32
 }
 
+/// One endpoint, `field` of radio input `input` (from 0), to `us`. One copy for the twelve
+/// endpoint parameters: each table entry passes only its input and field.
+#[inline(never)]
+fn set_endpoint_us(cfg: &mut Config, input: usize, us: f32, field: fn(&mut RcInput) -> &mut u16) -> SetResult {
+    if let Some(e) = cfg.rc.inputs.get_mut(input) {
+        *field(e) = counts_from_us(us);
+    }
+    Ok(())
+}
+
 /// Bounds and step checked: `us` is a multiple of 0.25 within 16 384 µs.
 fn counts_from_us(us: f32) -> u16 {
     (us * COUNTS_PER_US as f32) as u16
@@ -461,7 +475,9 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
     (ticks as f32 * 1000.0) / hz as f32
 }
 
-/// Whole milliseconds (checked) to ticks, refused unless exact.
+/// Whole milliseconds (checked) to ticks, refused unless exact. Out of line: its 64-bit
+/// division would otherwise be inlined into each caller at fcu-core's opt-level 3.
+#[inline(never)]
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
     let product = (ms as u64) * u64::from(tick_hz(cfg));
     if product == 0 || product % 1000 != 0 {
@@ -475,6 +491,13 @@ fn safety(cfg: &Config) -> SafetyConfig {
         SupervisorConfig::Safe(s) => s,
         SupervisorConfig::Reference => SafetyConfig::DEFAULT,
     }
+}
+
+/// One of the safe supervisor's times, `field`, in milliseconds. One copy for every such
+/// parameter, as for [`set_safety_ms`].
+#[inline(never)]
+fn safety_ms(cfg: &Config, field: fn(&SafetyConfig) -> u32) -> f32 {
+    ms_from_ticks(cfg, field(&safety(cfg)))
 }
 
 /// One of the safe supervisor's times, `field`, to `ms` (checked whole). One copy for every
@@ -496,7 +519,7 @@ fn set_safety_ms(cfg: &mut Config, ms: f32, field: fn(&mut SafetyConfig) -> &mut
 /// `(1 − a1 − a2) / (1 + a1 − a2) = k²`, the stored `a` being pre-negated).
 fn gyro_cutoff_hz(cfg: &Config) -> f32 {
     let c = &cfg.gyro_filter;
-    let listed = GYRO_DESIGNS_800_HZ.iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
+    let listed = gyro_designs().iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
     if let (Some(d), true) = (listed, cfg.timing.integration_hz == 800.0) {
         return f32::from(d.0);
     }
@@ -517,9 +540,16 @@ fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
 
 /// The gyro low-pass a cut-off of `hz` gives at an 800 Hz tick, from [`GYRO_DESIGNS_800_HZ`].
 fn gyro_design_800_hz(hz: f32) -> Option<BiquadCoeffs> {
-    let &(_, a1, a2, b0) = GYRO_DESIGNS_800_HZ.iter().find(|d| f32::from(d.0) == hz)?;
+    let &(_, a1, a2, b0) = gyro_designs().iter().find(|d| f32::from(d.0) == hz)?;
     let b0 = f32::from_bits(b0);
     Some(BiquadCoeffs { a1: f32::from_bits(a1), a2: f32::from_bits(a2), b0, b1: 2.0 * b0, b2: b0 })
+}
+
+/// [`GYRO_DESIGNS_800_HZ`] behind an optimisation barrier: fcu-core is built at opt-level 3
+/// for the control tick, which would unroll each search of the 27 designs into a kilobyte of
+/// compares; a search here runs once per parameter read or set.
+fn gyro_designs() -> &'static [(u16, u32, u32, u32)] {
+    core::hint::black_box(&GYRO_DESIGNS_800_HZ)
 }
 
 /// The cut-offs `GYRO_LPF_HZ` offers at the 800 Hz tick, with the bits of what
@@ -590,12 +620,7 @@ macro_rules! rc_endpoint {
                 step: Step::QuarterUs,
                 applies: Applies::Disarmed,
                 get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
-                set: |c, v| {
-                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
-                        e.$field = counts_from_us(v);
-                    }
-                    Ok(())
-                },
+                set: |c, v| set_endpoint_us(c, $input - 1, v, |e| &mut e.$field),
             },
             description: concat!("radio input ", $input, ": ", $what),
         }
@@ -670,7 +695,7 @@ macro_rules! safety_ms {
                 max: $max,
                 step: Step::Integer,
                 applies: Applies::Disarmed,
-                get: |c| ms_from_ticks(c, safety(c).$field),
+                get: |c| safety_ms(c, |s| s.$field),
                 set: |c, v| set_safety_ms(c, v, |s| &mut s.$field),
             },
             description: $what,

@@ -152,6 +152,8 @@ impl RcMap {
     /// Give `f` to `input`; the function that had `input` takes `f`'s old input, so the map
     /// stays a permutation. Returns the function moved that way, if any. An input out of range
     /// is ignored (`None`, nothing moves).
+    // Out of line: the parameter table's four RCMAP setters share one copy.
+    #[inline(never)]
     pub fn assign(&mut self, f: Function, input: u8) -> Option<Function> {
         if usize::from(input) >= CHANNELS {
             return None;

@@ -177,7 +177,8 @@ mod with_link {
                 next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
                 let mut line = LineBuf::<96>::new();
                 let _grounded = boot.write_fatal_line(&mut line);
-                let _queued = g.link.send_text(Severity::Critical, line.as_str().trim_end());
+                // The line is ASCII: an ASCII trim keeps the Unicode whitespace table out of flash.
+                let _queued = g.link.send_text(Severity::Critical, line.as_str().trim_end_matches(|c: char| c.is_ascii_whitespace()));
             }
             g.link.tick(now_ms, &mut g.station);
             if let Some(cfg) = g.station.take_change() {

@@ -205,7 +205,7 @@ impl Vehicle for Station {
         let armed = self.armed();
         let mut next = self.cfg;
         let applied = parameters::set(&mut next, usize::from(index), value, armed).map_err(|r| r.rule)?;
-        if next != self.cfg {
+        if !next.is_same_as(&self.cfg) {
             fcu_core::flight::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
             self.cfg = next;
             self.changed();
@@ -223,7 +223,7 @@ impl Vehicle for Station {
             Request::ResetParams if self.armed() => Err(RULE_ARMED),
             Request::ResetParams => {
                 fcu_core::flight::check_change(&self.cfg, &self.defaults, false).map_err(|e| e.rule())?;
-                if self.cfg != self.defaults {
+                if !self.cfg.is_same_as(&self.defaults) {
                     self.cfg = self.defaults;
                     self.changed();
                 }

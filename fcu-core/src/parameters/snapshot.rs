@@ -174,6 +174,9 @@ pub enum Source {
 
 /// The configuration to boot with: `defaults` with the newest valid snapshot's values, or
 /// `defaults` alone (and why), never a mix.
+// Out of line: inlined into a firmware's `init` with constant defaults, opt-level 3 builds the
+// defaults field by field once per way out (a kilobyte each) instead of copying them.
+#[inline(never)]
 pub fn load_config(sectors: [&[u32]; 2], defaults: &crate::Config) -> (crate::Config, Source) {
     match load(sectors) {
         None => (*defaults, Source::NoSnapshot),
