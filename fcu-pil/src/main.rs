@@ -48,6 +48,10 @@ struct ServeArgs {
     /// again with what the cut left in flash.
     #[arg(long)]
     power_cut: Option<String>,
+    /// Boot with these parameters (MAVProxy's `param save` format: NAME VALUE lines) as the
+    /// board's only saved set, over the defaults; an error names a line the set refuses.
+    #[arg(long)]
+    params: Option<PathBuf>,
     /// Emulated seconds to serve after boot (default one hour).
     #[arg(long, default_value_t = 3600.0)]
     duration: f64,
@@ -200,6 +204,7 @@ fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
         duration_s: a.duration,
         setup,
         power_cut,
+        params: a.params.clone(),
     };
     let report = fcu_pil::serve::serve_on(listener, &opts)?;
     print!("{report}");

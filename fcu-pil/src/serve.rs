@@ -43,6 +43,31 @@ pub struct ServeOptions {
     pub setup: BoardSetup,
     /// A power cut armed at a fraction of a flash operation to come ([`parse_power_cut`]).
     pub power_cut: Option<ArmedCut>,
+    /// A parameter file (MAVProxy's `param save` format) to boot with: written into the
+    /// flash as the only saved set ([`flash_with_parameters`]).
+    pub params: Option<PathBuf>,
+}
+
+/// Where the firmware keeps its parameters: flash sectors 1 and 2 (16 KiB each), from
+/// 0x0800_4000 (the repository's `memory.x`).
+const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
+
+/// `flash` (a 256 KiB image of 0x0800_0000 on) with the parameter sectors holding one saved
+/// set: the product's defaults with the values `text` names, as the firmware would have saved
+/// it (fcu-core's snapshot, sequence 1, at the start of sector 1; sector 2 erased). A line that
+/// names no parameter or a value the set refuses is an error naming the line.
+pub fn flash_with_parameters(mut flash: Vec<u8>, text: &str) -> Result<Vec<u8>, String> {
+    use fcu_core::parameters::{self, snapshot};
+    let cfg = parameters::apply_file(&fcu_core::Config::default(), text).map_err(|e| format!("line {}: {}", e.line, e.rule))?;
+    flash.resize(256 * 1024, 0xFF);
+    let sectors = flash.get_mut(PARAM_SECTORS).ok_or("flash image too short")?;
+    sectors.fill(0xFF);
+    for (at, word) in snapshot::encode(1, &parameters::values(&cfg)).iter().enumerate() {
+        if let Some(dst) = sectors.get_mut(4 * at..4 * at + 4) {
+            dst.copy_from_slice(&word.to_le_bytes());
+        }
+    }
+    Ok(flash)
 }
 
 /// Parses `erase:3/8`, `program:0.5`, `erase:1/8@2` (the second erase from boot on): the kind
@@ -235,6 +260,12 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
             setup.flash_contents = Some(std::fs::read(path).map_err(|e| format!("--flash {}: {e}", path.display()))?);
         }
     }
+    if let Some(path) = &opts.params {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("--params {}: {e}", path.display()))?;
+        let flash = flash_with_parameters(setup.flash_contents.take().unwrap_or_default(), &text)
+            .map_err(|e| format!("--params {}: {e}", path.display()))?;
+        setup.flash_contents = Some(flash);
+    }
     let image = Image::load(&opts.elf)?;
     let mut board = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).map_err(|e| format!("boot: {e}"))?;
     if !board.flying() {
@@ -274,6 +305,36 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn words(flash: &[u8], sector: usize) -> Vec<u32> {
+        let base = PARAM_SECTORS.start + sector * 0x4000;
+        flash[base..base + 0x4000].chunks(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    }
+
+    #[test]
+    fn a_parameter_file_becomes_the_only_saved_set() {
+        use fcu_core::parameters::{self, snapshot};
+        // Whatever the sectors held before is gone.
+        let old = vec![0u8; 256 * 1024];
+        let flash = flash_with_parameters(old, "ANGLE_MAX 30\n# a comment\nRC1_TRIM 1500\n").unwrap();
+        let (a, b) = (words(&flash, 0), words(&flash, 1));
+        let (cfg, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
+        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
+        let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
+        // ANGLE_MAX is kept in radians: it reads back within a float's rounding.
+        assert!((value("ANGLE_MAX") - 30.0).abs() < 1e-4, "{}", value("ANGLE_MAX"));
+        assert_eq!(value("RC1_TRIM"), 1500.0);
+        assert!(b.iter().all(|&w| w == u32::MAX), "sector 2 erased");
+        assert!(flash[..PARAM_SECTORS.start].iter().all(|&x| x == 0), "the rest of the flash untouched");
+    }
+
+    #[test]
+    fn a_file_the_set_refuses_names_its_line() {
+        let e = flash_with_parameters(Vec::new(), "ANGLE_MAX 30\nNO_SUCH 1\n").unwrap_err();
+        assert!(e.starts_with("line 2:"), "{e}");
+        let e = flash_with_parameters(Vec::new(), "ANGLE_MAX 300\n").unwrap_err();
+        assert!(e.starts_with("line"), "{e}");
+    }
 
     #[test]
     fn power_cuts_parse_with_a_kind_a_fraction_and_an_index() {

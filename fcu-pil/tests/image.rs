@@ -645,6 +645,7 @@ fn serve_bridges_usart1_to_a_tcp_client() {
         duration_s: 2.0,
         setup: BoardSetup::default(),
         power_cut: None,
+        params: None,
     };
     let server = std::thread::spawn(move || fcu_pil::serve::serve_on(listener, &opts));
     let mut client = std::net::TcpStream::connect(addr).expect("connect");

@@ -31,7 +31,7 @@ def free_port():
 class ServedBoard:
     """`fcu-pil serve` and a pymavlink connection to it (system 255, a ground station)."""
 
-    def __init__(self, scenario=None, power_cut=None, flash=None, duration_s=600):
+    def __init__(self, scenario=None, power_cut=None, flash=None, params=None, duration_s=600):
         self.port = free_port()
         self._dir = tempfile.TemporaryDirectory(prefix="fcu-gcs-")
         self.flash = flash or os.path.join(self._dir.name, "flash.bin")
@@ -41,6 +41,8 @@ class ServedBoard:
             cmd += ["--scenario", scenario]
         if power_cut:
             cmd += ["--power-cut", power_cut]
+        if params:
+            cmd += ["--params", params]
         self.log = open(os.path.join(self._dir.name, "serve.log"), "w+")
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=subprocess.STDOUT)
         self.conn = None

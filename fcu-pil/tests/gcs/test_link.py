@@ -128,6 +128,24 @@ class SaveAndReboot(unittest.TestCase):
             self.assertAlmostEqual(board.param_read("RC1_TRIM").param_value, 1500.0)
 
 
+class ParamsFile(unittest.TestCase):
+    def test_serve_boots_with_a_parameter_file_as_the_saved_set(self):
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "tune.parm")
+            with open(path, "w") as f:
+                f.write("# from MAVProxy's param save\nRATE_RLL_P 190\nRC2_REV -1\n")
+            with ServedBoard(params=path) as board:
+                self.assertIsNotNone(board.heartbeat())
+                self.assertEqual(board.param_read("RATE_RLL_P").param_value, 190.0)
+                self.assertEqual(board.param_read("RC2_REV").param_value, -1.0)
+                # The boot's own STATUSTEXT went out before the client connected: a reboot says
+                # where the set came from.
+                board.texts(0.1)
+                self.assertEqual(board.command(MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1).result, MAV.MAV_RESULT_ACCEPTED)
+                texts = board.texts(8.0)
+                self.assertTrue(any("loaded from flash" in t for t in texts), texts)
+
+
 class Armed(unittest.TestCase):
     """The hover scenario's pilot arms by gesture and takes off (on the bench)."""
 
