@@ -350,7 +350,7 @@ impl ControlTick {
 
     /// See [`FlightController::armed`].
     pub fn armed(&self) -> bool {
-        matches!(self.supervision.in_force().decision.state, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel)
+        self.supervision.in_force().decision.state.armed()
     }
 
     /// The tick's half of a change [`check_change`] allowed: its values made again by

@@ -133,6 +133,12 @@ impl FlightState {
     pub fn motors_may_run(self) -> bool {
         matches!(self, FlightState::Armed | FlightState::FailsafeLevel)
     }
+
+    /// The motors may be running or about to: arming, armed, or the failsafe's level stage.
+    /// Only gains and rates change then, and nothing is written to flash.
+    pub fn armed(self) -> bool {
+        matches!(self, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel)
+    }
 }
 
 /// A reason arming is refused.

@@ -9,7 +9,8 @@
 //! the rules of fcu-core's parameter table; the owner only moves bytes and words.
 
 use fcu_core::flight::Status;
-use fcu_core::parameters::{self, snapshot};
+use fcu_core::parameters::{self, snapshot, RULE_ARMED};
+use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
 
@@ -20,13 +21,8 @@ use crate::vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Ve
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
 pub const SAVE_DEBOUNCE_MS: u32 = 2000;
 
-/// The capture clock: counts per µs (4 MHz).
-const COUNTS_PER_US: u16 = 4;
-
 /// Rule of a request the station does not carry out on this board.
 pub const RULE_NOT_AVAILABLE: &str = "not available on this board yet";
-/// Rule of a save asked while armed (the link already refuses it; the station checks again).
-pub const RULE_ARMED: &str = "only while disarmed";
 
 pub struct Station {
     cfg: Config,
@@ -125,7 +121,7 @@ impl Station {
     }
 
     fn armed(&self) -> bool {
-        self.status.is_some_and(|s| matches!(s.state, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel))
+        self.status.is_some_and(|s| s.state.armed())
     }
 
     fn changed(&mut self) {
@@ -160,7 +156,7 @@ impl Vehicle for Station {
         };
         let mut rc_widths_us = [0u16; 8];
         for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
-            *out = w / COUNTS_PER_US;
+            *out = (u32::from(w) / COUNTS_PER_US) as u16;
         }
         let throttle_low = self.cfg.rc.throttle_low(&s.sticks);
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;

@@ -168,8 +168,8 @@ pub fn decode_all(bytes: &[u8]) -> Vec<Sent> {
     out
 }
 
-/// Drains the link and decodes what it sent.
-pub fn drain(link: &mut TestLink) -> Vec<Sent> {
+/// Drains the link (of any queue size) and decodes what it sent.
+pub fn drain<const N: usize>(link: &mut Link<N>) -> Vec<Sent> {
     let mut bytes = Vec::new();
     let mut buf = [0u8; 97];
     loop {
