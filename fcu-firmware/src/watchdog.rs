@@ -41,10 +41,13 @@ impl Watchdog {
     pub fn start(iwdg: IWDG, dbgmcu: &DBGMCU) -> Result<Watchdog, LsiNotRunning> {
         dbgmcu.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
         iwdg.kr().write(|w| w.key().start());
-        // From its first reload after the values land, the timeout is 50 ms.
-        let mut watchdog = Watchdog { iwdg };
-        watchdog.set(PRESCALER_DIV8, RELOAD)?;
-        Ok(watchdog)
+        iwdg.kr().write(|w| w.key().unlock());
+        iwdg.pr().write(|w| w.pr().set(PRESCALER_DIV8));
+        iwdg.rlr().write(|w| w.rl().set(RELOAD));
+        crate::cycles::poll(UPDATE_BOUND_CYCLES, || (iwdg.sr().read().bits() == 0).then_some(())).ok_or(LsiNotRunning)?;
+        // The first reload after the values land: from here the timeout is 50 ms.
+        iwdg.kr().write(|w| w.key().feed());
+        Ok(Watchdog { iwdg })
     }
 
     #[cfg(feature = "mavlink")]
@@ -62,6 +65,7 @@ impl Watchdog {
         self.set(PRESCALER_DIV8, RELOAD)
     }
 
+    #[cfg(feature = "mavlink")]
     /// New values while running: reload first (the count starts full under the old values),
     /// then PR and RLR, then a bounded wait for them to land, then a reload with them.
     fn set(&mut self, prescaler: u8, reload: u16) -> Result<(), LsiNotRunning> {
