@@ -88,61 +88,52 @@ impl RcCapture {
     /// back on, dropping what it captured meanwhile. Runs in the capture interrupt, which
     /// outranks the control tick: short and straight.
     pub fn take_edges(&mut self, mut sink: impl FnMut(CaptureEdge)) -> u32 {
-        let mut muted = 0;
-        // Look again until a look finds nothing: an edge captured while the last ones were
-        // handled (the next channel's, in a receiver's frame) is read at once rather than after
-        // a return and a new entry, and whatever comes after the last look waits only for the
-        // return. Bounded: a storm on a pin spends its edge budget within a few looks.
+        // The flags are looked at again until a look finds no channel not yet read, and only
+        // then is anything handed on: the radio's latency ends at the CCR read, so an edge
+        // latched while this interrupt runs (the next channel's, in a receiver's frame) waits
+        // for the look in progress, not for the queueing of those before it, and whatever
+        // comes after the last look waits only for the return. One edge per channel at most
+        // (pulses are 0.8 ms or more): a second one, a storm's, waits for the next entry, so
+        // a storm costs each entry at most its four reads.
+        let mut taken = 0u32;
+        let mut captures = [0u16; CHANNELS];
         for _ in 0..MAX_LOOKS {
-            let (found, newly_muted) = self.take_pending(&mut sink);
-            muted += newly_muted;
-            if !found {
+            let mut sr = self.tim.sr().read().bits();
+            if sr & 1 != 0 {
+                self.reopen_window();
+                // Again: a reopened channel's flag was cleared with its stale capture.
+                sr = self.tim.sr().read().bits();
+            }
+            // CCxIF is SR bit x (bits 1..4); DIER's CCxIE sit at the same bits.
+            let new = sr & u32::from(self.enabled_mask) & !taken;
+            if new == 0 {
                 break;
             }
-        }
-        muted
-    }
-
-    /// One look at the capture flags: (whether any edge was taken, channels muted).
-    ///
-    /// The flagged channels' CCRs are read first, back to back, and only then handed on: the
-    /// latency the radio is measured by ends at the read, and an edge arriving on another
-    /// channel meanwhile is latched by the timer and read at the next look.
-    fn take_pending(&mut self, sink: &mut impl FnMut(CaptureEdge)) -> (bool, u32) {
-        let mut sr = self.tim.sr().read().bits();
-        if sr & 1 != 0 {
-            self.reopen_window();
-            // Again: a reopened channel's flag was cleared with its stale capture.
-            sr = self.tim.sr().read().bits();
-        }
-        // CCxIF is SR bit x (bits 1..4); DIER's CCxIE sit at the same bits.
-        let pending = sr & u32::from(self.enabled_mask);
-        if pending == 0 {
-            return (false, 0);
-        }
-        let mut captures = [0u16; CHANNELS];
-        for (channel, (slot, ccr)) in captures.iter_mut().zip(self.tim.ccr_iter()).enumerate() {
-            if pending & (2 << channel) != 0 {
-                *slot = ccr.read().ccr().bits() as u16;
+            for (channel, (slot, ccr)) in captures.iter_mut().zip(self.tim.ccr_iter()).enumerate() {
+                if new & (2 << channel) != 0 {
+                    *slot = ccr.read().ccr().bits() as u16;
+                }
             }
+            taken |= new;
         }
-        // The four pins' levels in one read of GPIOA's IDR (PA0..PA3 are its bits 0..3).
+        if taken == 0 {
+            return 0;
+        }
+        // The four pins' levels in one read of GPIOA's IDR (PA0..PA3 are its bits 0..3): a
+        // pin keeps its level for the 0.8 ms of a pulse, far longer than the looks take.
         // SAFETY: a read of an input data register, which no write reaches; the pins are this
         // struct's own, in their alternate function, and IDR reflects them in any mode.
         let levels = unsafe { (*stm32f4xx_hal::pac::GPIOA::ptr()).idr().read().bits() };
         let mut muted = 0;
-        for (channel, &capture_counts) in captures.iter().enumerate() {
-            if pending & (2 << channel) == 0 {
+        for (channel, (&capture_counts, count)) in captures.iter().zip(self.edges_in_window.iter_mut()).enumerate() {
+            if taken & (2 << channel) == 0 {
                 continue;
             }
-            let level_high = levels & (1 << channel) != 0;
-            sink(CaptureEdge { channel, capture_counts, level_high });
-            if let Some(count) = self.edges_in_window.get_mut(channel) {
-                *count = count.saturating_add(1);
-                if *count == EDGE_BUDGET_PER_WRAP {
-                    self.enabled_mask &= !(2 << channel);
-                    muted += 1;
-                }
+            sink(CaptureEdge { channel, capture_counts, level_high: levels & (1 << channel) != 0 });
+            *count = count.saturating_add(1);
+            if *count == EDGE_BUDGET_PER_WRAP {
+                self.enabled_mask &= !(2 << channel);
+                muted += 1;
             }
         }
         if muted > 0 {
@@ -151,7 +142,7 @@ impl RcCapture {
         }
         // CCxOF is left set: it raises no interrupt, and clearing it with a write would race
         // a capture flag arriving between the read above and that write.
-        (true, muted)
+        muted
     }
 
     /// A new capture wrap: every channel gets its budget back. A channel that was muted

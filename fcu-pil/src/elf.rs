@@ -102,6 +102,15 @@ impl Image {
         (pc < start + size).then(|| demangle(name))
     }
 
+    /// The handler of exception `number` (its vector table entry), as [`Image::function_at`]
+    /// names it.
+    pub fn handler_name(&self, number: usize) -> Option<String> {
+        let vt = self.segments.iter().find(|s| s.address == crate::machine::FLASH_BASE)?;
+        let at = number.checked_mul(4)?;
+        let word = vt.data.get(at..at + 4)?;
+        self.function_at(u32::from_le_bytes(word.try_into().ok()?))
+    }
+
     pub fn symbol(&self, name: &str) -> Option<u32> {
         self.symbols.get(name).copied()
     }

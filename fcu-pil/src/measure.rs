@@ -39,6 +39,9 @@ pub struct Report {
     pub capture_latency_us_median: f64,
     pub capture_latency_us_max: f64,
     pub capture_latency_during_control_us_max: f64,
+    /// What ran when the slowest capture was latched: the innermost exception handler active
+    /// then, or `thread` (idle or the tasks RTIC runs from thread mode).
+    pub capture_latency_worst_in: String,
     /// The longest interval after boot during which the capture interrupt could not be taken
     /// because of the masks (PRIMASK, or BASEPRI at or above its priority), and where it began:
     /// the block that set the mask and its function.
@@ -56,6 +59,23 @@ pub struct Report {
     /// Exception entries, and how many stacked the extended (FP) frame.
     pub exception_entries: u64,
     pub fp_frames: u64,
+}
+
+/// The innermost exception handler active at `t` (the one entered last among those whose
+/// activation spans `t`), named by its vector; `thread` when none is.
+fn running_at(stats: &std::collections::HashMap<usize, crate::machine::ExceptionStats>, t: Time, image: &crate::elf::Image) -> String {
+    let innermost = stats
+        .iter()
+        .filter_map(|(&number, s)| {
+            let i = s.spans.partition_point(|&(entered, _)| entered <= t).checked_sub(1)?;
+            let &(entered, returned) = s.spans.get(i)?;
+            (t <= returned).then_some((entered, number))
+        })
+        .max();
+    match innermost {
+        Some((_, number)) => image.handler_name(number).unwrap_or_else(|| format!("exception {number}")),
+        None => "thread".to_string(),
+    }
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -144,6 +164,13 @@ pub fn measure(
         .map(|&(c, r)| us(r - c))
         .fold(0.0, f64::max);
 
+    let capture_latency_worst_in = board
+        .records
+        .capture_reads
+        .iter()
+        .max_by_key(|&&(c, r)| r - c)
+        .map_or_else(String::new, |&(c, _)| running_at(&st.exception_stats, c, m.image()));
+
     let masking = st.masking.clone().unwrap_or_default();
     let masked = masking.longest;
     let capture_pending_us_max =
@@ -167,6 +194,7 @@ pub fn measure(
         capture_latency_us_median,
         capture_latency_us_max,
         capture_latency_during_control_us_max: during,
+        capture_latency_worst_in,
         masked_us_max: masked.map_or(0.0, |i| us(i.to - i.from)),
         masked_from_pc: masked.map(|i| i.pc),
         masked_from_function: masked.and_then(|i| m.image().function_at(i.pc)),
@@ -230,8 +258,11 @@ impl fmt::Display for Report {
         writeln!(f, "  stack: {} of {} bytes used (high-water mark of the painted stack)", self.stack_used_bytes, self.stack_size_bytes)?;
         writeln!(
             f,
-            "  TIM2 capture to its read: median {:.1} µs, max {:.1} µs; max {:.1} µs while the control task runs",
-            self.capture_latency_us_median, self.capture_latency_us_max, self.capture_latency_during_control_us_max
+            "  TIM2 capture to its read: median {:.1} µs, max {:.1} µs (latched while {} ran); max {:.1} µs while the control task runs",
+            self.capture_latency_us_median,
+            self.capture_latency_us_max,
+            self.capture_latency_worst_in,
+            self.capture_latency_during_control_us_max
         )?;
         match self.masked_from_pc {
             Some(pc) => writeln!(
