@@ -16,7 +16,7 @@ use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative, 
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
 use crate::mixer::{MixerConfig, Saturate};
-use crate::rc::{PulseRules, RcConfig, StickCounts, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
+use crate::rc::{GestureThrottle, PulseRules, RcConfig, StickCounts, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
 use crate::telemetry::BatterySense;
 
@@ -367,6 +367,8 @@ impl Default for Config {
                 link_timeout_ticks: 80,
                 // D8: yaw rate proportional to the stick beyond the dead band.
                 yaw_stick: YawStick::Proportional,
+                // D18: the gestures take a low throttle, as every other throttle rule does.
+                gesture_throttle: GestureThrottle::Low,
                 ..r.rc
             },
             control: ControlConfig {

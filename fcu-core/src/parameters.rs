@@ -320,6 +320,10 @@ pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
         let (Some(value), None) = (value, extra) else { return Err(err("expected NAME VALUE")) };
         let i = index_of(name.as_bytes()).ok_or(err(RULE_UNKNOWN))?;
         let x: f32 = value.parse().map_err(|_| err("value is not a number"))?;
+        // A value out of its own bounds is this line's fault, whatever the others say.
+        if let Some(p) = TABLE.get(i) {
+            check_value(p, x).map_err(err)?;
+        }
         if let Some(slot) = v.get_mut(i) {
             *slot = x;
         }

@@ -89,6 +89,17 @@ pub enum YawStick {
     Proportional,
 }
 
+/// What the arm and calibrate gestures ask of the throttle (difference D18).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GestureThrottle {
+    /// At the bottom of its travel, exactly (reference). The Devo's throttle rests well below
+    /// its calibrated bottom, so it reads 0; a transmitter calibrated to its own endpoints
+    /// rests at its bottom, and a count of jitter above it breaks the gesture every few frames.
+    AtBottom,
+    /// Low, as every other throttle rule reads it: below `min_throttle` (`MIN_THR`).
+    Low,
+}
+
 /// What a stick does: the four functions a captured input can carry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Function {
@@ -249,6 +260,7 @@ pub struct RcConfig {
     /// Yaw target change per outer step at full rate, rad (120°/s × 6.25 ms).
     pub yaw_max_step_rad: f32,
     pub yaw_stick: YawStick,
+    pub gesture_throttle: GestureThrottle,
     pub pulses: PulseRules,
     /// Link timeout, control ticks since the last edge (reference: 31 ms) or, with validated
     /// pulses, since the last accepted pulse of a channel (100 ms).
@@ -269,6 +281,7 @@ impl RcConfig {
         yaw_deadband: StickCounts(600),
         yaw_max_step_rad: 0.013_089_97,
         yaw_stick: YawStick::BangBang,
+        gesture_throttle: GestureThrottle::AtBottom,
         pulses: PulseRules::Reference { reset_after_ticks: 25 },
         link_timeout_ticks: 25,
     };
@@ -474,10 +487,14 @@ impl RcConfig {
     pub fn gesture(&self, s: &Sticks) -> Option<Gesture> {
         // i16 arithmetic: `-th` of a positive i16 cannot overflow.
         let th = self.gesture_threshold.0;
-        if s.thr == StickCounts::ZERO && s.ele.0 < -th && s.ail.0 > th && s.rud.0 < -th {
+        let throttle_down = match self.gesture_throttle {
+            GestureThrottle::AtBottom => s.thr == StickCounts::ZERO,
+            GestureThrottle::Low => self.throttle_low(s),
+        };
+        if throttle_down && s.ele.0 < -th && s.ail.0 > th && s.rud.0 < -th {
             return Some(Gesture::Calibrate);
         }
-        if s.thr == StickCounts::ZERO && s.ele.0 < -th && s.ail.0 < -th && s.rud.0 > th {
+        if throttle_down && s.ele.0 < -th && s.ail.0 < -th && s.rud.0 > th {
             return Some(Gesture::Arm);
         }
         // Ours (the reference has no disarm): throttle low, rudder hard over the other way,

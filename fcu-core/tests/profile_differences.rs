@@ -191,6 +191,23 @@ fn d8_yaw_rate_is_proportional_to_the_stick() {
     assert_eq!(d.yaw_step(&full), r.yaw_step(&full));
 }
 
+#[test]
+fn d18_a_throttle_resting_a_count_above_its_bottom_still_arms() {
+    use fcu_core::rc::Gesture;
+    // The arm gesture with the throttle at rest on a transmitter calibrated to its own
+    // endpoints: its bottom, or a count or two above it with the pulse's jitter.
+    let arm = |thr: i16| Sticks { ail: StickCounts(-1500), ele: StickCounts(-1500), thr: StickCounts(thr), rud: StickCounts(1500) };
+    let r = Config::reference().rc;
+    let d = Config::default().rc;
+    assert_eq!(r.gesture(&arm(0)), Some(Gesture::Arm));
+    assert_eq!(r.gesture(&arm(2)), None, "the reference needs the throttle at 0 exactly");
+    for thr in [0, 1, 2, 150, 199] {
+        assert_eq!(d.gesture(&arm(thr)), Some(Gesture::Arm), "throttle {thr}");
+    }
+    // Above MIN_THR the throttle is not low: no gesture.
+    assert_eq!(d.gesture(&arm(200)), None);
+}
+
 /// An outer job of a level, still block with `sticks`.
 fn level_job(sticks: Sticks, throttle_low: bool) -> OuterJob {
     OuterJob {

@@ -56,6 +56,8 @@ struct ServeArgs {
     #[arg(long, default_value_t = 3600.0)]
     duration: f64,
     #[arg(long)]
+    /// The firmware ELF (default: FCU_PIL_ELF, else the `mavlink` build, built now; an image
+    /// without the link is refused).
     elf: Option<PathBuf>,
     #[command(flatten)]
     timing: TimingArg,
@@ -83,6 +85,17 @@ struct FlyArgs {
     /// Output directory for flight.csv, flight.svg and uart.log (created if missing).
     #[arg(long)]
     out: PathBuf,
+    /// Boot with these parameters (MAVProxy's `param save` format: NAME VALUE lines, as
+    /// `fcu-sim fly --params` takes) saved in flash, over the defaults (or over --flash's set).
+    /// Flies the `mavlink` image (built if --elf and FCU_PIL_ELF are not given), its UART set
+    /// to text lines, which the harness reads the board's state from.
+    #[arg(long)]
+    params: Option<PathBuf>,
+    /// Boot from this flash image (as `cargo pil serve --flash` saves it: the parameters a
+    /// ground station set and saved). Flies the `mavlink` image, as --params; the file is
+    /// only read.
+    #[arg(long)]
+    flash: Option<PathBuf>,
     #[command(flatten)]
     timing: TimingArg,
 }
@@ -144,8 +157,25 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
     use fcu_testkit::cli::fly as host;
     let spread = host::check_spread(a.spread).map_err(|e| e.0)?;
     let sc = host::prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration).map_err(|e| e.0)?;
-    let setup = a.timing.setup()?;
-    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    let mut setup = a.timing.setup()?;
+    let saved = a.params.is_some() || a.flash.is_some();
+    let elf = if saved { firmware::resolve_link_elf(a.elf.as_deref())? } else { firmware::resolve_elf(a.elf.as_deref())? };
+    if saved {
+        let flash = match &a.flash {
+            Some(path) => std::fs::read(path).map_err(|e| format!("--flash {}: {e}", path.display()))?,
+            None => Vec::new(),
+        };
+        let text = match &a.params {
+            Some(path) => Some(std::fs::read_to_string(path).map_err(|e| format!("--params {}: {e}", path.display()))?),
+            None => None,
+        };
+        let named = |e: String| match (&a.params, &a.flash) {
+            (Some(p), _) if e.starts_with("line") || e.starts_with("the set") => format!("--params {}: {e}", p.display()),
+            (_, Some(f)) => format!("--flash {}: {e}", f.display()),
+            _ => e,
+        };
+        setup.flash_contents = Some(fcu_pil::serve::flash_for_flight(flash, text.as_deref()).map_err(named)?);
+    }
     std::fs::create_dir_all(&a.out).map_err(|e| format!("--out {}: {e}", a.out.display()))?;
     let opts =
         fcu_testkit::sim::RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..Default::default() };
@@ -193,7 +223,7 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
 
 fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
     let setup = a.timing.setup()?;
-    let elf = firmware::resolve_elf(a.elf.as_deref())?;
+    let elf = firmware::resolve_link_elf(a.elf.as_deref())?;
     let listener = fcu_pil::serve::listen(&a.link)?;
     println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
     let power_cut = a.power_cut.as_deref().map(fcu_pil::serve::parse_power_cut).transpose()?;

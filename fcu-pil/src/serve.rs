@@ -56,13 +56,42 @@ const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
 /// set: the product's defaults with the values `text` names, as the firmware would have saved
 /// it (fcu-core's snapshot, sequence 1, at the start of sector 1; sector 2 erased). A line that
 /// names no parameter or a value the set refuses is an error naming the line.
-pub fn flash_with_parameters(mut flash: Vec<u8>, text: &str) -> Result<Vec<u8>, String> {
+pub fn flash_with_parameters(flash: Vec<u8>, text: &str) -> Result<Vec<u8>, String> {
+    let cfg = fcu_core::parameters::apply_file(&fcu_core::Config::default(), text).map_err(fcu_testkit::cli::fly::describe_file_error)?;
+    flash_with_config(flash, &cfg)
+}
+
+/// `flash` for a flight the harness watches (`cargo pil fly --flash/--params`): the set saved
+/// in it (the defaults if none), with the values `text` names over it, and its UART turned to
+/// text lines, which are what the harness reads the board's state from. Saved as the only set,
+/// as [`flash_with_parameters`] does.
+pub fn flash_for_flight(flash: Vec<u8>, text: Option<&str>) -> Result<Vec<u8>, String> {
     use fcu_core::parameters::{self, snapshot};
-    let cfg = parameters::apply_file(&fcu_core::Config::default(), text).map_err(|e| format!("line {}: {}", e.line, e.rule))?;
+    let words = |sector: usize| -> Vec<u32> {
+        let base = PARAM_SECTORS.start + sector * 0x4000;
+        flash
+            .get(base..base + 0x4000)
+            .map_or_else(Vec::new, |b| b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+    };
+    let (a, b) = (words(0), words(1));
+    let (saved, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
+    if let snapshot::Source::Refused(rule) = source {
+        return Err(format!("the flash's saved parameters are refused ({rule})"));
+    }
+    let cfg = match text {
+        Some(t) => parameters::apply_file(&saved, t).map_err(fcu_testkit::cli::fly::describe_file_error)?,
+        None => saved,
+    };
+    let cfg = parameters::apply_file(&cfg, "LINK_PROTOCOL 0").map_err(fcu_testkit::cli::fly::describe_file_error)?;
+    flash_with_config(flash, &cfg)
+}
+
+fn flash_with_config(mut flash: Vec<u8>, cfg: &fcu_core::Config) -> Result<Vec<u8>, String> {
+    use fcu_core::parameters::{self, snapshot};
     flash.resize(256 * 1024, 0xFF);
     let sectors = flash.get_mut(PARAM_SECTORS).ok_or("flash image too short")?;
     sectors.fill(0xFF);
-    for (at, word) in snapshot::encode(1, &parameters::values(&cfg)).iter().enumerate() {
+    for (at, word) in snapshot::encode(1, &parameters::values(cfg)).iter().enumerate() {
         if let Some(dst) = sectors.get_mut(4 * at..4 * at + 4) {
             dst.copy_from_slice(&word.to_le_bytes());
         }
@@ -70,7 +99,6 @@ pub fn flash_with_parameters(mut flash: Vec<u8>, text: &str) -> Result<Vec<u8>, 
     Ok(flash)
 }
 
-/// Parses `erase:3/8`, `program:0.5`, `erase:1/8@2` (the second erase from boot on): the kind
 /// of flash operation, the fraction of it at which the power fails, and which one.
 pub fn parse_power_cut(text: &str) -> Result<ArmedCut, String> {
     let bad = || format!("--power-cut {text}: expected erase|program:FRACTION[@N], e.g. erase:3/8 or program:0.5@2");
@@ -329,11 +357,34 @@ mod tests {
     }
 
     #[test]
+    fn a_flight_keeps_the_flash_set_takes_the_file_over_it_and_talks_text() {
+        use fcu_core::parameters::{self, snapshot};
+        let saved = flash_with_parameters(Vec::new(), "ANGLE_MAX 30\nRC1_TRIM 1500\n").unwrap();
+        let flash = flash_for_flight(saved, Some("RC1_TRIM 1400\n")).unwrap();
+        let (cfg, source) = snapshot::load_config([&words(&flash, 0), &words(&flash, 1)], &fcu_core::Config::default());
+        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
+        let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
+        assert!((value("ANGLE_MAX") - 30.0).abs() < 1e-4, "the flash's set kept");
+        assert_eq!(value("RC1_TRIM"), 1400.0, "the file over it");
+        assert_eq!(value("LINK_PROTOCOL"), 0.0, "text lines for the harness");
+        // No flash: the defaults, text lines.
+        let (cfg, _) = {
+            let f = flash_for_flight(Vec::new(), None).unwrap();
+            snapshot::load_config([&words(&f, 0), &words(&f, 1)], &fcu_core::Config::default())
+        };
+        assert_eq!(parameters::value(&cfg, parameters::index_of(b"LINK_PROTOCOL").unwrap()), Some(0.0));
+        assert!(flash_for_flight(Vec::new(), Some("NO_SUCH 1\n")).unwrap_err().starts_with("line 1:"));
+    }
+
+    #[test]
     fn a_file_the_set_refuses_names_its_line() {
         let e = flash_with_parameters(Vec::new(), "ANGLE_MAX 30\nNO_SUCH 1\n").unwrap_err();
         assert!(e.starts_with("line 2:"), "{e}");
-        let e = flash_with_parameters(Vec::new(), "ANGLE_MAX 300\n").unwrap_err();
-        assert!(e.starts_with("line"), "{e}");
+        let e = flash_with_parameters(Vec::new(), "# angles\nANGLE_MAX 300\n").unwrap_err();
+        assert!(e.starts_with("line 2:"), "{e}");
+        // Each line fine, the set they make refused (a trim outside its endpoints).
+        let e = flash_with_parameters(Vec::new(), "RC1_MIN 1000\nRC1_MAX 1200\nRC1_TRIM 1300\n").unwrap_err();
+        assert!(e.starts_with("the set is refused:"), "{e}");
     }
 
     #[test]

@@ -174,3 +174,26 @@ fn fly_help_lists_every_scenario_from_the_table() {
         assert!(out.contains(name), "`fly --help` does not name {name}:\n{out}");
     }
 }
+
+#[test]
+fn a_parameter_file_flies_the_other_transmitter_and_a_bad_one_is_named() {
+    let dir = tmp("params");
+    let _ = std::fs::create_dir_all(&dir);
+    let out = dir.join("flight");
+    let out = out.to_str().unwrap_or_default();
+    let parm = concat!(env!("CARGO_MANIFEST_DIR"), "/data/other-transmitter.parm");
+    let (code, stdout, err) = fcu_sim(&["fly", "--scenario", "other-transmitter", "--params", parm, "--out", out]);
+    assert_eq!(code, 0, "{stdout}\n{err}");
+    let (code, stdout, _) = fcu_sim(&["fly", "--scenario", "other-transmitter", "--duration", "5", "--out", out]);
+    assert_eq!(code, 1, "without its parameters: {stdout}");
+
+    let bad = dir.join("bad.parm");
+    let _ = std::fs::write(&bad, "RCMAP_ROLL 2\n# fine so far\nRC1_MAX 9000\n");
+    let bad = bad.to_str().unwrap_or_default();
+    let (code, _, err) = fcu_sim(&["fly", "--scenario", "hover", "--params", bad, "--out", out]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--params") && err.contains("bad.parm") && err.contains("line 3"), "{err}");
+    let (code, _, err) = fcu_sim(&["fly", "--scenario", "hover", "--profile", "reference", "--params", parm, "--out", out]);
+    assert_eq!(code, 2);
+    assert!(err.contains("reference profile keeps no parameters"), "{err}");
+}

@@ -433,6 +433,8 @@ fn a_parameter_file_round_trips_and_bad_lines_are_named() {
     assert_eq!(apply_file(&base, "ANG_RLL_P five\n"), Err(FileError { line: 1, rule: "value is not a number" }));
     assert_eq!(apply_file(&base, "ANG_RLL_P\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
     assert_eq!(apply_file(&base, "ANG_RLL_P 1 2\n"), Err(FileError { line: 1, rule: "expected NAME VALUE" }));
-    assert_eq!(apply_file(&base, "ANG_RLL_P nan\n"), Err(FileError { line: 0, rule: RULE_NOT_FINITE }));
+    // A value outside its own bounds is its line's; a set refused as a whole is line 0.
+    assert_eq!(apply_file(&base, "# a comment\nANG_RLL_P nan\n"), Err(FileError { line: 2, rule: RULE_NOT_FINITE }));
+    assert_eq!(apply_file(&base, "RC1_MIN 100\n"), Err(FileError { line: 1, rule: RULE_BELOW_MIN }));
     assert_eq!(apply_file(&base, "RC1_TRIM 2400\n").map_err(|e| e.line), Err(0));
 }

@@ -32,6 +32,11 @@ pub struct FlyArgs {
     /// Randomise every airframe parameter by ±this fraction from the seed (0 = nominal drone).
     #[arg(long, default_value_t = 0.0)]
     pub spread: f64,
+    /// A parameter file in MAVProxy's `param save` format (`NAME VALUE` lines, as
+    /// `fcu-ground params pull` or MAVProxy's `param save` write it), over the default
+    /// profile's values: the flight core flies with what a board would have saved.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
     /// Output directory for flight.csv and flight.svg (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -58,6 +63,28 @@ pub fn check_spread(spread: f64) -> Result<f64, CliError> {
         Ok(spread)
     } else {
         Err(CliError(format!("--spread: {spread} must be a fraction between 0 and 0.9")))
+    }
+}
+
+/// The configuration a `--params` file makes of `profile`'s. The reference profile keeps no
+/// parameters (it reproduces ST's firmware number for number); a bad line is named.
+pub fn config_with_params(profile: Profile, path: &Path) -> Result<fcu_core::Config, CliError> {
+    let named = |what: String| CliError(format!("--params {}: {what}", path.display()));
+    if profile == Profile::Reference {
+        return Err(named(
+            "the reference profile keeps no parameters (it is ST's firmware, number for number); fly --profile default".into(),
+        ));
+    }
+    let text = crate::csv::read_text(path).map_err(|e| named(e.to_string()))?;
+    fcu_core::parameters::apply_file(&profile.config(), &text).map_err(|e| named(describe_file_error(e)))
+}
+
+/// A refused parameter file in words: its line and the rule, or the rule the set as a whole
+/// breaks (line 0).
+pub fn describe_file_error(e: fcu_core::parameters::FileError) -> String {
+    match e.line {
+        0 => format!("the set is refused: {}", e.rule),
+        line => format!("line {line}: {}", e.rule),
     }
 }
 
@@ -97,11 +124,15 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
         .ok_or_else(|| CliError(format!("--profile: unknown profile `{}`; known: default, reference", a.profile)))?;
     let spread = check_spread(a.spread)?;
     let sc = prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration)?;
+    let cfg = match &a.params {
+        Some(path) => config_with_params(profile, path)?,
+        None => profile.config(),
+    };
     let out = OutputDir::prepare(&a.out)?;
     let mut csv = FlightCsv::create(&a.out).map_err(|e| out.abandon(e))?;
 
     let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
-    let mut computer = sim::InProcess::new(profile.config()).map_err(|e| out.abandon(CliError(e.to_string())))?;
+    let mut computer = sim::InProcess::new(cfg).map_err(|e| out.abandon(CliError(e.to_string())))?;
     let flown = sim::run_streaming(&mut computer, &sc, profile, &opts, &mut |r| csv.row(r));
     let log = flown.map_err(|e| out.abandon(csv.abandon(CliError(e.to_string()))))?;
     let title = format!("fcu-sim fly: {} — profile {}, seed {}", sc.name, profile.name(), a.seed);

@@ -5,6 +5,10 @@
 //! timestamps every edge with TIM2 counting at 4 MHz (0.25 µs) and wrapping every 32768 counts
 //! (8.192 ms), so a 2 ms pulse spans a quarter of the counter and the wrap is hit every frame.
 //! Edges carry jitter; optionally whole frames drop out and short spurious spikes appear.
+//!
+//! The pilot's sticks arrive as the reference's transmitter (a Devo 7E) sends them. A scenario
+//! can fly another [`Transmitter`]: each stick's travel re-encoded with that transmitter's
+//! endpoints and sense, on the receiver output it uses.
 
 use std::collections::VecDeque;
 
@@ -25,6 +29,9 @@ pub struct TxFrame {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct RadioParams {
+    /// The transmitter behind the receiver; `None`: the reference's Devo 7E, whose widths the
+    /// pilot's sticks already are.
+    pub transmitter: Option<Transmitter>,
     pub frame_period_s: f64,
     /// Edge timing jitter, µs rms (receiver clock and interrupt latency).
     pub jitter_us: f64,
@@ -36,7 +43,7 @@ pub struct RadioParams {
 
 impl Default for RadioParams {
     fn default() -> Self {
-        RadioParams { frame_period_s: 0.020, jitter_us: 0.5, frame_dropout_probability: 0.0, glitch_probability: 0.0 }
+        RadioParams { transmitter: None, frame_period_s: 0.020, jitter_us: 0.5, frame_dropout_probability: 0.0, glitch_probability: 0.0 }
     }
 }
 
@@ -44,6 +51,91 @@ impl RadioParams {
     /// A noisy receiver: a frame in fifty missing and a spike every ten frames.
     pub fn noisy() -> Self {
         RadioParams { jitter_us: 2.0, frame_dropout_probability: 0.02, glitch_probability: 0.1, ..Self::default() }
+    }
+}
+
+/// A transmitter that is not the reference's: which receiver output each stick comes out on,
+/// which sticks it reverses, and each stick's pulse width at the bottom, centre and top of its
+/// travel. The flight core flies it once its parameters say the same (`RCMAP_*`, `RCn_MIN`,
+/// `RCn_TRIM`, `RCn_MAX`, `RCn_REV`); with the Devo's, it reads the wrong sticks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transmitter {
+    pub name: &'static str,
+    /// The receiver output (capture input, 0-based) of each stick, in the core's order: roll
+    /// (AIL), pitch (ELE), throttle (THR), yaw (RUD).
+    pub output_of: [usize; CHANNELS],
+    /// The stick's pulse gets shorter as the stick goes up or right.
+    pub reversed: [bool; CHANNELS],
+    /// Each stick's width at the bottom, the centre and the top of its travel, µs (the
+    /// throttle is flown from its bottom to its top; its centre is not read).
+    pub endpoints_us: [[f64; 3]; CHANNELS],
+}
+
+impl Transmitter {
+    /// A transmitter in the common "TAER" order (throttle on the first output, then roll,
+    /// pitch, yaw), its pitch reversed, every stick from 1000 to 2000 µs, centred at 1500.
+    /// Its parameters: `fcu-testkit/data/other-transmitter.parm`.
+    pub const OTHER: Transmitter = Transmitter {
+        name: "TAER, pitch reversed, 1000..2000 µs",
+        output_of: [1, 2, 0, 3],
+        reversed: [false, true, false, false],
+        endpoints_us: [[1000.0, 1500.0, 2000.0], [1000.0, 1500.0, 2000.0], [1000.0, 1500.0, 2000.0], [1000.0, 1500.0, 2000.0]],
+    };
+
+    /// The flight core's radio parameters for this transmitter, in MAVProxy's `param save`
+    /// format: `RCMAP_*` from its outputs, `RCn_MIN/TRIM/MAX/REV` from each output's
+    /// endpoints and sense (the throttle's trim at its bottom, as ground stations set it).
+    pub fn parameters(&self) -> String {
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        for (stick, name) in ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().enumerate() {
+            let _ = writeln!(text, "{name} {}", self.output_of[stick] + 1);
+        }
+        for (stick, &output) in self.output_of.iter().enumerate() {
+            let [lo, mid, hi] = self.endpoints_us[stick];
+            let trim = if stick == fcu_core::rc::THR { lo } else { mid };
+            let n = output + 1;
+            let rev = if self.reversed[stick] { -1 } else { 1 };
+            let _ = writeln!(text, "RC{n}_MIN {lo}\nRC{n}_TRIM {trim}\nRC{n}_MAX {hi}\nRC{n}_REV {rev}");
+        }
+        text
+    }
+
+    /// The widths this transmitter sends, by receiver output, for the sticks the Devo 7E
+    /// sends as `devo_us` (AIL, ELE, THR, RUD): each stick's travel from its centre, as a
+    /// fraction of the Devo's, placed on this transmitter's endpoints; the throttle's from its
+    /// bottom to its top, resting on its bottom where the Devo's rests below its own. A width
+    /// that is not a number stays one (a broken script, as for the Devo).
+    pub fn widths_us(&self, devo_us: [f64; CHANNELS]) -> [f64; CHANNELS] {
+        let devo = fcu_core::rc::RcConfig::REFERENCE;
+        let us = |counts: u16| f64::from(counts) / COUNTS_PER_US as f64;
+        let mut out = [0.0; CHANNELS];
+        for (stick, &w) in devo_us.iter().enumerate() {
+            let d = devo.inputs[stick];
+            let (d_lo, d_mid, d_hi) = (us(d.min_counts), us(d.trim_counts), us(d.max_counts));
+            let [lo, mid, hi] = self.endpoints_us[stick];
+            let width = if stick == fcu_core::rc::THR {
+                let up = ((w - d_lo) / (d_hi - d_lo)).max(0.0);
+                if self.reversed[stick] {
+                    hi - up * (hi - lo)
+                } else {
+                    lo + up * (hi - lo)
+                }
+            } else {
+                // -1 at the bottom, 0 at the centre, +1 at the top.
+                let travel = if w >= d_mid { (w - d_mid) / (d_hi - d_mid) } else { (w - d_mid) / (d_mid - d_lo) };
+                let travel = if self.reversed[stick] { -travel } else { travel };
+                if travel >= 0.0 {
+                    mid + travel * (hi - mid)
+                } else {
+                    mid + travel * (mid - lo)
+                }
+            };
+            if let Some(slot) = out.get_mut(self.output_of[stick]) {
+                *slot = width;
+            }
+        }
+        out
     }
 }
 
@@ -110,7 +202,8 @@ impl RadioModel {
         self.frames_sent += 1;
         let mut new = Vec::with_capacity(2 * CHANNELS + 2);
         let mut rise_s = start_s;
-        for (ch, &w_us) in tx.width_us.iter().enumerate() {
+        let widths_us = self.params.transmitter.map_or(tx.width_us, |t| t.widths_us(tx.width_us));
+        for (ch, &w_us) in widths_us.iter().enumerate() {
             // A width that is not a number is what a broken transmitter script would give;
             // the receiver then holds the line low for that channel.
             let w_s = if w_us.is_finite() { w_us.clamp(0.0, 19_000.0) * 1e-6 } else { 0.0 };
@@ -231,6 +324,35 @@ mod tests {
         let extra = edges.len() as f64 - 8.0 * frames;
         // Each glitch adds 2 edges; expected 0.5 per sent frame.
         assert!((extra / 2.0 / frames - 0.5).abs() < 0.1, "{extra} glitch edges");
+    }
+
+    #[test]
+    fn the_other_transmitter_moves_each_stick_to_its_output_endpoints_and_sense() {
+        let devo =
+            fcu_core::rc::RcConfig::REFERENCE.inputs.map(|e| [e.min_counts, e.trim_counts, e.max_counts].map(|c| f64::from(c) / 4.0));
+        let t = Transmitter::OTHER;
+        // Sticks centred, throttle resting below the Devo's bottom: centres, the throttle on
+        // its bottom, each on its output (throttle 0, roll 1, pitch 2, yaw 3).
+        let rest = t.widths_us([devo[0][1], devo[1][1], 1000.0, devo[3][1]]);
+        assert_eq!(rest, [1000.0, 1500.0, 1500.0, 1500.0]);
+        // Every stick at its Devo top: the tops, but the reversed pitch at its bottom.
+        let top = t.widths_us([devo[0][2], devo[1][2], devo[2][2], devo[3][2]]);
+        assert_eq!(top, [2000.0, 2000.0, 1000.0, 2000.0]);
+        // Half the roll stick's travel down: half this transmitter's.
+        let half = t.widths_us([(devo[0][0] + devo[0][1]) / 2.0, devo[1][1], devo[2][0], devo[3][1]]);
+        assert_eq!(half[1], 1250.0);
+        assert!(t.widths_us([f64::NAN, devo[1][1], devo[2][0], devo[3][1]])[1].is_nan());
+    }
+
+    #[test]
+    fn the_other_transmitters_parameters_are_its_file() {
+        let file = fcu_core::parameters::apply_file(
+            &fcu_core::Config::default(),
+            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/data/other-transmitter.parm")),
+        );
+        let made = fcu_core::parameters::apply_file(&fcu_core::Config::default(), &Transmitter::OTHER.parameters());
+        assert_eq!(file.map(|c| c.rc), made.map(|c| c.rc));
+        assert_ne!(made.map(|c| c.rc), Ok(fcu_core::Config::default().rc));
     }
 
     #[test]

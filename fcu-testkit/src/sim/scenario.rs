@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use fcu_core::supervisor::FlightState;
 
 use super::plant::Disturbance;
-use super::radio_model::RadioParams;
+use super::radio_model::{RadioParams, Transmitter};
 
 /// Reference radio constants in TIM2 counts (`docs/reference.md#radio`).
 pub const AIL_CENTRE_COUNTS: f64 = 5862.0;
@@ -357,7 +357,7 @@ pub type Build = fn(&str) -> Scenario;
 
 /// The named scenarios, in the order they are listed (`fly --help`, the error for an unknown
 /// name): each name with the function that builds it under that name.
-pub const SCENARIOS: [(&str, Build); 9] = [
+pub const SCENARIOS: [(&str, Build); 10] = [
     ("hover", hover),
     ("steps", steps),
     ("sweeps", sweeps),
@@ -367,6 +367,7 @@ pub const SCENARIOS: [(&str, Build); 9] = [
     ("gust", gust),
     ("weak-motor", weak_motor),
     ("calibration-motion", calibration_motion),
+    ("other-transmitter", other_transmitter),
 ];
 
 /// The names [`by_name`] accepts, in the order of [`SCENARIOS`].
@@ -519,6 +520,18 @@ fn link_long(name: &str) -> Scenario {
         Criterion::StateSeen { from_s: 8.9, to_s: 9.3, state: FlightState::FailsafeOff },
         Criterion::MotorsOffDisarmedFrom { t_s: 9.3 },
     ];
+    s
+}
+
+/// The hover flown with a transmitter that is not the reference's: it flies only once the
+/// flight core's radio parameters are set for it (`fcu-testkit/data/other-transmitter.parm`).
+fn other_transmitter(name: &str) -> Scenario {
+    let mut s = hover(name);
+    s.about = format!(
+        "hover with another transmitter ({}): needs its radio parameters, --params fcu-testkit/data/other-transmitter.parm",
+        Transmitter::OTHER.name
+    );
+    s.radio.transmitter = Some(Transmitter::OTHER);
     s
 }
 
