@@ -126,7 +126,7 @@ impl Image {
 
 /// A legacy-mangled Rust name (`_ZN` + length-prefixed segments + `E`) as a path, without the
 /// trailing hash; any other name as it is.
-fn demangle(name: &str) -> String {
+pub fn demangle(name: &str) -> String {
     let Some(mut rest) = name.strip_prefix("_ZN") else {
         return name.to_string();
     };

@@ -403,6 +403,9 @@ pub struct State<P: Peripherals> {
     pub idle_time: Time,
     /// Time the core spent stalled on a flash fetch while a program or erase ran.
     pub flash_stall_time: Time,
+    /// While measured ([`Machine::measure_time_in`]): the code ranges (start, end), sorted,
+    /// and the time spent running blocks that start in one of them.
+    pub region: Option<(Vec<(u32, u32)>, Time)>,
     /// A store into flash went through Unicorn: its copy must be restored from the model.
     flash_dirty: bool,
     /// The flash interface was written since the block hook last found it idle: the hook looks
@@ -464,6 +467,7 @@ impl<P: Peripherals> State<P> {
             units_per_cycle,
             instructions: 0,
             idle_time: 0,
+            region: None,
             flash_stall_time: 0,
             flash_dirty: false,
             flash_watch: false,
@@ -1029,6 +1033,14 @@ impl<P: Peripherals + 'static> Machine<P> {
         }
     }
 
+    /// From now on, adds up the time spent in blocks that start within `ranges` (code
+    /// addresses, start inclusive, end exclusive): the CPU time of a part of the firmware
+    /// ([`State::region`]). Skipped idle laps are never in it.
+    pub fn measure_time_in(&mut self, mut ranges: Vec<(u32, u32)>) {
+        ranges.sort_unstable();
+        self.uc.get_data_mut().region = Some((ranges, 0));
+    }
+
     /// Injects an imprecise BusFault (as a failed buffered write would give), escalated to
     /// HardFault: the way to exercise the firmware's fault path on the real image.
     pub fn inject_bus_fault(&mut self) -> Result<(), Fault> {
@@ -1217,6 +1229,12 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
     st.instructions += n;
     st.now += (entry + body) * upc;
     st.attribute(n);
+    if let Some((ranges, time)) = st.region.as_mut() {
+        let i = ranges.partition_point(|&(start, _)| start <= addr);
+        if i > 0 && addr < ranges[i - 1].1 {
+            *time += (entry + body) * upc;
+        }
+    }
     match kind {
         BlockKind::Plain => {}
         BlockKind::IdleSpin => {

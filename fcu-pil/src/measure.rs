@@ -34,6 +34,9 @@ pub struct Report {
     pub tick_to_last_ccr_us_median: f64,
     pub tick_to_last_ccr_us_max: f64,
     pub cpu_load_pct: f64,
+    /// The ground-station link's share of the CPU after boot ([`link_ranges`]); `None` for an
+    /// image without the link.
+    pub link_cpu_pct: Option<f64>,
     pub stack_used_bytes: u32,
     pub stack_size_bytes: u32,
     pub capture_latency_us_median: f64,
@@ -59,6 +62,31 @@ pub struct Report {
     /// Exception entries, and how many stacked the extended (FP) frame.
     pub exception_entries: u64,
     pub fp_frames: u64,
+}
+
+/// What of an image is the ground-station link, as the ELF's function names tell (LTO inlines
+/// the protocol crate into the link's task): the task (`fcu_firmware::ground`) and what it
+/// calls of its own (`fcu_link`, the receive ring, the flash store, fcu-core's parameter
+/// table and the configuration checks a change runs), and the USART1 and DMA2 stream 2
+/// interrupts. Empty for an image without the link.
+pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
+    const PARTS: [&str; 10] = [
+        "fcu_firmware::ground::",
+        "fcu_link::",
+        "fcu_firmware::uart_rx::",
+        "fcu_firmware::param_flash::",
+        "fcu_core::parameters::",
+        "fcu_core::flight::check_change",
+        "Config::validate",
+        "::is_valid",
+        "USART1",
+        "DMA2_STREAM2",
+    ];
+    let names: Vec<(u32, u32, String)> = image.functions.iter().map(|(a, n, name)| (*a, *n, crate::elf::demangle(name))).collect();
+    if !names.iter().any(|(_, _, n)| n.starts_with("fcu_firmware::ground::with_link")) {
+        return Vec::new();
+    }
+    names.into_iter().filter(|(_, _, n)| PARTS.iter().any(|p| n.contains(p))).map(|(a, size, _)| (a & !1, (a & !1) + size)).collect()
 }
 
 /// The innermost exception handler active at `t` (the one entered last among those whose
@@ -99,11 +127,17 @@ pub fn measure(
     setup: &rig::BoardSetup,
 ) -> Result<Report, String> {
     let timing = setup.timing_profile()?;
+    let link = link_ranges(&crate::elf::Image::load(elf)?);
     let flight = rig::fly_with(
         elf,
         scenario,
         opts,
-        &rig::BoardSetup { timing: Some(timing), measure_masking_against: Some(CAPTURE_EXCEPTION), ..setup.clone() },
+        &rig::BoardSetup {
+            timing: Some(timing),
+            measure_masking_against: Some(CAPTURE_EXCEPTION),
+            measure_time_in: (!link.is_empty()).then_some(link),
+            ..setup.clone()
+        },
     )?;
     let m = &flight.board.machine;
     let st = m.state();
@@ -145,6 +179,8 @@ pub fn measure(
     let flown = m.now().saturating_sub(t0);
     // Idle time after boot: the boot's busy waits count as busy.
     let cpu_load_pct = 100.0 * (1.0 - time_to_s(st.idle_time.min(flown)) / time_to_s(flown).max(1e-9));
+
+    let link_cpu_pct = st.region.as_ref().map(|&(_, t)| 100.0 * time_to_s(t) / time_to_s(flown).max(1e-9));
 
     let stack_size_bytes = m.stack_top - SRAM_BASE;
     let stack_used_bytes = m.stack_high_water().map_or(0, |low| m.stack_top - low);
@@ -189,6 +225,7 @@ pub fn measure(
         tick_to_last_ccr_us_median,
         tick_to_last_ccr_us_max,
         cpu_load_pct,
+        link_cpu_pct,
         stack_used_bytes,
         stack_size_bytes,
         capture_latency_us_median,
@@ -255,6 +292,12 @@ impl fmt::Display for Report {
             self.tick_to_last_ccr_us_median, self.tick_to_last_ccr_us_max
         )?;
         writeln!(f, "  CPU load after boot: {:.1} %", self.cpu_load_pct)?;
+        if let Some(link) = self.link_cpu_pct {
+            writeln!(
+                f,
+                "  of which the ground-station link's own code (its task, protocol, receive, flash store, parameter checks; shared helpers such as memcpy not counted): {link:.2} %"
+            )?;
+        }
         writeln!(f, "  stack: {} of {} bytes used (high-water mark of the painted stack)", self.stack_used_bytes, self.stack_size_bytes)?;
         writeln!(
             f,
@@ -295,6 +338,33 @@ impl fmt::Display for Report {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn image_with(functions: &[(u32, u32, &str)]) -> crate::elf::Image {
+        crate::elf::Image {
+            path: std::path::PathBuf::from("test.elf"),
+            segments: Vec::new(),
+            initial_sp: 0,
+            symbols: std::collections::HashMap::new(),
+            functions: functions.iter().map(|&(a, n, name)| (a, n, name.to_string())).collect(),
+            flash_bytes: 0,
+            ram_bytes: 0,
+        }
+    }
+
+    #[test]
+    fn the_link_is_its_task_and_what_it_calls_of_its_own_and_nothing_without_it() {
+        let with = image_with(&[
+            (0x0800_c001, 0x100, "TIM1_BRK_TIM9"),
+            (0x0800_d000, 0x2000, "fcu_firmware::ground::with_link::run::{{closure}}"),
+            (0x0800_f001, 0x40, "fcu_core::parameters::snapshot::crc32"),
+            (0x0800_f100, 0x80, "fcu_core::flight::ControlTick::tick_with"),
+            (0x0800_f200, 0x20, "USART1"),
+        ]);
+        assert_eq!(link_ranges(&with), vec![(0x0800_d000, 0x0800_f000), (0x0800_f000, 0x0800_f040), (0x0800_f200, 0x0800_f220)]);
+        // The default image: parameters' names may be there, but no link task.
+        let without = image_with(&[(0x0800_c001, 0x100, "TIM1_BRK_TIM9"), (0x0800_f200, 0x20, "USART1")]);
+        assert!(link_ranges(&without).is_empty());
+    }
 
     fn within_targets() -> Report {
         Report { tick_to_last_ccr_us_median: 24.9, capture_latency_us_max: 4.9, masked_us_max: 4.9, ..Report::default() }

@@ -48,6 +48,9 @@ pub struct BoardSetup {
     pub measure_masking_against: Option<usize>,
     /// The flash memory's contents at power-on (a saved image); the ELF's sectors replace theirs.
     pub flash_contents: Option<Vec<u8>>,
+    /// Add up the time spent in these code ranges from the end of boot
+    /// ([`Machine::measure_time_in`]).
+    pub measure_time_in: Option<Vec<(u32, u32)>>,
 }
 
 impl BoardSetup {
@@ -126,6 +129,9 @@ impl EmulatedBoard {
                 // the timer's start, later than the slice's end.
                 if let Some(exc) = setup.measure_masking_against {
                     b.machine.measure_masking_against(exc);
+                }
+                if let Some(ranges) = &setup.measure_time_in {
+                    b.machine.measure_time_in(ranges.clone());
                 }
                 break;
             }
