@@ -110,8 +110,13 @@ pub enum Request {
     },
     /// Gyro/accelerometer calibration (the boot calibration). Disarmed (checked).
     CalibrateImu,
-    /// Radio calibration: endpoints and trims from the sticks. Disarmed (checked).
+    /// Radio calibration: the ground station reads the radio's widths (RC_CHANNELS) and writes
+    /// the endpoints and trims as parameters; the vehicle refuses to arm meanwhile. Disarmed
+    /// (checked).
     CalibrateRadio,
+    /// End the radio calibration (PREFLIGHT_CALIBRATION with every parameter 0, the way PX4
+    /// cancels one). Taken armed or not.
+    EndCalibration,
     /// Save the parameters to flash. Disarmed (checked).
     SaveParams,
     /// Reset the parameters to the defaults. Disarmed (checked).

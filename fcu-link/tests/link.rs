@@ -532,9 +532,17 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
         assert!(texts(&sent)[0].ends_with("refused: armed"));
         assert!(mock.requests.is_empty());
     }
-    // Magnetometer, baro, two at once, nothing: unsupported.
-    for params in [[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0; 7]]
-    {
+    // Every parameter 0 ends a calibration, armed or not (PX4's cancel).
+    for armed in [false, true] {
+        let mut link = link();
+        let mut mock = Mock::new();
+        mock.state.armed = armed;
+        let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]);
+        assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(mock.requests, [Request::EndCalibration]);
+    }
+    // Magnetometer, baro, two at once: unsupported.
+    for params in [[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]] {
         let mut link = link();
         let mut mock = Mock::new();
         let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, params);
