@@ -83,7 +83,8 @@ impl Station {
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
         let refusing = status.state == FlightState::Disarmed && status.blockers.contains(Blocker::GroundBusy);
-        self.saving_confirmed = if self.ground.saving && !self.ground_pending && refusing { self.saving_confirmed.saturating_add(1) } else { 0 };
+        self.saving_confirmed =
+            if self.ground.saving && !self.ground_pending && refusing { self.saving_confirmed.saturating_add(1) } else { 0 };
     }
 
     /// The configuration in force.

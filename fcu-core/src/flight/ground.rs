@@ -7,7 +7,10 @@
 //! motors that may not run, where the motor test's one compare value is written.
 
 use super::params::TickParams;
-use crate::ground::{capped_duty_pct, ground_test_rule, Disarm, GroundCommands, GroundInput, MotorTestChange, MOTORS, MOTOR_TEST_MAX_MS, RADIO_CALIBRATION_MAX_MS};
+use crate::ground::{
+    capped_duty_pct, ground_test_rule, Disarm, GroundCommands, GroundInput, MotorTestChange, MOTORS, MOTOR_TEST_MAX_MS,
+    RADIO_CALIBRATION_MAX_MS,
+};
 use crate::rc::{RcConfig, Sticks};
 use crate::supervisor::FlightState;
 
