@@ -201,7 +201,7 @@ impl Vehicle for Station {
                 rc_channel_count: 0,
                 motor_outputs_us: [1000; 4],
                 battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-                health: Health { imu: false, radio: false, estimator: false, battery: true },
+                health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
                 load_permille: 0,
             };
         };
@@ -237,7 +237,13 @@ impl Vehicle for Station {
             rc_channel_count: 4,
             motor_outputs_us,
             battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-            health: Health { imu: s.fault.is_none(), radio: s.link, estimator: s.calibrated, battery: true },
+            health: Health {
+                imu: s.fault.is_none(),
+                radio: s.link,
+                estimator: s.calibrated,
+                battery: true,
+                prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
+            },
             load_permille: 0,
         }
     }
@@ -406,6 +412,22 @@ mod tests {
         assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
         assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
         assert_eq!(st.take_ground(), None);
+    }
+
+    #[test]
+    fn the_pre_arm_check_is_healthy_disarmed_without_a_blocker_and_armed() {
+        let mut busy = Blockers::default();
+        busy.insert(Blocker::GroundBusy);
+        for (state, blockers, ready) in [
+            (FlightState::Disarmed, Blockers::default(), true),
+            (FlightState::Disarmed, busy, false),
+            (FlightState::Calibrating, Blockers::default(), false),
+            (FlightState::Armed, Blockers::default(), true),
+        ] {
+            let mut st = Station::new(Config::default(), Config::default());
+            st.observe(&status(state, REST, blockers), 3900, [0; 4], 0);
+            assert_eq!(st.state().health.prearm, ready, "{state:?} {blockers:?}");
+        }
     }
 
     #[test]

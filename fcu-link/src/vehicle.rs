@@ -60,6 +60,9 @@ pub struct Health {
     pub estimator: bool,
     /// Battery above its low threshold.
     pub battery: bool,
+    /// Nothing refuses arming, or armed (SYS_STATUS' pre-arm check, which QGroundControl
+    /// shows as "ready to arm").
+    pub prearm: bool,
 }
 
 /// A snapshot of the vehicle for one telemetry tick or one command decision.

@@ -178,6 +178,27 @@ fn telemetry_carries_the_vehicle_state() {
 }
 
 #[test]
+fn sys_status_carries_the_pre_arm_check() {
+    use common::MavSysStatusSensor as S;
+    let mut link = link();
+    let mut mock = Mock::new();
+    let mut sys_status = |mock: &mut Mock, now: u32| {
+        link.tick(now, mock);
+        messages(&drain(&mut link)).into_iter().find_map(|m| match m {
+            MavMessage::SYS_STATUS(s) => Some(s),
+            _ => None,
+        })
+    };
+    let ready = sys_status(&mut mock, 0).unwrap();
+    assert!(ready.onboard_control_sensors_present.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    assert!(ready.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    mock.state.health.prearm = false;
+    let blocked = sys_status(&mut mock, 5000).unwrap();
+    assert!(blocked.onboard_control_sensors_enabled.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    assert!(!blocked.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+}
+
+#[test]
 fn sequence_numbers_count_up_and_wrap() {
     let mut link = link();
     let mut mock = Mock::new();
