@@ -82,7 +82,7 @@ impl Station {
         self.battery_mv = battery_mv.min(u32::from(u16::MAX)) as u16;
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
-        let refusing = status.state == FlightState::Disarmed && status.blockers.contains(Blocker::GroundBusy);
+        let refusing = !status.state.armed() && status.blockers.contains(Blocker::GroundBusy);
         self.saving_confirmed =
             if self.ground.saving && !self.ground_pending && refusing { self.saving_confirmed.saturating_add(1) } else { 0 };
     }
@@ -127,9 +127,15 @@ impl Station {
 
     /// Whether the parameters should be written to flash now: asked for, or changed and left
     /// alone for [`SAVE_DEBOUNCE_MS`]; never while armed; and only once the control tick
-    /// refuses to arm for it (see the module docs).
+    /// refuses to arm for it (see the module docs). The reference's supervisor has no such
+    /// refusal: only the armed state counts there.
     pub fn save_due(&self) -> bool {
-        self.save_wanted() && self.ground.saving && self.saving_confirmed >= SAVE_CONFIRMATIONS
+        let confirmed = self.ground.saving && self.saving_confirmed >= SAVE_CONFIRMATIONS;
+        self.save_wanted() && (confirmed || !self.safe_supervisor())
+    }
+
+    fn safe_supervisor(&self) -> bool {
+        matches!(self.cfg.supervisor, SupervisorConfig::Safe(_))
     }
 
     fn save_wanted(&self) -> bool {
@@ -173,8 +179,8 @@ impl Station {
     }
 
     /// A command for the control tick; the safe supervisor's only.
-    fn to_tick(&mut self, add: impl FnOnce(&mut GroundInput)) -> Result<(), &'static str> {
-        if !matches!(self.cfg.supervisor, SupervisorConfig::Safe(_)) {
+    fn for_tick(&mut self, add: impl FnOnce(&mut GroundInput)) -> Result<(), &'static str> {
+        if !self.safe_supervisor() {
             return Err(ground::RULE_REFERENCE);
         }
         add(&mut self.ground);
@@ -297,26 +303,26 @@ impl Vehicle for Station {
             Request::Disarm { forced } => {
                 let throttle_low = self.status.is_none_or(|s| self.cfg.rc.throttle_low(&s.sticks));
                 ground::disarm_rule(self.flight_state(), throttle_low, forced)?;
-                self.to_tick(|g| g.disarm = Some(Disarm { forced }))
+                self.for_tick(|g| g.disarm = Some(Disarm { forced }))
             }
             Request::CalibrateImu => {
                 ground::ground_test_rule(self.flight_state())?;
-                self.to_tick(|g| g.calibrate_imu = true)
+                self.for_tick(|g| g.calibrate_imu = true)
             }
             Request::CalibrateRadio => {
                 ground::ground_test_rule(self.flight_state())?;
-                self.to_tick(|g| g.radio_calibration = Some(true))
+                self.for_tick(|g| g.radio_calibration = Some(true))
             }
-            Request::EndCalibration => self.to_tick(|g| g.radio_calibration = Some(false)),
+            Request::EndCalibration => self.for_tick(|g| g.radio_calibration = Some(false)),
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
                 ground::ground_test_rule(self.flight_state())?;
                 if motor >= ground::MOTORS {
                     return Err(ground::RULE_NO_SUCH_MOTOR);
                 }
                 let test = MotorTest { motor, duty_pct: ground::capped_duty_pct(throttle_pct), duration_ms: u32::from(duration_ms) };
-                self.to_tick(|g| g.motor_test = Some(MotorTestChange::Start(test)))
+                self.for_tick(|g| g.motor_test = Some(MotorTestChange::Start(test)))
             }
-            Request::StopMotorTest => self.to_tick(|g| g.motor_test = Some(MotorTestChange::Stop)),
+            Request::StopMotorTest => self.for_tick(|g| g.motor_test = Some(MotorTestChange::Stop)),
         }
     }
 }
@@ -412,6 +418,9 @@ mod tests {
         assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
         assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
         assert_eq!(st.take_ground(), None);
+        // A save has no arming refusal to wait for there.
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert!(st.save_due());
     }
 
     #[test]
@@ -452,6 +461,11 @@ mod tests {
         assert!(!st.save_due());
         st.observe(&busy, 3900, [0; 4], 1025);
         st.observe(&busy, 3900, [0; 4], 1030);
+        assert!(st.save_due());
+        // Calibrating or faulted, the board cannot arm either: the refusal is what counts.
+        let mut faulted = busy;
+        faulted.state = FlightState::Fault;
+        st.observe(&faulted, 3900, [0; 4], 1035);
         assert!(st.save_due());
         st.saved(true);
         assert!(!st.save_due());
