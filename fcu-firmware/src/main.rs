@@ -17,8 +17,9 @@
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
 //! | ground_link  | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
-//! |              |                         |      | parameter changes → the control loop, saves  |
-//! |              |                         |      | to flash, frames → the UART queue (200 Hz)   |
+//! |              |                         |      | parameter changes and commands → the control |
+//! |              |                         |      | loop, saves to flash, frames → the UART      |
+//! |              |                         |      | queue (200 Hz)                               |
 #![no_std]
 #![no_main]
 
