@@ -25,6 +25,7 @@
 //! [`FlightController::run_outer`], right after the tick that made the job.
 
 mod block;
+mod ground;
 mod heading;
 mod output;
 mod params;
@@ -44,6 +45,7 @@ use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
+use crate::ground::GroundInput;
 use crate::imu::{CalibrationPhase, Decoder, Offsets, RawImu, SensorFault};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, Sticks, CHANNELS};
@@ -296,6 +298,11 @@ impl FlightController {
         self.outer_step.set_battery_mv(battery_mv);
     }
 
+    /// A ground station's input (see [`ControlTick::take_ground`]).
+    pub fn take_ground(&mut self, input: &GroundInput) {
+        self.control_tick.take_ground(input);
+    }
+
     /// Run an outer step now and apply its result.
     pub fn run_outer(&mut self, job: &OuterJob) {
         let r = self.outer_step.run(job);
@@ -399,6 +406,19 @@ impl ControlTick {
         self.run(imu, flags)
     }
 
+    /// A ground station's input ([`crate::ground`]), between ticks as a configuration change
+    /// is: a disarm and an IMU calibration go to the supervisor's next decision, a motor test
+    /// or a radio calibration starts (if the state still allows it) or ends, the save's level
+    /// is kept. The reference's supervisor takes none of it.
+    pub fn take_ground(&mut self, input: &GroundInput) {
+        self.supervision.take_ground(input, &self.params);
+    }
+
+    /// A ground station's radio calibration runs (arming is blocked meanwhile).
+    pub fn radio_calibration(&self) -> bool {
+        self.supervision.radio_calibration()
+    }
+
     /// Take in an outer step's result (at the start of the next tick in the firmware): its
     /// attitude, targets, rate demands and gains are in force from now on.
     pub fn apply_outer(&mut self, r: &OuterResult) {
@@ -440,7 +460,8 @@ impl ControlTick {
             throttle_low: in_force.throttle_low,
             fault: self.sensors.fault().is_some(),
         };
-        let compare = self.output.run(p, self.outer.rate_demand_rad_s, gyro_rad_s, allowed);
+        let supervision = &self.supervision;
+        let compare = self.output.run(p, self.outer.rate_demand_rad_s, gyro_rad_s, allowed, || supervision.test_output());
 
         // One output per branch (docs/performance.md, «one output per branch»).
         if job_due {

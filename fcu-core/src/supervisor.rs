@@ -15,6 +15,7 @@
 //! 3. the transition's actions (what starts or ends with a state) are applied, and the
 //!    [`Decision`] follows from the new state.
 
+use crate::ground::{disarm_rule, GroundCommands};
 use crate::imu::SensorFault;
 use crate::rc::{Gesture, StickCounts, Sticks};
 
@@ -154,10 +155,13 @@ pub enum Blocker {
     SensorFault = 1 << 6,
     BootSettling = 1 << 7,
     GestureNotReleased = 1 << 8,
+    /// A ground station's motor test or radio calibration runs, or a flash save
+    /// ([`crate::ground`]).
+    GroundBusy = 1 << 9,
 }
 
 impl Blocker {
-    pub const ALL: [Blocker; 9] = [
+    pub const ALL: [Blocker; 10] = [
         Blocker::NotCalibrated,
         Blocker::Calibrating,
         Blocker::LinkNotGood,
@@ -167,6 +171,7 @@ impl Blocker {
         Blocker::SensorFault,
         Blocker::BootSettling,
         Blocker::GestureNotReleased,
+        Blocker::GroundBusy,
     ];
 
     pub fn name(self) -> &'static str {
@@ -180,6 +185,7 @@ impl Blocker {
             Blocker::SensorFault => "sensor-fault",
             Blocker::BootSettling => "boot-settling",
             Blocker::GestureNotReleased => "gesture-not-released",
+            Blocker::GroundBusy => "ground-busy",
         }
     }
 }
@@ -229,6 +235,8 @@ pub struct Inputs {
     /// good while it is below the channel timeout). Read only while the link is not good: lost
     /// time counts from that pulse.
     pub silence_ticks: u32,
+    /// What the ground station asks this tick ([`crate::ground`]).
+    pub ground: GroundCommands,
 }
 
 impl Inputs {
@@ -245,6 +253,7 @@ impl Inputs {
         calibrating: false,
         sensor_fault: None,
         tilt_rad: 0.0,
+        ground: GroundCommands::NONE,
     };
 }
 
@@ -281,6 +290,10 @@ pub enum Condition {
     LossBudgetSpent = 1 << 23,
     /// The link has been good for [`SafetyConfig::recovery_ticks`].
     Recovered = 1 << 24,
+    /// The ground station asked for a disarm, and [`crate::ground::disarm_rule`] lets it act.
+    GroundDisarm = 1 << 25,
+    /// The ground station asked for an IMU calibration.
+    GroundCalibrate = 1 << 26,
 }
 
 /// A set of conditions: the [`Blocker`]s on their own bits (the low 16) and the other
@@ -367,6 +380,8 @@ const STICKS_CENTRED: Conditions = Conditions::of(Condition::SticksCentred);
 const THROTTLE_LOW_TOO_LONG: Conditions = Conditions::of(Condition::ThrottleLowTooLong);
 const LOSS_BUDGET_SPENT: Conditions = Conditions::of(Condition::LossBudgetSpent);
 const RECOVERED: Conditions = Conditions::of(Condition::Recovered);
+const GROUND_DISARM: Conditions = Conditions::of(Condition::GroundDisarm);
+const GROUND_CALIBRATE: Conditions = Conditions::of(Condition::GroundCalibrate);
 
 /// The way out of every state, ahead of the state's own: a latched sensor fault ends
 /// everything. (Fault has no other way out.)
@@ -374,10 +389,15 @@ pub const FROM_EVERY_STATE: [Transition; 1] = [way(FlightState::Fault, FAULT, NO
 
 const FROM_CALIBRATING: [Transition; 1] = [way(FlightState::Disarmed, NONE, CALIBRATING)];
 
-const FROM_DISARMED: [Transition; 2] =
-    [way(FlightState::Calibrating, CALIBRATE_GESTURE, NOT_RELEASED), way(FlightState::Arming, ARM_GESTURE, ALL_BLOCKERS)];
+const FROM_DISARMED: [Transition; 3] = [
+    way(FlightState::Calibrating, CALIBRATE_GESTURE, NOT_RELEASED),
+    way(FlightState::Calibrating, GROUND_CALIBRATE, NONE),
+    way(FlightState::Arming, ARM_GESTURE, ALL_BLOCKERS),
+];
 
-const FROM_ARMING: [Transition; 5] = [
+const FROM_ARMING: [Transition; 6] = [
+    // The ground station's disarm abandons the arming.
+    way(FlightState::Disarmed, GROUND_DISARM, NONE),
     // Holding the gesture.
     way(FlightState::Arming, ARM_GESTURE, HOLD_BLOCKERS),
     // A blocker during the hold aborts it.
@@ -391,7 +411,9 @@ const FROM_ARMING: [Transition; 5] = [
     way(FlightState::Disarmed, NONE, NONE),
 ];
 
-const FROM_ARMED: [Transition; 5] = [
+const FROM_ARMED: [Transition; 6] = [
+    // Only with the throttle low or forced (`ground::disarm_rule`): the motors stop now.
+    way(FlightState::Disarmed, GROUND_DISARM, NONE),
     way(FlightState::FailsafeOff, NO_LINK.and(LOSS_BUDGET_SPENT), NONE),
     way(FlightState::FailsafeLevel, NO_LINK, NONE),
     way(FlightState::Disarmed, DISARM_GESTURE.and(DISARM_HELD), NONE),
@@ -400,8 +422,12 @@ const FROM_ARMED: [Transition; 5] = [
     way(FlightState::Disarmed, THROTTLE_LOW_TOO_LONG, NONE),
 ];
 
-const FROM_FAILSAFE_LEVEL: [Transition; 2] =
-    [way(FlightState::Armed, RECOVERED, NO_LINK), way(FlightState::FailsafeOff, LOSS_BUDGET_SPENT, NONE)];
+const FROM_FAILSAFE_LEVEL: [Transition; 3] = [
+    // Forced only: the stage-2 cut, at the ground station's word.
+    way(FlightState::FailsafeOff, GROUND_DISARM, NONE),
+    way(FlightState::Armed, RECOVERED, NO_LINK),
+    way(FlightState::FailsafeOff, LOSS_BUDGET_SPENT, NONE),
+];
 
 const FROM_FAILSAFE_OFF: [Transition; 1] = [way(FlightState::Disarmed, NONE, NO_LINK)];
 
@@ -493,6 +519,12 @@ impl Supervisor {
         self.steady
     }
 
+    /// The next tick must be decided, not repeated: something the steady rule does not read
+    /// has come (a ground station's disarm).
+    pub fn unsteady(&mut self) {
+        self.steady = false;
+    }
+
     fn blockers(&self, cfg: &SafetyConfig, i: &Inputs) -> Blockers {
         let mut b = Blockers::default();
         if !i.calibrated {
@@ -521,6 +553,9 @@ impl Supervisor {
         }
         if !self.released {
             b.insert(Blocker::GestureNotReleased);
+        }
+        if i.ground.busy {
+            b.insert(Blocker::GroundBusy);
         }
         b
     }
@@ -577,6 +612,8 @@ impl Supervisor {
         c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
         c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
         c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
+        c.set(Condition::GroundDisarm, i.ground.disarm.is_some_and(|d| disarm_rule(self.state, i.throttle_low, d.forced).is_ok()));
+        c.set(Condition::GroundCalibrate, i.ground.calibrate);
         c
     }
 
@@ -766,6 +803,7 @@ mod tests {
             calibrating: true,
             sensor_fault: None,
             tilt_rad: 0.0,
+            ground: GroundCommands::NONE,
         };
         let d = s.decide(&CFG, &i);
         assert_eq!(d.state, FlightState::Calibrating);
@@ -1276,6 +1314,7 @@ mod tests {
             calibrating,
             sensor_fault: fault.then_some(SensorFault::Stuck),
             tilt_rad: if tilted { 1.0 } else { 0.0 },
+            ground: GroundCommands::NONE,
         }
     }
 
@@ -1340,11 +1379,105 @@ mod tests {
         assert!(!r.s.steady(), "stage 1");
     }
 
+    /// One tick with a ground station's commands, then none again.
+    fn with_ground(r: &mut Rig, ground: GroundCommands) -> Decision {
+        r.i.ground = ground;
+        let d = r.step();
+        r.i.ground = GroundCommands::NONE;
+        d
+    }
+
+    const DISARM_ASKED: GroundCommands = GroundCommands { disarm: Some(crate::ground::Disarm { forced: false }), ..GroundCommands::NONE };
+    const DISARM_FORCED: GroundCommands = GroundCommands { disarm: Some(crate::ground::Disarm { forced: true }), ..GroundCommands::NONE };
+
+    #[test]
+    fn a_ground_disarm_acts_on_the_ground_and_in_the_air_only_forced() {
+        let mut r = Rig::new();
+        r.arm();
+        // Throttle low: the motors are stopped, the disarm acts at once.
+        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
+        // Flying: refused without the force value, taken with it.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Armed);
+        assert_eq!(r.step().state, FlightState::Armed, "a refused disarm is not kept for later");
+        r.sticks(IDLE);
+        assert_eq!(r.step().state, FlightState::Armed, "a refused disarm is not kept for later");
+        r.sticks(FLY);
+        let d = with_ground(&mut r, DISARM_FORCED);
+        assert_eq!((d.state, d.motors_enabled), (FlightState::Disarmed, false));
+    }
+
+    #[test]
+    fn a_ground_disarm_abandons_an_arming_and_ends_the_level_stage_only_forced() {
+        let mut r = Rig::new();
+        r.run(ARM, CFG.arm_hold_ticks / 2);
+        assert_eq!(r.last.state, FlightState::Arming);
+        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
+        // The gesture still held must be let go before it arms again.
+        r.run(ARM, CFG.arm_hold_ticks + 10);
+        assert_eq!(r.last.state, FlightState::Disarmed);
+
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        assert_eq!(r.lose_link(1).state, FlightState::FailsafeLevel);
+        r.i.ground = DISARM_ASKED;
+        assert_eq!(r.lose_link(1).state, FlightState::FailsafeLevel);
+        r.i.ground = DISARM_FORCED;
+        let d = r.lose_link(1);
+        assert_eq!((d.state, d.motors_enabled), (FlightState::FailsafeOff, false));
+    }
+
+    #[test]
+    fn arming_waits_while_the_ground_is_busy_and_a_busy_ground_ends_an_arming() {
+        let mut r = Rig::new();
+        r.i.ground = GroundCommands { busy: true, ..GroundCommands::NONE };
+        let d = r.run(ARM, CFG.arm_hold_ticks + 10);
+        assert_eq!(d.state, FlightState::Disarmed);
+        assert!(d.blockers.contains(Blocker::GroundBusy), "{:?}", d.blockers);
+        assert_eq!(Blocker::GroundBusy.name(), "ground-busy");
+        // Not busy any more: a fresh gesture arms.
+        r.i.ground = GroundCommands::NONE;
+        r.run(IDLE, 2);
+        r.arm();
+
+        let mut r = Rig::new();
+        r.run(ARM, 10);
+        assert_eq!(r.last.state, FlightState::Arming);
+        r.i.ground = GroundCommands { busy: true, ..GroundCommands::NONE };
+        assert_eq!(r.step().state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn a_ground_calibration_starts_disarmed_only() {
+        let mut r = Rig::new();
+        let d = with_ground(&mut r, GroundCommands { calibrate: true, ..GroundCommands::NONE });
+        assert_eq!(d.state, FlightState::Calibrating);
+        assert!(d.request_calibration);
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        let d = with_ground(&mut r, GroundCommands { calibrate: true, ..GroundCommands::NONE });
+        assert_eq!((d.state, d.request_calibration), (FlightState::Armed, false));
+    }
+
+    #[test]
+    fn a_ground_disarm_ends_steady_flight_once_unsteady_is_asked() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        assert!(r.s.steady());
+        r.s.unsteady();
+        assert!(!r.s.steady());
+    }
+
     // The state table alone.
 
-    /// Every set of conditions: the nine blockers and the nine other conditions.
+    /// Every set of conditions: the ten blockers and the eleven other conditions.
     fn every_conditions() -> impl Iterator<Item = Conditions> {
-        (0u32..1 << 18).map(|m| Conditions((m & 0x1FF) | (m >> 9) << 16))
+        (0u32..1 << 21).map(|m| Conditions((m & 0x3FF) | (m >> 10) << 16))
     }
 
     const STATES: [FlightState; 7] = [
@@ -1397,13 +1530,17 @@ mod tests {
     fn table_without_a_link_flight_goes_to_the_failsafe_and_stage_2_only_on_its_budget() {
         for c in every_conditions().filter(|c| !c.contains(FAULT)) {
             let from_armed = next_state(FlightState::Armed, c);
-            if c.contains(NO_LINK) {
+            // A ground station's disarm (the rule checked) comes first: the motors stop.
+            if c.contains(GROUND_DISARM) {
+                assert_eq!(from_armed, FlightState::Disarmed, "{c:?}");
+            } else if c.contains(NO_LINK) {
                 let stage = if c.contains(LOSS_BUDGET_SPENT) { FlightState::FailsafeOff } else { FlightState::FailsafeLevel };
                 assert_eq!(from_armed, stage, "{c:?}");
             }
             for s in STATES {
                 if next_state(s, c) == FlightState::FailsafeOff && s != FlightState::FailsafeOff {
-                    assert!(c.contains(LOSS_BUDGET_SPENT), "{s:?} {c:?}");
+                    let forced = s == FlightState::FailsafeLevel && c.contains(GROUND_DISARM);
+                    assert!(c.contains(LOSS_BUDGET_SPENT) || forced, "{s:?} {c:?}");
                 }
                 if next_state(s, c) == FlightState::FailsafeLevel && s != FlightState::FailsafeLevel {
                     assert!(s == FlightState::Armed && c.contains(NO_LINK), "{s:?} {c:?}");

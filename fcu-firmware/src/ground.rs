@@ -3,23 +3,27 @@
 //! Every decision is fcu-link's and fcu-core's (`fcu_link::station`: the parameter table's
 //! rules, what a command may do); this module moves bytes and words. Received bytes come from
 //! the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to both halves of the
-//! control loop; saves go to flash ([`crate::param_flash`]) once the changes settle, disarmed.
+//! control loop, accepted commands (and whether a save runs) to the control tick
+//! ([`to_control`]); saves go to flash ([`crate::param_flash`]) once the changes settle, disarmed.
 //! On a board set to text lines it listens, and the first valid MAVLink frame turns the UART to
 //! MAVLink.
 
 use crate::app::{Snapshot, UartOut};
 use crate::watchdog::Watchdog;
 use fcu_core::boot::BootVerdict;
+use fcu_core::flight::ControlTick;
+use fcu_core::ground::GroundInput;
 use fcu_core::Config;
 
 /// The link task's view of the shared resources it uses.
 #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
-pub struct Shared<U, L, B, T, O, W, M> {
+pub struct Shared<U, L, B, T, O, G, W, M> {
     pub uart: U,
     pub latest: L,
     pub battery_mv: B,
     pub tick_config: T,
     pub outer_config: O,
+    pub ground_input: G,
     pub watchdog: W,
     pub mavlink_on: M,
 }
@@ -56,14 +60,31 @@ pub fn start_receiver(_dma: stm32f4xx_hal::pac::DMA2, _rcc: &mut stm32f4xx_hal::
     Absent
 }
 
+/// The ground station's commands for the control tick, taken between ticks (from the control
+/// task). Without the ground link there are none, and the slot is never locked.
 #[cfg(not(feature = "mavlink"))]
-pub async fn run<U, L, B, T, O, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, O, W, M>, _boot: BootVerdict)
+pub fn to_control(_slot: &mut impl rtic::Mutex<T = Option<GroundInput>>, _tick: &mut ControlTick) {}
+
+/// The ground station's commands for the control tick, taken between ticks (from the control
+/// task).
+#[cfg(feature = "mavlink")]
+pub fn to_control(slot: &mut impl rtic::Mutex<T = Option<GroundInput>>, tick: &mut ControlTick) {
+    slot.lock(|slot| {
+        if let Some(input) = slot.take() {
+            tick.take_ground(&input);
+        }
+    });
+}
+
+#[cfg(not(feature = "mavlink"))]
+pub async fn run<U, L, B, T, O, G, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, O, G, W, M>, _boot: BootVerdict)
 where
     U: rtic::Mutex<T = UartOut>,
     L: rtic::Mutex<T = Option<Snapshot>>,
     B: rtic::Mutex<T = u32>,
     T: rtic::Mutex<T = Option<Config>>,
     O: rtic::Mutex<T = Option<Config>>,
+    G: rtic::Mutex<T = Option<GroundInput>>,
     W: rtic::Mutex<T = Option<Watchdog>>,
     M: rtic::Mutex<T = bool>,
 {
@@ -138,13 +159,14 @@ mod with_link {
         UartRx::start(dma, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() })
     }
 
-    pub async fn run<U, L, B, T, O, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, O, W, M>, boot: BootVerdict)
+    pub async fn run<U, L, B, T, O, G, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, O, G, W, M>, boot: BootVerdict)
     where
         U: Mutex<T = UartOut>,
         L: Mutex<T = Option<Snapshot>>,
         B: Mutex<T = u32>,
         T: Mutex<T = Option<Config>>,
         O: Mutex<T = Option<Config>>,
+        G: Mutex<T = Option<GroundInput>>,
         W: Mutex<T = Option<Watchdog>>,
         M: Mutex<T = bool>,
     {
@@ -185,6 +207,12 @@ mod with_link {
                 g.link.set_rates(g.station.rates());
                 s.tick_config.lock(|slot| *slot = Some(cfg));
                 s.outer_config.lock(|slot| *slot = Some(cfg));
+            }
+            // Commands, and whether a save is wanted (the tick then refuses to arm; the station
+            // starts the save once the status shows it). One the tick has not taken yet is
+            // merged with, not overwritten.
+            if let Some(input) = g.station.take_ground() {
+                s.ground_input.lock(|slot| *slot = Some(slot.map_or(input, |older| older.then(input))));
             }
             let link = &mut g.link;
             let uart_idle = s.uart.lock(|uart| {

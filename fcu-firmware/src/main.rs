@@ -17,8 +17,9 @@
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
 //! | ground_link  | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
-//! |              |                         |      | parameter changes → the control loop, saves  |
-//! |              |                         |      | to flash, frames → the UART queue (200 Hz)   |
+//! |              |                         |      | parameter changes and commands → the control |
+//! |              |                         |      | loop, saves to flash, frames → the UART      |
+//! |              |                         |      | queue (200 Hz)                               |
 #![no_std]
 #![no_main]
 
@@ -120,6 +121,7 @@ mod app {
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
+    use fcu_core::ground::GroundInput;
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::CaptureEdge;
     use fcu_core::rc::EdgeDecoder;
@@ -248,6 +250,9 @@ mod app {
         latest: Option<Snapshot>,
         /// A configuration the ground link changed, for each half of the control loop.
         tick_config: Option<Config>,
+        /// The ground station's commands for the control tick (disarm, motor test,
+        /// calibrations, a save running), from the ground link.
+        ground_input: Option<GroundInput>,
         outer_config: Option<Config>,
         /// Fed by the control tick; stretched by the ground link around a flash erase.
         watchdog: Option<Watchdog>,
@@ -386,6 +391,7 @@ mod app {
                 bus,
                 latest: None,
                 tick_config: None,
+                ground_input: None,
                 outer_config: None,
                 watchdog,
                 mavlink_on,
@@ -651,7 +657,7 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [outer_result, outer_job, bus, tick_config, watchdog],
+        shared = [outer_result, outer_job, bus, tick_config, ground_input, watchdog],
         local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
     )]
     fn control(mut cx: control::Context) {
@@ -676,6 +682,9 @@ mod app {
                     *slot = None;
                 }
             });
+            // The ground station's commands, taken between ticks as a change is (the core
+            // decides again with its own state).
+            crate::ground::to_control(&mut cx.shared.ground_input, inner);
             while let Some(edge) = cx.local.edges_in.dequeue() {
                 decoder.on_edge(edge);
             }
@@ -798,7 +807,7 @@ mod app {
 
     /// The ground station's link (`crate::ground`): MAVLink on USART1, with the `mavlink`
     /// feature; without it, never spawned.
-    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, outer_config, watchdog, mavlink_on], local = [ground])]
+    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, outer_config, ground_input, watchdog, mavlink_on], local = [ground])]
     async fn ground_link(cx: ground_link::Context, boot: BootVerdict) {
         let s = cx.shared;
         let links = crate::ground::Shared {
@@ -807,6 +816,7 @@ mod app {
             battery_mv: s.battery_mv,
             tick_config: s.tick_config,
             outer_config: s.outer_config,
+            ground_input: s.ground_input,
             watchdog: s.watchdog,
             mavlink_on: s.mavlink_on,
         };

@@ -4,7 +4,7 @@
 //! | command | rule |
 //! |---|---|
 //! | COMPONENT_ARM_DISARM | arming stays the stick gesture's: arm is DENIED with a STATUSTEXT. Disarm is passed on on the ground with the throttle low, and in the air (or with the throttle up) only with param2 = [`FORCE_DISARM`], MAVLink's force value; otherwise TEMPORARILY_REJECTED |
-//! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time, disarmed only; magnetometer, baro and the rest UNSUPPORTED |
+//! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time, disarmed only; every parameter 0: [`Request::EndCalibration`] (PX4's cancel); magnetometer, baro and the rest UNSUPPORTED |
 //! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults; disarmed only |
 //! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot, disarmed only; the host reboots when [`crate::Link::reboot_ready`] |
 //! | DO_MOTOR_TEST | one motor, disarmed only, capped and stopped as [`crate::MotorTestState`] says |
@@ -204,6 +204,9 @@ fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut
 
 fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
     let [gyro, mag, baro, radio, accel, p6, p7] = command.params;
+    if command.params == [0.0; 7] {
+        return ask(vehicle, Request::EndCalibration, "Calibration end refused");
+    }
     let imu = gyro == 1.0 || accel != 0.0;
     let radio = radio == 1.0;
     if mag != 0.0 || baro != 0.0 || p6 != 0.0 || p7 != 0.0 || imu == radio {

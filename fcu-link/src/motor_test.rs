@@ -18,11 +18,11 @@ use crate::link::Core;
 use crate::text::{Severity, Text};
 use crate::vehicle::{Request, Vehicle, VehicleState};
 
-/// The motor test's throttle cap, percent of full output: enough to see a brushed motor turn
-/// and which way, little enough that a forgotten propeller does not lift the board.
-pub const MOTOR_TEST_THROTTLE_CAP_PCT: f32 = 15.0;
-/// The longest motor test, ms.
-pub const MOTOR_TEST_MAX_MS: u16 = 3000;
+/// The motor test's throttle cap, percent of full output: the flight controller's
+/// ([`fcu_core::ground::MOTOR_TEST_MAX_DUTY_PCT`]), which caps it again.
+pub const MOTOR_TEST_THROTTLE_CAP_PCT: f32 = fcu_core::ground::MOTOR_TEST_MAX_DUTY_PCT;
+/// The longest motor test, ms ([`fcu_core::ground::MOTOR_TEST_MAX_MS`]).
+pub const MOTOR_TEST_MAX_MS: u16 = fcu_core::ground::MOTOR_TEST_MAX_MS as u16;
 /// A test stops when no frame came for this long, ms.
 pub const MOTOR_TEST_SILENCE_MS: u32 = 1500;
 /// A test stops when a radio channel moves more than this from its width at the start, µs.

@@ -4,14 +4,22 @@
 //!
 //! The station holds the configuration in force and a copy of the latest status; its owner
 //! (the firmware's link task) feeds it the status, hands the configuration changes it accepts
-//! to the control loop ([`Station::take_change`]) and does the flash work it asks for
-//! ([`Station::save_due`], [`Station::saved`]). It decides what a ground station may do, with
-//! the rules of fcu-core's parameter table; the owner only moves bytes and words.
+//! to the control loop ([`Station::take_change`]), hands the commands it accepts to the control
+//! tick ([`Station::take_ground`]) and does the flash work it asks for ([`Station::save_due`],
+//! [`Station::saved`]). It decides what a ground station may do, with the rules of fcu-core's
+//! parameter table and of [`fcu_core::ground`] (which the control tick applies again with the
+//! state it is in); the owner only moves bytes and words.
+//!
+//! A save first tells the control tick ([`GroundInput::saving`]), which refuses to arm from
+//! then on, and starts only once two status snapshots taken after that show the refusal
+//! ([`Blocker::GroundBusy`]) with the board disarmed: the first may predate the tick taking
+//! the input. An erase stalls every instruction fetch, the control tick's included.
 
 use fcu_core::flight::Status;
+use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange};
 use fcu_core::parameters::{self, snapshot, RULE_ARMED};
 use fcu_core::rc::COUNTS_PER_US;
-use fcu_core::supervisor::FlightState;
+use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 
 use crate::rates::Rates;
@@ -21,8 +29,9 @@ use crate::vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Ve
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
 pub const SAVE_DEBOUNCE_MS: u32 = 2000;
 
-/// Rule of a request the station does not carry out on this board.
-pub const RULE_NOT_AVAILABLE: &str = "not available on this board yet";
+/// Status snapshots showing the save's arming refusal before the save starts (see the module
+/// docs).
+const SAVE_CONFIRMATIONS: u8 = 2;
 
 pub struct Station {
     cfg: Config,
@@ -39,6 +48,12 @@ pub struct Station {
     /// A save asked for by the ground station: at once, not after the debounce.
     save_asked: bool,
     reboot_asked: bool,
+    /// The commands for the control tick not taken yet, and the save's level.
+    ground: GroundInput,
+    /// `ground` differs from what the control tick last took.
+    ground_pending: bool,
+    /// Snapshots since the save's level went out that show it in force (see the module docs).
+    saving_confirmed: u8,
 }
 
 impl Station {
@@ -55,6 +70,9 @@ impl Station {
             unsaved_since_ms: None,
             save_asked: false,
             reboot_asked: false,
+            ground: GroundInput::default(),
+            ground_pending: false,
+            saving_confirmed: 0,
         }
     }
 
@@ -64,6 +82,9 @@ impl Station {
         self.battery_mv = battery_mv.min(u32::from(u16::MAX)) as u16;
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
+        let refusing = !status.state.armed() && status.blockers.contains(Blocker::GroundBusy);
+        self.saving_confirmed =
+            if self.ground.saving && !self.ground_pending && refusing { self.saving_confirmed.saturating_add(1) } else { 0 };
     }
 
     /// The configuration in force.
@@ -87,9 +108,37 @@ impl Station {
         core::mem::take(&mut self.change_pending).then_some(self.cfg)
     }
 
+    /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_ground`]): the
+    /// commands accepted since the last call, and whether a save is wanted; `None` when nothing
+    /// changed.
+    pub fn take_ground(&mut self) -> Option<GroundInput> {
+        let saving = self.save_wanted();
+        if saving != self.ground.saving {
+            self.ground.saving = saving;
+            self.ground_pending = true;
+        }
+        if !core::mem::take(&mut self.ground_pending) {
+            return None;
+        }
+        let input = self.ground;
+        self.ground = GroundInput { saving, ..GroundInput::default() };
+        Some(input)
+    }
+
     /// Whether the parameters should be written to flash now: asked for, or changed and left
-    /// alone for [`SAVE_DEBOUNCE_MS`]; never while armed.
+    /// alone for [`SAVE_DEBOUNCE_MS`]; never while armed; and only once the control tick
+    /// refuses to arm for it (see the module docs). The reference's supervisor has no such
+    /// refusal: only the armed state counts there.
     pub fn save_due(&self) -> bool {
+        let confirmed = self.ground.saving && self.saving_confirmed >= SAVE_CONFIRMATIONS;
+        self.save_wanted() && (confirmed || !self.safe_supervisor())
+    }
+
+    fn safe_supervisor(&self) -> bool {
+        matches!(self.cfg.supervisor, SupervisorConfig::Safe(_))
+    }
+
+    fn save_wanted(&self) -> bool {
         if self.armed() {
             return false;
         }
@@ -124,6 +173,21 @@ impl Station {
         self.status.is_some_and(|s| s.state.armed())
     }
 
+    /// The supervisor's state as last seen (calibrating until the first status).
+    fn flight_state(&self) -> FlightState {
+        self.status.map_or(FlightState::Calibrating, |s| s.state)
+    }
+
+    /// A command for the control tick; the safe supervisor's only.
+    fn for_tick(&mut self, add: impl FnOnce(&mut GroundInput)) -> Result<(), &'static str> {
+        if !self.safe_supervisor() {
+            return Err(ground::RULE_REFERENCE);
+        }
+        add(&mut self.ground);
+        self.ground_pending = true;
+        Ok(())
+    }
+
     fn changed(&mut self) {
         self.change_pending = true;
         self.unsaved_since_ms = Some(self.now_ms);
@@ -143,7 +207,7 @@ impl Vehicle for Station {
                 rc_channel_count: 0,
                 motor_outputs_us: [1000; 4],
                 battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-                health: Health { imu: false, radio: false, estimator: false, battery: true },
+                health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
                 load_permille: 0,
             };
         };
@@ -179,7 +243,13 @@ impl Vehicle for Station {
             rc_channel_count: 4,
             motor_outputs_us,
             battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-            health: Health { imu: s.fault.is_none(), radio: s.link, estimator: s.calibrated, battery: true },
+            health: Health {
+                imu: s.fault.is_none(),
+                radio: s.link,
+                estimator: s.calibrated,
+                battery: true,
+                prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
+            },
             load_permille: 0,
         }
     }
@@ -230,8 +300,176 @@ impl Vehicle for Station {
                 self.reboot_asked = true;
                 Ok(())
             }
-            Request::StopMotorTest => Ok(()),
-            Request::Disarm { .. } | Request::CalibrateImu | Request::CalibrateRadio | Request::MotorTest { .. } => Err(RULE_NOT_AVAILABLE),
+            Request::Disarm { forced } => {
+                let throttle_low = self.status.is_none_or(|s| self.cfg.rc.throttle_low(&s.sticks));
+                ground::disarm_rule(self.flight_state(), throttle_low, forced)?;
+                self.for_tick(|g| g.disarm = Some(Disarm { forced }))
+            }
+            Request::CalibrateImu => {
+                ground::ground_test_rule(self.flight_state())?;
+                self.for_tick(|g| g.calibrate_imu = true)
+            }
+            Request::CalibrateRadio => {
+                ground::ground_test_rule(self.flight_state())?;
+                self.for_tick(|g| g.radio_calibration = Some(true))
+            }
+            Request::EndCalibration => self.for_tick(|g| g.radio_calibration = Some(false)),
+            Request::MotorTest { motor, throttle_pct, duration_ms } => {
+                ground::ground_test_rule(self.flight_state())?;
+                if motor >= ground::MOTORS {
+                    return Err(ground::RULE_NO_SUCH_MOTOR);
+                }
+                let test = MotorTest { motor, duty_pct: ground::capped_duty_pct(throttle_pct), duration_ms: u32::from(duration_ms) };
+                self.for_tick(|g| g.motor_test = Some(MotorTestChange::Start(test)))
+            }
+            Request::StopMotorTest => self.for_tick(|g| g.motor_test = Some(MotorTestChange::Stop)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fcu_core::flight::FlightController;
+    use fcu_core::rc::Sticks;
+    use fcu_core::supervisor::Blockers;
+
+    fn status(state: FlightState, sticks: Sticks, blockers: Blockers) -> Status {
+        let mut s = FlightController::new(Config::default()).unwrap().status();
+        s.state = state;
+        s.sticks = sticks;
+        s.blockers = blockers;
+        s
+    }
+
+    const REST: Sticks = Sticks::new(0, 0, 0, 0);
+    const UP: Sticks = Sticks::new(0, 0, 1500, 0);
+
+    fn station_in(state: FlightState, sticks: Sticks) -> Station {
+        let mut st = Station::new(Config::default(), Config::default());
+        st.observe(&status(state, sticks, Blockers::default()), 3900, [0; 4], 1000);
+        st
+    }
+
+    fn motor_test(motor: u8, throttle_pct: f32) -> Request {
+        Request::MotorTest { motor, throttle_pct, duration_ms: 2000 }
+    }
+
+    #[test]
+    fn a_disarm_goes_to_the_tick_on_the_ground_and_in_the_air_only_forced() {
+        let mut st = station_in(FlightState::Armed, REST);
+        assert_eq!(st.request(Request::Disarm { forced: false }), Ok(()));
+        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
+        assert_eq!(st.take_ground(), None, "taken once");
+
+        let mut st = station_in(FlightState::Armed, UP);
+        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_THROTTLE_NOT_LOW));
+        assert_eq!(st.take_ground(), None, "a refusal sends nothing");
+        assert_eq!(st.request(Request::Disarm { forced: true }), Ok(()));
+        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
+
+        let mut st = station_in(FlightState::FailsafeLevel, REST);
+        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_FAILSAFE_LEVEL));
+    }
+
+    #[test]
+    fn a_motor_test_goes_to_the_tick_disarmed_only_capped() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(motor_test(3, 90.0)), Ok(()));
+        let test = MotorTest { motor: 3, duty_pct: ground::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
+        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
+        assert_eq!(st.request(Request::StopMotorTest), Ok(()));
+        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
+        assert_eq!(st.request(motor_test(4, 5.0)), Err(ground::RULE_NO_SUCH_MOTOR));
+
+        for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
+            let mut st = station_in(state, REST);
+            assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_DISARMED_ONLY), "{state:?}");
+            assert_eq!(st.take_ground(), None);
+        }
+        assert_eq!(station_in(FlightState::Calibrating, REST).request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        // No status yet: the board is still booting.
+        let mut st = Station::new(Config::default(), Config::default());
+        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+    }
+
+    #[test]
+    fn calibrations_go_to_the_tick_disarmed_only_and_an_end_always() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::CalibrateImu), Ok(()));
+        assert_eq!(st.request(Request::CalibrateRadio), Ok(()));
+        let g = st.take_ground().unwrap();
+        assert!(g.calibrate_imu);
+        assert_eq!(g.radio_calibration, Some(true));
+
+        let mut st = station_in(FlightState::Armed, REST);
+        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_DISARMED_ONLY));
+        assert_eq!(st.request(Request::CalibrateRadio), Err(ground::RULE_DISARMED_ONLY));
+        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.request(Request::EndCalibration), Ok(()));
+        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
+    }
+
+    #[test]
+    fn the_reference_supervisor_takes_no_command() {
+        let cfg = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
+        let mut st = Station::new(cfg, cfg);
+        st.observe(&status(FlightState::Disarmed, REST, Blockers::default()), 3900, [0; 4], 0);
+        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
+        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
+        assert_eq!(st.take_ground(), None);
+        // A save has no arming refusal to wait for there.
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert!(st.save_due());
+    }
+
+    #[test]
+    fn the_pre_arm_check_is_healthy_disarmed_without_a_blocker_and_armed() {
+        let mut busy = Blockers::default();
+        busy.insert(Blocker::GroundBusy);
+        for (state, blockers, ready) in [
+            (FlightState::Disarmed, Blockers::default(), true),
+            (FlightState::Disarmed, busy, false),
+            (FlightState::Calibrating, Blockers::default(), false),
+            (FlightState::Armed, Blockers::default(), true),
+        ] {
+            let mut st = Station::new(Config::default(), Config::default());
+            st.observe(&status(state, REST, blockers), 3900, [0; 4], 0);
+            assert_eq!(st.state().health.prearm, ready, "{state:?} {blockers:?}");
+        }
+    }
+
+    #[test]
+    fn a_save_waits_until_the_tick_refuses_to_arm_for_it() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        let idle = status(FlightState::Disarmed, REST, Blockers::default());
+        let mut busy = idle;
+        busy.blockers.insert(Blocker::GroundBusy);
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert!(!st.save_due(), "the tick does not know yet");
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        // A snapshot that does not show the refusal, then one that may predate the tick's take.
+        st.observe(&idle, 3900, [0; 4], 1005);
+        st.observe(&busy, 3900, [0; 4], 1010);
+        assert!(!st.save_due());
+        st.observe(&busy, 3900, [0; 4], 1015);
+        assert!(st.save_due());
+        // Armed meanwhile (the refusal came too late): no save.
+        let mut armed = busy;
+        armed.state = FlightState::Armed;
+        st.observe(&armed, 3900, [0; 4], 1020);
+        assert!(!st.save_due());
+        st.observe(&busy, 3900, [0; 4], 1025);
+        st.observe(&busy, 3900, [0; 4], 1030);
+        assert!(st.save_due());
+        // Calibrating or faulted, the board cannot arm either: the refusal is what counts.
+        let mut faulted = busy;
+        faulted.state = FlightState::Fault;
+        st.observe(&faulted, 3900, [0; 4], 1035);
+        assert!(st.save_due());
+        st.saved(true);
+        assert!(!st.save_due());
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed again");
+        assert_eq!(st.take_ground(), None);
     }
 }

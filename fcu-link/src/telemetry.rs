@@ -20,6 +20,7 @@ fn sensors_present() -> MavSysStatusSensor {
         | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER
         | MavSysStatusSensor::MAV_SYS_STATUS_AHRS
         | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY
+        | MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK
 }
 
 impl<const TX: usize> Core<TX> {
@@ -92,6 +93,7 @@ impl<const TX: usize> Core<TX> {
             (h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
             (h.estimator, MavSysStatusSensor::MAV_SYS_STATUS_AHRS),
             (h.battery, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY),
+            (h.prearm, MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK),
         ] {
             if ok {
                 health |= bits;

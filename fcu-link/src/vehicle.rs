@@ -60,6 +60,9 @@ pub struct Health {
     pub estimator: bool,
     /// Battery above its low threshold.
     pub battery: bool,
+    /// Nothing refuses arming, or armed (SYS_STATUS' pre-arm check, which QGroundControl
+    /// shows as "ready to arm").
+    pub prearm: bool,
 }
 
 /// A snapshot of the vehicle for one telemetry tick or one command decision.
@@ -110,8 +113,13 @@ pub enum Request {
     },
     /// Gyro/accelerometer calibration (the boot calibration). Disarmed (checked).
     CalibrateImu,
-    /// Radio calibration: endpoints and trims from the sticks. Disarmed (checked).
+    /// Radio calibration: the ground station reads the radio's widths (RC_CHANNELS) and writes
+    /// the endpoints and trims as parameters; the vehicle refuses to arm meanwhile. Disarmed
+    /// (checked).
     CalibrateRadio,
+    /// End the radio calibration (PREFLIGHT_CALIBRATION with every parameter 0, the way PX4
+    /// cancels one). Taken armed or not.
+    EndCalibration,
     /// Save the parameters to flash. Disarmed (checked).
     SaveParams,
     /// Reset the parameters to the defaults. Disarmed (checked).

@@ -178,6 +178,27 @@ fn telemetry_carries_the_vehicle_state() {
 }
 
 #[test]
+fn sys_status_carries_the_pre_arm_check() {
+    use common::MavSysStatusSensor as S;
+    let mut link = link();
+    let mut mock = Mock::new();
+    let mut sys_status = |mock: &mut Mock, now: u32| {
+        link.tick(now, mock);
+        messages(&drain(&mut link)).into_iter().find_map(|m| match m {
+            MavMessage::SYS_STATUS(s) => Some(s),
+            _ => None,
+        })
+    };
+    let ready = sys_status(&mut mock, 0).unwrap();
+    assert!(ready.onboard_control_sensors_present.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    assert!(ready.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    mock.state.health.prearm = false;
+    let blocked = sys_status(&mut mock, 5000).unwrap();
+    assert!(blocked.onboard_control_sensors_enabled.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+    assert!(!blocked.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_PREARM_CHECK));
+}
+
+#[test]
 fn sequence_numbers_count_up_and_wrap() {
     let mut link = link();
     let mut mock = Mock::new();
@@ -532,9 +553,17 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
         assert!(texts(&sent)[0].ends_with("refused: armed"));
         assert!(mock.requests.is_empty());
     }
-    // Magnetometer, baro, two at once, nothing: unsupported.
-    for params in [[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0; 7]]
-    {
+    // Every parameter 0 ends a calibration, armed or not (PX4's cancel).
+    for armed in [false, true] {
+        let mut link = link();
+        let mut mock = Mock::new();
+        mock.state.armed = armed;
+        let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]);
+        assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(mock.requests, [Request::EndCalibration]);
+    }
+    // Magnetometer, baro, two at once: unsupported.
+    for params in [[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]] {
         let mut link = link();
         let mut mock = Mock::new();
         let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, params);
@@ -704,4 +733,98 @@ fn a_full_queue_drops_whole_frames_and_counts_them() {
     assert!(link.send_text(Severity::Info, "four"));
     let four = drain(&mut link);
     assert_eq!(four[0].sequence, sent[1].sequence + 2);
+}
+
+/// The link in front of fcu-core's station, as the firmware runs it: each command's answer
+/// and what reaches the control tick.
+mod with_the_station {
+    use super::*;
+    use fcu_core::flight::{FlightController, Status};
+    use fcu_core::ground::{Disarm, MotorTestChange};
+    use fcu_core::rc::Sticks;
+    use fcu_core::supervisor::FlightState;
+    use fcu_core::Config;
+    use fcu_link::station::Station;
+
+    fn station(state: FlightState, sticks: Sticks) -> Station {
+        let mut s: Status = FlightController::new(Config::default()).unwrap().status();
+        s.state = state;
+        s.sticks = sticks;
+        let mut st = Station::new(Config::default(), Config::default());
+        st.observe(&s, 3900, [0; 4], 0);
+        st
+    }
+
+    fn ask(st: &mut Station, cmd: MavCmd, params: [f32; 7]) -> (MavResult, Vec<String>) {
+        let mut link = link();
+        link.receive(&v2(&command_long(cmd, params)), 0, st);
+        let sent = drain(&mut link);
+        (ack_of(&sent).1, texts(&sent))
+    }
+
+    const REST: Sticks = Sticks::new(0, 0, 0, 0);
+    const UP: Sticks = Sticks::new(0, 0, 1500, 0);
+    const DISARM: [f32; 7] = [0.0; 7];
+    const FORCED: [f32; 7] = [0.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+    #[test]
+    fn disarm_accepted_on_the_ground_refused_in_the_air_unless_forced() {
+        let mut st = station(FlightState::Armed, REST);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM).0, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
+
+        let mut st = station(FlightState::Armed, UP);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
+        assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+        assert_eq!(texts.len(), 1);
+        assert!(texts[0].contains("21196"), "{texts:?}");
+        assert_eq!(st.take_ground(), None);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, FORCED).0, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
+
+        // The level stage: the station's own rule, DENIED with it.
+        let mut st = station(FlightState::FailsafeLevel, REST);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
+        assert_eq!(result, MavResult::MAV_RESULT_DENIED);
+        assert_eq!(texts, ["Disarm refused: in failsafe (force 21196)"]);
+    }
+
+    #[test]
+    fn motor_test_accepted_disarmed_refused_armed_and_while_calibrating() {
+        let test = [2.0, 0.0, 50.0, 1.5, 0.0, 0.0, 0.0];
+        let mut st = station(FlightState::Disarmed, REST);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_ACCEPTED);
+        match st.take_ground().and_then(|g| g.motor_test) {
+            Some(MotorTestChange::Start(t)) => {
+                assert_eq!((t.motor, t.duty_pct, t.duration_ms), (1, fcu_core::ground::MOTOR_TEST_MAX_DUTY_PCT, 1500));
+            }
+            other => panic!("{other:?}"),
+        }
+        let mut st = station(FlightState::Armed, REST);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+        assert_eq!(st.take_ground(), None);
+        let mut st = station(FlightState::Calibrating, REST);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
+        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: calibrating".to_string()]));
+    }
+
+    #[test]
+    fn calibrations_accepted_disarmed_refused_otherwise() {
+        let imu = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let radio = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+        let mut st = station(FlightState::Disarmed, REST);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu).0, MavResult::MAV_RESULT_ACCEPTED);
+        assert!(st.take_ground().is_some_and(|g| g.calibrate_imu));
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(true));
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]).0, MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
+
+        let mut st = station(FlightState::Fault, REST);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu);
+        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Calibration refused: fault or failsafe".to_string()]));
+        let mut st = station(FlightState::Armed, REST);
+        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+        assert_eq!(st.take_ground(), None);
+    }
 }

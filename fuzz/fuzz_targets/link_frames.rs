@@ -39,7 +39,7 @@ impl Vehicle for Mock {
             rc_channel_count: 8,
             motor_outputs_us: [1000; 4],
             battery: Battery { voltage_mv: 3900, current_ca: -1, remaining_pct: -1 },
-            health: Health { imu: true, radio: true, estimator: true, battery: true },
+            health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
             load_permille: 0,
         }
     }

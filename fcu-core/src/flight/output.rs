@@ -1,5 +1,6 @@
 //! The end of the tick: the rate loop, the mixer and the guard that writes the compare values.
 
+use super::ground::TestOutput;
 use super::params::TickParams;
 use crate::control::{RateLoop, Saturation};
 use crate::rc::StickCounts;
@@ -33,9 +34,17 @@ impl Output {
     }
 
     /// Rate loop and mixer while the supervisor lets the motors run, then the guard: last and
-    /// unconditional.
+    /// unconditional. With the motors not allowed to run, a ground station's motor test
+    /// (`test`, read only then) drives its one motor, unless a sensor fault is latched.
     #[inline(always)]
-    pub(super) fn run(&mut self, p: &TickParams, demand_rad_s: [f32; 3], gyro_rad_s: [f32; 3], allowed: MotorsAllowed) -> [u16; 4] {
+    pub(super) fn run(
+        &mut self,
+        p: &TickParams,
+        demand_rad_s: [f32; 3],
+        gyro_rad_s: [f32; 3],
+        allowed: MotorsAllowed,
+        test: impl FnOnce() -> Option<TestOutput>,
+    ) -> [u16; 4] {
         if allowed.enabled {
             let rate_commands = self.rate_loop.commands(&p.rate_loop, demand_rad_s, gyro_rad_s, allowed.throttle_low, self.saturation);
             let (cmd, sat) = p.mixer.mix(p.mixer.throttle_counts(allowed.throttle), rate_commands);
@@ -52,6 +61,11 @@ impl Output {
         self.compare = self.motor_command.map(|c| range.to_compare(c));
         if !allowed.enabled || allowed.fault {
             self.compare = [p.off_compare; 4];
+            if let Some(t) = test().filter(|_| !allowed.fault) {
+                if let Some(c) = self.compare.get_mut(usize::from(t.motor)) {
+                    *c = t.compare;
+                }
+            }
         }
         self.compare
     }

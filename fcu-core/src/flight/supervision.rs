@@ -1,9 +1,11 @@
 //! The tick's command stage: the radio, the supervisor and the decision in force, with the
 //! sticks the pipeline flies that follow from it.
 
+use super::ground::{Ground, TestOutput};
 use super::params::TickParams;
 use super::sensors::Sensors;
 use super::ForcedRadio;
+use crate::ground::GroundInput;
 use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
 
@@ -59,6 +61,8 @@ pub(super) struct Supervision {
     in_force: InForce,
     /// Ticks since boot, this one included: the supervisor's clock.
     ticks: u32,
+    /// What the ground station asked (the safe supervisor's only).
+    ground: Ground,
     /// Tests only: the supervisor decides every tick, the decision in force never stands.
     #[cfg(feature = "test-switches")]
     table_only: bool,
@@ -84,6 +88,7 @@ impl Supervision {
                 throttle_low: true,
             },
             ticks: 0,
+            ground: Ground::default(),
             #[cfg(feature = "test-switches")]
             table_only: false,
         }
@@ -154,6 +159,7 @@ impl Supervision {
                 if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
                     return false;
                 }
+                let ground = self.ground.commands(self.ticks, &radio.sticks, &p.rc);
                 let inputs = Inputs {
                     tick: self.ticks,
                     link: radio.link,
@@ -166,12 +172,42 @@ impl Supervision {
                     calibrating: sensors.calibrating(),
                     sensor_fault: sensors.fault(),
                     tilt_rad,
+                    ground,
                 };
-                supervisor.decide(cfg, &inputs)
+                let decision = supervisor.decide(cfg, &inputs);
+                self.ground.decided(decision.state);
+                decision
             }
         };
         self.in_force.decided(decision, radio.sticks, p);
         decision.request_calibration
+    }
+
+    /// A ground station's input, between ticks. The reference's supervisor takes none.
+    pub(super) fn take_ground(&mut self, input: &GroundInput, p: &TickParams) {
+        if let Machine::Safe { supervisor, .. } = &mut self.machine {
+            self.ground.take(input, self.ticks, self.in_force.decision.state, p);
+            if self.ground.disarm_pending() {
+                // Steady flight repeats the last decision without asking the supervisor.
+                supervisor.unsteady();
+            }
+        }
+    }
+
+    /// The safe supervisor's last decision was steady flight (tests).
+    #[cfg(test)]
+    pub(super) fn steady(&self) -> bool {
+        matches!(&self.machine, Machine::Safe { supervisor, .. } if supervisor.steady())
+    }
+
+    /// The motor test's output, while one runs.
+    pub(super) fn test_output(&self) -> Option<TestOutput> {
+        self.ground.test_output()
+    }
+
+    /// A ground station's radio calibration runs.
+    pub(super) fn radio_calibration(&self) -> bool {
+        self.ground.radio_calibration()
     }
 
     pub(super) fn in_force(&self) -> &InForce {

@@ -45,7 +45,7 @@ impl Mock {
                 rc_channel_count: 6,
                 motor_outputs_us: [1000, 1100, 1200, 1300],
                 battery: Battery { voltage_mv: 3900, current_ca: -1, remaining_pct: 70 },
-                health: Health { imu: true, radio: true, estimator: true, battery: true },
+                health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
                 load_permille: 420,
             },
             params: vec![

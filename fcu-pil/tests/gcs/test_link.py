@@ -109,6 +109,181 @@ class OnTheBench(unittest.TestCase):
         self.assertTrue(version.capabilities & MAV.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
 
 
+PREARM = MAV.MAV_SYS_STATUS_PREARM_CHECK
+
+
+def ready_to_arm(board, want=True, timeout=5.0):
+    """The next SYS_STATUS whose pre-arm check (health bit) says `want`, or None."""
+    return board.recv("SYS_STATUS", timeout, lambda m: bool(m.onboard_control_sensors_health & PREARM) == want)
+
+
+def gcs_heartbeat(board):
+    board.conn.mav.heartbeat_send(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, MAV.MAV_STATE_ACTIVE)
+
+
+def servo_outputs(m):
+    return [m.servo1_raw, m.servo2_raw, m.servo3_raw, m.servo4_raw]
+
+
+class GroundCommands(unittest.TestCase):
+    """The commands a ground station sends on the bench (sticks centred, throttle low): motor
+    test, IMU and radio calibration, disarm. The pre-arm check in SYS_STATUS (QGroundControl's
+    "ready to arm") shows the arming blocker they raise."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.board = ServedBoard()
+        if cls.board.heartbeat() is None or ready_to_arm(cls.board, True, 30.0) is None:
+            out = cls.board.serve_output()
+            cls.board.close()
+            raise AssertionError(f"the board never became ready to arm; serve said:\n{out}")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.board.close()
+
+    def setUp(self):
+        self.assertIsNotNone(ready_to_arm(self.board, True, 10.0), "not ready to arm before the test")
+
+    def test_the_motor_test_spins_only_the_asked_motor_capped_and_stops_on_time(self):
+        # Motor 3 at 60 % (capped to 15 %) for 2 s.
+        ack = self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 3, MAV.MOTOR_TEST_THROTTLE_PERCENT, 60.0, 2.0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+        start = time.time()
+        outputs, blocked = [], []
+        next_heartbeat = start
+        while time.time() - start < 3.5:
+            # A ground station's heartbeat: a link silent for 1.5 s stops the test.
+            if time.time() >= next_heartbeat:
+                next_heartbeat += 0.5
+                gcs_heartbeat(self.board)
+            m = self.board.conn.recv_match(type=["SERVO_OUTPUT_RAW", "SYS_STATUS"], blocking=True, timeout=0.5)
+            if m is None:
+                continue
+            t = time.time() - start
+            if m.get_type() == "SERVO_OUTPUT_RAW":
+                outputs.append((t, servo_outputs(m)))
+            elif 0.3 < t < 1.7:
+                blocked.append(not m.onboard_control_sensors_health & PREARM)
+        spinning = [(t, o) for t, o in outputs if any(v > 1000 for v in o)]
+        self.assertTrue(spinning, f"no motor turned: {outputs[:5]}")
+        for t, o in spinning:
+            self.assertEqual((o[0], o[1], o[3]), (1000, 1000, 1000), f"another motor turned at {t:.2f} s: {o}")
+            # 15 % of the 1000-2000 scale.
+            self.assertTrue(1000 < o[2] <= 1150, f"motor 3 at {o[2]} at {t:.2f} s")
+        last = spinning[-1][0]
+        self.assertTrue(1.5 < last < 2.5, f"motor 3 ran until {last:.2f} s of 2 s")
+        after = [o for t, o in outputs if t > 2.6]
+        self.assertTrue(after and all(o == [1000] * 4 for o in after), after)
+        self.assertTrue(blocked and all(blocked), "the pre-arm check stayed healthy while the motor turned")
+        self.assertIsNotNone(ready_to_arm(self.board, True, 3.0))
+
+    def test_a_stop_ends_the_motor_test_and_a_bad_motor_is_denied(self):
+        self.assertEqual(self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 1, 0, 10.0, 3.0, 0).result, MAV.MAV_RESULT_ACCEPTED)
+        self.assertIsNotNone(self.board.recv("SERVO_OUTPUT_RAW", 2.0, lambda m: m.servo1_raw > 1000))
+        # Any other command stops it (here one the board does not support).
+        self.board.command(MAV.MAV_CMD_DO_SET_ROI_LOCATION, 1, 2, 3)
+        self.assertIsNotNone(self.board.recv("SERVO_OUTPUT_RAW", 1.0, lambda m: servo_outputs(m) == [1000] * 4))
+        self.assertTrue(any("Motor test stopped" in t for t in self.board.texts(0.5)))
+        ack = self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 5, 0, 10.0, 1.0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_DENIED)
+
+    def test_an_imu_calibration_is_accepted_disarmed_and_runs(self):
+        self.board.texts(0.1)
+        ack = self.board.command(MAV.MAV_CMD_PREFLIGHT_CALIBRATION, 1, 0, 0, 0, 0, 0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+        # It runs (a second of samples): the board is calibrating, so a motor test is refused.
+        time.sleep(0.2)
+        ack = self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 1, 0, 10.0, 1.0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_DENIED)
+        self.assertTrue(any("calibrating" in t for t in self.board.texts(0.5)))
+        self.assertIsNotNone(ready_to_arm(self.board, True, 10.0), "not ready again after the calibration")
+        self.assertEqual(self.board.heartbeat(5.0).system_status, MAV.MAV_STATE_STANDBY)
+
+    def test_a_radio_calibration_blocks_arming_until_it_ends(self):
+        ack = self.board.command(MAV.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 1, 0, 0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+        self.assertIsNotNone(ready_to_arm(self.board, False, 3.0), "arming not blocked by the radio calibration")
+        # The ground station reads the widths meanwhile.
+        rc = self.board.recv("RC_CHANNELS", 2.0)
+        self.assertTrue(900 < rc.chan3_raw < 2100, rc)
+        time.sleep(1.5)
+        self.assertIsNotNone(ready_to_arm(self.board, False, 2.0), "the radio calibration ended by itself")
+        ack = self.board.command(MAV.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 0, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+        self.assertIsNotNone(ready_to_arm(self.board, True, 3.0), "still blocked after the end")
+
+    def test_a_disarm_of_a_disarmed_board_is_accepted(self):
+        ack = self.board.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+
+
+def armed(board, timeout=30.0):
+    return board.recv("HEARTBEAT", timeout, lambda m: m.get_srcSystem() == 1 and m.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def disarmed(board, timeout=3.0):
+    return board.recv("HEARTBEAT", timeout, lambda m: m.get_srcSystem() == 1 and not m.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def throttle_channel(board):
+    """RC_CHANNELS' field of the throttle's input (RCMAP_THROTTLE), its low end (RC3_MIN and the
+    like) in µs."""
+    n = int(board.param_read("RCMAP_THROTTLE").param_value)
+    return f"chan{n}_raw", board.param_read(f"RC{n}_MIN").param_value
+
+
+class DisarmFromTheLink(unittest.TestCase):
+    """The hover scenario's pilot arms by gesture and takes off (on the bench)."""
+
+    def test_in_the_air_only_with_the_force_value(self):
+        with ServedBoard(scenario="hover") as board:
+            self.assertIsNotNone(armed(board), "the scenario's pilot did not arm within 30 s")
+            field, low_us = throttle_channel(board)
+            flying = board.recv("RC_CHANNELS", 10.0, lambda m: getattr(m, field) > low_us + 200)
+            self.assertIsNotNone(flying, "the throttle never went up")
+            board.texts(0.1)
+            ack = board.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0)
+            self.assertEqual(ack.result, MAV.MAV_RESULT_TEMPORARILY_REJECTED)
+            self.assertTrue(any("21196" in t for t in board.texts(0.5)))
+            self.assertIsNotNone(armed(board, 2.0), "disarmed without the force value")
+            ack = board.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196)
+            self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+            self.assertIsNotNone(disarmed(board), "still armed after a forced disarm")
+            self.assertIsNotNone(board.recv("SERVO_OUTPUT_RAW", 1.0, lambda m: servo_outputs(m) == [1000] * 4))
+
+    def test_on_the_ground_with_the_throttle_low(self):
+        # The scenario lands at 20 s, its throttle low from then, and disarms by gesture at 24.5 s:
+        # in between the board is armed on the ground.
+        with ServedBoard(scenario="hover") as board:
+            self.assertIsNotNone(armed(board), "the scenario's pilot did not arm within 30 s")
+            field, low_us = throttle_channel(board)
+            self.assertIsNotNone(board.recv("RC_CHANNELS", 10.0, lambda m: getattr(m, field) > low_us + 200))
+            landed = board.recv("RC_CHANNELS", 25.0, lambda m: getattr(m, field) < low_us + 30)
+            self.assertIsNotNone(landed, "the throttle never came back down")
+            self.assertIsNotNone(armed(board, 1.5), "disarmed before the test asked")
+            ack = board.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0)
+            self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+            self.assertIsNotNone(disarmed(board, 2.0))
+
+
+class ArmingWhileAMotorTestRuns(unittest.TestCase):
+    def test_the_pilots_gesture_does_not_arm_while_motor_tests_are_asked(self):
+        """The hover scenario's pilot makes the arm gesture from 2.5 s to 4 s and would take off
+        at 4.5 s. A motor test asked meanwhile blocks arming (the gesture's first stick move
+        stops the test, and a gesture begun during one never arms): the board stays disarmed."""
+        with ServedBoard(scenario="hover") as board:
+            accepted = 0
+            start = time.time()
+            while time.time() - start < 6.0:
+                ack = board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 2, 0, 5.0, 3.0, 0, timeout=1.0)
+                if ack is not None and ack.result == MAV.MAV_RESULT_ACCEPTED:
+                    accepted += 1
+                time.sleep(0.2)
+            self.assertGreater(accepted, 0, "no motor test was accepted")
+            self.assertIsNone(armed(board, 6.0), "armed while motor tests were asked")
+
+
 class SaveAndReboot(unittest.TestCase):
     def test_saved_values_come_back_after_a_reboot(self):
         with ServedBoard() as board:
