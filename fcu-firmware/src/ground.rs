@@ -241,17 +241,18 @@ mod with_link {
         }
     }
 
-    /// Says where the parameters in force came from (a STATUSTEXT, once the link runs).
+    /// Says where the parameters in force came from: a STATUSTEXT once the link runs, and again
+    /// to each ground station that connects later (it missed the boot).
     fn announce_parameters(link: &mut Link<LINK_TX_BYTES>, source: &snapshot::Source) {
         let _queued = match source {
-            snapshot::Source::Snapshot { .. } => link.send_text(Severity::Info, "parameters loaded from flash"),
-            snapshot::Source::NoSnapshot => link.send_text(Severity::Notice, "no saved parameters: defaults"),
+            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, "parameters loaded from flash"),
+            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, "no saved parameters: defaults"),
             snapshot::Source::Refused(rule) => {
                 let mut text = LineBuf::<64>::new();
                 text.push_str("saved parameters refused (");
                 text.push_str(rule);
                 text.push_str("): defaults");
-                link.send_text(Severity::Warning, text.as_str())
+                link.greet(Severity::Warning, text.as_str())
             }
         };
     }

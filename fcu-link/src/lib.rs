@@ -63,7 +63,7 @@ pub mod text;
 pub mod tx;
 pub mod vehicle;
 
-pub use link::{Link, LinkConfig, LinkStats};
+pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS};
 pub use motor_test::{MotorTestState, MOTOR_TEST_MAX_MS, MOTOR_TEST_THROTTLE_CAP_PCT};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};

@@ -57,6 +57,10 @@ pub struct LinkStats {
 }
 
 /// A time-based stream: sends when `now` reaches `next_ms`.
+/// A line silent this long has no ground station on it any more: the next HEARTBEAT is a new
+/// one, which is greeted ([`Link::greet`]). Ground stations send theirs every second.
+pub const STATION_GONE_MS: u32 = 5000;
+
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Stream {
     next_ms: u32,
@@ -97,6 +101,9 @@ pub(crate) struct Core<const TX: usize> {
     pub(crate) param_cursor: Option<u16>,
     pub(crate) motor_test: Option<MotorTest>,
     pub(crate) last_rx_ms: Option<u32>,
+    /// Said when the host asked ([`Link::greet`]) and again to each ground station that
+    /// connects afterwards.
+    greeting: Option<(Severity, Text)>,
     pub(crate) now_ms: u32,
     pub(crate) reboot_pending: bool,
     pub(crate) stats: LinkStats,
@@ -159,6 +166,7 @@ impl<const TX: usize> Link<TX> {
                 param_cursor: None,
                 motor_test: None,
                 last_rx_ms: None,
+                greeting: None,
                 now_ms: 0,
                 reboot_pending: false,
                 stats: LinkStats {
@@ -199,6 +207,16 @@ impl<const TX: usize> Link<TX> {
     /// Bytes waiting to be sent.
     pub fn tx_pending(&self) -> usize {
         self.core.tx.len()
+    }
+
+    /// Sends a STATUSTEXT now (cut at 50 bytes) and again to every ground station that
+    /// connects later: the first HEARTBEAT after [`STATION_GONE_MS`] of silence from the
+    /// line. For what a station should always hear, once: where the parameters came from at
+    /// boot. A later call replaces the text.
+    pub fn greet(&mut self, severity: Severity, text: &str) -> bool {
+        let text = Text::new().push(text);
+        self.core.greeting = Some((severity, text));
+        self.core.text(severity, text)
     }
 
     /// Sends a STATUSTEXT (cut at 50 bytes); false when the transmit queue had no room.
@@ -260,10 +278,16 @@ impl<const TX: usize> Core<TX> {
     }
 
     fn handle<V: Vehicle>(&mut self, frame: Frame<'_>, vehicle: &mut V) {
+        let silent_before = self.last_rx_ms.is_none_or(|last| self.now_ms.wrapping_sub(last) > STATION_GONE_MS);
         self.last_rx_ms = Some(self.now_ms);
         let payload = frame.payload;
         match frame.message_id {
-            HEARTBEAT_DATA::ID => {}
+            HEARTBEAT_DATA::ID => {
+                // A station that connects after the board booted missed what it said then.
+                if let Some((severity, text)) = self.greeting.filter(|_| silent_before) {
+                    self.text(severity, text);
+                }
+            }
             PARAM_REQUEST_LIST_DATA::ID => match frame::decode::<PARAM_REQUEST_LIST_DATA>(payload) {
                 Some(m) if for_us(m.target_system, m.target_component) => {
                     self.param_cursor = Some(0);

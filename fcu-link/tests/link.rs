@@ -828,3 +828,33 @@ mod with_the_station {
         assert_eq!(st.take_ground(), None);
     }
 }
+
+#[test]
+fn a_greeting_is_said_at_once_and_again_to_each_station_that_connects_later() {
+    use fcu_link::STATION_GONE_MS;
+    let mut link = link();
+    let mut mock = Mock::new();
+    assert!(link.greet(Severity::Info, "parameters loaded from flash"));
+    assert_eq!(texts(&drain(&mut link)), ["parameters loaded from flash"]);
+    let heartbeat = v2(&common::HEARTBEAT_DATA::DEFAULT);
+    // The first station's first heartbeat: said again; its next ones: not.
+    assert_eq!(texts(&exchange(&mut link, &mut mock, &heartbeat, 10_000)), ["parameters loaded from flash"]);
+    assert!(texts(&exchange(&mut link, &mut mock, &heartbeat, 11_000)).is_empty());
+    assert!(texts(&exchange(&mut link, &mut mock, &heartbeat, 11_000 + STATION_GONE_MS)).is_empty());
+    // Silence past STATION_GONE_MS, then a heartbeat: a station that (re)connected.
+    let back = 11_000 + 2 * STATION_GONE_MS + 1;
+    assert_eq!(texts(&exchange(&mut link, &mut mock, &heartbeat, back)), ["parameters loaded from flash"]);
+    // Any other frame keeps the line alive without a greeting of its own.
+    let later = back + STATION_GONE_MS + 1;
+    assert!(texts(&exchange(&mut link, &mut mock, &v2(&common::PARAM_REQUEST_LIST_DATA { target_system: 1, target_component: 1 }), later))
+        .is_empty());
+    assert!(texts(&exchange(&mut link, &mut mock, &heartbeat, later + 1000)).is_empty());
+}
+
+#[test]
+fn without_a_greeting_a_heartbeat_gets_no_text() {
+    let mut link = link();
+    let mut mock = Mock::new();
+    let sent = exchange(&mut link, &mut mock, &v2(&common::HEARTBEAT_DATA::DEFAULT), 0);
+    assert!(texts(&sent).is_empty(), "{:?}", texts(&sent));
+}
