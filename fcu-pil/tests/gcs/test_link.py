@@ -321,6 +321,24 @@ class ParamsFile(unittest.TestCase):
                 self.assertTrue(any("loaded from flash" in t for t in texts), texts)
 
 
+class Greeting(unittest.TestCase):
+    def test_a_station_that_connects_after_the_boot_hears_where_the_parameters_came_from(self):
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "tune.parm")
+            with open(path, "w") as f:
+                f.write("RATE_RLL_P 190\n")
+            with ServedBoard(params=path) as board:
+                # Listening only: the board has heard nothing from this station yet.
+                self.assertIsNotNone(board.heartbeat())
+                board.texts(1.0)
+                gcs_heartbeat(board)
+                texts = board.texts(3.0)
+                self.assertIn("parameters loaded from flash", texts)
+                # Its next heartbeats are not greeted again.
+                gcs_heartbeat(board)
+                self.assertNotIn("parameters loaded from flash", board.texts(2.0))
+
+
 class Armed(unittest.TestCase):
     """The hover scenario's pilot arms by gesture and takes off (on the bench)."""
 
