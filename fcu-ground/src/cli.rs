@@ -102,7 +102,8 @@ pub fn diff(target: &Target, file: &Path) -> Result<ExitCode, Failure> {
     if differences.is_empty() {
         println!("no differences: the {} parameters {} names hold its values on the board", entries.len(), file.display());
     } else {
-        println!("{} differences", differences.len());
+        let n = differences.len();
+        println!("{n} difference{}", if n == 1 { "" } else { "s" });
     }
     if not_named > 0 {
         println!("({not_named} parameters of the board are not in {})", file.display());
