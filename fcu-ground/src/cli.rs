@@ -112,8 +112,8 @@ pub fn diff(target: &Target, file: &Path) -> Result<ExitCode, Failure> {
 }
 
 /// Ctrl-C sets the returned flag instead of ending the process (a recording is still
-/// written); without a handler, Ctrl-C ends the process as usual.
-pub fn interrupt_flag() -> Arc<AtomicBool> {
+/// written); before it is installed, Ctrl-C ends the process as usual.
+fn interrupt_flag() -> Arc<AtomicBool> {
     let flag = Arc::new(AtomicBool::new(false));
     let set = Arc::clone(&flag);
     if let Err(e) = ctrlc::set_handler(move || set.store(true, Ordering::Relaxed)) {
@@ -127,7 +127,7 @@ fn finished(started: Instant, duration: Option<Duration>, interrupted: &AtomicBo
 }
 
 /// `record --out DIR [--duration S]`.
-pub fn record(target: &Target, out: &Path, duration: Option<Duration>, interrupted: &AtomicBool) -> Result<ExitCode, Failure> {
+pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result<ExitCode, Failure> {
     let dir = fcu_testkit::cli::fly::OutputDir::prepare(out).map_err(|e| Failure(e.0))?;
     let connected = target.connect();
     let (mut conn, hb) = connected.map_err(|e| Failure(dir.abandon(fcu_testkit::cli::CliError(e.0)).0))?;
@@ -138,12 +138,14 @@ pub fn record(target: &Target, out: &Path, duration: Option<Duration>, interrupt
             None
         }
     };
+    // From here on Ctrl-C ends the recording, not the process; before, it ends a wait.
+    let interrupted = interrupt_flag();
     let mut recorder = Recorder::new(throttle);
     recorder.on_message(&MavMessage::HEARTBEAT(hb));
     let mut rec = Recording::create(out).map_err(|e| Failure(dir.abandon(fcu_testkit::cli::CliError(e)).0))?;
     let started = Instant::now();
     let ended: Result<(), Failure> = loop {
-        if finished(started, duration, interrupted) {
+        if finished(started, duration, &interrupted) {
             break Ok(());
         }
         let msg = match conn.recv(Duration::from_millis(100)) {
@@ -177,8 +179,9 @@ pub fn record(target: &Target, out: &Path, duration: Option<Duration>, interrupt
 }
 
 /// `watch [--duration S]`.
-pub fn watch(target: &Target, duration: Option<Duration>, interrupted: &AtomicBool) -> Result<ExitCode, Failure> {
+pub fn watch(target: &Target, duration: Option<Duration>) -> Result<ExitCode, Failure> {
     let (mut conn, hb) = target.connect()?;
+    let interrupted = interrupt_flag();
     let title = format!("fcu-ground watch: {}   ({})", target.link, if duration.is_some() { "until --duration" } else { "Ctrl-C ends" });
     let tty = std::io::stdout().is_terminal();
     let period = if tty { Duration::from_millis(200) } else { Duration::from_secs(1) };
@@ -192,7 +195,7 @@ pub fn watch(target: &Target, duration: Option<Duration>, interrupted: &AtomicBo
     let mut next_draw = started;
     let ended = loop {
         let now = Instant::now();
-        if now >= next_draw || finished(started, duration, interrupted) {
+        if now >= next_draw || finished(started, duration, &interrupted) {
             let screen = view.render(&title, started.elapsed().as_secs_f64());
             let frame = if tty { watch::redraw(&screen) } else { format!("{screen}\n") };
             if stdout.write_all(frame.as_bytes()).and_then(|()| stdout.flush()).is_err() {
@@ -201,7 +204,7 @@ pub fn watch(target: &Target, duration: Option<Duration>, interrupted: &AtomicBo
             }
             next_draw = now + period;
         }
-        if finished(started, duration, interrupted) {
+        if finished(started, duration, &interrupted) {
             break Ok(());
         }
         match conn.recv(next_draw.saturating_duration_since(Instant::now()).min(Duration::from_millis(100))) {

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use mavlink::dialects::common::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA};
 use mavlink::error::MessageReadError;
-use mavlink::{MavHeader, MavlinkReader};
+use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkReader};
 
 use crate::address::LinkAddress;
 
@@ -59,7 +59,9 @@ impl Sender {
     fn send(&mut self, msg: &MavMessage) -> std::io::Result<()> {
         let header = MavHeader { system_id: GCS_SYSTEM.into(), component_id: GCS_COMPONENT, sequence: self.sequence };
         self.sequence = self.sequence.wrapping_add(1);
-        mavlink::write_v2_msg(&mut self.out, header, msg).map_err(|e| std::io::Error::other(e.to_string()))?;
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(header, msg);
+        self.out.write_all(raw.raw_bytes())?;
         self.out.flush()
     }
 }
@@ -171,8 +173,35 @@ fn connect_tcp(host: &str, port: u16, timeout: Duration) -> std::io::Result<TcpS
     Err(last)
 }
 
+/// A std stream as embedded-io's reader, keeping the last error (embedded-io's carries only
+/// a kind) for the message.
+struct Io {
+    inner: Box<dyn Read + Send>,
+    error: Option<std::io::Error>,
+}
+
+impl embedded_io::ErrorType for Io {
+    type Error = embedded_io::ErrorKind;
+}
+
+impl embedded_io::Read for Io {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        match self.inner.read(buf) {
+            Ok(0) if !buf.is_empty() => {
+                self.error = Some(std::io::Error::new(ErrorKind::UnexpectedEof, "the board's end closed the link"));
+                Err(embedded_io::ErrorKind::Other)
+            }
+            Ok(n) => Ok(n),
+            Err(e) => {
+                self.error = Some(e);
+                Err(embedded_io::ErrorKind::Other)
+            }
+        }
+    }
+}
+
 fn read_loop(source: Box<dyn Read + Send>, tx: &mpsc::Sender<Incoming>, stop: &AtomicBool) {
-    let mut reader = MavlinkReader::new(source);
+    let mut reader = MavlinkReader::new(Io { inner: source, error: None });
     while !stop.load(Ordering::Relaxed) {
         match reader.read_any_message::<MavMessage>() {
             Ok((header, msg)) => {
@@ -183,11 +212,14 @@ fn read_loop(source: Box<dyn Read + Send>, tx: &mpsc::Sender<Incoming>, stop: &A
                     return;
                 }
             }
-            Err(MessageReadError::Io(e)) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
-            Err(MessageReadError::Io(e)) => {
-                let reason =
-                    if e.kind() == ErrorKind::UnexpectedEof { "the board's end closed the link".to_string() } else { e.to_string() };
-                let _ = tx.send(Incoming::Closed(reason));
+            Err(MessageReadError::Io) => {
+                let Some(e) = reader.get_mut().error.take() else { continue };
+                // A read timeout only lets the loop look at `stop`; the reader keeps any partial
+                // frame for the next read.
+                if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted) {
+                    continue;
+                }
+                let _ = tx.send(Incoming::Closed(e.to_string()));
                 return;
             }
             // A frame that does not parse is skipped; the reader resynchronises on the next.

@@ -70,8 +70,8 @@ fn main() -> ExitCode {
         Command::Params { action: ParamsAction::Pull { file } } => cli::pull(&target, file),
         Command::Params { action: ParamsAction::Push { file } } => cli::push(&target, file),
         Command::Params { action: ParamsAction::Diff { file } } => cli::diff(&target, file),
-        Command::Record { out, duration } => cli::record(&target, out, *duration, &cli::interrupt_flag()),
-        Command::Watch { duration } => cli::watch(&target, *duration, &cli::interrupt_flag()),
+        Command::Record { out, duration } => cli::record(&target, out, *duration),
+        Command::Watch { duration } => cli::watch(&target, *duration),
     };
     match done {
         Ok(code) => code,

@@ -12,6 +12,7 @@ import csv
 import os
 import pty
 import select
+import signal
 import socket
 import subprocess
 import tempfile
@@ -209,6 +210,25 @@ class Served(unittest.TestCase):
         self.assertEqual(times, sorted(times))
         with open(os.path.join(out, "flight.svg")) as f:
             self.assertIn("<svg", f.read(200))
+
+    def test_a_recording_ended_by_ctrl_c_is_written(self):
+        out = self.path("record-ctrl-c")
+        cmd = [GROUND, "--link", f"tcp:127.0.0.1:{self.port}", "--timeout", BOARD_TIMEOUT_S, "record", "--out", out]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        csv_path = os.path.join(out, ".flight.csv.partial")
+        deadline = time.time() + 90
+        # Rows are being written: the recording has begun.
+        while time.time() < deadline and proc.poll() is None:
+            if os.path.exists(csv_path) and os.path.getsize(csv_path) > 2000:
+                break
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=30)
+        said = f"exit {proc.returncode}\nstdout:\n{stdout}\nstderr:\n{stderr}"
+        self.assertEqual(proc.returncode, 0, said)
+        with open(os.path.join(out, "flight.csv")) as f:
+            self.assertGreater(len(list(csv.DictReader(f))), 0, said)
+        self.assertTrue(os.path.exists(os.path.join(out, "flight.svg")), said)
 
     def test_watch_prints_the_state(self):
         done = self.ground("watch", "--duration", "2")
