@@ -129,8 +129,9 @@ fn finished(started: Instant, duration: Option<Duration>, interrupted: &AtomicBo
 /// `record --out DIR [--duration S]`.
 pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result<ExitCode, Failure> {
     let dir = fcu_testkit::cli::fly::OutputDir::prepare(out).map_err(|e| Failure(e.0))?;
-    let connected = target.connect();
-    let (mut conn, hb) = connected.map_err(|e| Failure(dir.abandon(fcu_testkit::cli::CliError(e.0)).0))?;
+    // A directory this run created goes again if the run fails.
+    let fail = |message: String| Failure(dir.abandon(fcu_testkit::cli::CliError(message)).0);
+    let (mut conn, hb) = target.connect().map_err(|e| fail(e.0))?;
     let throttle = match params::read_by_name(&mut conn, "RCMAP_THROTTLE") {
         Ok(Some(v)) if (1.0..=8.0).contains(&v) => Some(v as u8),
         _ => {
@@ -142,7 +143,7 @@ pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result
     let interrupted = interrupt_flag();
     let mut recorder = Recorder::new(throttle);
     recorder.on_message(&MavMessage::HEARTBEAT(hb));
-    let mut rec = Recording::create(out).map_err(|e| Failure(dir.abandon(fcu_testkit::cli::CliError(e)).0))?;
+    let mut rec = Recording::create(out).map_err(fail)?;
     let started = Instant::now();
     let ended: Result<(), Failure> = loop {
         if finished(started, duration, &interrupted) {
@@ -162,18 +163,18 @@ pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result
         if let Some(sample) = recorder.on_message(&msg) {
             if let Err(e) = rec.row(&sample) {
                 rec.abandon();
-                return Err(Failure(dir.abandon(fcu_testkit::cli::CliError(e)).0));
+                return Err(fail(e));
             }
         }
     };
     if rec.rows() == 0 {
         rec.abandon();
         let why = ended.err().map_or_else(|| "no ATTITUDE from the board: nothing to record".to_string(), |e| e.0);
-        return Err(Failure(dir.abandon(fcu_testkit::cli::CliError(why)).0));
+        return Err(fail(why));
     }
     let rows = rec.rows();
     let title = format!("fcu-ground record: {}, {rows} rows", target.link);
-    let [csv, svg, texts] = rec.finish(&title).map_err(|e| Failure(dir.abandon(fcu_testkit::cli::CliError(e)).0))?;
+    let [csv, svg, texts] = rec.finish(&title).map_err(fail)?;
     println!("wrote {} ({rows} rows), {} and {}", csv.display(), svg.display(), texts.display());
     ended.map(|()| ExitCode::SUCCESS)
 }
