@@ -175,9 +175,9 @@ fn connect_tcp(host: &str, port: u16, timeout: Duration) -> std::io::Result<TcpS
 
 /// A std stream as embedded-io's reader, keeping the last error (embedded-io's carries only
 /// a kind) for the message.
-struct Io {
-    inner: Box<dyn Read + Send>,
-    error: Option<std::io::Error>,
+pub(crate) struct Io {
+    pub(crate) inner: Box<dyn Read + Send>,
+    pub(crate) error: Option<std::io::Error>,
 }
 
 impl embedded_io::ErrorType for Io {

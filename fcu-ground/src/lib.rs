@@ -37,6 +37,8 @@
 pub mod address;
 pub mod cli;
 pub mod connection;
+#[cfg(test)]
+mod mock_board;
 pub mod param_file;
 pub mod params;
 pub mod record;

@@ -51,19 +51,17 @@ pub fn pull(conn: &mut Connection, first_answer: Duration) -> Result<BoardParams
     conn.send(&MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA { target_system: BOARD_SYSTEM, target_component: BOARD_COMPONENT }))?;
     let mut got: BTreeMap<u16, (String, f32)> = BTreeMap::new();
     let mut count: Option<u16> = None;
-    let mut wait = first_answer.max(QUIET);
-    // The stream of the download.
+    // The stream of the download, until it is complete or no PARAM_VALUE has come for a while
+    // (telemetry keeps coming meanwhile: the quiet is the parameters').
+    let mut quiet_until = Instant::now() + first_answer.max(QUIET);
     while count.is_none_or(|c| got.len() < usize::from(c)) {
-        match conn.recv(wait)? {
-            Some(MavMessage::PARAM_VALUE(p)) => {
-                count = Some(p.param_count);
-                if p.param_index < p.param_count {
-                    got.insert(p.param_index, (name_of(&p), p.param_value));
-                }
-                wait = QUIET;
+        let Some(left) = quiet_until.checked_duration_since(Instant::now()) else { break };
+        if let Some(MavMessage::PARAM_VALUE(p)) = conn.recv(left)? {
+            count = Some(p.param_count);
+            if p.param_index < p.param_count {
+                got.insert(p.param_index, (name_of(&p), p.param_value));
             }
-            Some(_) => {}
-            None => break,
+            quiet_until = Instant::now() + QUIET;
         }
     }
     let Some(count) = count else {
@@ -245,4 +243,63 @@ pub fn read_by_name(conn: &mut Connection, name: &str) -> Result<Option<f32>, Li
         }
     }
     Ok(None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::address::LinkAddress;
+    use crate::mock_board::{serve, MockParam, MockState};
+    use crate::param_file;
+
+    fn table() -> Vec<MockParam> {
+        ["A", "B", "C", "D", "E"]
+            .iter()
+            .enumerate()
+            .map(|(i, &name)| MockParam { name, value: i as f32, min: 0.0, max: 100.0 })
+            .chain([
+                MockParam { name: "LO", value: 10.0, min: 0.0, max: 100.0 },
+                MockParam { name: "HI", value: 20.0, min: 0.0, max: 100.0 },
+            ])
+            .collect()
+    }
+
+    fn connect(port: u16) -> Connection {
+        let link = LinkAddress::Tcp { host: "127.0.0.1".into(), port };
+        let mut conn = Connection::open(&link, Duration::from_secs(5)).unwrap();
+        conn.wait_for_board(Duration::from_secs(5)).unwrap();
+        conn
+    }
+
+    #[test]
+    fn a_value_the_download_lost_is_asked_for_by_its_index() {
+        let (port, state) = serve(MockState { params: table(), drop_index: Some(2), ..MockState::default() });
+        let mut conn = connect(port);
+        let board = pull(&mut conn, Duration::from_secs(5)).unwrap();
+        let names: Vec<&str> = board.list.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["A", "B", "C", "D", "E", "LO", "HI"]);
+        assert_eq!(board.list[2], ("C".to_string(), 2.0));
+        assert_eq!(state.lock().unwrap().reads_by_index, [2]);
+    }
+
+    #[test]
+    fn a_push_names_refusals_and_retries_what_the_order_refused() {
+        let (port, state) = serve(MockState { params: table(), ..MockState::default() });
+        let mut conn = connect(port);
+        let mut board = pull(&mut conn, Duration::from_secs(5)).unwrap().by_name();
+        // LO above the old HI is refused until HI has moved; A is out of range; B is unchanged.
+        let entries = param_file::parse("LO 30\nHI 40\nA 500\nB 1\n").unwrap();
+        let mut seen = Vec::new();
+        let report = push(&mut conn, &entries, &mut board, &mut |n, old, new| seen.push((n.to_string(), old, new))).unwrap();
+        assert_eq!(report.unchanged, 1);
+        assert_eq!(seen, [("HI".to_string(), 20.0, 40.0), ("LO".to_string(), 10.0, 30.0)]);
+        assert_eq!(report.refused.len(), 1);
+        let r = &report.refused[0];
+        assert_eq!((r.entry.name.as_str(), r.entry.line, r.in_force, r.rule.as_deref()), ("A", 3, 0.0, Some("above the maximum")));
+        let st = state.lock().unwrap();
+        let values: Vec<(&str, f32)> = st.params.iter().map(|p| (p.name, p.value)).collect();
+        assert_eq!(values, [("A", 0.0), ("B", 1.0), ("C", 2.0), ("D", 3.0), ("E", 4.0), ("LO", 30.0), ("HI", 40.0)]);
+        // B, already in force, was never sent.
+        assert!(st.sets.iter().all(|(n, _)| n != "B"));
+    }
 }
