@@ -32,6 +32,12 @@ type Series = (&'static str, RGBColor, u32, fn((f64, f64, f64)) -> f64);
 /// than a page can show, and the SVG stays small.
 const MAX_POINTS: usize = 2500;
 
+/// The points that have a value: a log recorded from a board has no true attitude, target or
+/// altitude (NaN), which would otherwise be drawn along the panel's edge.
+fn drawn(points: impl Iterator<Item = (f64, f64)>) -> impl Iterator<Item = (f64, f64)> {
+    points.filter(|(_, y)| y.is_finite())
+}
+
 /// Write the plot to `path`. `title` goes on top.
 pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result<(), String> {
     let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
@@ -82,7 +88,7 @@ pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result
         ch.configure_mesh().x_desc("t (s)").y_desc("deg").light_line_style(WHITE.mix(0.0)).draw().map_err(|e| err(&e))?;
         let series: [Series; 3] = [("target", red, 2, |v| v.2), ("true", blue, 2, |v| v.0), ("estimated", orange, 1, |v| v.1)];
         for (label, color, width, pick) in series {
-            ch.draw_series(LineSeries::new(rows.iter().map(|r| (r.t_s, pick(get(r)))), color.stroke_width(width)))
+            ch.draw_series(LineSeries::new(drawn(rows.iter().map(|r| (r.t_s, pick(get(r))))), color.stroke_width(width)))
                 .map_err(|e| err(&e))?
                 .label(label)
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
@@ -142,7 +148,7 @@ pub fn write_svg(log: &FlightLog, title: &str, path: &std::path::Path) -> Result
             .map_err(|e| err(&e))?
             .label("state")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
-        ch.draw_series(rows.iter().step_by(4).map(|r| Circle::new((r.t_s, 2.0 * r.alt_m), 1, green.filled())))
+        ch.draw_series(drawn(rows.iter().step_by(4).map(|r| (r.t_s, 2.0 * r.alt_m))).map(|p| Circle::new(p, 1, green.filled())))
             .map_err(|e| err(&e))?
             .label("altitude (m × 2)")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2)));

@@ -1,0 +1,289 @@
+//! `watch`: the board's state, attitude, radio, motors and battery on one screen, redrawn in
+//! place (plain ANSI: cursor home, clear to the end) on a terminal, or printed as a block once a
+//! second when the output is not a terminal (a log, a test).
+
+use std::collections::VecDeque;
+use std::fmt::Write as _;
+
+use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavState, MavSysStatusSensor};
+
+/// STATUSTEXT lines kept on screen.
+const TEXTS_SHOWN: usize = 6;
+/// A HEARTBEAT older than this is called out: the board (or the link) has gone quiet.
+const STALE_S: f64 = 3.0;
+
+/// What the screen shows, from the board's messages.
+#[derive(Clone, Debug, Default)]
+pub struct View {
+    /// (armed, system status, when) of the latest HEARTBEAT.
+    heartbeat: Option<(bool, MavState, f64)>,
+    /// Roll, pitch, yaw, degrees.
+    attitude_deg: Option<[f64; 3]>,
+    /// Channel widths, µs (None: no pulses on it).
+    radio_us: Option<Vec<Option<u16>>>,
+    motors: Option<[u16; 4]>,
+    /// (voltage, V, if measured; remaining %, if estimated).
+    battery: Option<(Option<f64>, Option<i8>)>,
+    /// (present and healthy) per SYS_STATUS sensor group shown.
+    health: Option<[(&'static str, bool); 4]>,
+    texts: VecDeque<String>,
+}
+
+/// The severity's short name.
+pub fn severity_name(s: MavSeverity) -> &'static str {
+    match s {
+        MavSeverity::MAV_SEVERITY_EMERGENCY => "emergency",
+        MavSeverity::MAV_SEVERITY_ALERT => "alert",
+        MavSeverity::MAV_SEVERITY_CRITICAL => "critical",
+        MavSeverity::MAV_SEVERITY_ERROR => "error",
+        MavSeverity::MAV_SEVERITY_WARNING => "warning",
+        MavSeverity::MAV_SEVERITY_NOTICE => "notice",
+        MavSeverity::MAV_SEVERITY_INFO => "info",
+        MavSeverity::MAV_SEVERITY_DEBUG => "debug",
+    }
+}
+
+fn status_name(s: MavState) -> &'static str {
+    match s {
+        MavState::MAV_STATE_UNINIT => "uninit",
+        MavState::MAV_STATE_BOOT => "boot (calibrating)",
+        MavState::MAV_STATE_CALIBRATING => "calibrating",
+        MavState::MAV_STATE_STANDBY => "standby",
+        MavState::MAV_STATE_ACTIVE => "active",
+        MavState::MAV_STATE_CRITICAL => "critical (failsafe or fault)",
+        MavState::MAV_STATE_EMERGENCY => "emergency",
+        MavState::MAV_STATE_POWEROFF => "power off",
+        MavState::MAV_STATE_FLIGHT_TERMINATION => "flight termination",
+    }
+}
+
+impl View {
+    /// Takes one message received at `now_s` (the watch's clock).
+    pub fn on_message(&mut self, msg: &MavMessage, now_s: f64) {
+        match msg {
+            MavMessage::HEARTBEAT(h) => {
+                let armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.heartbeat = Some((armed, h.system_status, now_s));
+            }
+            MavMessage::ATTITUDE(a) => {
+                self.attitude_deg = Some([a.roll, a.pitch, a.yaw].map(|r| f64::from(r).to_degrees()));
+            }
+            MavMessage::RC_CHANNELS(r) => {
+                let all = [r.chan1_raw, r.chan2_raw, r.chan3_raw, r.chan4_raw, r.chan5_raw, r.chan6_raw, r.chan7_raw, r.chan8_raw];
+                let n = usize::from(r.chancount).min(all.len());
+                self.radio_us = Some(all.iter().take(n).map(|&w| (w != u16::MAX).then_some(w)).collect());
+            }
+            MavMessage::SERVO_OUTPUT_RAW(s) => {
+                self.motors = Some([s.servo1_raw, s.servo2_raw, s.servo3_raw, s.servo4_raw]);
+            }
+            MavMessage::SYS_STATUS(s) => {
+                let v = (s.voltage_battery != u16::MAX).then(|| f64::from(s.voltage_battery) / 1000.0);
+                let pct = (s.battery_remaining >= 0).then_some(s.battery_remaining);
+                self.battery = Some((v, pct));
+                let ok = |bits: MavSysStatusSensor| s.onboard_control_sensors_health.contains(bits);
+                self.health = Some([
+                    ("imu", ok(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL)),
+                    ("radio", ok(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER)),
+                    ("attitude estimate", ok(MavSysStatusSensor::MAV_SYS_STATUS_AHRS)),
+                    ("battery", ok(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY)),
+                ]);
+            }
+            MavMessage::STATUSTEXT(t) => {
+                let text = t.text.to_str().unwrap_or("(not UTF-8)").trim_end();
+                self.texts.push_back(format!("{now_s:7.1} s  [{}] {text}", severity_name(t.severity)));
+                while self.texts.len() > TEXTS_SHOWN {
+                    self.texts.pop_front();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The screen at `now_s`, one line per `\n`.
+    pub fn render(&self, title: &str, now_s: f64) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "{title}");
+        let waiting = "(nothing received yet)";
+        match self.heartbeat {
+            Some((armed, status, at)) => {
+                let armed = if armed { "ARMED" } else { "disarmed" };
+                let _ = write!(out, "state      {armed:<9} system status {}", status_name(status));
+                let age = now_s - at;
+                if age > STALE_S {
+                    let _ = write!(out, "   NO HEARTBEAT FOR {age:.0} s");
+                }
+                out.push('\n');
+            }
+            None => {
+                let _ = writeln!(out, "state      {waiting}");
+            }
+        }
+        match self.attitude_deg {
+            Some([r, p, y]) => {
+                let _ = writeln!(out, "attitude   roll {r:+7.1}°   pitch {p:+7.1}°   yaw {y:+7.1}°");
+            }
+            None => {
+                let _ = writeln!(out, "attitude   {waiting}");
+            }
+        }
+        match &self.radio_us {
+            Some(ch) if !ch.is_empty() => {
+                let _ = write!(out, "radio µs  ");
+                for (i, w) in ch.iter().enumerate() {
+                    match w {
+                        Some(w) => {
+                            let _ = write!(out, " ch{} {w:4}", i + 1);
+                        }
+                        None => {
+                            let _ = write!(out, " ch{}  ---", i + 1);
+                        }
+                    }
+                }
+                out.push('\n');
+            }
+            Some(_) => {
+                let _ = writeln!(out, "radio µs   no channels");
+            }
+            None => {
+                let _ = writeln!(out, "radio µs   {waiting}");
+            }
+        }
+        match self.motors {
+            Some(m) => {
+                let _ = writeln!(out, "motors     m1 {:4}  m2 {:4}  m3 {:4}  m4 {:4}   (1000 off .. 2000 full)", m[0], m[1], m[2], m[3]);
+            }
+            None => {
+                let _ = writeln!(out, "motors     {waiting}");
+            }
+        }
+        match self.battery {
+            Some((v, pct)) => {
+                let v = v.map_or("not measured".to_string(), |v| format!("{v:.2} V"));
+                let pct = pct.map_or(String::new(), |p| format!(", {p} % left"));
+                let _ = writeln!(out, "battery    {v}{pct}");
+            }
+            None => {
+                let _ = writeln!(out, "battery    {waiting}");
+            }
+        }
+        match self.health {
+            Some(h) => {
+                let parts: Vec<String> = h.iter().map(|(name, ok)| format!("{name} {}", if *ok { "ok" } else { "NOT OK" })).collect();
+                let _ = writeln!(out, "health     {}", parts.join(", "));
+            }
+            None => {
+                let _ = writeln!(out, "health     {waiting}");
+            }
+        }
+        let _ = writeln!(out, "messages");
+        if self.texts.is_empty() {
+            let _ = writeln!(out, "  (none yet)");
+        }
+        for t in &self.texts {
+            let _ = writeln!(out, "  {t}");
+        }
+        out
+    }
+}
+
+/// The screen as a terminal redraw: cursor home, each line cleared to its end, then the rest
+/// of the screen cleared (no flicker from a full clear).
+pub fn redraw(screen: &str) -> String {
+    let mut out = String::from("\x1b[H");
+    for line in screen.lines() {
+        out.push_str(line);
+        out.push_str("\x1b[K\n");
+    }
+    out.push_str("\x1b[J");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::dialects::common::{
+        MavAutopilot, MavType, ATTITUDE_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
+    };
+
+    fn heartbeat(status: MavState, armed: bool) -> MavMessage {
+        let base_mode = if armed { MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED } else { MavModeFlag::empty() };
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            base_mode,
+            system_status: status,
+            mavlink_version: 3,
+        })
+    }
+
+    fn text(s: &str) -> MavMessage {
+        MavMessage::STATUSTEXT(STATUSTEXT_DATA { severity: MavSeverity::MAV_SEVERITY_WARNING, text: s.into() })
+    }
+
+    #[test]
+    fn the_screen_shows_what_came() {
+        let mut v = View::default();
+        let empty = v.render("t", 0.0);
+        assert!(empty.contains("state      (nothing received yet)"), "{empty}");
+        v.on_message(&heartbeat(MavState::MAV_STATE_ACTIVE, true), 1.0);
+        v.on_message(&MavMessage::ATTITUDE(ATTITUDE_DATA { roll: 0.1, pitch: -0.2, yaw: 3.0, ..ATTITUDE_DATA::default() }), 1.0);
+        v.on_message(
+            &MavMessage::RC_CHANNELS(RC_CHANNELS_DATA {
+                chan1_raw: 1500,
+                chan2_raw: 1499,
+                chan3_raw: 1100,
+                chan4_raw: u16::MAX,
+                chancount: 4,
+                ..RC_CHANNELS_DATA::default()
+            }),
+            1.0,
+        );
+        v.on_message(
+            &MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+                servo1_raw: 1200,
+                servo2_raw: 1300,
+                servo3_raw: 1400,
+                servo4_raw: 1500,
+                ..SERVO_OUTPUT_RAW_DATA::default()
+            }),
+            1.0,
+        );
+        v.on_message(
+            &MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                voltage_battery: 3800,
+                battery_remaining: -1,
+                onboard_control_sensors_health: MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER,
+                ..SYS_STATUS_DATA::default()
+            }),
+            1.0,
+        );
+        v.on_message(&text("RC1_MIN: below the minimum"), 1.5);
+        let s = v.render("t", 2.0);
+        assert!(s.contains("state      ARMED     system status active"), "{s}");
+        assert!(s.contains("roll    +5.7°   pitch   -11.5°   yaw  +171.9°"), "{s}");
+        assert!(s.contains(" ch1 1500 ch2 1499 ch3 1100 ch4  ---"), "{s}");
+        assert!(s.contains("m1 1200  m2 1300  m3 1400  m4 1500"), "{s}");
+        assert!(s.contains("battery    3.80 V\n"), "{s}");
+        assert!(s.contains("imu NOT OK, radio ok"), "{s}");
+        assert!(s.contains("[warning] RC1_MIN: below the minimum"), "{s}");
+        assert!(!s.contains("NO HEARTBEAT"), "{s}");
+        // A board gone quiet is called out.
+        assert!(v.render("t", 10.0).contains("NO HEARTBEAT FOR 9 s"));
+    }
+
+    #[test]
+    fn only_the_latest_texts_stay() {
+        let mut v = View::default();
+        for i in 0..10 {
+            v.on_message(&text(&format!("line {i}")), f64::from(i));
+        }
+        let s = v.render("t", 10.0);
+        assert!(!s.contains("line 3") && s.contains("line 4") && s.contains("line 9"), "{s}");
+    }
+
+    #[test]
+    fn a_redraw_overwrites_in_place() {
+        assert_eq!(redraw("a\nb\n"), "\x1b[Ha\x1b[K\nb\x1b[K\n\x1b[J");
+    }
+}
