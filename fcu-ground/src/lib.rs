@@ -42,4 +42,6 @@ mod mock_board;
 pub mod param_file;
 pub mod params;
 pub mod record;
+#[cfg(test)]
+mod test_messages;
 pub mod watch;

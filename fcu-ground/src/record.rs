@@ -301,25 +301,9 @@ impl Recording {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_messages::heartbeat;
     use fcu_testkit::csv::{data_lines, Header, Row};
-    use mavlink::dialects::common::{
-        MavAutopilot, MavType, ATTITUDE_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
-    };
-
-    fn heartbeat(status: MavState, armed: bool) -> MavMessage {
-        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
-        if armed {
-            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-        }
-        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            base_mode,
-            system_status: status,
-            mavlink_version: 3,
-        })
-    }
+    use mavlink::dialects::common::{ATTITUDE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA};
 
     fn attitude(ms: u32, roll_rad: f32, pitch_rad: f32) -> MavMessage {
         MavMessage::ATTITUDE(ATTITUDE_DATA { time_boot_ms: ms, roll: roll_rad, pitch: pitch_rad, ..ATTITUDE_DATA::default() })

@@ -201,21 +201,8 @@ pub fn redraw(screen: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mavlink::dialects::common::{
-        MavAutopilot, MavType, ATTITUDE_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
-    };
-
-    fn heartbeat(status: MavState, armed: bool) -> MavMessage {
-        let base_mode = if armed { MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED } else { MavModeFlag::empty() };
-        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            base_mode,
-            system_status: status,
-            mavlink_version: 3,
-        })
-    }
+    use crate::test_messages::heartbeat;
+    use mavlink::dialects::common::{ATTITUDE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA};
 
     fn text(s: &str) -> MavMessage {
         MavMessage::STATUSTEXT(STATUSTEXT_DATA { severity: MavSeverity::MAV_SEVERITY_WARNING, text: s.into() })
