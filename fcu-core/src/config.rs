@@ -4,9 +4,9 @@
 //!   where it computes in double (`reference_arithmetic`); with it the core reproduces the
 //!   reference's golden vectors bit for bit.
 //! - [`Config::default()`] is the product: the same structure, pins, rates, sensor settings
-//!   and stick mapping, with the documented differences D1–D17 of `docs/profiles.md` (D13–D17:
+//!   and stick mapping, with the documented differences D1–D18 of `docs/profiles.md` (D13–D18:
 //!   yaw feedforward, battery compensation, gains from the measured loop, shaped yaw turns,
-//!   thrust linearisation), each a field here so a test can switch it on its own.
+//!   thrust linearisation, gestures with a low throttle), each a field here so a test can switch it on its own.
 //!
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
@@ -337,7 +337,7 @@ impl Config {
 }
 
 impl Default for Config {
-    /// The product: the reference's structure with differences D1–D17.
+    /// The product: the reference's structure with differences D1–D18.
     fn default() -> Config {
         let r = Config::reference();
         let tick_hz: f32 = 800.0;
