@@ -85,9 +85,13 @@ impl<const TX: usize> Core<TX> {
 
     fn sys_status(&mut self, state: &VehicleState) {
         let h = state.health;
+        // The geofence: not present, so never breached. Its health bit set as autopilots with a
+        // fence set it when none is breached: ground stations read a clear bit as a breach
+        // (MAVProxy says "fence breach" on the first SYS_STATUS without it).
         let mut health = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-            | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+            | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+            | MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE;
         for (ok, bits) in [
             (h.imu, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL),
             (h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),

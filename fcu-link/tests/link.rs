@@ -155,6 +155,10 @@ fn telemetry_carries_the_vehicle_state() {
                 use common::MavSysStatusSensor as S;
                 assert!(s.onboard_control_sensors_present.contains(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER));
                 assert!(s.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER));
+                // No fence, and none breached: ground stations read a clear health bit as a
+                // breach.
+                assert!(!s.onboard_control_sensors_present.contains(S::MAV_SYS_STATUS_GEOFENCE));
+                assert!(s.onboard_control_sensors_health.contains(S::MAV_SYS_STATUS_GEOFENCE));
                 seen += 1;
             }
             _ => {}

@@ -31,6 +31,8 @@ class MavProxy(unittest.TestCase):
             self.assertIsNotNone(board.heartbeat())
             self.assertEqual(board.param_read("ANGLE_MAX").param_value, 25.0)
             self.assertFalse(re.search(r"Unable to find parameter", out), out)
+            # The board has no geofence, and MAVProxy must not announce a breach of one.
+            self.assertNotIn("fence breach", out)
 
 
 if __name__ == "__main__":
