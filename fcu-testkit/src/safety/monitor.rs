@@ -26,9 +26,14 @@ pub const TILT_MARGIN_RAD: f64 = 1e-3;
 pub fn classify_gesture(rc: &RcConfig, s: &Sticks) -> Option<Gesture> {
     let th = i32::from(rc.gesture_threshold);
     let (ail, ele, thr, rud) = (i32::from(s.ail), i32::from(s.ele), i32::from(s.thr), i32::from(s.rud));
-    if thr == 0 && ele < -th && ail > th && rud < -th {
+    // The reference wants the throttle at its very bottom; the product, low (D18).
+    let down = match rc.gesture_throttle {
+        fcu_core::rc::GestureThrottle::AtBottom => thr == 0,
+        fcu_core::rc::GestureThrottle::Low => thr < i32::from(rc.min_throttle),
+    };
+    if down && ele < -th && ail > th && rud < -th {
         Some(Gesture::Calibrate)
-    } else if thr == 0 && ele < -th && ail < -th && rud > th {
+    } else if down && ele < -th && ail < -th && rud > th {
         Some(Gesture::Arm)
     } else if thr < i32::from(rc.min_throttle) && rud < -th && ele.abs() <= 300 && ail.abs() <= 300 {
         Some(Gesture::Disarm)
@@ -436,5 +441,32 @@ impl SafetyMonitor {
             self.radio_view(o.status)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fcu_core::rc::StickCounts;
+    use fcu_core::Config;
+
+    /// The arm gesture with the throttle at `thr` counts.
+    fn arm(thr: i16) -> Sticks {
+        Sticks::new(-1500, -1500, thr, 1500)
+    }
+
+    #[test]
+    fn the_monitors_arm_gesture_takes_the_throttle_as_each_profile_does() {
+        // A fuzzed stream found it: the product arms with the throttle a few counts above its
+        // bottom (D18), and a monitor that wanted 0 restarted its count of the hold there.
+        let (r, d) = (Config::reference().rc, Config::default().rc);
+        assert_eq!(classify_gesture(&r, &arm(0)), Some(Gesture::Arm));
+        assert_eq!(classify_gesture(&r, &arm(3)), None);
+        for thr in [0, 3, 199] {
+            assert_eq!(classify_gesture(&d, &arm(thr)), Some(Gesture::Arm), "throttle {thr}");
+            assert_eq!(classify_gesture(&d, &arm(thr)), d.gesture(&arm(thr)), "the monitor and the core agree at {thr}");
+        }
+        assert_eq!(d.min_throttle, StickCounts(200));
+        assert_eq!(classify_gesture(&d, &arm(200)), None, "at MIN_THR the throttle is not low");
     }
 }
