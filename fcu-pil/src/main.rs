@@ -169,10 +169,17 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
             Some(path) => Some(std::fs::read_to_string(path).map_err(|e| format!("--params {}: {e}", path.display()))?),
             None => None,
         };
-        let named = |e: String| match (&a.params, &a.flash) {
-            (Some(p), _) if e.starts_with("line") || e.starts_with("the set") => format!("--params {}: {e}", p.display()),
-            (_, Some(f)) => format!("--flash {}: {e}", f.display()),
-            _ => e,
+        let named = |e| match e {
+            fcu_pil::serve::FlightFlashError::SavedSetRefused(rule) => {
+                format!(
+                    "--flash {}: the flash's saved parameters are refused ({rule})",
+                    a.flash.as_deref().unwrap_or(std::path::Path::new("")).display()
+                )
+            }
+            fcu_pil::serve::FlightFlashError::File(e) => match &a.params {
+                Some(p) => format!("--params {}: {e}", p.display()),
+                None => e,
+            },
         };
         setup.flash_contents = Some(fcu_pil::serve::flash_for_flight(flash, text.as_deref()).map_err(named)?);
     }

@@ -61,29 +61,42 @@ pub fn flash_with_parameters(flash: Vec<u8>, text: &str) -> Result<Vec<u8>, Stri
     flash_with_config(flash, &cfg)
 }
 
+/// Why a flash could not be prepared for a flight: the set saved in it, or the parameter file.
+#[derive(Debug, PartialEq)]
+pub enum FlightFlashError {
+    /// The flash's newest saved set does not make a valid configuration (the rule).
+    SavedSetRefused(&'static str),
+    /// The parameter file: its line and rule, or the rule the whole set breaks.
+    File(String),
+}
+
 /// `flash` for a flight the harness watches (`cargo pil fly --flash/--params`): the set saved
 /// in it (the defaults if none), with the values `text` names over it, and its UART turned to
 /// text lines, which are what the harness reads the board's state from. Saved as the only set,
 /// as [`flash_with_parameters`] does.
-pub fn flash_for_flight(flash: Vec<u8>, text: Option<&str>) -> Result<Vec<u8>, String> {
+pub fn flash_for_flight(flash: Vec<u8>, text: Option<&str>) -> Result<Vec<u8>, FlightFlashError> {
     use fcu_core::parameters::{self, snapshot};
-    let words = |sector: usize| -> Vec<u32> {
-        let base = PARAM_SECTORS.start + sector * 0x4000;
-        flash
-            .get(base..base + 0x4000)
-            .map_or_else(Vec::new, |b| b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
-    };
-    let (a, b) = (words(0), words(1));
+    use fcu_testkit::cli::fly::describe_file_error;
+    let (a, b) = (param_sector_words(&flash, 0), param_sector_words(&flash, 1));
     let (saved, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
     if let snapshot::Source::Refused(rule) = source {
-        return Err(format!("the flash's saved parameters are refused ({rule})"));
+        return Err(FlightFlashError::SavedSetRefused(rule));
     }
-    let cfg = match text {
-        Some(t) => parameters::apply_file(&saved, t).map_err(fcu_testkit::cli::fly::describe_file_error)?,
+    let with_file = match text {
+        Some(t) => parameters::apply_file(&saved, t).map_err(|e| FlightFlashError::File(describe_file_error(e)))?,
         None => saved,
     };
-    let cfg = parameters::apply_file(&cfg, "LINK_PROTOCOL 0").map_err(fcu_testkit::cli::fly::describe_file_error)?;
-    flash_with_config(flash, &cfg)
+    let cfg = parameters::apply_file(&with_file, "LINK_PROTOCOL 0").map_err(|e| FlightFlashError::File(describe_file_error(e)))?;
+    flash_with_config(flash, &cfg).map_err(FlightFlashError::File)
+}
+
+/// The words of parameter sector `sector` (0 or 1) in a flash image of 0x0800_0000 on; none
+/// where the image is too short to hold it.
+fn param_sector_words(flash: &[u8], sector: usize) -> Vec<u32> {
+    let base = PARAM_SECTORS.start + sector * 0x4000;
+    flash
+        .get(base..base + 0x4000)
+        .map_or_else(Vec::new, |b| b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
 }
 
 fn flash_with_config(mut flash: Vec<u8>, cfg: &fcu_core::Config) -> Result<Vec<u8>, String> {
@@ -334,18 +347,13 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
 mod tests {
     use super::*;
 
-    fn words(flash: &[u8], sector: usize) -> Vec<u32> {
-        let base = PARAM_SECTORS.start + sector * 0x4000;
-        flash[base..base + 0x4000].chunks(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
-    }
-
     #[test]
     fn a_parameter_file_becomes_the_only_saved_set() {
         use fcu_core::parameters::{self, snapshot};
         // Whatever the sectors held before is gone.
         let old = vec![0u8; 256 * 1024];
         let flash = flash_with_parameters(old, "ANGLE_MAX 30\n# a comment\nRC1_TRIM 1500\n").unwrap();
-        let (a, b) = (words(&flash, 0), words(&flash, 1));
+        let (a, b) = (param_sector_words(&flash, 0), param_sector_words(&flash, 1));
         let (cfg, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
         assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
         let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
@@ -361,7 +369,8 @@ mod tests {
         use fcu_core::parameters::{self, snapshot};
         let saved = flash_with_parameters(Vec::new(), "ANGLE_MAX 30\nRC1_TRIM 1500\n").unwrap();
         let flash = flash_for_flight(saved, Some("RC1_TRIM 1400\n")).unwrap();
-        let (cfg, source) = snapshot::load_config([&words(&flash, 0), &words(&flash, 1)], &fcu_core::Config::default());
+        let (cfg, source) =
+            snapshot::load_config([&param_sector_words(&flash, 0), &param_sector_words(&flash, 1)], &fcu_core::Config::default());
         assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
         let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
         assert!((value("ANGLE_MAX") - 30.0).abs() < 1e-4, "the flash's set kept");
@@ -370,10 +379,13 @@ mod tests {
         // No flash: the defaults, text lines.
         let (cfg, _) = {
             let f = flash_for_flight(Vec::new(), None).unwrap();
-            snapshot::load_config([&words(&f, 0), &words(&f, 1)], &fcu_core::Config::default())
+            snapshot::load_config([&param_sector_words(&f, 0), &param_sector_words(&f, 1)], &fcu_core::Config::default())
         };
         assert_eq!(parameters::value(&cfg, parameters::index_of(b"LINK_PROTOCOL").unwrap()), Some(0.0));
-        assert!(flash_for_flight(Vec::new(), Some("NO_SUCH 1\n")).unwrap_err().starts_with("line 1:"));
+        assert_eq!(
+            flash_for_flight(Vec::new(), Some("NO_SUCH 1\n")),
+            Err(FlightFlashError::File(format!("line 1: {}", parameters::RULE_UNKNOWN)))
+        );
     }
 
     #[test]
