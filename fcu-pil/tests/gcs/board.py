@@ -22,6 +22,17 @@ ELF = os.environ.get(
 MAV = mavutil.mavlink
 
 
+def read_params(path):
+    """{NAME: value} of a parameter file (MAVProxy's `param save` format), in the file's order."""
+    out = {}
+    with open(path) as f:
+        for line in f:
+            words = line.split("#")[0].split()
+            if words:
+                out[words[0]] = float(words[1])
+    return out
+
+
 def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

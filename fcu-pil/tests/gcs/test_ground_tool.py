@@ -21,22 +21,11 @@ import time
 import tty
 import unittest
 
-from board import ELF, PIL, ROOT, free_port
+from board import ELF, PIL, ROOT, free_port, read_params
 
 GROUND = os.environ.get("FCU_GROUND", os.path.join(ROOT, "target", "release", "fcu-ground"))
 # The board boots in the emulator before it answers: the first HEARTBEAT may take a while.
 BOARD_TIMEOUT_S = "60"
-
-
-def read_params(path):
-    """{NAME: value} of a parameter file."""
-    out = {}
-    with open(path) as f:
-        for line in f:
-            words = line.split("#")[0].split()
-            if words:
-                out[words[0]] = float(words[1])
-    return out
 
 
 def write_params(path, params):

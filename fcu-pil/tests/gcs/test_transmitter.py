@@ -13,20 +13,9 @@ import subprocess
 import tempfile
 import unittest
 
-from board import ELF, MAV, PIL, ROOT, ServedBoard
+from board import ELF, MAV, PIL, ROOT, ServedBoard, read_params
 
 PARM = os.path.join(ROOT, "fcu-testkit", "data", "other-transmitter.parm")
-
-
-def parm_lines():
-    """(NAME, value) of the parameter file, in its order."""
-    out = []
-    with open(PARM) as f:
-        for line in f:
-            words = line.split("#")[0].split()
-            if words:
-                out.append((words[0], float(words[1])))
-    return out
 
 
 def fly(flash, out_dir):
@@ -43,12 +32,12 @@ class AnotherTransmitter(unittest.TestCase):
                 self.assertIsNotNone(b.heartbeat(), b.serve_output())
             with ServedBoard(flash=flash) as b:
                 self.assertIsNotNone(b.heartbeat(), b.serve_output())
-                for name, value in parm_lines():
+                for name, value in read_params(PARM).items():
                     echo = b.param_set(name, value)
                     self.assertIsNotNone(echo, f"no echo for {name}")
                     self.assertEqual(echo.param_value, value, f"{name} refused: {b.texts(0.5)}")
                 # Every value as the file has it, read back (a map set moves another).
-                for name, value in parm_lines():
+                for name, value in read_params(PARM).items():
                     self.assertEqual(b.param_read(name).param_value, value, name)
                 ack = b.command(MAV.MAV_CMD_PREFLIGHT_STORAGE, 1)
                 self.assertIsNotNone(ack)
