@@ -42,9 +42,14 @@ def free_port():
 class ServedBoard:
     """`fcu-pil serve` and a pymavlink connection to it (system 255, a ground station)."""
 
-    def __init__(self, scenario=None, power_cut=None, flash=None, params=None, duration_s=600):
+    def __init__(self, scenario=None, power_cut=None, flash=None, params=None, params_text=None, duration_s=600):
+        """`params` names a parameter file to boot with; `params_text` is one's text."""
         self.port = free_port()
         self._dir = tempfile.TemporaryDirectory(prefix="fcu-gcs-")
+        if params_text is not None:
+            params = os.path.join(self._dir.name, "tune.parm")
+            with open(params, "w") as f:
+                f.write(params_text)
         self.flash = flash or os.path.join(self._dir.name, "flash.bin")
         cmd = [PIL, "serve", "--link", f"tcp:127.0.0.1:{self.port}", "--flash", self.flash, "--elf", ELF,
                "--duration", str(duration_s)]

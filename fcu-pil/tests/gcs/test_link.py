@@ -305,38 +305,30 @@ class SaveAndReboot(unittest.TestCase):
 
 class ParamsFile(unittest.TestCase):
     def test_serve_boots_with_a_parameter_file_as_the_saved_set(self):
-        with tempfile.TemporaryDirectory() as d:
-            path = os.path.join(d, "tune.parm")
-            with open(path, "w") as f:
-                f.write("# from MAVProxy's param save\nRATE_RLL_P 190\nRC2_REV -1\n")
-            with ServedBoard(params=path) as board:
-                self.assertIsNotNone(board.heartbeat())
-                self.assertEqual(board.param_read("RATE_RLL_P").param_value, 190.0)
-                self.assertEqual(board.param_read("RC2_REV").param_value, -1.0)
-                # The boot's own STATUSTEXT went out before the client connected: a reboot says
-                # where the set came from.
-                board.texts(0.1)
-                self.assertEqual(board.command(MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1).result, MAV.MAV_RESULT_ACCEPTED)
-                texts = board.texts(8.0)
-                self.assertTrue(any("loaded from flash" in t for t in texts), texts)
+        with ServedBoard(params_text="# from MAVProxy's param save\nRATE_RLL_P 190\nRC2_REV -1\n") as board:
+            self.assertIsNotNone(board.heartbeat())
+            self.assertEqual(board.param_read("RATE_RLL_P").param_value, 190.0)
+            self.assertEqual(board.param_read("RC2_REV").param_value, -1.0)
+            # The boot's own STATUSTEXT went out before the client connected: a reboot says
+            # where the set came from.
+            board.texts(0.1)
+            self.assertEqual(board.command(MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1).result, MAV.MAV_RESULT_ACCEPTED)
+            texts = board.texts(8.0)
+            self.assertTrue(any("loaded from flash" in t for t in texts), texts)
 
 
 class Greeting(unittest.TestCase):
     def test_a_station_that_connects_after_the_boot_hears_where_the_parameters_came_from(self):
-        with tempfile.TemporaryDirectory() as d:
-            path = os.path.join(d, "tune.parm")
-            with open(path, "w") as f:
-                f.write("RATE_RLL_P 190\n")
-            with ServedBoard(params=path) as board:
-                # Listening only: the board has heard nothing from this station yet.
-                self.assertIsNotNone(board.heartbeat())
-                board.texts(1.0)
-                gcs_heartbeat(board)
-                texts = board.texts(3.0)
-                self.assertIn("parameters loaded from flash", texts)
-                # Its next heartbeats are not greeted again.
-                gcs_heartbeat(board)
-                self.assertNotIn("parameters loaded from flash", board.texts(2.0))
+        with ServedBoard(params_text="RATE_RLL_P 190\n") as board:
+            # Listening only: the board has heard nothing from this station yet.
+            self.assertIsNotNone(board.heartbeat())
+            board.texts(1.0)
+            gcs_heartbeat(board)
+            texts = board.texts(3.0)
+            self.assertIn("parameters loaded from flash", texts)
+            # Its next heartbeats are not greeted again.
+            gcs_heartbeat(board)
+            self.assertNotIn("parameters loaded from flash", board.texts(2.0))
 
 
 class Armed(unittest.TestCase):
