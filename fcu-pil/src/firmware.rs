@@ -41,7 +41,7 @@ pub fn resolve_link_elf(explicit: Option<&Path>) -> Result<PathBuf, String> {
         (explicit, _) => resolve_elf(explicit)?,
     };
     let image = crate::elf::Image::load(&elf)?;
-    if keeps_parameters(&image) {
+    if has_ground_link(&image) {
         Ok(elf)
     } else {
         Err(format!(
@@ -51,9 +51,10 @@ pub fn resolve_link_elf(explicit: Option<&Path>) -> Result<PathBuf, String> {
     }
 }
 
-/// Whether an image loads a saved parameter set at boot (fcu-core's snapshot loader is in it).
-pub fn keeps_parameters(image: &crate::elf::Image) -> bool {
-    image.symbols.keys().any(|name| name.contains("snapshot11load_config"))
+/// Whether an image was built with the ground-station link (`--features mavlink`): its link
+/// task is in it. Only such an image loads a saved parameter set at boot.
+pub fn has_ground_link(image: &crate::elf::Image) -> bool {
+    image.functions.iter().any(|(_, _, name)| crate::elf::demangle(name).starts_with("fcu_firmware::ground::with_link"))
 }
 
 fn build(extra: &[&str], target_dir: Option<PathBuf>) -> Result<PathBuf, String> {

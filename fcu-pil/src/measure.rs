@@ -82,11 +82,18 @@ pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
         "USART1",
         "DMA2_STREAM2",
     ];
-    let names: Vec<(u32, u32, String)> = image.functions.iter().map(|(a, n, name)| (*a, *n, crate::elf::demangle(name))).collect();
-    if !names.iter().any(|(_, _, n)| n.starts_with("fcu_firmware::ground::with_link")) {
+    if !crate::firmware::has_ground_link(image) {
         return Vec::new();
     }
-    names.into_iter().filter(|(_, _, n)| PARTS.iter().any(|p| n.contains(p))).map(|(a, size, _)| (a & !1, (a & !1) + size)).collect()
+    image
+        .functions
+        .iter()
+        .filter(|(_, _, name)| {
+            let name = crate::elf::demangle(name);
+            PARTS.iter().any(|p| name.contains(p))
+        })
+        .map(|&(a, size, _)| (a & !1, (a & !1) + size))
+        .collect()
 }
 
 /// The innermost exception handler active at `t` (the one entered last among those whose
