@@ -134,6 +134,9 @@ pub enum ConfigError {
     ReferenceArithmetic,
     /// The reference's Mahony filter without the crate's `reference` feature.
     ReferenceEstimator,
+    /// The reference's rate loop (derivative on the error, integrators that wind up against a
+    /// saturated motor) without the crate's `reference` feature.
+    ReferenceRateLoop,
     Timing,
     ImuSensitivity,
     Mount,
@@ -155,6 +158,9 @@ impl ConfigError {
         match self {
             ConfigError::ReferenceArithmetic => "reference arithmetic (fcu-core built without its `reference` feature)",
             ConfigError::ReferenceEstimator => "estimator: the reference's Mahony (fcu-core built without its `reference` feature)",
+            ConfigError::ReferenceRateLoop => {
+                "rate loop: the reference's derivative on error or wind-up (fcu-core built without its `reference` feature)"
+            }
             ConfigError::Timing => "timing (tick timer and dt)",
             ConfigError::ImuSensitivity => "imu sensitivity",
             ConfigError::Mount => "imu mount",
@@ -175,7 +181,9 @@ impl ConfigError {
     /// characters) when no part of the configuration names a finer one.
     pub fn rule(self) -> &'static str {
         match self {
-            ConfigError::ReferenceArithmetic | ConfigError::ReferenceEstimator => "reference profile not built in",
+            ConfigError::ReferenceArithmetic | ConfigError::ReferenceEstimator | ConfigError::ReferenceRateLoop => {
+                "reference profile not built in"
+            }
             ConfigError::Timing => "tick timing invalid",
             ConfigError::ImuSensitivity | ConfigError::Mount => "IMU settings invalid",
             ConfigError::Calibration => "calibration settings invalid",
@@ -253,6 +261,9 @@ impl Config {
             }
             if matches!(self.estimator, EstimatorConfig::Mahony(_)) {
                 return Err(ConfigError::ReferenceEstimator);
+            }
+            if self.control.derivative != Derivative::OnMeasurement || !self.control.anti_windup {
+                return Err(ConfigError::ReferenceRateLoop);
             }
         }
         // A dt in (0, 0.1) s.
@@ -449,6 +460,12 @@ mod tests {
         assert_eq!(estimator.validate(), Err(ConfigError::ReferenceEstimator));
         assert!(ConfigError::ReferenceEstimator.field().contains("`reference` feature"));
         assert!(matches!(crate::FlightController::new(estimator), Err(ConfigError::ReferenceEstimator)));
+        let reference_loop =
+            Config { control: ControlConfig { derivative: Derivative::OnError, ..Config::default().control }, ..Config::default() };
+        assert_eq!(reference_loop.validate(), Err(ConfigError::ReferenceRateLoop));
+        let winding = Config { control: ControlConfig { anti_windup: false, ..Config::default().control }, ..Config::default() };
+        assert_eq!(winding.validate(), Err(ConfigError::ReferenceRateLoop));
+        assert!(ConfigError::ReferenceRateLoop.field().contains("`reference` feature"));
     }
 
     #[test]

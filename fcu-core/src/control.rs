@@ -571,9 +571,17 @@ impl RateLoop {
         // The profile's two switches, decided once per tick rather than on every axis.
         match (cfg.derivative, cfg.anti_windup) {
             (Derivative::OnMeasurement, true) => self.commands_of_axes::<true, true>(cfg, errors, rate_rad_s, saturation),
+            #[cfg(feature = "reference")]
             (Derivative::OnMeasurement, false) => self.commands_of_axes::<true, false>(cfg, errors, rate_rad_s, saturation),
+            #[cfg(feature = "reference")]
             (Derivative::OnError, true) => self.commands_of_axes::<false, true>(cfg, errors, rate_rad_s, saturation),
+            #[cfg(feature = "reference")]
             (Derivative::OnError, false) => self.commands_of_axes::<false, false>(cfg, errors, rate_rad_s, saturation),
+            // Without the `reference` feature `Config::validate` refuses every other pair: each
+            // would be three more inlined copies of the rate loop (a kilobyte or so each) in an
+            // image that cannot fly them.
+            #[cfg(not(feature = "reference"))]
+            _ => self.commands_of_axes::<true, true>(cfg, errors, rate_rad_s, saturation),
         }
     }
 
@@ -646,7 +654,10 @@ fn clamp_symmetric(v: f32, lim: f32) -> f32 {
 mod tests {
     use super::*;
 
+    // The reference's rate loop (derivative on error, winding up) is compiled in with the
+    // `reference` feature only.
     #[test]
+    #[cfg(feature = "reference")]
     fn inner_d_filter_matches_the_reference_worked_example() {
         // docs/reference.md#examples: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
         let cfg = ControlConfig::REFERENCE;
@@ -661,7 +672,10 @@ mod tests {
         assert!((out2[0] - (p + i2 + 19.5)).abs() < 1e-3, "{}", out2[0]);
     }
 
+    // The reference's rate loop (derivative on error, winding up) is compiled in with the
+    // `reference` feature only.
     #[test]
+    #[cfg(feature = "reference")]
     fn derivative_on_measurement_has_no_kick_on_a_demand_step() {
         let mut cfg = ControlConfig::REFERENCE;
         cfg.derivative = Derivative::OnMeasurement;
@@ -675,7 +689,10 @@ mod tests {
         assert!(b > 290.0, "{b}");
     }
 
+    // The reference's rate loop (derivative on error, winding up) is compiled in with the
+    // `reference` feature only.
     #[test]
+    #[cfg(feature = "reference")]
     fn integrator_resets_while_throttle_is_low_and_is_clamped() {
         let cfg = ControlConfig::REFERENCE;
         let none = Saturation::NONE;

@@ -403,6 +403,10 @@ fn truncated_mean(sum: i64, n: u32) -> i32 {
 /// bits, and a 64-bit `/` would bring compiler-builtins' general division (about 1 KB of
 /// flash) into the image for a quotient taken once per calibration.
 fn quotient_u64_u32(num: u64, d: u32) -> u64 {
+    // The sums of a level, still board's 800 samples fit 32 bits: one hardware division.
+    if let Ok(num) = u32::try_from(num) {
+        return u64::from(num / d.max(1));
+    }
     let d = u64::from(d);
     let mut quotient = 0u64;
     let mut remainder = 0u64;

@@ -41,6 +41,7 @@ fn every_rule_fits_a_statustext_with_the_name() {
     ];
     let errors = [
         ConfigError::ReferenceArithmetic,
+        ConfigError::ReferenceRateLoop,
         ConfigError::Timing,
         ConfigError::ImuSensitivity,
         ConfigError::Calibration,
