@@ -855,7 +855,9 @@ mod app {
         let mut line = LineBuf::<96>::new();
         let _grounded = verdict.write_fatal_line(&mut line);
         loop {
-            defmt::error!("{=str}", line.as_str());
+            // Bytes shown as ASCII: a `str` would need UTF-8 validation code in flash for an
+            // ASCII line.
+            defmt::error!("{=[u8]:a}", line.as_bytes());
             // With MAVLink on the UART, the ground link sends it as a STATUSTEXT instead.
             if !cx.shared.mavlink_on.lock(|on| *on) {
                 cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
