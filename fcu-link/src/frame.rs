@@ -35,23 +35,48 @@ pub fn encode_patched<D: MessageData>(sequence: u8, data: &D, patches: &[Patch],
     let mut payload = [0u8; MAX_PAYLOAD];
     // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
     data.ser(MavlinkVersion::V2, &mut payload);
+    encode_payload(sequence, Header::of::<D>(), &mut payload, patches, out)
+}
+
+/// What a frame's header and CRC need of its message's definition.
+#[derive(Clone, Copy, Debug)]
+pub struct Header {
+    /// Message id.
+    pub id: u32,
+    /// The extra CRC byte of the message's definition.
+    pub extra_crc: u8,
+    /// The payload's length with every field the crate's struct has.
+    pub encoded_len: usize,
+}
+
+impl Header {
+    /// `D`'s.
+    pub const fn of<D: MessageData>() -> Self {
+        Header { id: D::ID, extra_crc: D::EXTRA_CRC, encoded_len: D::ENCODED_LEN }
+    }
+}
+
+/// Frames a serialized payload (see [`encode_patched`]). Out of line and not generic, so
+/// the patching, truncation, header and CRC exist once however many messages are sent.
+#[inline(never)]
+pub fn encode_payload(sequence: u8, header: Header, payload: &mut [u8; MAX_PAYLOAD], patches: &[Patch], out: &mut [u8; MAX_FRAME]) -> usize {
     for &(at, byte) in patches {
         if let Some(slot) = payload.get_mut(at) {
             *slot = byte;
         }
     }
     let patched_len = patches.iter().map(|&(at, _)| at + 1).max().unwrap_or(0);
-    let full = payload.get(..D::ENCODED_LEN.max(patched_len)).unwrap_or(&payload);
+    let full = payload.get(..header.encoded_len.max(patched_len)).unwrap_or(payload);
     // MAVLink 2 drops trailing zero bytes of the payload but always keeps the first.
     let len = full.iter().rposition(|&b| b != 0).map_or(1, |last| last + 1);
-    let id = D::ID.to_le_bytes();
-    let header = [crate::reader::STX_V2, len as u8, 0, 0, sequence, SYSTEM_ID, COMPONENT_ID, id[0], id[1], id[2]];
-    out[..V2_HEADER].copy_from_slice(&header);
+    let id = header.id.to_le_bytes();
+    let start = [crate::reader::STX_V2, len as u8, 0, 0, sequence, SYSTEM_ID, COMPONENT_ID, id[0], id[1], id[2]];
+    out[..V2_HEADER].copy_from_slice(&start);
     let end = V2_HEADER + len;
     if let (Some(dst), Some(src)) = (out.get_mut(V2_HEADER..end), payload.get(..len)) {
         dst.copy_from_slice(src);
     }
-    let crc = out.get(1..end).map_or(0, |covered| mavlink::calculate_crc(covered, D::EXTRA_CRC));
+    let crc = out.get(1..end).map_or(0, |covered| mavlink::calculate_crc(covered, header.extra_crc));
     if let Some(dst) = out.get_mut(end..end + 2) {
         dst.copy_from_slice(&crc.to_le_bytes());
     }
