@@ -265,8 +265,18 @@ impl<const TX: usize> Core<TX> {
 
     /// [`Core::send`] with payload patches (see [`frame::encode_patched`]).
     pub(crate) fn send_patched<D: MessageData>(&mut self, data: &D, patches: &[frame::Patch]) -> bool {
+        let mut payload = [0u8; frame::MAX_PAYLOAD];
+        // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
+        data.ser(mavlink::MavlinkVersion::V2, &mut payload);
+        self.queue(frame::Header::of::<D>(), &mut payload, patches)
+    }
+
+    /// Frames a serialized payload and queues it. Out of line and not generic over the
+    /// message: one copy of the framing and queueing for every message sent.
+    #[inline(never)]
+    fn queue(&mut self, header: frame::Header, payload: &mut [u8; frame::MAX_PAYLOAD], patches: &[frame::Patch]) -> bool {
         let mut out = [0u8; MAX_FRAME];
-        let len = frame::encode_patched(self.sequence, data, patches, &mut out);
+        let len = frame::encode_payload(self.sequence, header, payload, patches, &mut out);
         // The sequence advances for dropped frames too, so the ground station's loss count
         // sees them.
         self.sequence = self.sequence.wrapping_add(1);
