@@ -89,11 +89,26 @@ pub fn encode_payload(sequence: u8, header: Header, payload: &mut [u8; MAX_PAYLO
 /// Returns the message and the raw values in the order of `fields`.
 pub fn decode_with_raw<D: MessageData, const F: usize>(payload: &[u8], fields: [(usize, usize, u32); F]) -> Option<(D, [u32; F])> {
     let mut padded = [0u8; MAX_PAYLOAD];
+    let mut raw = [0u32; F];
+    let len = pad_with_raw(payload, D::ENCODED_LEN, &fields, &mut raw, &mut padded)?;
+    let message = D::deser(MavlinkVersion::V2, padded.get(..len)?).ok()?;
+    Some((message, raw))
+}
+
+/// The part of [`decode_with_raw`] that does not depend on the message: out of line and not
+/// generic, one copy for every message decoded so. Returns the length to decode.
+#[inline(never)]
+fn pad_with_raw(
+    payload: &[u8],
+    encoded_len: usize,
+    fields: &[(usize, usize, u32)],
+    raw: &mut [u32],
+    padded: &mut [u8; MAX_PAYLOAD],
+) -> Option<usize> {
     let n = payload.len().min(MAX_PAYLOAD);
     if let (Some(dst), Some(src)) = (padded.get_mut(..n), payload.get(..n)) {
         dst.copy_from_slice(src);
     }
-    let mut raw = [0u32; F];
     for (value, &(at, width, stand_in)) in raw.iter_mut().zip(fields.iter()) {
         let field = padded.get_mut(at..at + width)?;
         let mut le = [0u8; 4];
@@ -101,9 +116,7 @@ pub fn decode_with_raw<D: MessageData, const F: usize>(payload: &[u8], fields: [
         *value = u32::from_le_bytes(le);
         field.copy_from_slice(stand_in.to_le_bytes().get(..width)?);
     }
-    let len = payload.len().max(D::ENCODED_LEN).min(MAX_PAYLOAD);
-    let message = D::deser(MavlinkVersion::V2, padded.get(..len)?).ok()?;
-    Some((message, raw))
+    Some(payload.len().max(encoded_len).min(MAX_PAYLOAD))
 }
 
 /// Decodes a payload whose enum fields are all checked by the crate.
