@@ -33,9 +33,16 @@ pub fn encode<D: MessageData>(sequence: u8, data: &D, out: &mut [u8; MAX_FRAME])
 /// past the message's length writes an extension field the crate's struct does not have.
 pub fn encode_patched<D: MessageData>(sequence: u8, data: &D, patches: &[Patch], out: &mut [u8; MAX_FRAME]) -> usize {
     let mut payload = [0u8; MAX_PAYLOAD];
-    // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
-    data.ser(MavlinkVersion::V2, &mut payload);
+    serialize(data, &mut payload);
     encode_payload(sequence, Header::of::<D>(), &mut payload, patches, out)
+}
+
+/// Writes `data`'s fields into `payload` (the rest stays as it was).
+pub(crate) fn serialize<D: MessageData>(data: &D, payload: &mut [u8; MAX_PAYLOAD]) {
+    // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
+    // Its structs have no extension fields, so both versions write the same bytes; asked for
+    // MAVLink 1 it skips its own trim of trailing zeros, which `encode_payload` does anyway.
+    data.ser(MavlinkVersion::V1, payload);
 }
 
 /// What a frame's header and CRC need of its message's definition.

@@ -266,8 +266,7 @@ impl<const TX: usize> Core<TX> {
     /// [`Core::send`] with payload patches (see [`frame::encode_patched`]).
     pub(crate) fn send_patched<D: MessageData>(&mut self, data: &D, patches: &[frame::Patch]) -> bool {
         let mut payload = [0u8; frame::MAX_PAYLOAD];
-        // The crate panics on a buffer shorter than the message: MAX_PAYLOAD holds any message.
-        data.ser(mavlink::MavlinkVersion::V2, &mut payload);
+        frame::serialize(data, &mut payload);
         self.queue(frame::Header::of::<D>(), &mut payload, patches)
     }
 
