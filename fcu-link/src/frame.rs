@@ -83,7 +83,7 @@ pub fn encode_payload(sequence: u8, header: Header, payload: &mut [u8; MAX_PAYLO
     if let (Some(dst), Some(src)) = (out.get_mut(V2_HEADER..end), payload.get(..len)) {
         dst.copy_from_slice(src);
     }
-    let crc = out.get(1..end).map_or(0, |covered| mavlink::calculate_crc(covered, header.extra_crc));
+    let crc = out.get(1..end).map_or(0, |covered| crate::crc::checksum(covered, header.extra_crc));
     if let Some(dst) = out.get_mut(end..end + 2) {
         dst.copy_from_slice(&crc.to_le_bytes());
     }

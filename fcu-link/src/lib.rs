@@ -50,6 +50,7 @@
 )]
 
 pub mod command;
+pub mod crc;
 mod fallbacks;
 pub mod frame;
 mod link;

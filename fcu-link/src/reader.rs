@@ -248,7 +248,7 @@ impl FrameReader {
             return None;
         };
         let received = u16::from_le_bytes([lo, hi]);
-        if mavlink::calculate_crc(covered, handled.extra_crc) != received {
+        if crate::crc::checksum(covered, handled.extra_crc) != received {
             bump(&mut self.stats.bad_crc);
             return None;
         }
