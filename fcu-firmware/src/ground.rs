@@ -238,8 +238,9 @@ mod with_link {
             pace.next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
             let mut line = LineBuf::<96>::new();
             let _grounded = boot.write_fatal_line(&mut line);
-            // The line is ASCII: an ASCII trim keeps the Unicode whitespace table out of flash.
-            let _queued = g.link.send_text(Severity::Critical, line.as_str().trim_end_matches(|c: char| c.is_ascii_whitespace()));
+            // The line is ASCII: an ASCII trim of its bytes keeps the Unicode whitespace table
+            // and the UTF-8 check out of flash.
+            let _queued = g.link.send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
         }
         g.link.tick(now_ms, &mut g.station);
         if let Some(cfg) = g.station.take_change() {
@@ -267,8 +268,8 @@ mod with_link {
             let saved = save_parameters(&g.station, &mut g.flash, &mut s.watchdog);
             g.station.saved(saved.is_ok());
             let _queued = match saved {
-                Ok(()) => g.link.send_text(Severity::Info, "parameters saved"),
-                Err(_) => g.link.send_text(Severity::Error, "parameters NOT saved: flash error"),
+                Ok(()) => g.link.send_text(Severity::Info, b"parameters saved"),
+                Err(_) => g.link.send_text(Severity::Error, b"parameters NOT saved: flash error"),
             };
         }
         if g.station.reboot_asked() && g.link.reboot_ready() && !g.station.unsaved() {
@@ -282,14 +283,14 @@ mod with_link {
     /// to each ground station that connects later (it missed the boot).
     fn announce_parameters(link: &mut Link<LINK_TX_BYTES>, source: &snapshot::Source) {
         let _queued = match source {
-            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, "parameters loaded from flash"),
-            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, "no saved parameters: defaults"),
+            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, b"parameters loaded from flash"),
+            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, b"no saved parameters: defaults"),
             snapshot::Source::Refused(rule) => {
                 let mut text = LineBuf::<64>::new();
                 text.push_str("saved parameters refused (");
                 text.push_str(rule);
                 text.push_str("): defaults");
-                link.greet(Severity::Warning, text.as_str())
+                link.greet(Severity::Warning, text.as_bytes())
             }
         };
     }

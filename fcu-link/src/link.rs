@@ -213,15 +213,18 @@ impl<const TX: usize> Link<TX> {
     /// connects later: the first HEARTBEAT after [`STATION_GONE_MS`] of silence from the
     /// line. For what a station should always hear, once: where the parameters came from at
     /// boot. A later call replaces the text.
-    pub fn greet(&mut self, severity: Severity, text: &str) -> bool {
-        let text = Text::new().push(text);
+    pub fn greet(&mut self, severity: Severity, text: &[u8]) -> bool {
+        let text = Text::new().push_bytes(text);
         self.core.greeting = Some((severity, text));
         self.core.text(severity, text)
     }
 
     /// Sends a STATUSTEXT (cut at 50 bytes); false when the transmit queue had no room.
-    pub fn send_text(&mut self, severity: Severity, text: &str) -> bool {
-        self.core.text(severity, Text::new().push(text))
+    ///
+    /// Texts are bytes (ASCII, or UTF-8), not `str`: a host with its text in a byte buffer then
+    /// needs no UTF-8 check, whose code and table are 600 bytes of flash.
+    pub fn send_text(&mut self, severity: Severity, text: &[u8]) -> bool {
+        self.core.text(severity, Text::new().push_bytes(text))
     }
 
     /// The motor test running, if any.

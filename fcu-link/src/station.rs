@@ -263,8 +263,8 @@ impl Vehicle for Station {
         Some(Param { name: parameters::name(i)?, value: parameters::value(&self.cfg, i)? })
     }
 
-    fn param_index(&self, name: &str) -> Option<u16> {
-        parameters::index_of(name.as_bytes()).map(|i| i as u16)
+    fn param_index(&self, name: &[u8]) -> Option<u16> {
+        parameters::index_of(name).map(|i| i as u16)
     }
 
     fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
