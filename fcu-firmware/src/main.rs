@@ -855,7 +855,8 @@ mod app {
         let mut line = LineBuf::<96>::new();
         let _grounded = verdict.write_fatal_line(&mut line);
         loop {
-            defmt::error!("{=str}", line.as_str());
+            // The line's bytes shown as ASCII: `as_str` would link the UTF-8 check (600 B).
+            defmt::error!("{=[u8]:a}", line.as_bytes());
             // With MAVLink on the UART, the ground link sends it as a STATUSTEXT instead.
             if !cx.shared.mavlink_on.lock(|on| *on) {
                 cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
