@@ -13,6 +13,8 @@ use mavlink::dialects::common::{
 };
 use mavlink::MessageData;
 
+use crate::link::bump;
+
 /// MAVLink 1 start byte.
 pub const STX_V1: u8 = 0xFE;
 /// MAVLink 2 start byte.
@@ -136,10 +138,6 @@ impl Default for FrameReader {
     fn default() -> Self {
         Self::new()
     }
-}
-
-fn bump(counter: &mut u32) {
-    *counter = counter.saturating_add(1);
 }
 
 impl FrameReader {
