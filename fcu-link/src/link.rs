@@ -258,6 +258,7 @@ pub(crate) fn bump(counter: &mut u32) {
 }
 
 /// True for a message addressed to us or to everyone.
+#[inline(never)]
 pub(crate) fn for_us(target_system: u8, target_component: u8) -> bool {
     (target_system == 0 || target_system == SYSTEM_ID) && (target_component == 0 || target_component == COMPONENT_ID)
 }
