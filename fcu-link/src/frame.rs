@@ -66,7 +66,13 @@ impl Header {
 /// Frames a serialized payload (see [`encode_patched`]). Out of line and not generic, so
 /// the patching, truncation, header and CRC exist once however many messages are sent.
 #[inline(never)]
-pub fn encode_payload(sequence: u8, header: Header, payload: &mut [u8; MAX_PAYLOAD], patches: &[Patch], out: &mut [u8; MAX_FRAME]) -> usize {
+pub fn encode_payload(
+    sequence: u8,
+    header: Header,
+    payload: &mut [u8; MAX_PAYLOAD],
+    patches: &[Patch],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
     for &(at, byte) in patches {
         if let Some(slot) = payload.get_mut(at) {
             *slot = byte;
