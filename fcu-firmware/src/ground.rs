@@ -111,6 +111,8 @@ mod with_link {
     /// The link's period: 200 Hz, so a parameter download (one value per call) runs at its
     /// 100 Hz and received bytes wait at most 5 ms.
     const LINK_PERIOD_MS: u32 = 5;
+    /// How long the UART has to send the last bytes before a reboot.
+    const REBOOT_PAUSE_MS: u32 = 20;
     /// How often a fatal boot fault is repeated as a STATUSTEXT.
     const FAULT_REPEAT_MS: u32 = 2000;
 
@@ -173,12 +175,15 @@ mod with_link {
         let mut pace = Pace { announced: false, next_fatal_ms: 0 };
         loop {
             let now_ms = Mono::now().duration_since_epoch().as_millis();
-            if step(g, &mut s, &boot, &mut pace, now_ms) == Next::Reboot {
-                // The acknowledgement has left the link's queue; give the UART its 20 ms.
-                Mono::delay(20.millis()).await;
+            let next = step(g, &mut s, &boot, &mut pace, now_ms);
+            // One await in the loop: the task's future then holds one delay, not two.
+            // Before a reboot the acknowledgement has left the link's queue; the UART gets
+            // its 20 ms to send it.
+            let pause_ms = if next == Next::Reboot { REBOOT_PAUSE_MS } else { LINK_PERIOD_MS };
+            Mono::delay(pause_ms.millis()).await;
+            if next == Next::Reboot {
                 cortex_m::peripheral::SCB::sys_reset();
             }
-            Mono::delay(LINK_PERIOD_MS.millis()).await;
         }
     }
 
