@@ -169,6 +169,8 @@ impl Station {
         self.reboot_asked
     }
 
+    /// Out of line: most rules ask it.
+    #[inline(never)]
     fn armed(&self) -> bool {
         self.status.is_some_and(|s| s.state.armed())
     }
