@@ -111,6 +111,8 @@ mod with_link {
     /// The link's period: 200 Hz, so a parameter download (one value per call) runs at its
     /// 100 Hz and received bytes wait at most 5 ms.
     const LINK_PERIOD_MS: u32 = 5;
+    /// How long the UART has to send the last bytes before a reboot.
+    const REBOOT_PAUSE_MS: u32 = 20;
     /// How often a fatal boot fault is repeated as a STATUSTEXT.
     const FAULT_REPEAT_MS: u32 = 2000;
 
@@ -170,74 +172,115 @@ mod with_link {
         W: Mutex<T = Option<Watchdog>>,
         M: Mutex<T = bool>,
     {
-        let mut announced = false;
-        let mut next_fatal_ms = 0u32;
+        let mut pace = Pace { announced: false, next_fatal_ms: 0 };
         loop {
             let now_ms = Mono::now().duration_since_epoch().as_millis();
-            if let Some(snapshot) = s.latest.lock(Option::take) {
-                let battery_mv = s.battery_mv.lock(|mv| *mv);
-                g.station.observe(&snapshot.status, battery_mv, snapshot.rc_widths_counts, now_ms);
-            }
-            let mut bytes = [0u8; 64];
-            loop {
-                let n = g.uart_rx.take(&mut bytes);
-                if n == 0 {
-                    break;
-                }
-                g.link.receive(bytes.get(..n).unwrap_or_default(), now_ms, &mut g.station);
-            }
-            let heard = g.link.stats().reader.frames > 0;
-            if !s.mavlink_on.lock(|on| core::mem::replace(on, *on || heard) || heard) {
-                Mono::delay(LINK_PERIOD_MS.millis()).await;
-                continue;
-            }
-            if !announced {
-                announced = true;
-                announce_parameters(&mut g.link, &g.params_source);
-            }
-            if !boot.may_fly() && now_ms.wrapping_sub(next_fatal_ms) as i32 >= 0 {
-                next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
-                let mut line = LineBuf::<96>::new();
-                let _grounded = boot.write_fatal_line(&mut line);
-                // The line is ASCII: an ASCII trim keeps the Unicode whitespace table out of flash.
-                let _queued = g.link.send_text(Severity::Critical, line.as_str().trim_end_matches(|c: char| c.is_ascii_whitespace()));
-            }
-            g.link.tick(now_ms, &mut g.station);
-            if let Some(cfg) = g.station.take_change() {
-                g.link.set_rates(g.station.rates());
-                s.tick_config.lock(|slot| *slot = Some(cfg));
-                s.outer_config.lock(|slot| *slot = Some(cfg));
-            }
-            // Commands, and whether a save is wanted (the tick then refuses to arm; the station
-            // starts the save once the status shows it). One the tick has not taken yet is
-            // merged with, not overwritten.
-            if let Some(input) = g.station.take_ground() {
-                s.ground_input.lock(|slot| *slot = Some(slot.map_or(input, |older| older.then(input))));
-            }
-            let link = &mut g.link;
-            let uart_idle = s.uart.lock(|uart| {
-                let mut out = [0u8; 128];
-                let room = uart.room().min(out.len());
-                let n = link.poll_tx(out.get_mut(..room).unwrap_or_default());
-                uart.send(out.get(..n).unwrap_or_default());
-                uart.is_idle()
-            });
-            // Flash work stalls the CPU, the UART's interrupt included: only once every byte
-            // queued (a command's acknowledgement) is out.
-            if g.station.save_due() && uart_idle && g.link.tx_pending() == 0 {
-                let saved = save_parameters(&g.station, &mut g.flash, &mut s.watchdog);
-                g.station.saved(saved.is_ok());
-                let _queued = match saved {
-                    Ok(()) => g.link.send_text(Severity::Info, "parameters saved"),
-                    Err(_) => g.link.send_text(Severity::Error, "parameters NOT saved: flash error"),
-                };
-            }
-            if g.station.reboot_asked() && g.link.reboot_ready() && !g.station.unsaved() {
-                // The acknowledgement has left the link's queue; give the UART its 20 ms.
-                Mono::delay(20.millis()).await;
+            let next = step(g, &mut s, &boot, &mut pace, now_ms);
+            // One await in the loop: the task's future then holds one delay, not two.
+            // Before a reboot the acknowledgement has left the link's queue; the UART gets
+            // its 20 ms to send it.
+            let pause_ms = if next == Next::Reboot { REBOOT_PAUSE_MS } else { LINK_PERIOD_MS };
+            Mono::delay(pause_ms.millis()).await;
+            if next == Next::Reboot {
                 cortex_m::peripheral::SCB::sys_reset();
             }
-            Mono::delay(LINK_PERIOD_MS.millis()).await;
+        }
+    }
+
+    /// What the task remembers between two periods besides the link and station.
+    struct Pace {
+        announced: bool,
+        next_fatal_ms: u32,
+    }
+
+    #[derive(PartialEq)]
+    enum Next {
+        Wait,
+        Reboot,
+    }
+
+    /// One period of the link's work. A plain function, out of line: the task's future then
+    /// holds only what lives across an await, not every local of the link's work.
+    #[inline(never)]
+    fn step<U, L, B, T, O, G, W, M>(
+        g: &mut GroundLink,
+        s: &mut Shared<U, L, B, T, O, G, W, M>,
+        boot: &BootVerdict,
+        pace: &mut Pace,
+        now_ms: u32,
+    ) -> Next
+    where
+        U: Mutex<T = UartOut>,
+        L: Mutex<T = Option<Snapshot>>,
+        B: Mutex<T = u32>,
+        T: Mutex<T = Option<Config>>,
+        O: Mutex<T = Option<Config>>,
+        G: Mutex<T = Option<GroundInput>>,
+        W: Mutex<T = Option<Watchdog>>,
+        M: Mutex<T = bool>,
+    {
+        if let Some(snapshot) = s.latest.lock(Option::take) {
+            let battery_mv = s.battery_mv.lock(|mv| *mv);
+            g.station.observe(&snapshot.status, battery_mv, snapshot.rc_widths_counts, now_ms);
+        }
+        let mut bytes = [0u8; 64];
+        loop {
+            let n = g.uart_rx.take(&mut bytes);
+            if n == 0 {
+                break;
+            }
+            g.link.receive(bytes.get(..n).unwrap_or_default(), now_ms, &mut g.station);
+        }
+        let heard = g.link.stats().reader.frames > 0;
+        if !s.mavlink_on.lock(|on| core::mem::replace(on, *on || heard) || heard) {
+            return Next::Wait;
+        }
+        if !pace.announced {
+            pace.announced = true;
+            announce_parameters(&mut g.link, &g.params_source);
+        }
+        if !boot.may_fly() && now_ms.wrapping_sub(pace.next_fatal_ms) as i32 >= 0 {
+            pace.next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
+            let mut line = LineBuf::<96>::new();
+            let _grounded = boot.write_fatal_line(&mut line);
+            // The line is ASCII: an ASCII trim of its bytes keeps the Unicode whitespace table
+            // and the UTF-8 check out of flash.
+            let _queued = g.link.send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
+        }
+        g.link.tick(now_ms, &mut g.station);
+        if let Some(cfg) = g.station.take_change() {
+            g.link.set_rates(g.station.rates());
+            s.tick_config.lock(|slot| *slot = Some(cfg));
+            s.outer_config.lock(|slot| *slot = Some(cfg));
+        }
+        // Commands, and whether a save is wanted (the tick then refuses to arm; the station
+        // starts the save once the status shows it). One the tick has not taken yet is
+        // merged with, not overwritten.
+        if let Some(input) = g.station.take_ground() {
+            s.ground_input.lock(|slot| *slot = Some(slot.map_or(input, |older| older.then(input))));
+        }
+        let link = &mut g.link;
+        let uart_idle = s.uart.lock(|uart| {
+            let mut out = [0u8; 128];
+            let room = uart.room().min(out.len());
+            let n = link.poll_tx(out.get_mut(..room).unwrap_or_default());
+            uart.send(out.get(..n).unwrap_or_default());
+            uart.is_idle()
+        });
+        // Flash work stalls the CPU, the UART's interrupt included: only once every byte
+        // queued (a command's acknowledgement) is out.
+        if g.station.save_due() && uart_idle && g.link.tx_pending() == 0 {
+            let saved = save_parameters(&g.station, &mut g.flash, &mut s.watchdog);
+            g.station.saved(saved.is_ok());
+            let _queued = match saved {
+                Ok(()) => g.link.send_text(Severity::Info, b"parameters saved"),
+                Err(_) => g.link.send_text(Severity::Error, b"parameters NOT saved: flash error"),
+            };
+        }
+        if g.station.reboot_asked() && g.link.reboot_ready() && !g.station.unsaved() {
+            Next::Reboot
+        } else {
+            Next::Wait
         }
     }
 
@@ -245,14 +288,14 @@ mod with_link {
     /// to each ground station that connects later (it missed the boot).
     fn announce_parameters(link: &mut Link<LINK_TX_BYTES>, source: &snapshot::Source) {
         let _queued = match source {
-            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, "parameters loaded from flash"),
-            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, "no saved parameters: defaults"),
+            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, b"parameters loaded from flash"),
+            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, b"no saved parameters: defaults"),
             snapshot::Source::Refused(rule) => {
                 let mut text = LineBuf::<64>::new();
                 text.push_str("saved parameters refused (");
                 text.push_str(rule);
                 text.push_str("): defaults");
-                link.greet(Severity::Warning, text.as_str())
+                link.greet(Severity::Warning, text.as_bytes())
             }
         };
     }

@@ -213,15 +213,18 @@ impl<const TX: usize> Link<TX> {
     /// connects later: the first HEARTBEAT after [`STATION_GONE_MS`] of silence from the
     /// line. For what a station should always hear, once: where the parameters came from at
     /// boot. A later call replaces the text.
-    pub fn greet(&mut self, severity: Severity, text: &str) -> bool {
-        let text = Text::new().push(text);
+    pub fn greet(&mut self, severity: Severity, text: &[u8]) -> bool {
+        let text = Text::new().push_bytes(text);
         self.core.greeting = Some((severity, text));
         self.core.text(severity, text)
     }
 
     /// Sends a STATUSTEXT (cut at 50 bytes); false when the transmit queue had no room.
-    pub fn send_text(&mut self, severity: Severity, text: &str) -> bool {
-        self.core.text(severity, Text::new().push(text))
+    ///
+    /// Texts are bytes (ASCII, or UTF-8), not `str`: a host with its text in a byte buffer then
+    /// needs no UTF-8 check, whose code and table are 600 bytes of flash.
+    pub fn send_text(&mut self, severity: Severity, text: &[u8]) -> bool {
+        self.core.text(severity, Text::new().push_bytes(text))
     }
 
     /// The motor test running, if any.
@@ -248,11 +251,14 @@ impl<const TX: usize> Link<TX> {
     }
 }
 
+/// Counts one more, saturating. Out of line: some twenty counters are bumped, each then a call.
+#[inline(never)]
 pub(crate) fn bump(counter: &mut u32) {
     *counter = counter.saturating_add(1);
 }
 
 /// True for a message addressed to us or to everyone.
+#[inline(never)]
 pub(crate) fn for_us(target_system: u8, target_component: u8) -> bool {
     (target_system == 0 || target_system == SYSTEM_ID) && (target_component == 0 || target_component == COMPONENT_ID)
 }
@@ -265,8 +271,17 @@ impl<const TX: usize> Core<TX> {
 
     /// [`Core::send`] with payload patches (see [`frame::encode_patched`]).
     pub(crate) fn send_patched<D: MessageData>(&mut self, data: &D, patches: &[frame::Patch]) -> bool {
+        let mut payload = [0u8; frame::MAX_PAYLOAD];
+        frame::serialize(data, &mut payload);
+        self.queue(frame::Header::of::<D>(), &mut payload, patches)
+    }
+
+    /// Frames a serialized payload and queues it. Out of line and not generic over the
+    /// message: one copy of the framing and queueing for every message sent.
+    #[inline(never)]
+    fn queue(&mut self, header: frame::Header, payload: &mut [u8; frame::MAX_PAYLOAD], patches: &[frame::Patch]) -> bool {
         let mut out = [0u8; MAX_FRAME];
-        let len = frame::encode_patched(self.sequence, data, patches, &mut out);
+        let len = frame::encode_payload(self.sequence, header, payload, patches, &mut out);
         // The sequence advances for dropped frames too, so the ground station's loss count
         // sees them.
         self.sequence = self.sequence.wrapping_add(1);

@@ -13,6 +13,14 @@ const PARAM_SET_TYPE_AT: usize = 22;
 /// A PARAM_VALUE frame at its longest.
 const PARAM_VALUE_FRAME: usize = 12 + PARAM_VALUE_DATA::ENCODED_LEN;
 
+/// A name as PARAM_REQUEST_READ and PARAM_SET carry it, up to its first NUL. Bytes, not a
+/// `str`: the link never needs the UTF-8 check (see [`crate::Link::send_text`]).
+fn name_in(id: &CharArray<16>) -> &[u8] {
+    let bytes: &[u8] = id.as_slice();
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    bytes.get(..end).unwrap_or_default()
+}
+
 /// A name as PARAM_VALUE carries it: 16 bytes, NUL-padded, no NUL when 16 long.
 pub(crate) fn name_bytes(name: &str) -> CharArray<16> {
     let mut bytes = [0u8; 16];
@@ -66,7 +74,7 @@ impl<const TX: usize> Core<TX> {
         }
         let index = match u16::try_from(m.param_index) {
             Ok(index) => Some(index),
-            Err(_) => m.param_id.to_str().ok().and_then(|n| vehicle.param_index(n)),
+            Err(_) => vehicle.param_index(name_in(&m.param_id)),
         };
         let sent = index.is_some_and(|index| self.param_value(index, None, vehicle));
         if !sent && index.is_none_or(|i| i >= vehicle.param_count()) {
@@ -85,9 +93,12 @@ impl<const TX: usize> Core<TX> {
             bump(&mut self.stats.not_for_us);
             return;
         }
-        let name = m.param_id.to_str().unwrap_or("");
+        let name = name_in(&m.param_id);
         let Some(index) = vehicle.param_index(name) else {
-            let text = Text::new().push("PARAM_SET: no parameter ").push(name);
+            // Echoed only when it is ASCII: a STATUSTEXT is text, and no parameter's name is
+            // anything else.
+            let shown: &[u8] = if name.is_ascii() { name } else { &[] };
+            let text = Text::new().push("PARAM_SET: no parameter ").push_bytes(shown);
             self.text(Severity::Warning, text);
             return;
         };
@@ -104,7 +115,7 @@ impl<const TX: usize> Core<TX> {
             }
             Err(rule) => {
                 self.param_value(index, None, vehicle);
-                self.text(Severity::Warning, Text::new().push(name).push(": ").push(rule));
+                self.text(Severity::Warning, Text::new().push_bytes(name).push(": ").push(rule));
             }
         }
     }

@@ -13,6 +13,8 @@ use mavlink::dialects::common::{
 };
 use mavlink::MessageData;
 
+use crate::link::bump;
+
 /// MAVLink 1 start byte.
 pub const STX_V1: u8 = 0xFE;
 /// MAVLink 2 start byte.
@@ -138,10 +140,6 @@ impl Default for FrameReader {
     }
 }
 
-fn bump(counter: &mut u32) {
-    *counter = counter.saturating_add(1);
-}
-
 impl FrameReader {
     /// A reader hunting for a start byte.
     pub const fn new() -> Self {
@@ -248,7 +246,7 @@ impl FrameReader {
             return None;
         };
         let received = u16::from_le_bytes([lo, hi]);
-        if mavlink::calculate_crc(covered, handled.extra_crc) != received {
+        if crate::crc::checksum(covered, handled.extra_crc) != received {
             bump(&mut self.stats.bad_crc);
             return None;
         }

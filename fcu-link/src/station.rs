@@ -169,6 +169,8 @@ impl Station {
         self.reboot_asked
     }
 
+    /// Out of line: most rules ask it.
+    #[inline(never)]
     fn armed(&self) -> bool {
         self.status.is_some_and(|s| s.state.armed())
     }
@@ -178,14 +180,14 @@ impl Station {
         self.status.map_or(FlightState::Calibrating, |s| s.state)
     }
 
-    /// A command for the control tick; the safe supervisor's only.
-    fn for_tick(&mut self, add: impl FnOnce(&mut GroundInput)) -> Result<(), &'static str> {
+    /// The commands for the control tick, to add one to; the safe supervisor's only. Not
+    /// generic over what is added (a closure each): one copy for every command.
+    fn for_tick(&mut self) -> Result<&mut GroundInput, &'static str> {
         if !self.safe_supervisor() {
             return Err(ground::RULE_REFERENCE);
         }
-        add(&mut self.ground);
         self.ground_pending = true;
-        Ok(())
+        Ok(&mut self.ground)
     }
 
     fn changed(&mut self) {
@@ -263,8 +265,8 @@ impl Vehicle for Station {
         Some(Param { name: parameters::name(i)?, value: parameters::value(&self.cfg, i)? })
     }
 
-    fn param_index(&self, name: &str) -> Option<u16> {
-        parameters::index_of(name.as_bytes()).map(|i| i as u16)
+    fn param_index(&self, name: &[u8]) -> Option<u16> {
+        parameters::index_of(name).map(|i| i as u16)
     }
 
     fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
@@ -303,26 +305,36 @@ impl Vehicle for Station {
             Request::Disarm { forced } => {
                 let throttle_low = self.status.is_none_or(|s| self.cfg.rc.throttle_low(&s.sticks));
                 ground::disarm_rule(self.flight_state(), throttle_low, forced)?;
-                self.for_tick(|g| g.disarm = Some(Disarm { forced }))
+                self.for_tick()?.disarm = Some(Disarm { forced });
+                Ok(())
             }
             Request::CalibrateImu => {
                 ground::ground_test_rule(self.flight_state())?;
-                self.for_tick(|g| g.calibrate_imu = true)
+                self.for_tick()?.calibrate_imu = true;
+                Ok(())
             }
             Request::CalibrateRadio => {
                 ground::ground_test_rule(self.flight_state())?;
-                self.for_tick(|g| g.radio_calibration = Some(true))
+                self.for_tick()?.radio_calibration = Some(true);
+                Ok(())
             }
-            Request::EndCalibration => self.for_tick(|g| g.radio_calibration = Some(false)),
+            Request::EndCalibration => {
+                self.for_tick()?.radio_calibration = Some(false);
+                Ok(())
+            }
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
                 ground::ground_test_rule(self.flight_state())?;
                 if motor >= ground::MOTORS {
                     return Err(ground::RULE_NO_SUCH_MOTOR);
                 }
                 let test = MotorTest { motor, duty_pct: ground::capped_duty_pct(throttle_pct), duration_ms: u32::from(duration_ms) };
-                self.for_tick(|g| g.motor_test = Some(MotorTestChange::Start(test)))
+                self.for_tick()?.motor_test = Some(MotorTestChange::Start(test));
+                Ok(())
             }
-            Request::StopMotorTest => self.for_tick(|g| g.motor_test = Some(MotorTestChange::Stop)),
+            Request::StopMotorTest => {
+                self.for_tick()?.motor_test = Some(MotorTestChange::Stop);
+                Ok(())
+            }
         }
     }
 }

@@ -88,21 +88,16 @@ impl<const TX: usize> Core<TX> {
         // The geofence: not present, so never breached. Its health bit set as autopilots with a
         // fence set it when none is breached: ground stations read a clear bit as a breach
         // (MAVProxy says "fence breach" on the first SYS_STATUS without it).
-        let mut health = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+        let when = |ok: bool, bits: MavSysStatusSensor| if ok { bits } else { MavSysStatusSensor::empty() };
+        let health = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-            | MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE;
-        for (ok, bits) in [
-            (h.imu, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL),
-            (h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
-            (h.estimator, MavSysStatusSensor::MAV_SYS_STATUS_AHRS),
-            (h.battery, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY),
-            (h.prearm, MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK),
-        ] {
-            if ok {
-                health |= bits;
-            }
-        }
+            | MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE
+            | when(h.imu, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL)
+            | when(h.radio, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER)
+            | when(h.estimator, MavSysStatusSensor::MAV_SYS_STATUS_AHRS)
+            | when(h.battery, MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY)
+            | when(h.prearm, MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK);
         let reader = self.stats.reader;
         let errors = reader.bad_crc.saturating_add(reader.bad_length);
         self.send(&SYS_STATUS_DATA {

@@ -61,8 +61,13 @@ impl Text {
     }
 
     /// Appends `s` (bytes past the limit are dropped).
-    pub fn push(mut self, s: &str) -> Self {
-        for &byte in s.as_bytes() {
+    pub fn push(self, s: &str) -> Self {
+        self.push_bytes(s.as_bytes())
+    }
+
+    /// Appends `bytes` (those past the limit are dropped).
+    pub fn push_bytes(mut self, bytes: &[u8]) -> Self {
+        for &byte in bytes {
             if let Some(slot) = self.buf.get_mut(self.len) {
                 *slot = byte;
                 self.len += 1;

@@ -155,8 +155,10 @@ pub trait Vehicle {
     /// Parameter `index`, or `None` past the end.
     fn param(&self, index: u16) -> Option<Param>;
 
-    /// Index of the parameter called `name` (exact, upper case), if any.
-    fn param_index(&self, name: &str) -> Option<u16>;
+    /// Index of the parameter called `name` (exact, upper case), if any. The name is the
+    /// bytes a ground station sent, NUL padding taken off: any bytes, not only UTF-8 (a name
+    /// that is not one of the table's has no index, whatever it holds).
+    fn param_index(&self, name: &[u8]) -> Option<u16>;
 
     /// Sets parameter `index` to `value` (finite: the link refuses NaN and infinities before
     /// asking). `Ok` carries the value now in force, `Err` the rule that refused it (short,

@@ -352,6 +352,12 @@ fn param_set_refused_is_echoed_with_the_old_value_and_the_rule() {
     let sent = exchange(&mut link, &mut mock, &v2(&param_set("NO_SUCH", 1.0)), 0);
     assert!(param_values(&sent).is_empty());
     assert_eq!(texts(&sent), ["PARAM_SET: no parameter NO_SUCH"]);
+    // A name that is not ASCII is no parameter either, and is not echoed into the text.
+    let mut not_ascii = param_set("RC1_MIN", 1100.0);
+    not_ascii.param_id = mavlink::types::CharArray::new(*b"RC1_MIN\xff\0\0\0\0\0\0\0\0");
+    let sent = exchange(&mut link, &mut mock, &v2(&not_ascii), 0);
+    assert!(param_values(&sent).is_empty());
+    assert_eq!(texts(&sent), ["PARAM_SET: no parameter "]);
 
     assert!(mock.sets.is_empty());
     assert_eq!(mock.value("RC1_MIN"), 1000.0);
@@ -701,9 +707,9 @@ fn motor_test_rules() {
 #[test]
 fn send_text_goes_out_cut_at_50_bytes() {
     let mut link = link();
-    assert!(link.send_text(Severity::Info, "Armed"));
+    assert!(link.send_text(Severity::Info, b"Armed"));
     let long = "x".repeat(80);
-    assert!(link.send_text(Severity::Warning, &long));
+    assert!(link.send_text(Severity::Warning, long.as_bytes()));
     let sent = drain(&mut link);
     assert_eq!(texts(&sent), ["Armed".to_string(), "x".repeat(50)]);
     match &sent[0].message {
@@ -716,9 +722,9 @@ fn send_text_goes_out_cut_at_50_bytes() {
 fn a_full_queue_drops_whole_frames_and_counts_them() {
     // A STATUSTEXT of three characters is a 16-byte frame.
     let mut link: Link<40> = Link::new(LinkConfig::DEFAULT);
-    assert!(link.send_text(Severity::Info, "one"));
-    assert!(link.send_text(Severity::Info, "two"));
-    assert!(!link.send_text(Severity::Info, "three is one too many"));
+    assert!(link.send_text(Severity::Info, b"one"));
+    assert!(link.send_text(Severity::Info, b"two"));
+    assert!(!link.send_text(Severity::Info, b"three is one too many"));
     assert_eq!(link.stats().tx_dropped, 1);
     // Drained a few bytes at a time, the frames come out whole.
     let mut bytes = Vec::new();
@@ -734,7 +740,7 @@ fn a_full_queue_drops_whole_frames_and_counts_them() {
     assert_eq!(texts(&sent), ["one", "two"]);
     // The dropped frame's sequence number is skipped, so a ground station counts it lost.
     assert_eq!(sent[1].sequence, sent[0].sequence + 1);
-    assert!(link.send_text(Severity::Info, "four"));
+    assert!(link.send_text(Severity::Info, b"four"));
     let four = drain(&mut link);
     assert_eq!(four[0].sequence, sent[1].sequence + 2);
 }
@@ -838,7 +844,7 @@ fn a_greeting_is_said_at_once_and_again_to_each_station_that_connects_later() {
     use fcu_link::STATION_GONE_MS;
     let mut link = link();
     let mut mock = Mock::new();
-    assert!(link.greet(Severity::Info, "parameters loaded from flash"));
+    assert!(link.greet(Severity::Info, b"parameters loaded from flash"));
     assert_eq!(texts(&drain(&mut link)), ["parameters loaded from flash"]);
     let heartbeat = v2(&common::HEARTBEAT_DATA::DEFAULT);
     // The first station's first heartbeat: said again; its next ones: not.

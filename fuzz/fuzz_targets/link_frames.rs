@@ -50,8 +50,8 @@ impl Vehicle for Mock {
         let i = usize::from(index);
         Some(Param { name: NAMES.get(i)?, value: *self.values.get(i)? })
     }
-    fn param_index(&self, name: &str) -> Option<u16> {
-        NAMES.iter().position(|n| *n == name).map(|i| i as u16)
+    fn param_index(&self, name: &[u8]) -> Option<u16> {
+        NAMES.iter().position(|n| n.as_bytes() == name).map(|i| i as u16)
     }
     fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
         assert!(value.is_finite(), "non-finite value passed on");

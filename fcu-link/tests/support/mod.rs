@@ -76,8 +76,8 @@ impl Vehicle for Mock {
     fn param(&self, index: u16) -> Option<Param> {
         self.params.get(usize::from(index)).map(|p| Param { name: p.name, value: p.value })
     }
-    fn param_index(&self, name: &str) -> Option<u16> {
-        self.params.iter().position(|p| p.name == name).map(|i| i as u16)
+    fn param_index(&self, name: &[u8]) -> Option<u16> {
+        self.params.iter().position(|p| p.name.as_bytes() == name).map(|i| i as u16)
     }
     fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
         assert!(value.is_finite(), "the link passed on a non-finite value");
