@@ -216,7 +216,7 @@ impl Config {
     }
 
     /// The ST reference firmware, R release (221117), DC motors, Devo 7E radio.
-    pub fn reference() -> Config {
+    pub const fn reference() -> Config {
         Config {
             // B2: TIM9 ticks at 807.69 Hz, every integration assumes 800 Hz (its dt is the C
             // double 0.00125).
@@ -240,8 +240,8 @@ impl Config {
     /// battery compensation (D14) and no thrust curve (D17): its compare values are pulse
     /// widths an ESC reads as a command, not a duty on a brushed motor, and scaling them would
     /// move the idle pulse itself.
-    pub fn esc() -> Config {
-        let d = Config::default();
+    pub const fn esc() -> Config {
+        let d = Config::DEFAULT;
         Config {
             mixer: MixerConfig { saturate: Saturate::AttitudePriority, ..MixerConfig::REFERENCE_ESC },
             rc: RcConfig { min_throttle: StickCounts(20), ..d.rc },
@@ -348,8 +348,18 @@ impl Config {
 }
 
 impl Default for Config {
-    /// The product: the reference's structure with differences D1–D18.
+    /// The product: [`Config::DEFAULT`].
     fn default() -> Config {
+        Config::DEFAULT
+    }
+}
+
+impl Config {
+    /// The product: the reference's structure with differences D1–D18. A constant, so that a
+    /// firmware keeps it in flash (a `static`) instead of building it field by field in RAM.
+    pub const DEFAULT: Config = Config::product();
+
+    const fn product() -> Config {
         let r = Config::reference();
         let tick_hz: f32 = 800.0;
         Config {

@@ -38,7 +38,7 @@ pub struct Absent;
 
 #[cfg(not(feature = "mavlink"))]
 impl GroundLink {
-    pub fn new(_cfg: Config, _defaults: Config, _stored: Absent, _receiver: Absent) -> Self {
+    pub fn new(_cfg: Config, _defaults: &'static Config, _stored: Absent, _receiver: Absent) -> Self {
         GroundLink
     }
 
@@ -50,8 +50,8 @@ impl GroundLink {
 /// The configuration to boot with. Without the ground link nothing can change or save a
 /// parameter: the build's defaults.
 #[cfg(not(feature = "mavlink"))]
-pub fn load_parameters(_flash: stm32f4xx_hal::pac::FLASH, defaults: Config) -> (Config, Absent) {
-    (defaults, Absent)
+pub fn load_parameters(_flash: stm32f4xx_hal::pac::FLASH, defaults: &'static Config) -> (Config, Absent) {
+    (*defaults, Absent)
 }
 
 /// Without the ground link USART1 receives nothing.
@@ -126,7 +126,7 @@ mod with_link {
     }
 
     impl GroundLink {
-        pub fn new(cfg: Config, defaults: Config, stored: (ParamFlash, snapshot::Source), uart_rx: UartRx) -> Self {
+        pub fn new(cfg: Config, defaults: &'static Config, stored: (ParamFlash, snapshot::Source), uart_rx: UartRx) -> Self {
             let station = Station::new(cfg, defaults);
             let mut link = Link::new(LinkConfig::DEFAULT);
             link.set_rates(station.rates());
@@ -143,11 +143,11 @@ mod with_link {
 
     /// The parameters saved in flash over the build's defaults, or the defaults alone (and
     /// why, said on the link once it runs): never a mix.
-    pub fn load_parameters(flash: stm32f4xx_hal::pac::FLASH, defaults: Config) -> (Config, (ParamFlash, snapshot::Source)) {
+    pub fn load_parameters(flash: stm32f4xx_hal::pac::FLASH, defaults: &'static Config) -> (Config, (ParamFlash, snapshot::Source)) {
         let flash = ParamFlash::new(flash);
         let (cfg, source) = match (flash.sector(0), flash.sector(1)) {
-            (Some(a), Some(b)) => snapshot::load_config([a, b], &defaults),
-            _ => (defaults, snapshot::Source::NoSnapshot),
+            (Some(a), Some(b)) => snapshot::load_config([a, b], defaults),
+            _ => (*defaults, snapshot::Source::NoSnapshot),
         };
         (cfg, (flash, source))
     }

@@ -38,18 +38,10 @@ use fcu_core::mixer::MixerConfig;
 
 rtic_monotonics::systick_monotonic!(Mono, 1000);
 
-/// The flight profile this build flies: the product (`Config::default()`), or its ESC
-/// variant with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max).
-fn flight_config() -> fcu_core::Config {
-    #[cfg(feature = "esc")]
-    {
-        fcu_core::Config::esc()
-    }
-    #[cfg(not(feature = "esc"))]
-    {
-        fcu_core::Config::default()
-    }
-}
+/// The flight profile this build flies: the product (`Config::DEFAULT`), or its ESC variant
+/// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the ground link keeps
+/// a reference to it for a reset to defaults, not a copy built in RAM.
+static FLIGHT_CONFIG: fcu_core::Config = if cfg!(feature = "esc") { fcu_core::Config::esc() } else { fcu_core::Config::DEFAULT };
 
 /// TIM4's compare for "motors off" in this build: 0 on the on-board MOSFETs, the idle pulse
 /// for ESCs. A constant because the fault paths below cannot reach the configuration; `init`
@@ -303,7 +295,7 @@ mod app {
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
 
-        let defaults = crate::flight_config();
+        let defaults = &crate::FLIGHT_CONFIG;
         let (cfg, stored) = crate::ground::load_parameters(dp.FLASH, defaults);
 
         // Motors first: PB6..PB9 driven by TIM4 at compare 0 (off) from the very start.

@@ -35,7 +35,7 @@ const SAVE_CONFIRMATIONS: u8 = 2;
 
 pub struct Station {
     cfg: Config,
-    defaults: Config,
+    defaults: &'static Config,
     status: Option<Status>,
     battery_mv: u16,
     /// Radio pulse widths, capture counts, by input (0: none yet).
@@ -58,7 +58,7 @@ pub struct Station {
 
 impl Station {
     /// `cfg` is the configuration the board booted with, `defaults` what a reset restores.
-    pub fn new(cfg: Config, defaults: Config) -> Station {
+    pub fn new(cfg: Config, defaults: &'static Config) -> Station {
         Station {
             cfg,
             defaults,
@@ -290,9 +290,9 @@ impl Vehicle for Station {
             }
             Request::ResetParams if self.armed() => Err(RULE_ARMED),
             Request::ResetParams => {
-                fcu_core::flight::check_change(&self.cfg, &self.defaults, false).map_err(|e| e.rule())?;
-                if !self.cfg.is_same_as(&self.defaults) {
-                    self.cfg = self.defaults;
+                fcu_core::flight::check_change(&self.cfg, self.defaults, false).map_err(|e| e.rule())?;
+                if !self.cfg.is_same_as(self.defaults) {
+                    self.cfg = *self.defaults;
                     self.changed();
                 }
                 Ok(())
@@ -358,7 +358,7 @@ mod tests {
     const UP: Sticks = Sticks::new(0, 0, 1500, 0);
 
     fn station_in(state: FlightState, sticks: Sticks) -> Station {
-        let mut st = Station::new(Config::default(), Config::default());
+        let mut st = Station::new(Config::default(), &Config::DEFAULT);
         st.observe(&status(state, sticks, Blockers::default()), 3900, [0; 4], 1000);
         st
     }
@@ -401,7 +401,7 @@ mod tests {
         }
         assert_eq!(station_in(FlightState::Calibrating, REST).request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
         // No status yet: the board is still booting.
-        let mut st = Station::new(Config::default(), Config::default());
+        let mut st = Station::new(Config::default(), &Config::DEFAULT);
         assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
     }
 
@@ -424,8 +424,8 @@ mod tests {
 
     #[test]
     fn the_reference_supervisor_takes_no_command() {
-        let cfg = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
-        let mut st = Station::new(cfg, cfg);
+        const CFG: Config = Config { supervisor: SupervisorConfig::Reference, ..Config::DEFAULT };
+        let mut st = Station::new(CFG, &CFG);
         st.observe(&status(FlightState::Disarmed, REST, Blockers::default()), 3900, [0; 4], 0);
         assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
         assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
@@ -445,7 +445,7 @@ mod tests {
             (FlightState::Calibrating, Blockers::default(), false),
             (FlightState::Armed, Blockers::default(), true),
         ] {
-            let mut st = Station::new(Config::default(), Config::default());
+            let mut st = Station::new(Config::default(), &Config::DEFAULT);
             st.observe(&status(state, REST, blockers), 3900, [0; 4], 0);
             assert_eq!(st.state().health.prearm, ready, "{state:?} {blockers:?}");
         }

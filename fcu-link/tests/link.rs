@@ -760,7 +760,7 @@ mod with_the_station {
         let mut s: Status = FlightController::new(Config::default()).unwrap().status();
         s.state = state;
         s.sticks = sticks;
-        let mut st = Station::new(Config::default(), Config::default());
+        let mut st = Station::new(Config::default(), &Config::DEFAULT);
         st.observe(&s, 3900, [0; 4], 0);
         st
     }
