@@ -143,6 +143,8 @@ enum GyroScale {
 }
 
 impl Decoder {
+    // Out of line: built at boot and by each half of the loop on a configuration change.
+    #[inline(never)]
     pub fn new(cfg: &ImuConfig) -> Self {
         let k = cfg.gyro_mdps_per_lsb;
         // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
