@@ -19,7 +19,8 @@ pub(crate) struct Derived {
 
 impl Derived {
     /// The one place where a configuration becomes the values the pipeline works with, at
-    /// unity gains.
+    /// unity gains. Out of line: at boot and in both halves of the loop on a change.
+    #[inline(never)]
     pub(crate) fn new(cfg: &Config) -> Derived {
         let decoder = Decoder::new(&cfg.imu);
         let outer_hz = cfg.timing.outer_hz();
