@@ -11,7 +11,7 @@
 use crate::app::{Snapshot, UartOut};
 use crate::watchdog::Watchdog;
 use fcu_core::boot::BootVerdict;
-use fcu_core::flight::ControlTick;
+use fcu_core::flight::{ControlTick, OuterStep};
 use fcu_core::ground::GroundInput;
 use fcu_core::Config;
 
@@ -64,6 +64,41 @@ pub fn start_receiver(_dma: stm32f4xx_hal::pac::DMA2, _rcc: &mut stm32f4xx_hal::
 /// task). Without the ground link there are none, and the slot is never locked.
 #[cfg(not(feature = "mavlink"))]
 pub fn to_control(_slot: &mut impl rtic::Mutex<T = Option<GroundInput>>, _tick: &mut ControlTick) {}
+
+/// A parameter change for the control tick's half (from the control task, between ticks).
+/// Without the ground link nothing changes the configuration: the slot is never locked, and
+/// the image holds no code to take a change.
+#[cfg(not(feature = "mavlink"))]
+pub fn config_to_tick(_slot: &mut impl rtic::Mutex<T = Option<Config>>, _tick: &mut ControlTick) {}
+
+/// A parameter change for the outer step's half (from the outer-step task); none without the
+/// ground link.
+#[cfg(not(feature = "mavlink"))]
+pub fn config_to_outer(_slot: &mut impl rtic::Mutex<T = Option<Config>>, _outer: &mut OuterStep) {}
+
+/// A parameter change the ground link accepted (the core checked it against the armed state),
+/// for the control tick's half: taken between ticks, every stage keeping its state. Read in
+/// place: moving the `Option<Config>` out would copy its 456 bytes every tick, change or not.
+#[cfg(feature = "mavlink")]
+pub fn config_to_tick(slot: &mut impl rtic::Mutex<T = Option<Config>>, tick: &mut ControlTick) {
+    slot.lock(|slot| {
+        if let Some(cfg) = slot.as_ref() {
+            let _refused = tick.take_config(cfg);
+            *slot = None;
+        }
+    });
+}
+
+/// The same change for the outer step's half, before its next step.
+#[cfg(feature = "mavlink")]
+pub fn config_to_outer(slot: &mut impl rtic::Mutex<T = Option<Config>>, outer: &mut OuterStep) {
+    slot.lock(|slot| {
+        if let Some(cfg) = slot.as_ref() {
+            outer.take_config(cfg);
+            *slot = None;
+        }
+    });
+}
 
 /// The ground station's commands for the control tick, taken between ticks (from the control
 /// task).

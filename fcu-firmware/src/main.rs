@@ -666,14 +666,7 @@ mod app {
             }
             // A parameter change the ground link accepted (the core checked it against the
             // armed state); taken between ticks, every stage keeping its state.
-            // Read in place: moving the `Option<Config>` out would copy its 456 bytes every
-            // tick, change or not.
-            cx.shared.tick_config.lock(|slot| {
-                if let Some(cfg) = slot.as_ref() {
-                    let _refused = inner.take_config(cfg);
-                    *slot = None;
-                }
-            });
+            crate::ground::config_to_tick(&mut cx.shared.tick_config, inner);
             // The ground station's commands, taken between ticks as a change is (the core
             // decides again with its own state).
             crate::ground::to_control(&mut cx.shared.ground_input, inner);
@@ -744,13 +737,7 @@ mod app {
     #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, outer_config], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
         while let Some(job) = cx.shared.outer_job.lock(Option::take) {
-            let outer = &mut *cx.local.outer;
-            cx.shared.outer_config.lock(|slot| {
-                if let Some(cfg) = slot.as_ref() {
-                    outer.take_config(cfg);
-                    *slot = None;
-                }
-            });
+            crate::ground::config_to_outer(&mut cx.shared.outer_config, cx.local.outer);
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);
