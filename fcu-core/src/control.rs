@@ -4,6 +4,8 @@
 //! Axis order everywhere is `[x, y, z]` = `[pitch, roll, yaw]` (the reference's naming:
 //! pitch is the rotation about body X).
 
+use crate::config::{above, within};
+
 /// Gains and limits of one axis of the cascade.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AxisGains {
@@ -35,7 +37,7 @@ impl AxisGains {
             self.inner_i_limit,
             self.output_limit,
         ];
-        v.iter().all(|g| g.is_finite() && *g >= 0.0)
+        v.iter().all(|&g| within(g, 0.0, f32::MAX))
     }
 }
 
@@ -117,7 +119,8 @@ impl ThrustCurve {
 
     /// A curve whose thrust rises with the duty over the whole range, tuned inside it.
     pub fn is_valid(&self) -> bool {
-        let finite = self.quad.is_finite() && self.lin.is_finite() && self.reference_duty.is_finite();
+        let finite = within(self.quad, f32::MIN, f32::MAX) && within(self.lin, f32::MIN, f32::MAX);
+        // Between 0 and 1, so finite.
         finite && self.slope(0.0) > 0.0 && self.slope(1.0) > 0.0 && self.reference_duty > 0.0 && self.reference_duty < 1.0
     }
 
@@ -160,12 +163,7 @@ impl BatteryCompensation {
     pub const LIPO_1S: BatteryCompensation = BatteryCompensation { nominal_mv: 4000, min_valid_mv: 2500, max_gain: 1.5, filter_s: 2.0 };
 
     pub fn is_valid(&self) -> bool {
-        self.nominal_mv > 0
-            && self.min_valid_mv > 0
-            && self.max_gain.is_finite()
-            && (1.0..=4.0).contains(&self.max_gain)
-            && self.filter_s.is_finite()
-            && self.filter_s > 0.0
+        self.nominal_mv > 0 && self.min_valid_mv > 0 && within(self.max_gain, 1.0, 4.0) && above(self.filter_s, 0.0, f32::MAX)
     }
 
     /// The thrust gain for a (filtered) battery voltage.
@@ -339,15 +337,12 @@ impl ControlConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        let dt_ok = |dt: f32| dt.is_finite() && dt > 0.0;
+        let dt_ok = |dt: f32| above(dt, 0.0, f32::MAX);
         self.axes().iter().all(|a| a.is_valid())
-            && self.d_filter_k.is_finite()
-            && self.d_filter_k > 0.0
-            && self.d_filter_k <= 1.0
+            && above(self.d_filter_k, 0.0, 1.0)
             && dt_ok(self.inner_dt_s)
             && dt_ok(self.outer_integrator_dt_s)
-            && self.yaw_rate_feedforward.is_finite()
-            && (0.0..=1.5).contains(&self.yaw_rate_feedforward)
+            && within(self.yaw_rate_feedforward, 0.0, 1.5)
             && self.yaw_shaping.is_none_or(|y| y.is_valid())
             && self.battery.is_none_or(|b| b.is_valid())
             && self.thrust_curve.is_none_or(|c| c.is_valid())
@@ -377,7 +372,7 @@ pub struct YawShaping {
 impl YawShaping {
     /// Stages from 1 ms (the acceleration is divided by it) to 1 s, a lead of at most 0.5 s.
     pub fn is_valid(&self) -> bool {
-        self.stage_s.is_finite() && (0.001..=1.0).contains(&self.stage_s) && self.lead_s.is_finite() && (0.0..=0.5).contains(&self.lead_s)
+        within(self.stage_s, 0.001, 1.0) && within(self.lead_s, 0.0, 0.5)
     }
 }
 

@@ -299,25 +299,29 @@ impl RcConfig {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        let rules: [(bool, &'static str); 11] = [
-            (self.map.is_permutation(), "RCMAP: each input once"),
-            (self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"),
-            (self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"),
-            (self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"),
+        // Each rule in turn, returning at the first broken: an array of every rule's verdict,
+        // searched after, evaluates them all (a kilobyte at fcu-core's opt-level 3).
+        let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
+        broken(self.map.is_permutation(), "RCMAP: each input once")
+            .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
+            .or_else(|| broken(self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"))
+            .or_else(|| broken(self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"))
             // A gesture is a stick beyond the threshold while the others are centred: it must
             // be reachable, and a centred stick must not make one.
-            (self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"),
-            (
-                self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
-                "THR_MIN past the throttle travel",
-            ),
-            (self.max_tilt_rad.is_finite() && self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"),
-            (self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale"),
-            (self.yaw_max_step_rad.is_finite() && self.yaw_max_step_rad >= 0.0, "yaw rate out of range"),
-            (self.link_timeout_ticks > 0, "radio timeout is zero"),
-            (pulses_ok, "pulse limits invalid"),
-        ];
-        rules.into_iter().find(|(ok, _)| !ok).map(|(_, rule)| rule)
+            .or_else(|| broken(self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"))
+            .or_else(|| {
+                broken(
+                    self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
+                    "THR_MIN past the throttle travel",
+                )
+            })
+            .or_else(|| broken(self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"))
+            .or_else(|| {
+                broken(self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale")
+            })
+            .or_else(|| broken(crate::config::within(self.yaw_max_step_rad, 0.0, f32::MAX), "yaw rate out of range"))
+            .or_else(|| broken(self.link_timeout_ticks > 0, "radio timeout is zero"))
+            .or_else(|| broken(pulses_ok, "pulse limits invalid"))
     }
 
     /// Every input: `min <= trim <= max`, inside the capture wrap.
