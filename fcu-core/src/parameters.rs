@@ -463,7 +463,8 @@ fn stick_from_us(us: f32) -> StickCounts {
 /// a whole rate; 0 otherwise, which no conversion accepts).
 fn tick_hz(cfg: &Config) -> u32 {
     let hz = cfg.timing.integration_hz;
-    if hz.is_finite() && hz > 0.0 && libm::truncf(hz) == hz && hz < 1.0e6 {
+    // Between 0 and 10^6, so finite.
+    if hz > 0.0 && hz < 1.0e6 && libm::truncf(hz) == hz {
         hz as u32
     } else {
         0
@@ -478,15 +479,17 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
     (ticks as f32 * 1000.0) / hz as f32
 }
 
-/// Whole milliseconds (checked) to ticks, refused unless exact. Out of line: its 64-bit
-/// division would otherwise be inlined into each caller at fcu-core's opt-level 3.
+/// Whole milliseconds (checked, within the parameters' bounds) to ticks, refused unless exact.
+/// In u32, without a 64-bit product and its division by 1000 (a few hundred bytes at opt-level
+/// 3): ms·hz = (ms / 1000)·hz·1000 + (ms % 1000)·hz, the second under 10^9 for hz < 10^6.
 #[inline(never)]
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
-    let product = (ms as u64) * u64::from(tick_hz(cfg));
-    if product == 0 || product % 1000 != 0 {
+    let (ms, hz) = (ms as u32, tick_hz(cfg));
+    let rest = (ms % 1000) * hz;
+    if ms == 0 || hz == 0 || rest % 1000 != 0 {
         return Err(RULE_NOT_TICKS);
     }
-    u32::try_from(product / 1000).map_err(|_| RULE_NOT_TICKS)
+    (ms / 1000).checked_mul(hz).and_then(|t| t.checked_add(rest / 1000)).ok_or(RULE_NOT_TICKS)
 }
 
 fn safety(cfg: &Config) -> SafetyConfig {
