@@ -251,8 +251,11 @@ pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, armed: bool) -> Resu
 }
 
 /// Finite, within bounds, on the step.
+// Out of line: one copy for a set and a whole set.
+#[inline(never)]
 fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
-    if !v.is_finite() {
+    // One comparison, false for a NaN and an infinity (`is_finite` is a bit-pattern test).
+    if !(v.abs() <= f32::MAX) {
         return Err(RULE_NOT_FINITE);
     }
     if v < p.min {
@@ -261,13 +264,16 @@ fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
     if v > p.max {
         return Err(RULE_ABOVE_MAX);
     }
-    match p.step {
-        Step::Any => Ok(()),
-        // Bounded by |max| < 2^24: the fraction test is exact.
-        Step::Integer if libm::truncf(v) != v => Err(RULE_NOT_WHOLE),
-        Step::QuarterUs if libm::truncf(v * 4.0) != v * 4.0 => Err(RULE_NOT_QUARTER_US),
-        _ => Ok(()),
+    let (steps, rule) = match p.step {
+        Step::Any => return Ok(()),
+        Step::Integer => (v, RULE_NOT_WHOLE),
+        Step::QuarterUs => (v * 4.0, RULE_NOT_QUARTER_US),
+    };
+    // Within bounds, |steps| < 2^24: it converts to i32 and back unchanged only if whole.
+    if (steps as i32) as f32 != steps {
+        return Err(rule);
     }
+    Ok(())
 }
 
 /// Every parameter's value in `cfg`, in table order.
