@@ -469,8 +469,8 @@ fn stick_from_us(us: f32) -> StickCounts {
 /// a whole rate; 0 otherwise, which no conversion accepts).
 fn tick_hz(cfg: &Config) -> u32 {
     let hz = cfg.timing.integration_hz;
-    // Between 0 and 10^6, so finite.
-    if hz > 0.0 && hz < 1.0e6 && libm::truncf(hz) == hz {
+    // Between 0 and 10^6, so finite, and whole if it converts to u32 and back unchanged.
+    if hz > 0.0 && hz < 1.0e6 && (hz as u32) as f32 == hz {
         hz as u32
     } else {
         0
@@ -532,7 +532,7 @@ fn gyro_cutoff_hz(cfg: &Config) -> f32 {
         return f32::from(d.0);
     }
     let k2 = (1.0 - c.a1 - c.a2) / (1.0 + c.a1 - c.a2);
-    if !(k2.is_finite() && k2 > 0.0) {
+    if !crate::config::above(k2, 0.0, f32::MAX) {
         return 0.0;
     }
     libm::roundf(libm::atanf(libm::sqrtf(k2)) * cfg.timing.integration_hz / core::f32::consts::PI)
