@@ -254,8 +254,8 @@ pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, armed: bool) -> Resu
 // Out of line: one copy for a set and a whole set.
 #[inline(never)]
 fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
-    // One comparison, false for a NaN and an infinity (`is_finite` is a bit-pattern test).
-    if !(v.abs() <= f32::MAX) {
+    // Two comparisons, where `is_finite` is a bit-pattern test.
+    if !crate::config::within(v, f32::MIN, f32::MAX) {
         return Err(RULE_NOT_FINITE);
     }
     if v < p.min {
