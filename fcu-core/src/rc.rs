@@ -304,8 +304,7 @@ impl RcConfig {
         let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
         broken(self.map.is_permutation(), "RCMAP: each input once")
             .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
-            .or_else(|| broken(self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"))
-            .or_else(|| broken(self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"))
+            .or_else(|| self.endpoints_problem())
             // A gesture is a stick beyond the threshold while the others are centred: it must
             // be reachable, and a centred stick must not make one.
             .or_else(|| broken(self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"))
@@ -324,22 +323,24 @@ impl RcConfig {
             .or_else(|| broken(pulses_ok, "pulse limits invalid"))
     }
 
-    /// Every input: `min <= trim <= max`, inside the capture wrap.
-    fn endpoints_ordered(&self) -> bool {
-        self.inputs.iter().all(|e| e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP)
-    }
-
-    /// A centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
-    /// either end, the throttle's that much travel.
-    fn endpoints_span(&self) -> bool {
+    /// The endpoints' rule broken: every input `min <= trim <= max` inside the capture wrap,
+    /// then a centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
+    /// either end and the throttle's that much travel. One pass over the inputs: an input out
+    /// of order is reported before any too close, wherever it is.
+    fn endpoints_problem(&self) -> Option<&'static str> {
         let span = i32::from(MIN_ENDPOINT_SPAN_COUNTS);
-        self.inputs.iter().enumerate().all(|(i, e)| {
-            let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
-            match self.map.function(i) {
-                Function::Throttle => max - min >= span,
-                _ => trim - min >= span && max - trim >= span,
+        let mut too_close = false;
+        for (i, e) in self.inputs.iter().enumerate() {
+            if !(e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP) {
+                return Some("RCn: need MIN <= TRIM <= MAX");
             }
-        })
+            let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
+            too_close |= match self.map.function(i) {
+                Function::Throttle => max - min < span,
+                _ => trim - min < span || max - trim < span,
+            };
+        }
+        too_close.then_some("RCn: MIN/TRIM/MAX too close")
     }
 
     /// The endpoints of the input that carries `f` (a map naming no input, which
@@ -966,6 +967,15 @@ mod tests {
         assert!(c.is_valid());
         c.map.assign(Function::Roll, THR as u8);
         assert!(!c.is_valid());
+    }
+
+    #[test]
+    fn an_input_out_of_order_is_named_before_one_too_close_wherever_they_are() {
+        let mut c = REF;
+        c.inputs[AIL].max_counts = c.inputs[AIL].trim_counts + 1;
+        assert_eq!(c.problem(), Some("RCn: MIN/TRIM/MAX too close"));
+        c.inputs[RUD].trim_counts = c.inputs[RUD].max_counts + 1;
+        assert_eq!(c.problem(), Some("RCn: need MIN <= TRIM <= MAX"));
     }
 
     #[test]
