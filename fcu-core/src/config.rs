@@ -20,6 +20,18 @@ use crate::rc::{GestureThrottle, PulseRules, RcConfig, StickCounts, YawStick, CA
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
 use crate::telemetry::BatterySense;
 
+/// `x` in `[lo, hi]` (finite bounds), so finite: a NaN fails both comparisons, an infinity
+/// the bound it passes. The checks use it instead of `x.is_finite() && lo <= x`, which
+/// fcu-core's opt-level 3 turns into a bit-pattern classification of some 70 bytes a field.
+pub(crate) fn within(x: f32, lo: f32, hi: f32) -> bool {
+    lo <= x && x <= hi
+}
+
+/// `x` in `(lo, hi]` (finite bounds), so finite: as [`within`].
+pub(crate) fn above(x: f32, lo: f32, hi: f32) -> bool {
+    lo < x && x <= hi
+}
+
 /// The control tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Timing {
@@ -267,21 +279,19 @@ impl Config {
             }
         }
         // A dt in (0, 0.1) s.
-        let hz = self.timing.integration_hz;
-        if !(hz.is_finite() && hz > 10.0) {
+        if !above(self.timing.integration_hz, 10.0, f32::MAX) {
             return Err(ConfigError::Timing);
         }
         let sens = [self.imu.accel_mg_per_lsb, self.imu.gyro_mdps_per_lsb];
-        if !sens.iter().all(|s| s.is_finite() && *s > 0.0) {
+        if !sens.iter().all(|&s| above(s, 0.0, f32::MAX)) {
             return Err(ConfigError::ImuSensitivity);
         }
         if !self.imu.mount.is_valid() {
             return Err(ConfigError::Mount);
         }
         let cal = &self.calibration;
-        let check_ok = cal.motion_check.is_none_or(|m| {
-            m.gyro_max_dev_mdps.is_finite() && m.gyro_max_dev_mdps > 0.0 && m.accel_norm_tol_mg.is_finite() && m.accel_norm_tol_mg > 0.0
-        });
+        let check_ok =
+            cal.motion_check.is_none_or(|m| above(m.gyro_max_dev_mdps, 0.0, f32::MAX) && above(m.accel_norm_tol_mg, 0.0, f32::MAX));
         if cal.samples == 0 || !check_ok {
             return Err(ConfigError::Calibration);
         }

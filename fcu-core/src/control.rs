@@ -4,8 +4,10 @@
 //! Axis order everywhere is `[x, y, z]` = `[pitch, roll, yaw]` (the reference's naming:
 //! pitch is the rotation about body X).
 
+use crate::config::{above, within};
+
 /// Gains and limits of one axis of the cascade.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub struct AxisGains {
     /// Outer (angle) loop: rate demand = kp·e + ki·∫e, rad/s per rad.
     pub outer_kp: f32,
@@ -23,6 +25,25 @@ pub struct AxisGains {
     pub d_lowpass: bool,
 }
 
+/// The derived comparison, field by field, out of line: derived, it is inlined into
+/// `ControlConfig`'s for two of the three axes (some 170 bytes each at opt-level 3).
+impl PartialEq for AxisGains {
+    #[inline(never)]
+    fn eq(&self, other: &AxisGains) -> bool {
+        // Destructured: a field added to the struct must be added here.
+        let AxisGains { outer_kp, outer_ki, outer_i_limit, inner_kp, inner_ki, inner_kd, inner_i_limit, output_limit, d_lowpass } = *self;
+        outer_kp == other.outer_kp
+            && outer_ki == other.outer_ki
+            && outer_i_limit == other.outer_i_limit
+            && inner_kp == other.inner_kp
+            && inner_ki == other.inner_ki
+            && inner_kd == other.inner_kd
+            && inner_i_limit == other.inner_i_limit
+            && output_limit == other.output_limit
+            && d_lowpass == other.d_lowpass
+    }
+}
+
 impl AxisGains {
     fn is_valid(&self) -> bool {
         let v = [
@@ -35,7 +56,7 @@ impl AxisGains {
             self.inner_i_limit,
             self.output_limit,
         ];
-        v.iter().all(|g| g.is_finite() && *g >= 0.0)
+        v.iter().all(|&g| within(g, 0.0, f32::MAX))
     }
 }
 
@@ -117,7 +138,8 @@ impl ThrustCurve {
 
     /// A curve whose thrust rises with the duty over the whole range, tuned inside it.
     pub fn is_valid(&self) -> bool {
-        let finite = self.quad.is_finite() && self.lin.is_finite() && self.reference_duty.is_finite();
+        let finite = within(self.quad, f32::MIN, f32::MAX) && within(self.lin, f32::MIN, f32::MAX);
+        // Between 0 and 1, so finite.
         finite && self.slope(0.0) > 0.0 && self.slope(1.0) > 0.0 && self.reference_duty > 0.0 && self.reference_duty < 1.0
     }
 
@@ -160,12 +182,7 @@ impl BatteryCompensation {
     pub const LIPO_1S: BatteryCompensation = BatteryCompensation { nominal_mv: 4000, min_valid_mv: 2500, max_gain: 1.5, filter_s: 2.0 };
 
     pub fn is_valid(&self) -> bool {
-        self.nominal_mv > 0
-            && self.min_valid_mv > 0
-            && self.max_gain.is_finite()
-            && (1.0..=4.0).contains(&self.max_gain)
-            && self.filter_s.is_finite()
-            && self.filter_s > 0.0
+        self.nominal_mv > 0 && self.min_valid_mv > 0 && within(self.max_gain, 1.0, 4.0) && above(self.filter_s, 0.0, f32::MAX)
     }
 
     /// The thrust gain for a (filtered) battery voltage.
@@ -339,15 +356,12 @@ impl ControlConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        let dt_ok = |dt: f32| dt.is_finite() && dt > 0.0;
+        let dt_ok = |dt: f32| above(dt, 0.0, f32::MAX);
         self.axes().iter().all(|a| a.is_valid())
-            && self.d_filter_k.is_finite()
-            && self.d_filter_k > 0.0
-            && self.d_filter_k <= 1.0
+            && above(self.d_filter_k, 0.0, 1.0)
             && dt_ok(self.inner_dt_s)
             && dt_ok(self.outer_integrator_dt_s)
-            && self.yaw_rate_feedforward.is_finite()
-            && (0.0..=1.5).contains(&self.yaw_rate_feedforward)
+            && within(self.yaw_rate_feedforward, 0.0, 1.5)
             && self.yaw_shaping.is_none_or(|y| y.is_valid())
             && self.battery.is_none_or(|b| b.is_valid())
             && self.thrust_curve.is_none_or(|c| c.is_valid())
@@ -377,7 +391,7 @@ pub struct YawShaping {
 impl YawShaping {
     /// Stages from 1 ms (the acceleration is divided by it) to 1 s, a lead of at most 0.5 s.
     pub fn is_valid(&self) -> bool {
-        self.stage_s.is_finite() && (0.001..=1.0).contains(&self.stage_s) && self.lead_s.is_finite() && (0.0..=0.5).contains(&self.lead_s)
+        within(self.stage_s, 0.001, 1.0) && within(self.lead_s, 0.0, 0.5)
     }
 }
 
@@ -653,6 +667,32 @@ fn clamp_symmetric(v: f32, lim: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn axis_gains_differ_in_any_one_field() {
+        let a = ControlConfig::REFERENCE.pitch;
+        assert_eq!(a, a);
+        let changes: [fn(&mut AxisGains); 9] = [
+            |g| g.outer_kp += 1.0,
+            |g| g.outer_ki += 1.0,
+            |g| g.outer_i_limit += 1.0,
+            |g| g.inner_kp += 1.0,
+            |g| g.inner_ki += 1.0,
+            |g| g.inner_kd += 1.0,
+            |g| g.inner_i_limit += 1.0,
+            |g| g.output_limit += 1.0,
+            |g| g.d_lowpass = !g.d_lowpass,
+        ];
+        for (i, change) in changes.iter().enumerate() {
+            let mut b = a;
+            change(&mut b);
+            assert_ne!(a, b, "field {i}");
+        }
+        // As f32 compares: -0 equals 0, a NaN nothing.
+        assert_eq!(AxisGains { outer_ki: -0.0, ..a }, AxisGains { outer_ki: 0.0, ..a });
+        let nan = AxisGains { inner_kd: f32::NAN, ..a };
+        assert_ne!(nan, nan);
+    }
 
     // The reference's rate loop (derivative on error, winding up) is compiled in with the
     // `reference` feature only.

@@ -83,9 +83,11 @@ impl MixerConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        let finite = [self.throttle_slope, self.throttle_offset, self.min_compare, self.max_compare].iter().all(|v| v.is_finite());
-        finite
-            && self.throttle_slope >= 0.0
+        use crate::config::within;
+        within(self.throttle_slope, 0.0, f32::MAX)
+            && within(self.throttle_offset, f32::MIN, f32::MAX)
+            // Both compares finite: the minimum at least 0, the maximum above it and at most
+            // the period.
             && self.min_compare >= 0.0
             && self.min_compare < self.max_compare
             && self.max_compare <= self.period_counts()

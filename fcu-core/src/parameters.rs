@@ -4,7 +4,7 @@
 //! Each parameter is a name (at most [`NAME_LEN`] characters, upper case, as MAVLink's
 //! `param_id` carries it and MAVProxy writes it), a unit, bounds, a step (any value, whole
 //! numbers, or quarter microseconds, the capture clock's resolution), when a change may apply
-//! ([`Applies`]), and a getter and a setter on [`Config`]. Every value is an `f32` (MAVLink's
+//! ([`Applies`]), and the setting of [`Config`] it reads and writes. Every value is an `f32` (MAVLink's
 //! `REAL32`); whole-number parameters stay far below 2^24, so they are exact.
 //!
 //! A change goes through [`set`]: a value that is not finite, out of bounds, off its step, not
@@ -33,12 +33,14 @@
 //! - Saving: [`values`] into [`snapshot::plan_save`]; at boot [`snapshot::load_config`].
 //! - Files in MAVProxy's format: [`write_file`], [`apply_file`].
 
+mod field;
 pub mod snapshot;
 
-use crate::config::{Config, LinkProtocol};
+use crate::config::Config;
 use crate::filter::BiquadCoeffs;
-use crate::rc::{Function, RcInput, StickCounts, COUNTS_PER_US};
+use crate::rc::{Function, StickCounts, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
+use field::{Axis, Endpoint, Field, Gain, SafetyTime, Stick};
 
 /// The longest name: MAVLink's `param_id` is 16 bytes, NUL-terminated only when shorter.
 pub const NAME_LEN: usize = 16;
@@ -115,8 +117,7 @@ pub struct Param {
     pub max: f32,
     pub step: Step,
     pub applies: Applies,
-    get: fn(&Config) -> f32,
-    set: fn(&mut Config, f32) -> SetResult,
+    field: Field,
 }
 
 /// A parameter as the table defines it: itself and one line for the parameter list.
@@ -135,7 +136,7 @@ impl core::fmt::Debug for Param {
 impl Param {
     /// The value in `cfg`.
     pub fn get(&self, cfg: &Config) -> f32 {
-        (self.get)(cfg)
+        self.field.get(cfg)
     }
 }
 
@@ -228,7 +229,7 @@ pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Ap
         return Err(refuse(RULE_ARMED));
     }
     let mut next = *cfg;
-    (p.set)(&mut next, value).map_err(refuse)?;
+    p.field.set(&mut next, value).map_err(refuse)?;
     if let Err(e) = next.validate() {
         let rule = match e {
             crate::ConfigError::Rc => next.rc.problem().unwrap_or(e.rule()),
@@ -250,8 +251,11 @@ pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, armed: bool) -> Resu
 }
 
 /// Finite, within bounds, on the step.
+// Out of line: one copy for a set and a whole set.
+#[inline(never)]
 fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
-    if !v.is_finite() {
+    // Two comparisons, where `is_finite` is a bit-pattern test.
+    if !crate::config::within(v, f32::MIN, f32::MAX) {
         return Err(RULE_NOT_FINITE);
     }
     if v < p.min {
@@ -260,13 +264,16 @@ fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
     if v > p.max {
         return Err(RULE_ABOVE_MAX);
     }
-    match p.step {
-        Step::Any => Ok(()),
-        // Bounded by |max| < 2^24: the fraction test is exact.
-        Step::Integer if libm::truncf(v) != v => Err(RULE_NOT_WHOLE),
-        Step::QuarterUs if libm::truncf(v * 4.0) != v * 4.0 => Err(RULE_NOT_QUARTER_US),
-        _ => Ok(()),
+    let (steps, rule) = match p.step {
+        Step::Any => return Ok(()),
+        Step::Integer => (v, RULE_NOT_WHOLE),
+        Step::QuarterUs => (v * 4.0, RULE_NOT_QUARTER_US),
+    };
+    // Within bounds, |steps| < 2^24: it converts to i32 and back unchanged only if whole.
+    if (steps as i32) as f32 != steps {
+        return Err(rule);
     }
+    Ok(())
 }
 
 /// Every parameter's value in `cfg`, in table order.
@@ -282,7 +289,7 @@ pub fn with_values(base: &Config, values: &[f32; COUNT]) -> Result<Config, &'sta
     let mut cfg = *base;
     for (p, &v) in TABLE.iter().zip(values) {
         check_value(p, v)?;
-        (p.set)(&mut cfg, v)?;
+        p.field.set(&mut cfg, v)?;
     }
     cfg.validate().map_err(|e| e.rule())?;
     Ok(cfg)
@@ -437,12 +444,10 @@ fn us_from_counts(c: u16) -> f32 {
     f32::from(c) / COUNTS_PER_US as f32
 }
 
-/// One endpoint, `field` of radio input `input` (from 0), to `us`. One copy for the twelve
-/// endpoint parameters: each table entry passes only its input and field.
-#[inline(never)]
-fn set_endpoint_us(cfg: &mut Config, input: usize, us: f32, field: fn(&mut RcInput) -> &mut u16) -> SetResult {
+/// The endpoint `which` of radio input `input` (from 0) to `us`.
+fn set_endpoint_us(cfg: &mut Config, input: usize, us: f32, which: Endpoint) -> SetResult {
     if let Some(e) = cfg.rc.inputs.get_mut(input) {
-        *field(e) = counts_from_us(us);
+        *field::endpoint_mut(e, which) = counts_from_us(us);
     }
     Ok(())
 }
@@ -464,7 +469,8 @@ fn stick_from_us(us: f32) -> StickCounts {
 /// a whole rate; 0 otherwise, which no conversion accepts).
 fn tick_hz(cfg: &Config) -> u32 {
     let hz = cfg.timing.integration_hz;
-    if hz.is_finite() && hz > 0.0 && libm::truncf(hz) == hz && hz < 1.0e6 {
+    // Between 0 and 10^6, so finite, and whole if it converts to u32 and back unchanged.
+    if hz > 0.0 && hz < 1.0e6 && (hz as u32) as f32 == hz {
         hz as u32
     } else {
         0
@@ -479,15 +485,17 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
     (ticks as f32 * 1000.0) / hz as f32
 }
 
-/// Whole milliseconds (checked) to ticks, refused unless exact. Out of line: its 64-bit
-/// division would otherwise be inlined into each caller at fcu-core's opt-level 3.
+/// Whole milliseconds (checked, within the parameters' bounds) to ticks, refused unless exact.
+/// In u32, without a 64-bit product and its division by 1000 (a few hundred bytes at opt-level
+/// 3): ms·hz = (ms / 1000)·hz·1000 + (ms % 1000)·hz, the second under 10^9 for hz < 10^6.
 #[inline(never)]
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
-    let product = (ms as u64) * u64::from(tick_hz(cfg));
-    if product == 0 || product % 1000 != 0 {
+    let (ms, hz) = (ms as u32, tick_hz(cfg));
+    let rest = (ms % 1000) * hz;
+    if ms == 0 || hz == 0 || rest % 1000 != 0 {
         return Err(RULE_NOT_TICKS);
     }
-    u32::try_from(product / 1000).map_err(|_| RULE_NOT_TICKS)
+    (ms / 1000).checked_mul(hz).and_then(|t| t.checked_add(rest / 1000)).ok_or(RULE_NOT_TICKS)
 }
 
 fn safety(cfg: &Config) -> SafetyConfig {
@@ -497,21 +505,17 @@ fn safety(cfg: &Config) -> SafetyConfig {
     }
 }
 
-/// One of the safe supervisor's times, `field`, in milliseconds. One copy for every such
-/// parameter, as for [`set_safety_ms`].
-#[inline(never)]
-fn safety_ms(cfg: &Config, field: fn(&SafetyConfig) -> u32) -> f32 {
-    ms_from_ticks(cfg, field(&safety(cfg)))
+/// The safe supervisor's time `which`, in milliseconds.
+fn safety_ms(cfg: &Config, which: SafetyTime) -> f32 {
+    ms_from_ticks(cfg, field::safety_ticks(&safety(cfg), which))
 }
 
-/// One of the safe supervisor's times, `field`, to `ms` (checked whole). One copy for every
-/// such parameter: each table entry passes only its field.
-#[inline(never)]
-fn set_safety_ms(cfg: &mut Config, ms: f32, field: fn(&mut SafetyConfig) -> &mut u32) -> SetResult {
+/// The safe supervisor's time `which` to `ms` (checked whole).
+fn set_safety_ms(cfg: &mut Config, ms: f32, which: SafetyTime) -> SetResult {
     let ticks = ticks_from_ms(cfg, ms)?;
     match &mut cfg.supervisor {
         SupervisorConfig::Safe(s) => {
-            *field(s) = ticks;
+            *field::safety_ticks_mut(s, which) = ticks;
             Ok(())
         }
         SupervisorConfig::Reference => Err(RULE_NO_SAFETY),
@@ -528,7 +532,7 @@ fn gyro_cutoff_hz(cfg: &Config) -> f32 {
         return f32::from(d.0);
     }
     let k2 = (1.0 - c.a1 - c.a2) / (1.0 + c.a1 - c.a2);
-    if !(k2.is_finite() && k2 > 0.0) {
+    if !crate::config::above(k2, 0.0, f32::MAX) {
         return 0.0;
     }
     libm::roundf(libm::atanf(libm::sqrtf(k2)) * cfg.timing.integration_hz / core::f32::consts::PI)
@@ -602,11 +606,7 @@ macro_rules! rc_map {
                 max: 4.0,
                 step: Step::Integer,
                 applies: Applies::Disarmed,
-                get: |c| f32::from(c.rc.map.input($f)) + 1.0,
-                set: |c, v| {
-                    c.rc.map.assign($f, (v as u8).saturating_sub(1));
-                    Ok(())
-                },
+                field: Field::RcMap($f),
             },
             description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
         }
@@ -614,7 +614,7 @@ macro_rules! rc_map {
 }
 
 macro_rules! rc_endpoint {
-    ($name:literal, $input:literal, $field:ident, $what:literal) => {
+    ($name:literal, $input:literal, $which:ident, $what:literal) => {
         Definition {
             param: Param {
                 name: $name,
@@ -623,8 +623,7 @@ macro_rules! rc_endpoint {
                 max: 2500.0,
                 step: Step::QuarterUs,
                 applies: Applies::Disarmed,
-                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e| us_from_counts(e.$field)),
-                set: |c, v| set_endpoint_us(c, $input - 1, v, |e| &mut e.$field),
+                field: Field::RcEndpoint($input - 1, Endpoint::$which),
             },
             description: concat!("radio input ", $input, ": ", $what),
         }
@@ -641,16 +640,7 @@ macro_rules! rc_rev {
                 max: 1.0,
                 step: Step::Integer,
                 applies: Applies::Disarmed,
-                get: |c| c.rc.inputs.get($input - 1).map_or(0.0, |e: &RcInput| if e.reversed { -1.0 } else { 1.0 }),
-                set: |c, v| {
-                    if v == 0.0 {
-                        return Err(RULE_REV);
-                    }
-                    if let Some(e) = c.rc.inputs.get_mut($input - 1) {
-                        e.reversed = v < 0.0;
-                    }
-                    Ok(())
-                },
+                field: Field::RcReversed($input - 1),
             },
             description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
         }
@@ -660,16 +650,16 @@ macro_rules! rc_rev {
 macro_rules! rc_input {
     ($min:literal, $trim:literal, $max:literal, $rev:literal, $input:literal) => {
         [
-            rc_endpoint!($min, $input, min_counts, "shortest pulse (a full deflection, or the throttle's bottom)"),
-            rc_endpoint!($trim, $input, trim_counts, "centre pulse (unused on the throttle)"),
-            rc_endpoint!($max, $input, max_counts, "longest pulse (a full deflection, or full throttle)"),
+            rc_endpoint!($min, $input, Min, "shortest pulse (a full deflection, or the throttle's bottom)"),
+            rc_endpoint!($trim, $input, Trim, "centre pulse (unused on the throttle)"),
+            rc_endpoint!($max, $input, Max, "longest pulse (a full deflection, or full throttle)"),
             rc_rev!($rev, $input),
         ]
     };
 }
 
 macro_rules! gain {
-    ($name:literal, $axis:ident . $field:ident, $max:literal, $what:literal) => {
+    ($name:literal, $axis:ident, $gain:ident, $max:literal, $what:literal) => {
         Definition {
             param: Param {
                 name: $name,
@@ -678,11 +668,7 @@ macro_rules! gain {
                 max: $max,
                 step: Step::Any,
                 applies: Applies::Anytime,
-                get: |c| c.control.$axis.$field,
-                set: |c, v| {
-                    c.control.$axis.$field = v;
-                    Ok(())
-                },
+                field: Field::Gain(Axis::$axis, Gain::$gain),
             },
             description: $what,
         }
@@ -690,7 +676,7 @@ macro_rules! gain {
 }
 
 macro_rules! safety_ms {
-    ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
+    ($name:literal, $which:ident, $min:literal, $max:literal, $what:literal) => {
         Definition {
             param: Param {
                 name: $name,
@@ -699,8 +685,7 @@ macro_rules! safety_ms {
                 max: $max,
                 step: Step::Integer,
                 applies: Applies::Disarmed,
-                get: |c| safety_ms(c, |s| s.$field),
-                set: |c, v| set_safety_ms(c, v, |s| &mut s.$field),
+                field: Field::Safety(SafetyTime::$which),
             },
             description: $what,
         }
@@ -708,7 +693,7 @@ macro_rules! safety_ms {
 }
 
 macro_rules! stick_us {
-    ($name:literal, $field:ident, $min:literal, $max:literal, $what:literal) => {
+    ($name:literal, $which:ident, $min:literal, $max:literal, $what:literal) => {
         Definition {
             param: Param {
                 name: $name,
@@ -717,11 +702,7 @@ macro_rules! stick_us {
                 max: $max,
                 step: Step::QuarterUs,
                 applies: Applies::Disarmed,
-                get: |c| stick_us(c.rc.$field),
-                set: |c, v| {
-                    c.rc.$field = stick_from_us(v);
-                    Ok(())
-                },
+                field: Field::Stick(Stick::$which),
             },
             description: $what,
         }
@@ -799,28 +780,24 @@ const DEFINITION: [Definition; COUNT] = [
             max: 500.0,
             step: Step::Integer,
             applies: Applies::Disarmed,
-            get: |c| ms_from_ticks(c, c.rc.link_timeout_ticks),
-            set: |c, v| {
-                c.rc.link_timeout_ticks = ticks_from_ms(c, v)?;
-                Ok(())
-            },
+            field: Field::RcTimeoutMs,
         },
         description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
     },
     stick_us!(
         "GESTURE_US",
-        gesture_threshold,
+        GestureThreshold,
         100.0,
         449.0,
         "stick travel from centre (or the throttle's bottom) that counts for a gesture"
     ),
-    stick_us!("THR_MIN_US", min_throttle, 0.0, 400.0, "throttle travel below which the throttle is low (motors stop, disarm gesture)"),
-    stick_us!("YAW_DEADBAND_US", yaw_deadband, 0.0, 300.0, "yaw stick travel from centre that asks for no turn"),
-    safety_ms!("ARM_HOLD_MS", arm_hold_ticks, 100.0, 5000.0, "the arm gesture must be held this long, then released"),
-    safety_ms!("DISARM_HOLD_MS", disarm_hold_ticks, 100.0, 5000.0, "the disarm gesture must be held this long"),
-    safety_ms!("DISARM_DELAY_MS", auto_disarm_ticks, 1000.0, 60000.0, "armed with the throttle low this long disarms"),
-    safety_ms!("FS_OFF_MS", failsafe_off_ticks, 200.0, 10000.0, "lost radio time over a flight that stops the motors (failsafe stage 2)"),
-    safety_ms!("FS_RECOVER_MS", recovery_ticks, 200.0, 10000.0, "a good link must last this long to hand control back"),
+    stick_us!("THR_MIN_US", MinThrottle, 0.0, 400.0, "throttle travel below which the throttle is low (motors stop, disarm gesture)"),
+    stick_us!("YAW_DEADBAND_US", YawDeadband, 0.0, 300.0, "yaw stick travel from centre that asks for no turn"),
+    safety_ms!("ARM_HOLD_MS", ArmHold, 100.0, 5000.0, "the arm gesture must be held this long, then released"),
+    safety_ms!("DISARM_HOLD_MS", DisarmHold, 100.0, 5000.0, "the disarm gesture must be held this long"),
+    safety_ms!("DISARM_DELAY_MS", AutoDisarm, 1000.0, 60000.0, "armed with the throttle low this long disarms"),
+    safety_ms!("FS_OFF_MS", FailsafeOff, 200.0, 10000.0, "lost radio time over a flight that stops the motors (failsafe stage 2)"),
+    safety_ms!("FS_RECOVER_MS", Recovery, 200.0, 10000.0, "a good link must last this long to hand control back"),
     Definition {
         param: Param {
             name: "ANGLE_MAX",
@@ -829,11 +806,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 60.0,
             step: Step::Any,
             applies: Applies::Anytime,
-            get: |c| c.rc.max_tilt_rad.to_degrees(),
-            set: |c, v| {
-                c.rc.max_tilt_rad = v.to_radians();
-                Ok(())
-            },
+            field: Field::AngleMaxDeg,
         },
         description: "roll and pitch at full stick",
     },
@@ -845,26 +818,22 @@ const DEFINITION: [Definition; COUNT] = [
             max: 720.0,
             step: Step::Any,
             applies: Applies::Anytime,
-            get: |c| (c.rc.yaw_max_step_rad * c.timing.outer_hz()).to_degrees(),
-            set: |c, v| {
-                c.rc.yaw_max_step_rad = v.to_radians() / c.timing.outer_hz();
-                Ok(())
-            },
+            field: Field::YawRateMaxDegS,
         },
         description: "yaw rate at full stick",
     },
-    gain!("ANG_RLL_P", roll.outer_kp, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
-    gain!("ANG_PIT_P", pitch.outer_kp, 20.0, "pitch angle loop: rate demand per angle error, 1/s"),
-    gain!("ANG_YAW_P", yaw.outer_kp, 20.0, "heading loop: yaw rate demand per heading error, 1/s"),
-    gain!("RATE_RLL_P", roll.inner_kp, 5000.0, "roll rate loop P, compare counts per rad/s"),
-    gain!("RATE_RLL_I", roll.inner_ki, 5000.0, "roll rate loop I, counts per rad"),
-    gain!("RATE_RLL_D", roll.inner_kd, 500.0, "roll rate loop D, counts per rad/s^2"),
-    gain!("RATE_PIT_P", pitch.inner_kp, 5000.0, "pitch rate loop P, compare counts per rad/s"),
-    gain!("RATE_PIT_I", pitch.inner_ki, 5000.0, "pitch rate loop I, counts per rad"),
-    gain!("RATE_PIT_D", pitch.inner_kd, 500.0, "pitch rate loop D, counts per rad/s^2"),
-    gain!("RATE_YAW_P", yaw.inner_kp, 5000.0, "yaw rate loop P, compare counts per rad/s"),
-    gain!("RATE_YAW_I", yaw.inner_ki, 5000.0, "yaw rate loop I, counts per rad"),
-    gain!("RATE_YAW_D", yaw.inner_kd, 500.0, "yaw rate loop D, counts per rad/s^2"),
+    gain!("ANG_RLL_P", Roll, OuterP, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
+    gain!("ANG_PIT_P", Pitch, OuterP, 20.0, "pitch angle loop: rate demand per angle error, 1/s"),
+    gain!("ANG_YAW_P", Yaw, OuterP, 20.0, "heading loop: yaw rate demand per heading error, 1/s"),
+    gain!("RATE_RLL_P", Roll, InnerP, 5000.0, "roll rate loop P, compare counts per rad/s"),
+    gain!("RATE_RLL_I", Roll, InnerI, 5000.0, "roll rate loop I, counts per rad"),
+    gain!("RATE_RLL_D", Roll, InnerD, 500.0, "roll rate loop D, counts per rad/s^2"),
+    gain!("RATE_PIT_P", Pitch, InnerP, 5000.0, "pitch rate loop P, compare counts per rad/s"),
+    gain!("RATE_PIT_I", Pitch, InnerI, 5000.0, "pitch rate loop I, counts per rad"),
+    gain!("RATE_PIT_D", Pitch, InnerD, 500.0, "pitch rate loop D, counts per rad/s^2"),
+    gain!("RATE_YAW_P", Yaw, InnerP, 5000.0, "yaw rate loop P, compare counts per rad/s"),
+    gain!("RATE_YAW_I", Yaw, InnerI, 5000.0, "yaw rate loop I, counts per rad"),
+    gain!("RATE_YAW_D", Yaw, InnerD, 500.0, "yaw rate loop D, counts per rad/s^2"),
     Definition {
         param: Param {
             name: "YAW_FF",
@@ -873,11 +842,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 1.5,
             step: Step::Any,
             applies: Applies::Anytime,
-            get: |c| c.control.yaw_rate_feedforward,
-            set: |c, v| {
-                c.control.yaw_rate_feedforward = v;
-                Ok(())
-            },
+            field: Field::YawFeedforward,
         },
         description: "share of the yaw stick's rate fed straight to the yaw rate loop",
     },
@@ -889,8 +854,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 300.0,
             step: Step::Integer,
             applies: Applies::Disarmed,
-            get: gyro_cutoff_hz,
-            set: set_gyro_cutoff,
+            field: Field::GyroCutoffHz,
         },
         description: "gyro low-pass cut-off, 40..300 Hz in steps of 10 (second-order Butterworth at the 800 Hz tick)",
     },
@@ -902,11 +866,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 1.0,
             step: Step::Any,
             applies: Applies::Disarmed,
-            get: |c| c.control.d_filter_k,
-            set: |c, v| {
-                c.control.d_filter_k = v;
-                Ok(())
-            },
+            field: Field::RateDFilterK,
         },
         description: "rate loop D low-pass: share of each new sample, 1 = unfiltered (0.4: ~65 Hz at 800 Hz)",
     },
@@ -918,11 +878,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 10.0,
             step: Step::Any,
             applies: Applies::Disarmed,
-            get: |c| c.battery_sense.volt_mult,
-            set: |c, v| {
-                c.battery_sense.volt_mult = v;
-                Ok(())
-            },
+            field: Field::BatteryVoltMult,
         },
         description: "battery volts per volt at the ADC pin (the board's divider: 1.5)",
     },
@@ -934,14 +890,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 1.0,
             step: Step::Integer,
             applies: Applies::Reboot,
-            get: |c| match c.link.protocol {
-                LinkProtocol::TextLines => 0.0,
-                LinkProtocol::Mavlink => 1.0,
-            },
-            set: |c, v| {
-                c.link.protocol = if v == 0.0 { LinkProtocol::TextLines } else { LinkProtocol::Mavlink };
-                Ok(())
-            },
+            field: Field::LinkProtocol,
         },
         description: "USART1: 0 text lines (serial plotter), 1 MAVLink",
     },
@@ -953,11 +902,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 50.0,
             step: Step::Integer,
             applies: Applies::Anytime,
-            get: |c| f32::from(c.link.attitude_hz),
-            set: |c, v| {
-                c.link.attitude_hz = v as u8;
-                Ok(())
-            },
+            field: Field::LinkAttitudeHz,
         },
         description: "attitude messages per second",
     },
@@ -969,11 +914,7 @@ const DEFINITION: [Definition; COUNT] = [
             max: 50.0,
             step: Step::Integer,
             applies: Applies::Anytime,
-            get: |c| f32::from(c.link.rc_hz),
-            set: |c, v| {
-                c.link.rc_hz = v as u8;
-                Ok(())
-            },
+            field: Field::LinkRcHz,
         },
         description: "radio input and motor output messages per second",
     },

@@ -299,43 +299,48 @@ impl RcConfig {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        let rules: [(bool, &'static str); 11] = [
-            (self.map.is_permutation(), "RCMAP: each input once"),
-            (self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"),
-            (self.endpoints_ordered(), "RCn: need MIN <= TRIM <= MAX"),
-            (self.endpoints_span(), "RCn: MIN/TRIM/MAX too close"),
+        // Each rule in turn, returning at the first broken: an array of every rule's verdict,
+        // searched after, evaluates them all (a kilobyte at fcu-core's opt-level 3).
+        let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
+        broken(self.map.is_permutation(), "RCMAP: each input once")
+            .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
+            .or_else(|| self.endpoints_problem())
             // A gesture is a stick beyond the threshold while the others are centred: it must
             // be reachable, and a centred stick must not make one.
-            (self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"),
-            (
-                self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
-                "THR_MIN past the throttle travel",
-            ),
-            (self.max_tilt_rad.is_finite() && self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"),
-            (self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale"),
-            (self.yaw_max_step_rad.is_finite() && self.yaw_max_step_rad >= 0.0, "yaw rate out of range"),
-            (self.link_timeout_ticks > 0, "radio timeout is zero"),
-            (pulses_ok, "pulse limits invalid"),
-        ];
-        rules.into_iter().find(|(ok, _)| !ok).map(|(_, rule)| rule)
+            .or_else(|| broken(self.gesture_threshold > CENTRED_COUNTS && self.gesture_threshold < self.full_scale, "gesture: 76..449 us"))
+            .or_else(|| {
+                broken(
+                    self.min_throttle >= StickCounts::ZERO && i32::from(self.min_throttle) < 2 * i32::from(self.full_scale),
+                    "THR_MIN past the throttle travel",
+                )
+            })
+            .or_else(|| broken(self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"))
+            .or_else(|| {
+                broken(self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale")
+            })
+            .or_else(|| broken(crate::config::within(self.yaw_max_step_rad, 0.0, f32::MAX), "yaw rate out of range"))
+            .or_else(|| broken(self.link_timeout_ticks > 0, "radio timeout is zero"))
+            .or_else(|| broken(pulses_ok, "pulse limits invalid"))
     }
 
-    /// Every input: `min <= trim <= max`, inside the capture wrap.
-    fn endpoints_ordered(&self) -> bool {
-        self.inputs.iter().all(|e| e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP)
-    }
-
-    /// A centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
-    /// either end, the throttle's that much travel.
-    fn endpoints_span(&self) -> bool {
+    /// The endpoints' rule broken: every input `min <= trim <= max` inside the capture wrap,
+    /// then a centred function's input at least [`MIN_ENDPOINT_SPAN_COUNTS`] from its trim to
+    /// either end and the throttle's that much travel. One pass over the inputs: an input out
+    /// of order is reported before any too close, wherever it is.
+    fn endpoints_problem(&self) -> Option<&'static str> {
         let span = i32::from(MIN_ENDPOINT_SPAN_COUNTS);
-        self.inputs.iter().enumerate().all(|(i, e)| {
-            let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
-            match self.map.function(i) {
-                Function::Throttle => max - min >= span,
-                _ => trim - min >= span && max - trim >= span,
+        let mut too_close = false;
+        for (i, e) in self.inputs.iter().enumerate() {
+            if !(e.min_counts <= e.trim_counts && e.trim_counts <= e.max_counts && u32::from(e.max_counts) < CAPTURE_WRAP) {
+                return Some("RCn: need MIN <= TRIM <= MAX");
             }
-        })
+            let (min, trim, max) = (i32::from(e.min_counts), i32::from(e.trim_counts), i32::from(e.max_counts));
+            too_close |= match self.map.function(i) {
+                Function::Throttle => max - min < span,
+                _ => trim - min < span || max - trim < span,
+            };
+        }
+        too_close.then_some("RCn: MIN/TRIM/MAX too close")
     }
 
     /// The endpoints of the input that carries `f` (a map naming no input, which
@@ -962,6 +967,15 @@ mod tests {
         assert!(c.is_valid());
         c.map.assign(Function::Roll, THR as u8);
         assert!(!c.is_valid());
+    }
+
+    #[test]
+    fn an_input_out_of_order_is_named_before_one_too_close_wherever_they_are() {
+        let mut c = REF;
+        c.inputs[AIL].max_counts = c.inputs[AIL].trim_counts + 1;
+        assert_eq!(c.problem(), Some("RCn: MIN/TRIM/MAX too close"));
+        c.inputs[RUD].trim_counts = c.inputs[RUD].max_counts + 1;
+        assert_eq!(c.problem(), Some("RCn: need MIN <= TRIM <= MAX"));
     }
 
     #[test]

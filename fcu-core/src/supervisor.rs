@@ -69,8 +69,7 @@ impl SafetyConfig {
             && self.failsafe_off_ticks > 0
             && self.recovery_ticks > 0
             && self.loss_forget_ticks > 0
-            && self.max_arm_tilt_rad.is_finite()
-            && self.max_arm_tilt_rad > 0.0
+            && crate::config::above(self.max_arm_tilt_rad, 0.0, f32::MAX)
     }
 }
 

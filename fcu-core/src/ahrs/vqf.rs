@@ -101,14 +101,14 @@ impl VqfConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        let positive = |x: f32| x.is_finite() && x > 0.0;
+        use crate::config::{above, within};
+        let positive = |x: f32| above(x, 0.0, f32::MAX);
         positive(self.dt_s)
             && positive(self.tau_acc_s)
             && positive(self.rest_filter_tau_s)
             && positive(self.rest_th_gyr_dps)
             && positive(self.rest_th_acc_mg)
-            && self.rest_min_s.is_finite()
-            && self.rest_min_s >= 0.0
+            && within(self.rest_min_s, 0.0, f32::MAX)
             && positive(self.bias_clip_dps)
             && positive(self.bias_sigma_init_dps)
             && positive(self.bias_forgetting_time_s)
