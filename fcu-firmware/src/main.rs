@@ -108,7 +108,7 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use crate::sensor_bus::{BusError, SensorBus, BURST_BYTES};
-    use crate::timers::{Motors, RcCapture, TickTimer};
+    use crate::timers::{Motors, RcCapture, TickStart, TickTimer};
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
@@ -332,7 +332,7 @@ mod app {
             gpioa.pa3.into_pull_down_input().into_alternate::<1>(),
         );
         let capture = RcCapture::new(dp.TIM2, capture_pins, &mut rcc);
-        let mut tick_timer = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
+        let (tick_timer, tick_start) = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
 
         // PCLK2 / 4 = 21 MHz: the F401's ADC clock must stay at or under 36 MHz (datasheet),
         // and ST's code uses the same divider.
@@ -352,7 +352,9 @@ mod app {
         let watchdog = if boot.may_fly() { Watchdog::start(dp.IWDG, &dp.DBGMCU).ok() } else { None };
         boot = boot.with_watchdog(watchdog.is_some());
         if boot.may_fly() {
-            tick_timer.start();
+            if start_ticking::spawn(tick_start).is_err() {
+                defmt::error!("tick start already spawned");
+            }
         } else {
             // No flight (the core's verdict): TIM9 stays stopped, so `control` never runs and
             // the motors stay off. The watchdog is not armed, so the LED code and the UART
@@ -782,6 +784,13 @@ mod app {
             tlm::write_debug_line(&mut line, &tlm::debug_fields(status));
             cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
         }
+    }
+
+    /// Starts the control tick once `init` has returned, RTIC has put every resource in place
+    /// and the interrupts are enabled (see `TickStart`).
+    #[task(priority = 1)]
+    async fn start_ticking(_cx: start_ticking::Context, tick_start: TickStart) {
+        tick_start.start();
     }
 
     /// The ground station's link (`crate::ground`): MAVLink on USART1, with the `mavlink`

@@ -228,9 +228,25 @@ pub struct TickTimer {
     tim: TIM9,
 }
 
+/// The right to start TIM9, apart from the [`TickTimer`] the control task keeps: boot hands
+/// it to a task that runs once every resource is in place and the interrupts are enabled.
+/// Started at the end of `init` instead, TIM9 would count through what follows it (RTIC
+/// moving the resources into place, and whatever the compiler schedules after the start) with
+/// every interrupt masked.
+pub struct TickStart(());
+
+impl TickStart {
+    pub fn start(self) {
+        // SAFETY: CR1 is written only here, once, after `TickTimer::new` set it up and before
+        // the timer runs; `TickTimer` reads SR and writes SR, registers this never touches.
+        let tim = unsafe { &*TIM9::ptr() };
+        tim.cr1().modify(|_, w| w.cen().set_bit());
+    }
+}
+
 impl TickTimer {
-    /// Configures TIM9 but does not start it: [`TickTimer::start`] is the last step of boot.
-    pub fn new(tim: TIM9, psc: u16, arr: u16, rcc: &mut Rcc) -> Self {
+    /// Configures TIM9 but does not start it: [`TickStart::start`] is the last step of boot.
+    pub fn new(tim: TIM9, psc: u16, arr: u16, rcc: &mut Rcc) -> (Self, TickStart) {
         TIM9::enable(rcc);
         TIM9::reset(rcc);
         tim.psc().write(|w| w.psc().set(psc));
@@ -245,11 +261,7 @@ impl TickTimer {
         tim.egr().write(|w| w.ug().set_bit());
         tim.sr().write(|w| w.uif().clear_bit().cc1if().clear_bit());
         tim.dier().write(|w| w.uie().set_bit().cc1ie().set_bit());
-        TickTimer { tim }
-    }
-
-    pub fn start(&mut self) {
-        self.tim.cr1().modify(|_, w| w.cen().set_bit());
+        (TickTimer { tim }, TickStart(()))
     }
 
     /// Which of the interrupt's events are pending, each cleared (rc_w0: a 0 clears, a 1
