@@ -19,8 +19,7 @@ pub(crate) struct Derived {
 
 impl Derived {
     /// The one place where a configuration becomes the values the pipeline works with, at
-    /// unity gains. Out of line: at boot and in both halves of the loop on a change.
-    #[inline(never)]
+    /// unity gains.
     pub(crate) fn new(cfg: &Config) -> Derived {
         let decoder = Decoder::new(&cfg.imu);
         let outer_hz = cfg.timing.outer_hz();
