@@ -218,7 +218,6 @@ pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
     let found = newest(sectors);
     let sequence = found.map_or(1, |(s, _)| s.sequence.wrapping_add(1));
     let words = encode(sequence, values);
-    let erased = |words: &[u32]| !words.is_empty() && words.iter().all(|&w| w == ERASED);
     // The slot after the last one written to in the newest snapshot's sector (a save cut
     // short leaves its slot used): everything after it is erased, the newest untouched.
     let (sector, next) = match found {
@@ -235,8 +234,15 @@ pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
     // The sector is full (or there is no snapshot): the other one, erased unless it is.
     let other = if found.is_some() { sector ^ 1 } else { 0 };
     let other_words = sectors.get(other).copied().unwrap_or(&[]);
-    let fresh = other_words.get(..SLOTS * RECORD_WORDS).is_some_and(|w| w.iter().all(|&x| x == ERASED));
+    let fresh = other_words.get(..SLOTS * RECORD_WORDS).is_some_and(erased);
     SavePlan { erase: (!fresh).then_some(other), sector: other, first_word: 0, words }
+}
+
+/// Words that are all erased flash (and at least one). Out of line: the save asks it of every
+/// slot and of a whole sector, and at fcu-core's opt-level each copy would be unrolled.
+#[inline(never)]
+fn erased(words: &[u32]) -> bool {
+    !words.is_empty() && words.iter().all(|&w| w == ERASED)
 }
 
 #[cfg(test)]
