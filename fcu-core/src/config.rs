@@ -48,6 +48,11 @@ pub struct Timing {
 /// The timers' input clock, Hz (APB2 timers at 84 MHz).
 pub const TIMER_CLOCK_HZ: u32 = 84_000_000;
 
+/// Timer clock cycles per radio capture count (the capture clock is `COUNTS_PER_US` MHz).
+const TIMER_CYCLES_PER_COUNT: u32 = TIMER_CLOCK_HZ / (COUNTS_PER_US * 1_000_000);
+// The pulse-window check counts in whole cycles per count.
+const _: () = assert!(TIMER_CYCLES_PER_COUNT * COUNTS_PER_US * 1_000_000 == TIMER_CLOCK_HZ);
+
 impl Timing {
     /// The tick rate the timer really produces, Hz.
     pub fn tick_hz(&self) -> f32 {
@@ -344,15 +349,16 @@ impl Config {
         let PulseRules::Validated { min_counts, max_counts, max_pulse_ticks } = self.rc.pulses else {
             return true;
         };
-        // Ticks spanned by `counts`: counts × timer clock / (capture clock × tick divider).
+        // Ticks spanned by `counts`: counts × timer clock / (capture clock × tick divider), that
+        // is counts × TIMER_CYCLES_PER_COUNT / divider, in 32 bits (no 64-bit division linked):
+        // counts × 21 stays under 2^22, so the one divider past 32 bits (2^32) spans as u32::MAX.
         let t = &self.timing;
-        let divider = (u64::from(t.tick_timer_psc) + 1) * (u64::from(t.tick_timer_arr) + 1);
-        let per = u64::from(COUNTS_PER_US) * 1_000_000 * divider;
-        let ticks_ceil = |counts: u64| (counts * u64::from(TIMER_CLOCK_HZ)).div_ceil(per);
-        let ticks_floor = |counts: u64| counts * u64::from(TIMER_CLOCK_HZ) / per;
-        let longest_valid = ticks_ceil(u64::from(max_counts)) + 1;
-        let shortest_alias = ticks_floor(u64::from(CAPTURE_WRAP) + u64::from(min_counts)).saturating_sub(2);
-        let window = u64::from(max_pulse_ticks);
+        let divider = u32::try_from((u64::from(t.tick_timer_psc) + 1) * (u64::from(t.tick_timer_arr) + 1)).unwrap_or(u32::MAX);
+        let ticks_ceil = |counts: u32| (counts * TIMER_CYCLES_PER_COUNT).div_ceil(divider);
+        let ticks_floor = |counts: u32| counts * TIMER_CYCLES_PER_COUNT / divider;
+        let longest_valid = ticks_ceil(u32::from(max_counts)) + 1;
+        let shortest_alias = ticks_floor(CAPTURE_WRAP + u32::from(min_counts)).saturating_sub(2);
+        let window = u32::from(max_pulse_ticks);
         longest_valid <= window && window <= shortest_alias
     }
 }
@@ -460,6 +466,49 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The window check as first written, in 64 bits: the 32-bit one must agree with it.
+    fn pulse_window_in_u64(psc: u16, arr: u16, min_counts: u16, max_counts: u16, max_pulse_ticks: u16) -> bool {
+        let divider = (u64::from(psc) + 1) * (u64::from(arr) + 1);
+        let per = u64::from(COUNTS_PER_US) * 1_000_000 * divider;
+        let ticks_ceil = |counts: u64| (counts * u64::from(TIMER_CLOCK_HZ)).div_ceil(per);
+        let ticks_floor = |counts: u64| counts * u64::from(TIMER_CLOCK_HZ) / per;
+        let longest_valid = ticks_ceil(u64::from(max_counts)) + 1;
+        let shortest_alias = ticks_floor(u64::from(CAPTURE_WRAP) + u64::from(min_counts)).saturating_sub(2);
+        let window = u64::from(max_pulse_ticks);
+        longest_valid <= window && window <= shortest_alias
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_pulse_window_check_in_32_bits_is_the_64_bit_one(
+            psc in proptest::prop_oneof![0u16..200, proptest::num::u16::ANY],
+            arr in proptest::prop_oneof![0u16..2000, proptest::num::u16::ANY],
+            min_counts in proptest::num::u16::ANY,
+            max_counts in proptest::num::u16::ANY,
+            max_pulse_ticks in proptest::prop_oneof![1u16..10, 1u16..],
+        ) {
+            let mut cfg = Config::DEFAULT;
+            cfg.timing.tick_timer_psc = psc;
+            cfg.timing.tick_timer_arr = arr;
+            cfg.rc.pulses = PulseRules::Validated { min_counts, max_counts, max_pulse_ticks };
+            proptest::prop_assert_eq!(
+                cfg.pulse_window_cannot_alias(),
+                pulse_window_in_u64(psc, arr, min_counts, max_counts, max_pulse_ticks)
+            );
+        }
+    }
+
+    #[test]
+    fn the_pulse_window_check_at_the_largest_divider() {
+        for (min_counts, max_counts, ticks) in [(0, 0, 1), (3200, 8800, 3), (u16::MAX, u16::MAX, u16::MAX)] {
+            let mut cfg = Config::DEFAULT;
+            cfg.timing.tick_timer_psc = u16::MAX;
+            cfg.timing.tick_timer_arr = u16::MAX;
+            cfg.rc.pulses = PulseRules::Validated { min_counts, max_counts, max_pulse_ticks: ticks };
+            assert_eq!(cfg.pulse_window_cannot_alias(), pulse_window_in_u64(u16::MAX, u16::MAX, min_counts, max_counts, ticks));
+        }
+    }
 
     #[test]
     fn both_profiles_are_valid() {
