@@ -500,7 +500,14 @@ mod tests {
     }
 
     #[test]
-    fn the_pulse_window_check_at_the_largest_divider() {
+    fn the_pulse_window_check_at_the_largest_divider_and_where_a_window_fits() {
+        // A window that fits (random inputs rarely make one): the longest valid pulse spans
+        // 1 tick, the shortest alias far more.
+        let mut fits = Config::DEFAULT;
+        (fits.timing.tick_timer_psc, fits.timing.tick_timer_arr) = (27, 1451);
+        fits.rc.pulses = PulseRules::Validated { min_counts: 0, max_counts: 1, max_pulse_ticks: 2 };
+        assert!(fits.pulse_window_cannot_alias());
+        assert!(pulse_window_in_u64(27, 1451, 0, 1, 2));
         for (min_counts, max_counts, ticks) in [(0, 0, 1), (3200, 8800, 3), (u16::MAX, u16::MAX, u16::MAX)] {
             let mut cfg = Config::DEFAULT;
             cfg.timing.tick_timer_psc = u16::MAX;
