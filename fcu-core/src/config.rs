@@ -56,9 +56,13 @@ const _: () = assert!(TIMER_CYCLES_PER_COUNT * COUNTS_PER_US * 1_000_000 == TIME
 impl Timing {
     /// The tick rate the timer really produces, Hz.
     pub fn tick_hz(&self) -> f32 {
-        // In u64: (PSC + 1)·(ARR + 1) reaches 2^32 at PSC = ARR = 65 535.
-        let div = (u64::from(self.tick_timer_psc) + 1) * (u64::from(self.tick_timer_arr) + 1);
-        TIMER_CLOCK_HZ as f32 / div as f32
+        TIMER_CLOCK_HZ as f32 / self.tick_divider() as f32
+    }
+
+    /// Timer clock cycles per tick, (PSC + 1)·(ARR + 1): in u64, since it reaches 2^32 at
+    /// PSC = ARR = 65 535.
+    pub fn tick_divider(&self) -> u64 {
+        (u64::from(self.tick_timer_psc) + 1) * (u64::from(self.tick_timer_arr) + 1)
     }
 
     /// The dt every per-tick integration assumes, s.
@@ -352,8 +356,7 @@ impl Config {
         // Ticks spanned by `counts`: counts × timer clock / (capture clock × tick divider), that
         // is counts × TIMER_CYCLES_PER_COUNT / divider, in 32 bits (no 64-bit division linked):
         // counts × 21 stays under 2^22, so the one divider past 32 bits (2^32) spans as u32::MAX.
-        let t = &self.timing;
-        let divider = u32::try_from((u64::from(t.tick_timer_psc) + 1) * (u64::from(t.tick_timer_arr) + 1)).unwrap_or(u32::MAX);
+        let divider = u32::try_from(self.timing.tick_divider()).unwrap_or(u32::MAX);
         let ticks_ceil = |counts: u32| (counts * TIMER_CYCLES_PER_COUNT).div_ceil(divider);
         let ticks_floor = |counts: u32| counts * TIMER_CYCLES_PER_COUNT / divider;
         let longest_valid = ticks_ceil(u32::from(max_counts)) + 1;
