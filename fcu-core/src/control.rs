@@ -696,54 +696,52 @@ mod tests {
 
     // The reference's rate loop (derivative on error, winding up) is compiled in with the
     // `reference` feature only.
-    #[test]
     #[cfg(feature = "reference")]
-    fn inner_d_filter_matches_the_reference_worked_example() {
-        // docs/reference.md#examples: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
-        let cfg = ControlConfig::REFERENCE;
-        let mut r = RateLoop::default();
-        let none = Saturation::NONE;
-        let out = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
-        let p = 100.0 * 0.1;
-        let i = 100.0 * 0.1 * 0.00125;
-        assert!((out[0] - (p + i + 20.0)).abs() < 1e-3, "{}", out[0]);
-        let out2 = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
-        let i2 = 100.0 * 0.1 * 0.0025;
-        assert!((out2[0] - (p + i2 + 19.5)).abs() < 1e-3, "{}", out2[0]);
-    }
+    mod reference_rate_loop {
+        use super::*;
 
-    // The reference's rate loop (derivative on error, winding up) is compiled in with the
-    // `reference` feature only.
-    #[test]
-    #[cfg(feature = "reference")]
-    fn derivative_on_measurement_has_no_kick_on_a_demand_step() {
-        let mut cfg = ControlConfig::REFERENCE;
-        cfg.derivative = Derivative::OnMeasurement;
-        let none = Saturation::NONE;
-        let mut on_meas = RateLoop::default();
-        let mut on_err = RateLoop::default();
-        let a = on_meas.commands(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
-        let b = on_err.commands(&ControlConfig::REFERENCE, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
-        // P + I only, vs P + I + a 200-count derivative kick.
-        assert!(a < 101.0, "{a}");
-        assert!(b > 290.0, "{b}");
-    }
-
-    // The reference's rate loop (derivative on error, winding up) is compiled in with the
-    // `reference` feature only.
-    #[test]
-    #[cfg(feature = "reference")]
-    fn integrator_resets_while_throttle_is_low_and_is_clamped() {
-        let cfg = ControlConfig::REFERENCE;
-        let none = Saturation::NONE;
-        let mut r = RateLoop::default();
-        for _ in 0..100_000 {
-            r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
+        #[test]
+        fn inner_d_filter_matches_the_reference_worked_example() {
+            // docs/reference.md#examples: error steps 0 → 0.1 rad/s: raw_d 80, d 2.0, KD·d 20.
+            let cfg = ControlConfig::REFERENCE;
+            let mut r = RateLoop::default();
+            let none = Saturation::NONE;
+            let out = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+            let p = 100.0 * 0.1;
+            let i = 100.0 * 0.1 * 0.00125;
+            assert!((out[0] - (p + i + 20.0)).abs() < 1e-3, "{}", out[0]);
+            let out2 = r.commands(&cfg, [0.1, 0.0, 0.0], [0.0; 3], false, none);
+            let i2 = 100.0 * 0.1 * 0.0025;
+            assert!((out2[0] - (p + i2 + 19.5)).abs() < 1e-3, "{}", out2[0]);
         }
-        assert_eq!(r.integrators()[0], 20.0);
-        assert_eq!(r.integrators()[1], -20.0);
-        r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], true, none);
-        assert_eq!(r.integrators()[0], 35.0 * 0.00125);
+
+        #[test]
+        fn derivative_on_measurement_has_no_kick_on_a_demand_step() {
+            let mut cfg = ControlConfig::REFERENCE;
+            cfg.derivative = Derivative::OnMeasurement;
+            let none = Saturation::NONE;
+            let mut on_meas = RateLoop::default();
+            let mut on_err = RateLoop::default();
+            let a = on_meas.commands(&cfg, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+            let b = on_err.commands(&ControlConfig::REFERENCE, [1.0, 0.0, 0.0], [0.0; 3], false, none)[0];
+            // P + I only, vs P + I + a 200-count derivative kick.
+            assert!(a < 101.0, "{a}");
+            assert!(b > 290.0, "{b}");
+        }
+
+        #[test]
+        fn integrator_resets_while_throttle_is_low_and_is_clamped() {
+            let cfg = ControlConfig::REFERENCE;
+            let none = Saturation::NONE;
+            let mut r = RateLoop::default();
+            for _ in 0..100_000 {
+                r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], false, none);
+            }
+            assert_eq!(r.integrators()[0], 20.0);
+            assert_eq!(r.integrators()[1], -20.0);
+            r.commands(&cfg, [35.0, -35.0, 0.0], [0.0; 3], true, none);
+            assert_eq!(r.integrators()[0], 35.0 * 0.00125);
+        }
     }
 
     #[test]
