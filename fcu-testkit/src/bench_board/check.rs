@@ -1,0 +1,338 @@
+//! The bench's invariants, checked from outside the board: what the ground station sent and
+//! read back, what the flash holds, what the control loop shows and what the pilot did.
+//!
+//! The ground station's view of the parameters (`model`) starts from what the board loaded and
+//! changes only by what the board confirmed: a PARAM_VALUE carrying a value a PARAM_SET asked
+//! for (applied to the model with fcu-core's table rules, so a set that moves another
+//! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. An
+//! answer the transmit queue dropped is caught up with when the value shows up later (a report,
+//! a save, a load).
+
+use std::collections::VecDeque;
+
+use fcu_core::parameters::snapshot::{self, SavePlan, RECORD_WORDS};
+use fcu_core::parameters::{self, COUNT};
+use fcu_core::Config;
+
+use super::board::TICK_US;
+use super::flash::Flash;
+use super::ground::{cmd, Answer, GroundFrame};
+
+/// The rules the bench holds the board to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Invariant {
+    /// No reset, flash erase or program, calibration or motor test starts while armed
+    /// (arming, armed or the failsafe's level stage).
+    NothingStartsArmed,
+    /// The board arms only after the pilot held the arm gesture for the hold time.
+    ArmedOnlyByGesture,
+    /// A value the board accepted (echoed for a PARAM_SET) is the value it reports, saves and
+    /// loads after a reboot; the board's output is whole frames.
+    AcceptedIsReportedSavedLoaded,
+    /// After a power cut the loaded set is one that was in force as a whole at some point.
+    PowerCutLoadsAWholeSet,
+    /// A saved set that a rule refuses falls back to the newest saved set still valid.
+    RefusedSnapshotFallsBack,
+    /// No save or erase raises a sensor fault or makes the loop miss its data.
+    SavesKeepTheLoopRunning,
+}
+
+/// A broken invariant: which, when (bench time), and what was seen.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Violation {
+    pub invariant: Invariant,
+    pub at_ms: u64,
+    pub what: String,
+}
+
+impl std::fmt::Display for Violation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:?} at {} ms: {}", self.invariant, self.at_ms, self.what)
+    }
+}
+
+/// Why the board booted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BootKind {
+    First,
+    /// A reset the firmware decided (a reboot command).
+    Reset,
+    PowerCut,
+}
+
+/// A snapshot written whole, in the order written.
+#[derive(Clone, Debug)]
+struct Written {
+    sector: usize,
+    first_word: usize,
+    words: [u32; RECORD_WORDS],
+    values: [f32; COUNT],
+    /// Saved by the board on the bench (not found in flash at the start).
+    by_board: bool,
+}
+
+fn bits(values: &[f32; COUNT]) -> [u32; COUNT] {
+    values.map(f32::to_bits)
+}
+
+fn name(i: usize) -> &'static str {
+    parameters::name(i).unwrap_or("?")
+}
+
+/// The first parameter that differs between two sets, for a message.
+fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
+    match (0..COUNT).find(|&i| a[i].to_bits() != b[i].to_bits()) {
+        Some(i) => format!("{} = {} against {}", name(i), a[i], b[i]),
+        None => "no difference".into(),
+    }
+}
+
+/// Keeps at most this many violations of each invariant.
+const KEEP: usize = 4;
+
+pub struct Checker {
+    defaults: &'static Config,
+    model: Config,
+    /// PARAM_SETs sent and not confirmed yet: (index, value).
+    pending_sets: Vec<(usize, f32)>,
+    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1.
+    pending_storage: VecDeque<f32>,
+    /// Every set that was in force as a whole, as bits.
+    history: Vec<[u32; COUNT]>,
+    written: Vec<Written>,
+    violations: Vec<Violation>,
+    /// Sets the board confirmed.
+    pub accepted_sets: u32,
+}
+
+impl Checker {
+    pub fn new(defaults: &'static Config) -> Checker {
+        Checker {
+            defaults,
+            model: *defaults,
+            pending_sets: Vec::new(),
+            pending_storage: VecDeque::new(),
+            history: vec![bits(&parameters::values(defaults))],
+            written: Vec::new(),
+            violations: Vec::new(),
+            accepted_sets: 0,
+        }
+    }
+
+    pub fn violations(&self) -> &[Violation] {
+        &self.violations
+    }
+
+    /// The first violation of `invariant`.
+    pub fn first(&self, invariant: Invariant) -> Option<&Violation> {
+        self.violations.iter().find(|v| v.invariant == invariant)
+    }
+
+    pub fn violate(&mut self, invariant: Invariant, at_ticks: u64, what: String) {
+        if self.violations.iter().filter(|v| v.invariant == invariant).count() < KEEP {
+            self.violations.push(Violation { invariant, at_ms: at_ticks * u64::from(TICK_US) / 1000, what });
+        }
+    }
+
+    fn remember(&mut self, values: &[f32; COUNT]) {
+        let b = bits(values);
+        if self.history.last() != Some(&b) && !self.history.contains(&b) {
+            self.history.push(b);
+        }
+    }
+
+    /// The snapshots already in flash at the start, oldest first (by sequence: a history
+    /// planted on the bench has no wrap), were each in force on the board that saved them.
+    pub fn on_flash_history(&mut self, flash: &Flash) {
+        let mut found = Vec::new();
+        for (s, words) in flash.sectors().iter().enumerate() {
+            for k in 0..snapshot::SLOTS {
+                let at = k * RECORD_WORDS;
+                if let Some(snap) = snapshot::decode(&words[at..at + RECORD_WORDS]) {
+                    let mut w = [0u32; RECORD_WORDS];
+                    w.copy_from_slice(&words[at..at + RECORD_WORDS]);
+                    found.push((snap.sequence, Written { sector: s, first_word: at, words: w, values: snap.values, by_board: false }));
+                }
+            }
+        }
+        found.sort_by_key(|(seq, _)| *seq);
+        for (_, w) in found {
+            self.remember(&w.values);
+            self.written.push(w);
+        }
+    }
+
+    /// A frame the ground station sent.
+    pub fn on_sent(&mut self, frame: &GroundFrame) {
+        match *frame {
+            GroundFrame::ParamSet { name, value } => {
+                if let Some(i) = parameters::index_of(&name) {
+                    self.pending_sets.push((i, value));
+                }
+            }
+            GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back(params[0]),
+            _ => {}
+        }
+    }
+
+    /// The board confirmed parameter `i` at `value`, a PARAM_SET having asked for it.
+    fn accept(&mut self, i: usize, value: f32, at: u64) {
+        if let Some(pos) = self.pending_sets.iter().position(|&(j, v)| j == i && v.to_bits() == value.to_bits()) {
+            // Older sets of the same parameter were answered before it, one way or the other.
+            let mut k = 0;
+            self.pending_sets.retain(|&(j, _)| {
+                let keep = j != i || k > pos;
+                k += 1;
+                keep
+            });
+        }
+        let mut next = self.model;
+        match parameters::set(&mut next, i, value, false) {
+            Ok(_) => self.model = next,
+            Err(r) => self.violate(
+                Invariant::AcceptedIsReportedSavedLoaded,
+                at,
+                format!("the board took {} = {value}, which the table refuses in the set it reported: {}", name(i), r.rule),
+            ),
+        }
+        self.accepted_sets += 1;
+        let v = parameters::values(&self.model);
+        self.remember(&v);
+    }
+
+    /// Catches up with sets whose answer was dropped: where `values` differ from the model by
+    /// a value a PARAM_SET asked for, the board took it.
+    fn reconcile(&mut self, values: &[f32; COUNT], at: u64) {
+        for (i, v) in values.iter().enumerate() {
+            let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
+            if differs && self.pending_sets.iter().any(|&(j, p)| j == i && p.to_bits() == v.to_bits()) {
+                self.accept(i, *v, at);
+            }
+        }
+    }
+
+    /// An answer of the board, as it left the link.
+    pub fn on_answer(&mut self, answer: &Answer, at: u64) {
+        match answer {
+            Answer::ParamValue { name: reported, value, index } => {
+                let i = usize::from(*index);
+                let Some(current) = parameters::value(&self.model, i) else {
+                    return self.violate(
+                        Invariant::AcceptedIsReportedSavedLoaded,
+                        at,
+                        format!("PARAM_VALUE of index {i}, which does not exist"),
+                    );
+                };
+                if parameters::name(i) != Some(reported.as_str()) {
+                    self.violate(
+                        Invariant::AcceptedIsReportedSavedLoaded,
+                        at,
+                        format!("PARAM_VALUE {reported} with the index of {}", name(i)),
+                    );
+                }
+                if current.to_bits() == value.to_bits() {
+                    self.pending_sets.retain(|&(j, v)| j != i || v.to_bits() != value.to_bits());
+                } else if self.pending_sets.iter().any(|&(j, v)| j == i && v.to_bits() == value.to_bits()) {
+                    self.accept(i, *value, at);
+                } else if let Some(&(_, asked)) = self.pending_sets.iter().find(|&&(j, _)| j == i) {
+                    self.violate(
+                        Invariant::AcceptedIsReportedSavedLoaded,
+                        at,
+                        format!(
+                            "a PARAM_SET of {} = {asked} answered with {value}: neither the value asked for nor the one in force ({current})",
+                            name(i)
+                        ),
+                    );
+                } else {
+                    self.violate(
+                        Invariant::AcceptedIsReportedSavedLoaded,
+                        at,
+                        format!("the board reports {} = {value}; the value it accepted is {current}", name(i)),
+                    );
+                }
+            }
+            Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
+                if let Some(p1) = self.pending_storage.pop_front() {
+                    if *result == 0 && p1 == 2.0 {
+                        self.model = *self.defaults;
+                        let v = parameters::values(&self.model);
+                        self.remember(&v);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A save's words were all programmed.
+    pub fn on_saved(&mut self, plan: &SavePlan, at: u64) {
+        let Some(snap) = snapshot::decode(&plan.words) else {
+            return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
+        };
+        self.reconcile(&snap.values, at);
+        let model = parameters::values(&self.model);
+        if bits(&snap.values) != bits(&model) {
+            let d = first_difference(&snap.values, &model);
+            self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, format!("saved a set other than the one accepted: {d} accepted"));
+        }
+        self.written.push(Written {
+            sector: plan.sector,
+            first_word: plan.first_word,
+            words: plan.words,
+            values: snap.values,
+            by_board: true,
+        });
+    }
+
+    /// The board booted with `cfg`, found as `source` in `flash`.
+    pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, at: u64) {
+        let loaded = parameters::values(cfg);
+        let sectors = flash.sectors();
+        let intact: Vec<&Written> = self
+            .written
+            .iter()
+            .filter(|w| sectors[w.sector].get(w.first_word..w.first_word + RECORD_WORDS) == Some(&w.words[..]))
+            .collect();
+        let mut found = Vec::new();
+        if let Some(newest) = intact.last() {
+            let seq = newest.words[1];
+            if newest.by_board && bits(&newest.values) != bits(&loaded) {
+                let d = first_difference(&loaded, &newest.values);
+                found.push((
+                    Invariant::AcceptedIsReportedSavedLoaded,
+                    format!("{kind:?}: loaded ({source:?}) other than the newest save (sequence {seq:#x}): {d} saved"),
+                ));
+            }
+            if let Err(rule) = parameters::with_values(self.defaults, &newest.values) {
+                let fallback = intact.iter().rev().find(|w| parameters::with_values(self.defaults, &w.values).is_ok());
+                let expected = fallback.map_or_else(|| parameters::values(self.defaults), |w| w.values);
+                if bits(&expected) != bits(&loaded) {
+                    let d = first_difference(&loaded, &expected);
+                    let from = fallback.map_or("the defaults".to_string(), |w| format!("the set saved at sequence {:#x}", w.words[1]));
+                    found.push((
+                        Invariant::RefusedSnapshotFallsBack,
+                        format!("the newest set (sequence {seq:#x}) is refused ({rule}); loaded {source:?}, not {from}: {d}"),
+                    ));
+                }
+            }
+        }
+        if kind == BootKind::Reset {
+            self.reconcile(&loaded, at);
+            let model = parameters::values(&self.model);
+            if bits(&model) != bits(&loaded) {
+                let d = first_difference(&loaded, &model);
+                found.push((Invariant::AcceptedIsReportedSavedLoaded, format!("after a reboot command loaded ({source:?}) {d} accepted")));
+            }
+        }
+        if kind == BootKind::PowerCut && !self.history.contains(&bits(&loaded)) {
+            found.push((Invariant::PowerCutLoadsAWholeSet, format!("loaded ({source:?}) a set never in force: {:?}", loaded)));
+        }
+        for (invariant, what) in found {
+            self.violate(invariant, at, what);
+        }
+        self.model = *cfg;
+        self.pending_sets.clear();
+        self.pending_storage.clear();
+        self.remember(&loaded);
+    }
+}

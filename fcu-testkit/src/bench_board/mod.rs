@@ -1,0 +1,264 @@
+//! The board on a bench: the link task, the control loop and the parameter flash composed as
+//! the firmware composes them, deterministic to the tick, for the invariants that live where
+//! they meet (`tests/boundaries.rs`, the `boundaries` fuzz target).
+//!
+//! - [`flash`]: two sectors of 4096 words, erase (250–500 ms of stalled CPU) and word
+//!   programming that only clears bits, and a power cut at any word;
+//! - [`ground`]: the ground station's MAVLink frames (any parameter name and value, any command
+//!   number and parameters) and the board's answers read back;
+//! - [`task`]: the link task's period (today's firmware step);
+//! - [`board`]: [`Bench`], the board at 800 Hz with its link period every 4 ticks, the UART at
+//!   115200 baud both ways, a level still IMU, the pilot's transmitter;
+//! - [`check`]: the invariants, each a named [`Invariant`], checked as the bench runs.
+//!
+//! A [`Scenario`] is a flash history (snapshots an older firmware saved, some of which today's
+//! rules may refuse), a seed and the operations; [`Scenario::from_bytes`] makes one of any bytes
+//! for the fuzzer.
+
+pub mod board;
+pub mod check;
+pub mod flash;
+pub mod ground;
+pub mod task;
+
+pub use board::{Bench, Counts, Op, Pilot};
+pub use check::{Invariant, Violation};
+pub use flash::{Flash, PowerCut};
+pub use ground::{cmd, name16, GroundFrame};
+
+use fcu_core::parameters::{self, snapshot, COUNT};
+use fcu_core::Config;
+
+/// How long the board needs after power-on to calibrate and settle before it may arm, ms
+/// (with a margin); every scenario starts with it.
+pub const BOOT_MS: u32 = 3000;
+
+/// A snapshot an older firmware saved: its sequence number and values (defaults with some
+/// values replaced, whatever today's rules say of them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planted {
+    pub sequence: u32,
+    pub changes: Vec<(usize, f32)>,
+}
+
+impl Planted {
+    pub fn values(&self, defaults: &Config) -> [f32; COUNT] {
+        let mut v = parameters::values(defaults);
+        for &(i, x) in &self.changes {
+            if let Some(slot) = v.get_mut(i) {
+                *slot = x;
+            }
+        }
+        v
+    }
+}
+
+/// Writes `values` as a snapshot with sequence `sequence` where a save would put it.
+pub fn plant(flash: &mut Flash, sequence: u32, values: &[f32; COUNT]) {
+    let plan = snapshot::plan_save(flash.sectors(), values);
+    let words = snapshot::encode(sequence, values);
+    if let Some(sector) = plan.erase {
+        let _whole = flash.erase(sector);
+    }
+    let _whole = flash.program(plan.sector, plan.first_word, &words);
+}
+
+/// Everything one bench run is made of.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    pub history: Vec<Planted>,
+    pub seed: u64,
+    pub ops: Vec<Op>,
+}
+
+impl Scenario {
+    /// The flash with the history written, oldest first.
+    pub fn flash(&self, defaults: &Config) -> Flash {
+        let mut flash = Flash::new();
+        for p in &self.history {
+            plant(&mut flash, p.sequence, &p.values(defaults));
+        }
+        flash
+    }
+
+    /// Boots the board on the scenario's flash, lets it settle ([`BOOT_MS`]) and runs the
+    /// operations.
+    pub fn run(&self, defaults: &'static Config) -> Bench {
+        let mut bench = Bench::new(self.flash(defaults), defaults, self.seed);
+        bench.run_ms(BOOT_MS);
+        bench.run(&self.ops);
+        bench
+    }
+
+    /// A scenario from any bytes (the fuzzer's input), at most [`MAX_FUZZ_MS`] of operations:
+    ///
+    /// | byte | meaning |
+    /// |---|---|
+    /// | 0 | the seed |
+    /// | 1 | `h`: a history of `h & 3` snapshots, sequence numbers starting at `u32::MAX - (h >> 2 & 31)` when `h & 0x80`, at 1 otherwise; each snapshot then takes a byte `n` and `n & 3` (index, value) changes of 2 bytes (see below); with `h & 0x40` the last of them fills both sectors (the next save erases) |
+    /// | then `k`, by range | |
+    /// | `0x00..=0x3F` | wait `(k + 1) · 20` ms |
+    /// | `0x40..=0x44` | the pilot: neutral, arm, fly, disarm, transmitter off |
+    /// | `0x45` / `0x46` | the arm / disarm gesture: held 1.1 s, then neutral 0.1 s |
+    /// | `0x47..=0x5F` | a heartbeat |
+    /// | `0x60..=0x6F` + 2 bytes | PARAM_SET: parameter `b0 % (COUNT + 1)` (`COUNT`: an unknown name), value [`value_for`]`(b1)` |
+    /// | `0x70..=0x7F` + 2 bytes | a command ([`command_for`]): COMMAND_INT when `k & 1` |
+    /// | `0x80..=0x8F` + 1 byte | PARAM_REQUEST_READ of that index (`0xFF`: by name, of parameter 0) |
+    /// | `0x90..=0x97` | PARAM_REQUEST_LIST |
+    /// | `0x98..=0x9F` | a flood of `((k & 7) + 1) · 200` ms |
+    /// | `0xA0..=0xAF` + 3 bytes | a power cut at word `b0 | b1 << 8` (scaled by `k & 15` sectors' words), partial bits from `b2` |
+    /// | `0xB0..=0xB7` | a power cut now |
+    /// | `0xB8..=0xBF` | erases take `250 + (k & 7) · 35` ms |
+    /// | `0xC0..=0xFF` | wait `(k & 63) + 1` ms |
+    pub fn from_bytes(data: &[u8]) -> Scenario {
+        let mut it = data.iter().copied();
+        let mut next = || it.next().unwrap_or(0);
+        let seed = u64::from(next());
+        let h = next();
+        let start = if h & 0x80 != 0 { u32::MAX - u32::from((h >> 2) & 0x1F) } else { 1 };
+        let mut history = Vec::new();
+        for k in 0..u32::from(h & 3) {
+            let n = next();
+            let changes = (0..n & 3)
+                .map(|_| {
+                    let i = usize::from(next()) % COUNT;
+                    (i, value_for(i, next()))
+                })
+                .collect();
+            history.push(Planted { sequence: start.saturating_add(k), changes });
+        }
+        if h & 0x40 != 0 {
+            if let Some(last) = history.last().cloned() {
+                let room = u32::MAX - last.sequence;
+                for k in 1..=(2 * snapshot::SLOTS as u32).min(room) {
+                    history.push(Planted { sequence: last.sequence + k, changes: last.changes.clone() });
+                }
+            }
+        }
+        let mut ops = Vec::new();
+        let mut ms = 0u32;
+        while let Some(k) = it.next() {
+            if ms >= MAX_FUZZ_MS {
+                break;
+            }
+            let mut byte = || it.next().unwrap_or(0);
+            match k {
+                0x00..=0x3F => {
+                    let w = (u32::from(k) + 1) * 20;
+                    ms += w;
+                    ops.push(Op::Wait { ms: w });
+                }
+                0x40..=0x44 => {
+                    ops.push(Op::Pilot([Pilot::Neutral, Pilot::Arm, Pilot::Fly, Pilot::Disarm, Pilot::Off][usize::from(k - 0x40)]))
+                }
+                0x45 | 0x46 => {
+                    ms += 1200;
+                    ops.extend(gesture(if k == 0x45 { Pilot::Arm } else { Pilot::Disarm }));
+                }
+                0x47..=0x5F => ops.push(Op::Send(GroundFrame::Heartbeat)),
+                0x60..=0x6F => {
+                    let i = usize::from(byte()) % (COUNT + 1);
+                    let sel = byte();
+                    ops.push(Op::Send(param_set(i, value_for(i, sel))));
+                }
+                0x70..=0x7F => {
+                    let (c, p) = (byte(), byte());
+                    ops.push(Op::Send(command_for(c, p, k & 1 != 0)));
+                }
+                0x80..=0x8F => {
+                    let i = byte();
+                    let frame = if i == 0xFF {
+                        GroundFrame::ParamRead { index: -1, name: name16(parameters::name(0).unwrap_or("")) }
+                    } else {
+                        GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] }
+                    };
+                    ops.push(Op::Send(frame));
+                }
+                0x90..=0x97 => ops.push(Op::Send(GroundFrame::ParamList)),
+                0x98..=0x9F => {
+                    let w = (u32::from(k & 7) + 1) * 200;
+                    ms += w;
+                    ops.push(Op::Flood { ms: w });
+                }
+                0xA0..=0xAF => {
+                    let (lo, hi, partial) = (byte(), byte(), byte());
+                    let at_word = u32::from(k & 15) * snapshot::SECTOR_WORDS as u32 / 4 + u32::from(u16::from_le_bytes([lo, hi]) % 2048);
+                    ops.push(Op::CutAtWord(PowerCut { at_word, partial_bits: u32::from(partial).wrapping_mul(0x0101_0101) }));
+                }
+                0xB0..=0xB7 => ops.push(Op::CutNow),
+                0xB8..=0xBF => ops.push(Op::EraseMs(250 + u32::from(k & 7) * 35)),
+                0xC0..=0xFF => {
+                    let w = u32::from(k & 63) + 1;
+                    ms += w;
+                    ops.push(Op::Wait { ms: w });
+                }
+            }
+        }
+        Scenario { history, seed, ops }
+    }
+}
+
+/// The most time a fuzz input's operations may take, ms (a case stays some tens of ms of CPU).
+pub const MAX_FUZZ_MS: u32 = 20_000;
+
+/// The pilot's gesture: `hold` for 1.1 s (more than the default 1 s hold), then the sticks
+/// released for 0.1 s.
+pub fn gesture(hold: Pilot) -> [Op; 4] {
+    [Op::Pilot(hold), Op::Wait { ms: 1100 }, Op::Pilot(Pilot::Neutral), Op::Wait { ms: 100 }]
+}
+
+/// A PARAM_SET of parameter `i` (an unknown name past the table).
+pub fn param_set(i: usize, value: f32) -> GroundFrame {
+    GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap_or("NO_SUCH_PARAM")), value }
+}
+
+/// A value for parameter `i` from a selector: its default, bounds, the middle and a step past
+/// them, whole numbers, and values from the selector's bits.
+pub fn value_for(i: usize, sel: u8) -> f32 {
+    let (min, max, default) = match parameters::param(i) {
+        Some(p) => (p.min, p.max, parameters::value(&Config::DEFAULT, i).unwrap_or(0.0)),
+        None => (0.0, 1.0, 0.0),
+    };
+    match sel {
+        0 => default,
+        1 => min,
+        2 => max,
+        3 => ((min + max) * 0.5).round(),
+        4 => max + 1.0,
+        5 => min - 1.0,
+        6 => f32::NAN,
+        7..=39 => f32::from(sel - 7),
+        40..=127 => min + (max - min) * f32::from(sel - 40) / 87.0,
+        _ => (min + (max - min) * f32::from(sel - 128) / 127.0).round(),
+    }
+}
+
+/// A command from two selector bytes: `c` picks the command (reboot, storage, calibration,
+/// motor test, arm/disarm, home position, or an unlisted number), `p` its parameters.
+pub fn command_for(c: u8, p: u8, int: bool) -> GroundFrame {
+    let command = match c % 8 {
+        0 => cmd::PREFLIGHT_REBOOT_SHUTDOWN,
+        1 => cmd::PREFLIGHT_STORAGE,
+        2 => cmd::PREFLIGHT_CALIBRATION,
+        3 => cmd::DO_MOTOR_TEST,
+        4 => cmd::COMPONENT_ARM_DISARM,
+        5 => cmd::GET_HOME_POSITION,
+        _ => u16::from(c) * 7,
+    };
+    let first = [0.0, 1.0, 2.0, 3.0, 4.0, 21196.0, -1.0, 0.5][usize::from(p & 7)];
+    let mut params = [first, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    match command {
+        // Motor `first`, throttle in percent, `p >> 3`% for 2 s, one motor.
+        cmd::DO_MOTOR_TEST => params = [first, 0.0, f32::from(p >> 3), 2.0, 1.0, 0.0, 0.0],
+        // Gyro, radio or accelerometer by the upper bits.
+        cmd::PREFLIGHT_CALIBRATION => match p >> 3 & 3 {
+            1 => params[3] = 1.0,
+            2 => params[4] = 1.0,
+            _ => {}
+        },
+        // Arm or disarm, forced by the upper bits.
+        cmd::COMPONENT_ARM_DISARM if p & 0x80 != 0 => params[1] = 21196.0,
+        _ => {}
+    }
+    GroundFrame::Command { command, params, int }
+}

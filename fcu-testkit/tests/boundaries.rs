@@ -1,0 +1,287 @@
+//! The invariants where the link, the parameter flash and the flight state meet, on the bench
+//! board (`fcu_testkit::bench_board`): any interleaving of ground-station frames, the pilot's
+//! gestures and flight, a flooded or silent link, and power cuts at any flash word.
+//!
+//! Each invariant is its own proptest over the same operations (a shrunk counterexample names
+//! the operations that break it), and each finding that broke one has a plain test with its
+//! scenario written out.
+
+use fcu_core::parameters::{self, snapshot, COUNT};
+use fcu_core::supervisor::FlightState;
+use fcu_core::Config;
+use fcu_testkit::bench_board::{
+    cmd, command_for, gesture, param_set, value_for, Bench, GroundFrame, Invariant, Op, Pilot, Planted, PowerCut, Scenario,
+};
+use proptest::prelude::*;
+
+static DEFAULTS: Config = Config::DEFAULT;
+
+fn index(name: &str) -> usize {
+    parameters::index_of(name.as_bytes()).unwrap_or_else(|| panic!("no parameter {name}"))
+}
+
+/// Parameters the findings were about, picked more often than the rest.
+fn interesting() -> Vec<usize> {
+    ["ANGLE_MAX", "RCMAP_ROLL", "RCMAP_YAW", "RCMAP_THROTTLE", "ARM_HOLD_MS", "LINK_ATT_HZ", "RATE_RLL_P"]
+        .iter()
+        .filter_map(|n| parameters::index_of(n.as_bytes()))
+        .collect()
+}
+
+fn param_index() -> impl Strategy<Value = usize> {
+    prop_oneof![2 => prop::sample::select(interesting()), 1 => 0..=COUNT]
+}
+
+fn reboot() -> Op {
+    Op::Send(GroundFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
+}
+
+fn save() -> Op {
+    Op::Send(GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
+}
+
+fn set(name: &str, value: f32) -> Op {
+    Op::Send(param_set(index(name), value))
+}
+
+/// One step of a bench session: a few operations that belong together.
+fn episode() -> impl Strategy<Value = Vec<Op>> {
+    prop_oneof![
+        3 => Just(gesture(Pilot::Arm).to_vec()),
+        2 => Just(gesture(Pilot::Disarm).to_vec()),
+        2 => (200u32..3000).prop_map(|ms| vec![Op::Pilot(Pilot::Fly), Op::Wait { ms }, Op::Pilot(Pilot::Neutral)]),
+        1 => (100u32..1500).prop_map(|ms| vec![Op::Pilot(Pilot::Off), Op::Wait { ms }, Op::Pilot(Pilot::Neutral)]),
+        4 => (param_index(), any::<u8>()).prop_map(|(i, sel)| vec![Op::Send(param_set(i, value_for(i, sel)))]),
+        1 => (param_index(), any::<u8>(), 1u32..60).prop_map(|(i, sel, ms)| {
+            vec![Op::Send(param_set(i, value_for(i, sel))), Op::Wait { ms }, Op::Send(param_set(i, value_for(i, sel.wrapping_add(1))))]
+        }),
+        3 => (any::<u8>(), any::<u8>(), any::<bool>()).prop_map(|(c, p, int)| vec![Op::Send(command_for(c, p, int))]),
+        2 => Just(vec![reboot()]),
+        2 => Just(vec![save()]),
+        1 => (0u8..=255).prop_map(|i| vec![Op::Send(GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] })]),
+        1 => Just(vec![Op::Send(GroundFrame::ParamList)]),
+        1 => Just(vec![Op::Send(GroundFrame::Heartbeat)]),
+        2 => (200u32..3000).prop_map(|ms| vec![Op::Flood { ms }]),
+        2 => (prop_oneof![0..snapshot::RECORD_WORDS as u32, 0..(snapshot::SECTOR_WORDS + snapshot::RECORD_WORDS) as u32], any::<u32>())
+            .prop_map(|(at_word, partial_bits)| vec![Op::CutAtWord(PowerCut { at_word, partial_bits })]),
+        1 => Just(vec![Op::CutNow]),
+        1 => (250u32..=500).prop_map(|ms| vec![Op::EraseMs(ms)]),
+        4 => (5u32..3000).prop_map(|ms| vec![Op::Wait { ms }]),
+    ]
+}
+
+/// Snapshots an older firmware left: none to three, or both sectors full (the next save erases
+/// the older), numbered from 1 or up to the wrap.
+fn history() -> impl Strategy<Value = Vec<Planted>> {
+    let changes = || prop::collection::vec((param_index(), any::<u8>()).prop_map(|(i, sel)| (i % COUNT, value_for(i % COUNT, sel))), 0..3);
+    let sets = prop_oneof![
+        4 => prop::collection::vec(changes(), 0..4),
+        1 => changes().prop_map(|c| vec![c; 2 * snapshot::SLOTS]),
+    ];
+    let start = prop_oneof![Just(1u32), (0u32..4).prop_map(|k| u32::MAX - k)];
+    (sets, start).prop_map(|(sets, start)| {
+        let n = sets.len() as u32;
+        let start = start.min(u32::MAX - n.saturating_sub(1));
+        sets.into_iter().enumerate().map(|(k, changes)| Planted { sequence: start + k as u32, changes }).collect()
+    })
+}
+
+fn scenario() -> impl Strategy<Value = Scenario> {
+    (history(), any::<u64>(), prop::collection::vec(episode(), 1..14)).prop_map(|(history, seed, eps)| Scenario {
+        history,
+        seed,
+        ops: eps.into_iter().flatten().collect(),
+    })
+}
+
+/// Runs the scenario and fails with the first violation of `invariant`.
+fn holds(invariant: Invariant, s: &Scenario) -> Result<(), TestCaseError> {
+    let bench = s.run(&DEFAULTS);
+    match bench.checker.first(invariant) {
+        Some(v) => Err(TestCaseError::fail(v.to_string())),
+        None => Ok(()),
+    }
+}
+
+fn config() -> ProptestConfig {
+    ProptestConfig { failure_persistence: None, ..ProptestConfig::default() }
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    #[test]
+    #[ignore = "fails until the reboot re-checked against the flight state lands"]
+    fn nothing_starts_while_armed(s in scenario()) {
+        holds(Invariant::NothingStartsArmed, &s)?;
+    }
+
+    #[test]
+    fn arming_only_by_the_stick_gesture(s in scenario()) {
+        holds(Invariant::ArmedOnlyByGesture, &s)?;
+    }
+
+    #[test]
+    #[ignore = "fails until the ANGLE_MAX round trip and the sequence number's wrap are fixed"]
+    fn an_accepted_value_is_reported_saved_and_loaded(s in scenario()) {
+        holds(Invariant::AcceptedIsReportedSavedLoaded, &s)?;
+    }
+
+    #[test]
+    fn a_power_cut_loads_a_set_once_in_force_as_a_whole(s in scenario()) {
+        holds(Invariant::PowerCutLoadsAWholeSet, &s)?;
+    }
+
+    #[test]
+    #[ignore = "fails until the load falls back to the newest valid snapshot"]
+    fn a_refused_saved_set_falls_back_to_the_newest_valid_one(s in scenario()) {
+        holds(Invariant::RefusedSnapshotFallsBack, &s)?;
+    }
+
+    #[test]
+    fn saves_keep_the_control_loop_fed(s in scenario()) {
+        holds(Invariant::SavesKeepTheLoopRunning, &s)?;
+    }
+}
+
+/// The bench after `ops` on an empty flash.
+fn bench(ops: Vec<Op>) -> Bench {
+    Scenario { history: Vec::new(), seed: 1, ops }.run(&DEFAULTS)
+}
+
+fn assert_holds(bench: &Bench, invariant: Invariant) {
+    if let Some(v) = bench.checker.first(invariant) {
+        panic!("{v}");
+    }
+}
+
+#[test]
+fn the_bench_arms_flies_disarms_and_saves() {
+    let mut ops = vec![set("ANGLE_MAX", 35.0), save(), Op::Wait { ms: 200 }];
+    ops.extend(gesture(Pilot::Arm));
+    ops.extend([Op::Pilot(Pilot::Fly), Op::Wait { ms: 1000 }, Op::Pilot(Pilot::Neutral), Op::Wait { ms: 100 }]);
+    ops.extend(gesture(Pilot::Disarm));
+    let b = bench(ops);
+    assert!(b.counts.arms >= 1, "{:?}", b.counts);
+    assert_eq!(b.status().state, FlightState::Disarmed);
+    assert!(b.counts.saves >= 1, "{:?}", b.counts);
+    assert!(b.checker.violations().is_empty(), "{:?}", b.checker.violations());
+}
+
+/// Finding: a reboot accepted disarmed was carried out later in flight, once the transmit
+/// queue drained (the firmware never looked at the flight state again).
+#[test]
+#[ignore = "fails until the reboot re-checked against the flight state lands"]
+fn a_reboot_accepted_disarmed_is_not_carried_out_in_flight() {
+    let mut ops = vec![Op::Flood { ms: 500 }, reboot()];
+    // The uplink stays full while the pilot arms and takes off: the acknowledgement waits.
+    ops.push(Op::Pilot(Pilot::Arm));
+    ops.push(Op::Flood { ms: 1100 });
+    ops.push(Op::Pilot(Pilot::Neutral));
+    ops.push(Op::Flood { ms: 100 });
+    ops.push(Op::Pilot(Pilot::Fly));
+    ops.push(Op::Flood { ms: 500 });
+    ops.push(Op::Wait { ms: 3000 });
+    let b = bench(ops);
+    assert!(b.counts.arms >= 1, "the pilot armed: {:?}", b.counts);
+    assert_holds(&b, Invariant::NothingStartsArmed);
+}
+
+/// Finding: ANGLE_MAX 60, a legal value, saved and rebooted wiped every parameter.
+#[test]
+#[ignore = "fails until ANGLE_MAX's degrees survive the round trip through radians"]
+fn angle_max_60_saved_and_rebooted_is_loaded() {
+    let b = bench(vec![set("RATE_RLL_P", 100.0), set("ANGLE_MAX", 60.0), save(), Op::Wait { ms: 500 }, reboot(), Op::Wait { ms: 500 }]);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}
+
+/// Finding: a save after the sequence number wrapped was lost (the older snapshot, numbered
+/// higher, loaded).
+#[test]
+#[ignore = "fails until the snapshot's sequence number wraps safely"]
+fn a_save_after_the_sequence_number_wraps_is_loaded() {
+    let history = vec![Planted { sequence: u32::MAX, changes: vec![] }];
+    let ops = vec![set("ANGLE_MAX", 40.0), save(), Op::Wait { ms: 500 }, reboot(), Op::Wait { ms: 500 }];
+    let b = Scenario { history, seed: 1, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}
+
+/// Finding: an RCMAP set made a map that is not a permutation; saved, it was refused at the
+/// next boot.
+#[test]
+fn an_rcmap_set_saved_and_rebooted_is_loaded() {
+    for (a, x, c, y) in
+        [("RCMAP_ROLL", 3.0, "RCMAP_YAW", 1.0), ("RCMAP_ROLL", 2.0, "RCMAP_PITCH", 4.0), ("RCMAP_THROTTLE", 1.0, "RCMAP_YAW", 3.0)]
+    {
+        let b = bench(vec![set(a, x), set(c, y), save(), Op::Wait { ms: 500 }, reboot(), Op::Wait { ms: 500 }]);
+        assert_eq!((b.counts.saves, b.counts.reboots), (1, 1), "{a} {x} {c} {y}");
+        assert!(b.config().rc.map.is_permutation(), "{a} {x} {c} {y}: {:?}", b.config().rc.map);
+        assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    }
+}
+
+/// A snapshot today's rules refuse, saved after a valid one: the valid one loads, not the
+/// defaults.
+#[test]
+#[ignore = "fails until the load falls back to the newest valid snapshot"]
+fn a_refused_newest_snapshot_falls_back_to_the_one_before() {
+    let angle = index("ANGLE_MAX");
+    let max = parameters::param(angle).map(|p| p.max).unwrap_or(60.0);
+    let history = vec![
+        Planted { sequence: 7, changes: vec![(index("RATE_RLL_P"), 100.0)] },
+        Planted { sequence: 8, changes: vec![(angle, max + 10.0)] },
+    ];
+    let b = Scenario { history, seed: 1, ops: vec![Op::Wait { ms: 10 }] }.run(&DEFAULTS);
+    assert_holds(&b, Invariant::RefusedSnapshotFallsBack);
+}
+
+/// A power cut at every word of a save that erases: the set loaded is always one in force.
+#[test]
+fn a_power_cut_at_any_word_of_an_erasing_save_loads_a_whole_set() {
+    // Both sectors full: the next save erases sector 0.
+    let slots = 2 * snapshot::SLOTS as u32;
+    let history: Vec<Planted> =
+        (1..=slots).map(|k| Planted { sequence: k, changes: vec![(index("RATE_RLL_P"), 50.0 + k as f32)] }).collect();
+    let words = snapshot::SECTOR_WORDS as u32 + snapshot::RECORD_WORDS as u32;
+    for at_word in (0..words).step_by(97).chain([words - 1, words - 2, snapshot::SECTOR_WORDS as u32]) {
+        let ops =
+            vec![Op::CutAtWord(PowerCut { at_word, partial_bits: 0x0F0F_F0F0 }), set("ANGLE_MAX", 41.0), save(), Op::Wait { ms: 800 }];
+        let b = Scenario { history: history.clone(), seed: 3, ops }.run(&DEFAULTS);
+        assert_eq!((b.counts.erases, b.counts.cuts_in_flash), (1, 1), "cut at word {at_word}");
+        assert_holds(&b, Invariant::PowerCutLoadsAWholeSet);
+        assert_holds(&b, Invariant::SavesKeepTheLoopRunning);
+    }
+}
+
+#[test]
+fn any_bytes_make_a_scenario_that_runs() {
+    for seed in 0..8u8 {
+        let bytes: Vec<u8> = (0..64u32).map(|k| (k * 37 + u32::from(seed) * 11) as u8).collect();
+        let s = Scenario::from_bytes(&bytes);
+        let _ = s.run(&DEFAULTS);
+    }
+    let _ = Scenario::from_bytes(&[]).run(&DEFAULTS);
+}
+
+/// The generated sessions reach what the invariants are about: flight, saves, erases, reboots,
+/// power cuts inside flash work.
+#[test]
+fn the_generated_sessions_reach_flight_saves_erases_reboots_and_cuts() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::{Config as RunnerConfig, TestRunner};
+    let mut runner = TestRunner::new(RunnerConfig { rng_seed: proptest::test_runner::RngSeed::Fixed(7), ..RunnerConfig::default() });
+    let mut total = fcu_testkit::bench_board::Counts::default();
+    for _ in 0..64 {
+        let s = scenario().new_tree(&mut runner).unwrap().current();
+        let c = s.run(&DEFAULTS).counts;
+        total.arms += c.arms;
+        total.saves += c.saves;
+        total.erases += c.erases;
+        total.reboots += c.reboots;
+        total.power_cuts += c.power_cuts;
+        total.cuts_in_flash += c.cuts_in_flash;
+    }
+    assert!(total.arms > 0 && total.saves > 0 && total.erases > 0 && total.reboots > 0 && total.cuts_in_flash > 0, "{total:?}");
+}
