@@ -21,11 +21,14 @@
 //! - **Radio calibration**: while it runs the ground station reads the radio's widths and
 //!   writes the endpoints and trims as parameters; arming is blocked meanwhile. It ends on
 //!   request or after [`RADIO_CALIBRATION_MAX_MS`].
-//! - **Saving**: the ground station says when a flash save is about to run and when it is done;
-//!   arming is blocked meanwhile, since an erase stalls every instruction fetch.
+//! - **Saving and rebooting**: the ground station says when a flash save or a reboot it accepted
+//!   is pending and when it is done or dropped; arming is blocked meanwhile, since an erase
+//!   stalls every instruction fetch and a reset stops the motors. The station carries either out
+//!   only once a status shows the block in force with the board disarmed, checks that again at
+//!   the instant it acts, and drops it (saying why) when it cannot within its time.
 //!
-//! A motor test, a radio calibration and a save all show as one arming blocker,
-//! [`crate::supervisor::Blocker::GroundBusy`].
+//! Each shows as an arming blocker of its own ([`crate::supervisor::Blocker`]): `motor-test`,
+//! `radio-calibration`, `saving`, `reboot-pending`.
 
 use crate::supervisor::FlightState;
 
@@ -91,6 +94,8 @@ pub struct GroundInput {
     pub radio_calibration: Option<bool>,
     /// A flash save is due or running: arming waits (a level, not a request).
     pub saving: bool,
+    /// A reboot is pending: arming waits (a level, not a request).
+    pub rebooting: bool,
 }
 
 impl GroundInput {
@@ -108,6 +113,7 @@ impl GroundInput {
             motor_test: newer.motor_test.or(self.motor_test),
             radio_calibration: newer.radio_calibration.or(self.radio_calibration),
             saving: newer.saving,
+            rebooting: newer.rebooting,
         }
     }
 }
@@ -115,8 +121,8 @@ impl GroundInput {
 /// What the supervisor reads of the ground station on one tick ([`crate::supervisor::Inputs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GroundCommands {
-    /// A motor test, a radio calibration or a save runs: arming is refused.
-    pub busy: bool,
+    /// What holds arming back, each an arming blocker of its own.
+    pub holds: Holds,
     /// A disarm, taken once.
     pub disarm: Option<Disarm>,
     /// An IMU calibration, taken once.
@@ -124,7 +130,22 @@ pub struct GroundCommands {
 }
 
 impl GroundCommands {
-    pub const NONE: GroundCommands = GroundCommands { busy: false, disarm: None, calibrate: false };
+    pub const NONE: GroundCommands = GroundCommands { holds: Holds::NONE, disarm: None, calibrate: false };
+}
+
+/// The ground station's work that holds arming back while it runs or is pending.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Holds {
+    /// A motor test runs, or a stick that ended one has not come back to rest.
+    pub motor_test: bool,
+    pub radio_calibration: bool,
+    /// A flash save is due or runs.
+    pub saving: bool,
+    pub rebooting: bool,
+}
+
+impl Holds {
+    pub const NONE: Holds = Holds { motor_test: false, radio_calibration: false, saving: false, rebooting: false };
 }
 
 /// Whether a disarm asked from the ground may act in `state`, with the radio's throttle low or
@@ -197,6 +218,7 @@ mod tests {
             motor_test: Some(MotorTestChange::Stop),
             radio_calibration: Some(true),
             saving: true,
+            rebooting: true,
         };
         let second = GroundInput { disarm: Some(Disarm { forced: false }), ..GroundInput::default() };
         let both = first.then(second);
@@ -204,7 +226,7 @@ mod tests {
         assert!(both.calibrate_imu);
         assert_eq!(both.motor_test, Some(MotorTestChange::Stop));
         assert_eq!(both.radio_calibration, Some(true));
-        assert!(!both.saving, "the level is the newer one's");
+        assert!(!both.saving && !both.rebooting, "the levels are the newer one's");
         let start = MotorTestChange::Start(MotorTest { motor: 1, duty_pct: 5.0, duration_ms: 1000 });
         let newer = GroundInput { motor_test: Some(start), radio_calibration: Some(false), ..GroundInput::default() };
         assert_eq!(first.then(newer).motor_test, Some(start));

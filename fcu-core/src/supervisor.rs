@@ -154,13 +154,19 @@ pub enum Blocker {
     SensorFault = 1 << 6,
     BootSettling = 1 << 7,
     GestureNotReleased = 1 << 8,
-    /// A ground station's motor test or radio calibration runs, or a flash save
+    /// A ground station's motor test runs, or a stick that ended one has not come back to rest
     /// ([`crate::ground`]).
-    GroundBusy = 1 << 9,
+    MotorTest = 1 << 9,
+    /// A ground station's radio calibration runs.
+    RadioCalibration = 1 << 10,
+    /// A flash save is due or runs: an erase stalls every instruction fetch.
+    Saving = 1 << 11,
+    /// A reboot a ground station asked for is pending.
+    RebootPending = 1 << 12,
 }
 
 impl Blocker {
-    pub const ALL: [Blocker; 10] = [
+    pub const ALL: [Blocker; 13] = [
         Blocker::NotCalibrated,
         Blocker::Calibrating,
         Blocker::LinkNotGood,
@@ -170,7 +176,10 @@ impl Blocker {
         Blocker::SensorFault,
         Blocker::BootSettling,
         Blocker::GestureNotReleased,
-        Blocker::GroundBusy,
+        Blocker::MotorTest,
+        Blocker::RadioCalibration,
+        Blocker::Saving,
+        Blocker::RebootPending,
     ];
 
     pub fn name(self) -> &'static str {
@@ -184,7 +193,10 @@ impl Blocker {
             Blocker::SensorFault => "sensor-fault",
             Blocker::BootSettling => "boot-settling",
             Blocker::GestureNotReleased => "gesture-not-released",
-            Blocker::GroundBusy => "ground-busy",
+            Blocker::MotorTest => "motor-test",
+            Blocker::RadioCalibration => "radio-calibration",
+            Blocker::Saving => "saving",
+            Blocker::RebootPending => "reboot-pending",
         }
     }
 }
@@ -553,8 +565,16 @@ impl Supervisor {
         if !self.released {
             b.insert(Blocker::GestureNotReleased);
         }
-        if i.ground.busy {
-            b.insert(Blocker::GroundBusy);
+        let holds = i.ground.holds;
+        for (held, blocker) in [
+            (holds.motor_test, Blocker::MotorTest),
+            (holds.radio_calibration, Blocker::RadioCalibration),
+            (holds.saving, Blocker::Saving),
+            (holds.rebooting, Blocker::RebootPending),
+        ] {
+            if held {
+                b.insert(blocker);
+            }
         }
         b
     }
@@ -1430,23 +1450,32 @@ mod tests {
     }
 
     #[test]
-    fn arming_waits_while_the_ground_is_busy_and_a_busy_ground_ends_an_arming() {
-        let mut r = Rig::new();
-        r.i.ground = GroundCommands { busy: true, ..GroundCommands::NONE };
-        let d = r.run(ARM, CFG.arm_hold_ticks + 10);
-        assert_eq!(d.state, FlightState::Disarmed);
-        assert!(d.blockers.contains(Blocker::GroundBusy), "{:?}", d.blockers);
-        assert_eq!(Blocker::GroundBusy.name(), "ground-busy");
-        // Not busy any more: a fresh gesture arms.
-        r.i.ground = GroundCommands::NONE;
-        r.run(IDLE, 2);
-        r.arm();
+    fn arming_waits_while_the_ground_holds_it_and_a_hold_ends_an_arming() {
+        use crate::ground::Holds;
+        let each = [
+            (Holds { motor_test: true, ..Holds::NONE }, Blocker::MotorTest, "motor-test"),
+            (Holds { radio_calibration: true, ..Holds::NONE }, Blocker::RadioCalibration, "radio-calibration"),
+            (Holds { saving: true, ..Holds::NONE }, Blocker::Saving, "saving"),
+            (Holds { rebooting: true, ..Holds::NONE }, Blocker::RebootPending, "reboot-pending"),
+        ];
+        for (holds, blocker, name) in each {
+            let mut r = Rig::new();
+            r.i.ground = GroundCommands { holds, ..GroundCommands::NONE };
+            let d = r.run(ARM, CFG.arm_hold_ticks + 10);
+            assert_eq!(d.state, FlightState::Disarmed, "{name}");
+            assert_eq!(d.blockers.iter().collect::<std::vec::Vec<_>>(), [blocker], "{name}");
+            assert_eq!(blocker.name(), name);
+            // Held no more: a fresh gesture arms.
+            r.i.ground = GroundCommands::NONE;
+            r.run(IDLE, 2);
+            r.arm();
 
-        let mut r = Rig::new();
-        r.run(ARM, 10);
-        assert_eq!(r.last.state, FlightState::Arming);
-        r.i.ground = GroundCommands { busy: true, ..GroundCommands::NONE };
-        assert_eq!(r.step().state, FlightState::Disarmed);
+            let mut r = Rig::new();
+            r.run(ARM, 10);
+            assert_eq!(r.last.state, FlightState::Arming);
+            r.i.ground = GroundCommands { holds, ..GroundCommands::NONE };
+            assert_eq!(r.step().state, FlightState::Disarmed, "{name}");
+        }
     }
 
     #[test]

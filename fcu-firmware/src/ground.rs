@@ -136,8 +136,9 @@ mod with_link {
     use crate::Mono;
     use fcu_core::parameters::snapshot;
     use fcu_core::telemetry::LineBuf;
-    use fcu_link::station::Station;
-    use fcu_link::{Link, LinkConfig, Severity};
+    use fcu_link::service::{Observed, Service};
+    use fcu_link::station::Due;
+    use fcu_link::{LinkConfig, Severity};
     use rtic::Mutex;
     use rtic_monotonics::systick::prelude::*;
 
@@ -146,33 +147,25 @@ mod with_link {
     /// The link's period: 200 Hz, so a parameter download (one value per call) runs at its
     /// 100 Hz and received bytes wait at most 5 ms.
     const LINK_PERIOD_MS: u32 = 5;
-    /// How long the UART has to send the last bytes before a reboot.
-    const REBOOT_PAUSE_MS: u32 = 20;
     /// How often a fatal boot fault is repeated as a STATUSTEXT.
     const FAULT_REPEAT_MS: u32 = 2000;
 
     pub struct GroundLink {
-        link: Link<LINK_TX_BYTES>,
-        station: Station,
+        service: Service<LINK_TX_BYTES>,
         uart_rx: UartRx,
         flash: ParamFlash,
-        /// How the parameters were found at boot, said once the link runs.
-        params_source: snapshot::Source,
     }
 
     impl GroundLink {
         pub fn new(cfg: Config, defaults: &'static Config, stored: (ParamFlash, snapshot::Source), uart_rx: UartRx) -> Self {
-            let station = Station::new(cfg, defaults);
-            let mut link = Link::new(LinkConfig::DEFAULT);
-            link.set_rates(station.rates());
-            let (flash, params_source) = stored;
-            GroundLink { link, station, uart_rx, flash, params_source }
+            let (flash, source) = stored;
+            GroundLink { service: Service::new(cfg, defaults, source, LinkConfig::DEFAULT), uart_rx, flash }
         }
 
         /// MAVLink from boot, or text lines until a ground station speaks MAVLink (the link's
         /// protocol parameter).
         pub fn speaks_mavlink_from_boot(&self) -> bool {
-            self.station.config().link.protocol == fcu_core::config::LinkProtocol::Mavlink
+            self.service.speaks_mavlink_from_boot()
         }
     }
 
@@ -207,44 +200,25 @@ mod with_link {
         W: Mutex<T = Option<Watchdog>>,
         M: Mutex<T = bool>,
     {
-        let mut pace = Pace { announced: false, next_fatal_ms: 0 };
+        let mut next_fatal_ms = 0;
         loop {
             let now_ms = Mono::now().duration_since_epoch().as_millis();
-            let next = step(g, &mut s, &boot, &mut pace, now_ms);
-            // One await in the loop: the task's future then holds one delay, not two.
-            // Before a reboot the acknowledgement has left the link's queue; the UART gets
-            // its 20 ms to send it.
-            let pause_ms = if next == Next::Reboot { REBOOT_PAUSE_MS } else { LINK_PERIOD_MS };
-            Mono::delay(pause_ms.millis()).await;
-            if next == Next::Reboot {
-                cortex_m::peripheral::SCB::sys_reset();
-            }
+            step(g, &mut s, &boot, &mut next_fatal_ms, now_ms);
+            Mono::delay(LINK_PERIOD_MS.millis()).await;
         }
     }
 
-    /// What the task remembers between two periods besides the link and station.
-    struct Pace {
-        announced: bool,
-        next_fatal_ms: u32,
-    }
-
-    #[derive(PartialEq)]
-    enum Next {
-        Wait,
-        Reboot,
-    }
-
-    /// One period of the link's work. A plain function, out of line: the task's future then
-    /// holds only what lives across an await, not every local of the link's work.
+    /// One period of the link's work (`fcu_link::service` decides; this moves bytes and
+    /// words). A plain function, out of line: the task's future then holds only what lives
+    /// across an await, not every local of the link's work.
     #[inline(never)]
     fn step<U, L, B, T, O, G, W, M>(
         g: &mut GroundLink,
         s: &mut Shared<U, L, B, T, O, G, W, M>,
         boot: &BootVerdict,
-        pace: &mut Pace,
+        next_fatal_ms: &mut u32,
         now_ms: u32,
-    ) -> Next
-    where
+    ) where
         U: Mutex<T = UartOut>,
         L: Mutex<T = Option<Snapshot>>,
         B: Mutex<T = u32>,
@@ -256,7 +230,8 @@ mod with_link {
     {
         if let Some(snapshot) = s.latest.lock(Option::take) {
             let battery_mv = s.battery_mv.lock(|mv| *mv);
-            g.station.observe(&snapshot.status, battery_mv, snapshot.rc_widths_counts, now_ms);
+            let observed = Observed { status: snapshot.status, battery_mv, rc_widths_counts: snapshot.rc_widths_counts };
+            g.service.observe(now_ms, &observed);
         }
         let mut bytes = [0u8; 64];
         loop {
@@ -264,89 +239,61 @@ mod with_link {
             if n == 0 {
                 break;
             }
-            g.link.receive(bytes.get(..n).unwrap_or_default(), now_ms, &mut g.station);
+            g.service.receive(now_ms, bytes.get(..n).unwrap_or_default());
         }
-        let heard = g.link.stats().reader.frames > 0;
+        let heard = g.service.heard();
         if !s.mavlink_on.lock(|on| core::mem::replace(on, *on || heard) || heard) {
-            return Next::Wait;
+            return;
         }
-        if !pace.announced {
-            pace.announced = true;
-            announce_parameters(&mut g.link, &g.params_source);
-        }
-        if !boot.may_fly() && now_ms.wrapping_sub(pace.next_fatal_ms) as i32 >= 0 {
-            pace.next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
+        if !boot.may_fly() && now_ms.wrapping_sub(*next_fatal_ms) as i32 >= 0 {
+            *next_fatal_ms = now_ms.wrapping_add(FAULT_REPEAT_MS);
             let mut line = LineBuf::<96>::new();
             let _grounded = boot.write_fatal_line(&mut line);
             // The line is ASCII: an ASCII trim of its bytes keeps the Unicode whitespace table
             // and the UTF-8 check out of flash.
-            let _queued = g.link.send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
+            let _queued = g.service.link_mut().send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
         }
-        g.link.tick(now_ms, &mut g.station);
-        if let Some(cfg) = g.station.take_change() {
-            g.link.set_rates(g.station.rates());
+        let to = g.service.period(now_ms);
+        if let Some(cfg) = to.config {
             s.tick_config.lock(|slot| *slot = Some(cfg));
             s.outer_config.lock(|slot| *slot = Some(cfg));
         }
-        // Commands, and whether a save is wanted (the tick then refuses to arm; the station
-        // starts the save once the status shows it). One the tick has not taken yet is
-        // merged with, not overwritten.
-        if let Some(input) = g.station.take_ground() {
+        // Commands, and the levels of a pending save or reboot (the tick then refuses to arm).
+        // One the tick has not taken yet is merged with, not overwritten.
+        if let Some(input) = to.ground {
             s.ground_input.lock(|slot| *slot = Some(slot.map_or(input, |older| older.then(input))));
         }
-        let link = &mut g.link;
+        let service = &mut g.service;
         let uart_idle = s.uart.lock(|uart| {
             let mut out = [0u8; 128];
             let room = uart.room().min(out.len());
-            let n = link.poll_tx(out.get_mut(..room).unwrap_or_default());
+            let n = service.poll_tx(out.get_mut(..room).unwrap_or_default());
             uart.send(out.get(..n).unwrap_or_default());
             uart.is_idle()
         });
-        // Flash work stalls the CPU, the UART's interrupt included: only once every byte
-        // queued (a command's acknowledgement) is out.
-        if g.station.save_due() && uart_idle && g.link.tx_pending() == 0 {
-            let saved = save_parameters(&g.station, &mut g.flash, &mut s.watchdog);
-            g.station.saved(saved.is_ok());
-            let _queued = match saved {
-                Ok(()) => g.link.send_text(Severity::Info, b"parameters saved"),
-                Err(_) => g.link.send_text(Severity::Error, b"parameters NOT saved: flash error"),
-            };
-        }
-        if g.station.reboot_asked() && g.link.reboot_ready() && !g.station.unsaved() {
-            Next::Reboot
-        } else {
-            Next::Wait
-        }
-    }
-
-    /// Says where the parameters in force came from: a STATUSTEXT once the link runs, and again
-    /// to each ground station that connects later (it missed the boot).
-    fn announce_parameters(link: &mut Link<LINK_TX_BYTES>, source: &snapshot::Source) {
-        let _queued = match source {
-            snapshot::Source::Snapshot { .. } => link.greet(Severity::Info, b"parameters loaded from flash"),
-            snapshot::Source::NoSnapshot => link.greet(Severity::Notice, b"no saved parameters: defaults"),
-            snapshot::Source::Refused(rule) => {
-                let mut text = LineBuf::<64>::new();
-                text.push_str("saved parameters refused (");
-                text.push_str(rule);
-                text.push_str("): defaults");
-                link.greet(Severity::Warning, text.as_bytes())
+        // Asked at the instant of acting, and acted on at once.
+        match g.service.due(now_ms, uart_idle) {
+            Due::Nothing => {}
+            Due::Save => {
+                let saved = save_parameters(&g.service, &mut g.flash, &mut s.watchdog);
+                g.service.saved(saved.is_ok());
             }
-        };
+            Due::Reboot => cortex_m::peripheral::SCB::sys_reset(),
+        }
     }
 
-    /// Writes the parameters in force to flash as the station plans it: erase a sector if the
+    /// Writes the parameters in force to flash as the service plans it: erase a sector if the
     /// plan says so (the watchdog's timeout stretched over it: every fetch stalls meanwhile,
     /// the control tick's included), then the snapshot's words, its commit word last.
     fn save_parameters(
-        station: &Station,
+        service: &Service<LINK_TX_BYTES>,
         flash: &mut ParamFlash,
         watchdog: &mut impl Mutex<T = Option<Watchdog>>,
     ) -> Result<(), FlashError> {
         let (Some(a), Some(b)) = (flash.sector(0), flash.sector(1)) else {
             return Err(FlashError::OutOfRange);
         };
-        let plan = station.plan_save([a, b]);
+        let plan = service.plan_save([a, b]);
         if let Some(sector) = plan.erase {
             watchdog.lock(|w| w.as_mut().map_or(Ok(()), Watchdog::stretch_for_flash)).map_err(|_| FlashError::Timeout)?;
             let erased = flash.erase(sector);

@@ -59,6 +59,7 @@ mod motor_test;
 mod params;
 pub mod rates;
 pub mod reader;
+pub mod service;
 pub mod station;
 mod telemetry;
 pub mod text;
@@ -69,6 +70,8 @@ pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS};
 pub use motor_test::{MotorTestState, MOTOR_TEST_MAX_MS, MOTOR_TEST_THROTTLE_CAP_PCT};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
+pub use service::{Observed, Service, ToControl};
+pub use station::Due;
 pub use text::Severity;
 pub use vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Vehicle, VehicleState};
 

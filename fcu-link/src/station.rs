@@ -10,10 +10,21 @@
 //! parameter table and of [`fcu_core::ground`] (which the control tick applies again with the
 //! state it is in); the owner only moves bytes and words.
 //!
-//! A save first tells the control tick ([`GroundInput::saving`]), which refuses to arm from
-//! then on, and starts only once two status snapshots taken after that show the refusal
-//! ([`Blocker::GroundBusy`]) with the board disarmed: the first may predate the tick taking
-//! the input. An erase stalls every instruction fetch, the control tick's included.
+//! # Deferred actions
+//!
+//! A save and a reboot are not carried out when they are asked for: a save waits for the
+//! changes to settle, both wait for the acknowledgement to leave. Each first tells the control
+//! tick ([`GroundInput::saving`], [`GroundInput::rebooting`]), which refuses to arm from then on
+//! with a blocker of its own ([`Blocker::Saving`], [`Blocker::RebootPending`]), and is due only
+//! once two status snapshots taken after that show the refusal with the board disarmed (the
+//! first may predate the tick taking the input). [`Station::due`] asks again at the instant the
+//! owner acts. An asked-for save or reboot that cannot be carried out within
+//! [`ACTION_TIMEOUT_MS`], or that finds the board armed (it armed before the refusal reached the
+//! tick), is dropped with a text saying so ([`Station::take_notice`]). An erase stalls every
+//! instruction fetch, the control tick's included; a reset stops the motors.
+//!
+//! A save is refused while a motor test runs (the motor would keep its duty through the erase)
+//! and a motor test or a calibration while a save or a reboot is pending.
 
 use fcu_core::flight::Status;
 use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange};
@@ -29,9 +40,31 @@ use crate::vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Ve
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
 pub const SAVE_DEBOUNCE_MS: u32 = 2000;
 
-/// Status snapshots showing the save's arming refusal before the save starts (see the module
+/// Status snapshots showing the arming refusal before a save or a reboot is due (see the module
 /// docs).
-const SAVE_CONFIRMATIONS: u8 = 2;
+const HOLD_CONFIRMATIONS: u8 = 2;
+
+/// How long an asked-for save or reboot may wait for the arming refusal to show before it is
+/// dropped: the refusal takes a tick and a status snapshot (milliseconds); the wait is for a
+/// control loop that has stopped reporting, or a flood that keeps the link from going quiet.
+pub const ACTION_TIMEOUT_MS: u32 = 5000;
+
+/// Rule: a save is refused while a motor test runs.
+pub const RULE_MOTOR_TEST_RUNNING: &str = "motor test running";
+/// Rule: nothing new starts while a save is pending.
+pub const RULE_SAVING: &str = "save pending";
+/// Rule: nothing new starts while a reboot is pending.
+pub const RULE_REBOOTING: &str = "reboot pending";
+
+/// Flash or reset work the owner is to carry out now ([`Station::due`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Due {
+    Nothing,
+    /// Write the parameters ([`Station::plan_save`]), then report with [`Station::saved`].
+    Save,
+    /// Reset the board.
+    Reboot,
+}
 
 pub struct Station {
     cfg: Config,
@@ -45,15 +78,19 @@ pub struct Station {
     change_pending: bool,
     /// When the parameters in RAM differ from flash: the time of the last change.
     unsaved_since_ms: Option<u32>,
-    /// A save asked for by the ground station: at once, not after the debounce.
-    save_asked: bool,
-    reboot_asked: bool,
-    /// The commands for the control tick not taken yet, and the save's level.
+    /// A save asked for by the ground station (at once, not after the debounce): when.
+    save_asked_ms: Option<u32>,
+    /// A reboot asked for: when.
+    reboot_asked_ms: Option<u32>,
+    /// The commands for the control tick not taken yet, and the levels of the save and the
+    /// reboot.
     ground: GroundInput,
     /// `ground` differs from what the control tick last took.
     ground_pending: bool,
-    /// Snapshots since the save's level went out that show it in force (see the module docs).
-    saving_confirmed: u8,
+    /// Snapshots since the levels went out that show them in force (see the module docs).
+    hold_confirmed: u8,
+    /// A dropped action's text, for the ground station.
+    notice: Option<&'static [u8]>,
 }
 
 impl Station {
@@ -68,11 +105,12 @@ impl Station {
             now_ms: 0,
             change_pending: false,
             unsaved_since_ms: None,
-            save_asked: false,
-            reboot_asked: false,
+            save_asked_ms: None,
+            reboot_asked_ms: None,
             ground: GroundInput::default(),
             ground_pending: false,
-            saving_confirmed: 0,
+            hold_confirmed: 0,
+            notice: None,
         }
     }
 
@@ -82,9 +120,22 @@ impl Station {
         self.battery_mv = battery_mv.min(u32::from(u16::MAX)) as u16;
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
-        let refusing = !status.state.armed() && status.blockers.contains(Blocker::GroundBusy);
-        self.saving_confirmed =
-            if self.ground.saving && !self.ground_pending && refusing { self.saving_confirmed.saturating_add(1) } else { 0 };
+        let held = self.ground.saving || self.ground.rebooting;
+        let shows = |level: bool, blocker: Blocker| !level || status.blockers.contains(blocker);
+        let refusing =
+            !status.state.armed() && shows(self.ground.saving, Blocker::Saving) && shows(self.ground.rebooting, Blocker::RebootPending);
+        self.hold_confirmed = if held && !self.ground_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
+        if matches!(status.state, FlightState::Armed | FlightState::FailsafeLevel) {
+            // Armed before the refusal reached the tick: what was asked cannot be done now,
+            // and is not to be done by surprise later. (An arming gesture under way is ended
+            // by the refusal: the action waits for it.)
+            if self.reboot_asked_ms.take().is_some() {
+                self.notice = Some(b"reboot dropped: the board armed");
+            }
+            if self.save_asked_ms.take().is_some() {
+                self.notice = Some(b"save dropped: the board armed (saved after disarm)");
+            }
+        }
     }
 
     /// The configuration in force.
@@ -113,16 +164,54 @@ impl Station {
     /// changed.
     pub fn take_ground(&mut self) -> Option<GroundInput> {
         let saving = self.save_wanted();
-        if saving != self.ground.saving {
+        let rebooting = self.reboot_asked_ms.is_some();
+        if (saving, rebooting) != (self.ground.saving, self.ground.rebooting) {
             self.ground.saving = saving;
+            self.ground.rebooting = rebooting;
             self.ground_pending = true;
         }
         if !core::mem::take(&mut self.ground_pending) {
             return None;
         }
         let input = self.ground;
-        self.ground = GroundInput { saving, ..GroundInput::default() };
+        self.ground = GroundInput { saving, rebooting, ..GroundInput::default() };
         Some(input)
+    }
+
+    /// The flash or reset work to carry out now, asked at the instant the owner would act: a
+    /// save ([`Station::save_due`]) first, then a reboot once nothing is left unsaved; an
+    /// asked-for action past [`ACTION_TIMEOUT_MS`] is dropped instead
+    /// ([`Station::take_notice`]). The owner acts on the answer at once, with nothing in
+    /// between that could let the board arm.
+    pub fn due(&mut self) -> Due {
+        let late = |asked: Option<u32>| asked.is_some_and(|t| self.now_ms.wrapping_sub(t) >= ACTION_TIMEOUT_MS);
+        if late(self.save_asked_ms) {
+            self.save_asked_ms = None;
+            self.notice = Some(b"save dropped: arming refusal not confirmed in 5 s");
+        }
+        if late(self.reboot_asked_ms) {
+            self.reboot_asked_ms = None;
+            self.notice = Some(b"reboot dropped: arming refusal not confirmed in 5 s");
+        }
+        if self.save_due() {
+            Due::Save
+        } else if self.reboot_due() {
+            Due::Reboot
+        } else {
+            Due::Nothing
+        }
+    }
+
+    /// Whether a save or a reboot waits only for the link to go quiet: the owner stops
+    /// feeding the UART, so that the acknowledgement is out and no byte is mid-way when the
+    /// CPU stalls or resets.
+    pub fn action_imminent(&self) -> bool {
+        self.save_due() || self.reboot_due()
+    }
+
+    /// A text for the ground station about an action dropped (see [`Station::due`]), once.
+    pub fn take_notice(&mut self) -> Option<&'static [u8]> {
+        self.notice.take()
     }
 
     /// Whether the parameters should be written to flash now: asked for, or changed and left
@@ -130,20 +219,40 @@ impl Station {
     /// refuses to arm for it (see the module docs). The reference's supervisor has no such
     /// refusal: only the armed state counts there.
     pub fn save_due(&self) -> bool {
-        let confirmed = self.ground.saving && self.saving_confirmed >= SAVE_CONFIRMATIONS;
-        self.save_wanted() && (confirmed || !self.safe_supervisor())
+        self.save_wanted() && self.held(self.ground.saving)
+    }
+
+    /// Whether the board should reset now: asked for, nothing left to save, and the control
+    /// tick refuses to arm for it.
+    fn reboot_due(&self) -> bool {
+        self.reboot_asked_ms.is_some() && !self.unsaved() && !self.armed() && self.held(self.ground.rebooting)
+    }
+
+    /// The control tick shows the refusal `level` asks for (always, for the reference's
+    /// supervisor, which has none).
+    fn held(&self, level: bool) -> bool {
+        let confirmed = level && !self.ground_pending && self.hold_confirmed >= HOLD_CONFIRMATIONS;
+        !self.armed() && (confirmed || !self.safe_supervisor())
     }
 
     fn safe_supervisor(&self) -> bool {
         matches!(self.cfg.supervisor, SupervisorConfig::Safe(_))
     }
 
+    /// A save is wanted: asked for, settled after a change, or before an asked-for reboot;
+    /// never while armed or while a motor test runs.
     fn save_wanted(&self) -> bool {
-        if self.armed() {
+        if self.armed() || self.motor_test_running() {
             return false;
         }
         let settled = self.unsaved_since_ms.is_some_and(|t| self.now_ms.wrapping_sub(t) >= SAVE_DEBOUNCE_MS);
-        self.save_asked || settled
+        let before_reboot = self.reboot_asked_ms.is_some() && self.unsaved_since_ms.is_some();
+        self.save_asked_ms.is_some() || settled || before_reboot
+    }
+
+    /// The last status shows a motor test running (or a stick it stopped not yet back).
+    fn motor_test_running(&self) -> bool {
+        self.status.is_some_and(|s| s.blockers.contains(Blocker::MotorTest))
     }
 
     /// The words to write for a save, given the sectors as they are.
@@ -155,18 +264,32 @@ impl Station {
     pub fn saved(&mut self, ok: bool) {
         if ok {
             self.unsaved_since_ms = None;
+        } else if self.reboot_asked_ms.take().is_some() {
+            // A reboot would lose what failed to save: the ground station decides again.
+            self.notice = Some(b"reboot dropped: the save before it failed");
         }
-        self.save_asked = false;
+        self.save_asked_ms = None;
     }
 
     /// Whether a save is still to be made (a reboot waits for it).
     pub fn unsaved(&self) -> bool {
-        self.unsaved_since_ms.is_some() || self.save_asked
+        self.unsaved_since_ms.is_some() || self.save_asked_ms.is_some()
     }
 
-    /// A reboot was asked for (the link says when its acknowledgement is out).
+    /// A reboot was asked for and is pending.
     pub fn reboot_asked(&self) -> bool {
-        self.reboot_asked
+        self.reboot_asked_ms.is_some()
+    }
+
+    /// Why a new motor test or calibration may not start now: a save or a reboot is pending.
+    fn pending_rule(&self) -> Result<(), &'static str> {
+        if self.reboot_asked_ms.is_some() {
+            Err(RULE_REBOOTING)
+        } else if self.save_wanted() || self.ground.saving {
+            Err(RULE_SAVING)
+        } else {
+            Ok(())
+        }
     }
 
     /// Out of line: most rules ask it.
@@ -284,8 +407,9 @@ impl Vehicle for Station {
     fn request(&mut self, request: Request) -> Result<(), &'static str> {
         match request {
             Request::SaveParams if self.armed() => Err(RULE_ARMED),
+            Request::SaveParams if self.motor_test_running() => Err(RULE_MOTOR_TEST_RUNNING),
             Request::SaveParams => {
-                self.save_asked = true;
+                self.save_asked_ms = Some(self.now_ms);
                 Ok(())
             }
             Request::ResetParams if self.armed() => Err(RULE_ARMED),
@@ -299,7 +423,7 @@ impl Vehicle for Station {
             }
             Request::Reboot if self.armed() => Err(RULE_ARMED),
             Request::Reboot => {
-                self.reboot_asked = true;
+                self.reboot_asked_ms = Some(self.now_ms);
                 Ok(())
             }
             Request::Disarm { forced } => {
@@ -310,11 +434,13 @@ impl Vehicle for Station {
             }
             Request::CalibrateImu => {
                 ground::ground_test_rule(self.flight_state())?;
+                self.pending_rule()?;
                 self.for_tick()?.calibrate_imu = true;
                 Ok(())
             }
             Request::CalibrateRadio => {
                 ground::ground_test_rule(self.flight_state())?;
+                self.pending_rule()?;
                 self.for_tick()?.radio_calibration = Some(true);
                 Ok(())
             }
@@ -324,6 +450,7 @@ impl Vehicle for Station {
             }
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
                 ground::ground_test_rule(self.flight_state())?;
+                self.pending_rule()?;
                 if motor >= ground::MOTORS {
                     return Err(ground::RULE_NO_SUCH_MOTOR);
                 }
@@ -438,7 +565,7 @@ mod tests {
     #[test]
     fn the_pre_arm_check_is_healthy_disarmed_without_a_blocker_and_armed() {
         let mut busy = Blockers::default();
-        busy.insert(Blocker::GroundBusy);
+        busy.insert(Blocker::Saving);
         for (state, blockers, ready) in [
             (FlightState::Disarmed, Blockers::default(), true),
             (FlightState::Disarmed, busy, false),
@@ -456,7 +583,7 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         let idle = status(FlightState::Disarmed, REST, Blockers::default());
         let mut busy = idle;
-        busy.blockers.insert(Blocker::GroundBusy);
+        busy.blockers.insert(Blocker::Saving);
         assert_eq!(st.request(Request::SaveParams), Ok(()));
         assert!(!st.save_due(), "the tick does not know yet");
         assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
@@ -466,22 +593,152 @@ mod tests {
         assert!(!st.save_due());
         st.observe(&busy, 3900, [0; 4], 1015);
         assert!(st.save_due());
-        // Armed meanwhile (the refusal came too late): no save.
-        let mut armed = busy;
-        armed.state = FlightState::Armed;
-        st.observe(&armed, 3900, [0; 4], 1020);
-        assert!(!st.save_due());
-        st.observe(&busy, 3900, [0; 4], 1025);
-        st.observe(&busy, 3900, [0; 4], 1030);
-        assert!(st.save_due());
         // Calibrating or faulted, the board cannot arm either: the refusal is what counts.
         let mut faulted = busy;
         faulted.state = FlightState::Fault;
-        st.observe(&faulted, 3900, [0; 4], 1035);
+        st.observe(&faulted, 3900, [0; 4], 1020);
+        assert!(st.save_due());
+        // Armed meanwhile (the refusal came too late): no save, and the request is dropped.
+        let mut armed = busy;
+        armed.state = FlightState::Armed;
+        st.observe(&armed, 3900, [0; 4], 1025);
+        assert!(!st.save_due());
+        assert!(st.take_notice().is_some());
+        st.observe(&busy, 3900, [0; 4], 1030);
+        st.observe(&busy, 3900, [0; 4], 1035);
+        assert!(!st.save_due(), "nothing was changed: nothing left to save");
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        st.observe(&busy, 3900, [0; 4], 1040);
         assert!(st.save_due());
         st.saved(true);
         assert!(!st.save_due());
         assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed again");
         assert_eq!(st.take_ground(), None);
+    }
+
+    /// A status in `state` showing `blockers`, fed at `now_ms`.
+    fn feed(st: &mut Station, state: FlightState, blockers: &[Blocker], now_ms: u32) {
+        let mut b = Blockers::default();
+        for &blocker in blockers {
+            b.insert(blocker);
+        }
+        st.observe(&status(state, REST, b), 3900, [0; 4], now_ms);
+    }
+
+    #[test]
+    fn a_reboot_is_due_only_once_the_tick_refuses_to_arm_for_it() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.due(), Due::Nothing, "the tick does not know yet");
+        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(true));
+        feed(&mut st, FlightState::Disarmed, &[], 1005);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1010);
+        assert_eq!(st.due(), Due::Nothing, "one snapshot may predate the tick's take");
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1015);
+        assert_eq!(st.due(), Due::Reboot);
+    }
+
+    #[test]
+    fn a_reboot_accepted_disarmed_is_dropped_when_the_board_arms_never_carried_out_in_flight() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::Reboot), Ok(()));
+        let _ = st.take_ground();
+        // A gesture under way (motors off) is ended by the refusal: the reboot waits for it.
+        feed(&mut st, FlightState::Arming, &[Blocker::RebootPending], 1002);
+        assert_eq!(st.due(), Due::Nothing);
+        assert!(st.reboot_asked());
+        // The pilot's gesture won the race against the refusal: armed, then flying for long.
+        feed(&mut st, FlightState::Armed, &[], 1005);
+        assert_eq!(st.due(), Due::Nothing);
+        assert_eq!(st.take_notice(), Some(&b"reboot dropped: the board armed"[..]));
+        assert!(!st.reboot_asked());
+        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        for t in (1010..20_000).step_by(5) {
+            feed(&mut st, FlightState::Armed, &[], t);
+            assert_eq!(st.due(), Due::Nothing, "at {t} ms");
+        }
+        // Landed and disarmed: the reboot does not come back by surprise.
+        for t in (20_000..21_000).step_by(5) {
+            feed(&mut st, FlightState::Disarmed, &[], t);
+            assert_eq!(st.due(), Due::Nothing, "at {t} ms");
+        }
+    }
+
+    #[test]
+    fn a_reboot_never_confirmed_times_out_with_a_text() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::Reboot), Ok(()));
+        let _ = st.take_ground();
+        // The tick never shows the refusal (its status stopped, say).
+        feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS - 5);
+        assert_eq!(st.due(), Due::Nothing);
+        assert!(st.reboot_asked());
+        feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS);
+        assert_eq!(st.due(), Due::Nothing);
+        assert_eq!(st.take_notice(), Some(&b"reboot dropped: arming refusal not confirmed in 5 s"[..]));
+        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        // A late confirmation does not revive it.
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 5);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 10);
+        assert_eq!(st.due(), Due::Nothing);
+    }
+
+    #[test]
+    fn an_asked_save_that_finds_the_board_armed_is_dropped_and_waits_for_the_disarm() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        let _ = st.take_ground();
+        feed(&mut st, FlightState::Armed, &[], 1005);
+        assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (saved after disarm)"[..]));
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "no save while armed");
+        for t in (1010..10_000).step_by(5) {
+            feed(&mut st, FlightState::Armed, &[], t);
+            assert_eq!(st.due(), Due::Nothing, "never while armed, at {t} ms");
+        }
+        // Disarmed: the change is still unsaved, and saved once the refusal shows.
+        feed(&mut st, FlightState::Disarmed, &[], 10_000);
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_005);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_010);
+        assert_eq!(st.due(), Due::Save);
+    }
+
+    #[test]
+    fn a_reboot_saves_what_is_unsaved_first() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
+        assert_eq!(st.request(Request::Reboot), Ok(()));
+        let g = st.take_ground().unwrap();
+        assert!(g.saving && g.rebooting, "{g:?}");
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1005);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1010);
+        assert_eq!(st.due(), Due::Save, "not the reboot: the change would be lost");
+        st.saved(true);
+        assert_eq!(st.take_ground().map(|g| (g.saving, g.rebooting)), Some((false, true)));
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1015);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1020);
+        assert_eq!(st.due(), Due::Reboot);
+    }
+
+    #[test]
+    fn a_save_is_refused_during_a_motor_test_and_a_test_while_a_save_or_reboot_is_pending() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000);
+        assert_eq!(st.request(Request::SaveParams), Err(RULE_MOTOR_TEST_RUNNING));
+        // A change made meanwhile waits for the test to end.
+        assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
+        feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000 + SAVE_DEBOUNCE_MS + 100);
+        assert_eq!(st.take_ground().map(|g| g.saving), None);
+        assert_eq!(st.due(), Due::Nothing);
+
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_SAVING));
+        assert_eq!(st.request(Request::CalibrateImu), Err(RULE_SAVING));
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_REBOOTING));
+        assert_eq!(st.request(Request::CalibrateRadio), Err(RULE_REBOOTING));
     }
 }

@@ -8,7 +8,7 @@
 
 use super::params::TickParams;
 use crate::ground::{
-    capped_duty_pct, ground_test_rule, Disarm, GroundCommands, GroundInput, MotorTestChange, MOTORS, MOTOR_TEST_MAX_MS,
+    capped_duty_pct, ground_test_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, MOTORS, MOTOR_TEST_MAX_MS,
     RADIO_CALIBRATION_MAX_MS,
 };
 use crate::rc::{RcConfig, Sticks};
@@ -27,6 +27,7 @@ pub(super) struct TestOutput {
 #[derive(Clone, Debug, Default)]
 pub(super) struct Ground {
     saving: bool,
+    rebooting: bool,
     disarm: Option<Disarm>,
     calibrate: bool,
     motor_test: Option<TestOutput>,
@@ -45,16 +46,18 @@ fn ticks_in(ms: u32, p: &TickParams) -> u32 {
 impl Ground {
     /// Takes what the station asked, at tick `now` in `state`. A test or calibration that may
     /// not start in `state` ([`ground_test_rule`]) is dropped: the station answered with an
-    /// older view of the state.
+    /// older view of the state. A save stops a motor test and refuses a new one: an erase
+    /// stalls the tick, and the motor would keep its duty through it.
     pub(super) fn take(&mut self, input: &GroundInput, now: u32, state: FlightState, p: &TickParams) {
         self.saving = input.saving;
+        self.rebooting = input.rebooting;
         if input.disarm.is_some() {
             self.disarm = input.disarm;
         }
         let may_start = ground_test_rule(state).is_ok();
         self.calibrate |= input.calibrate_imu && may_start;
         match input.motor_test {
-            Some(MotorTestChange::Start(t)) if may_start && t.motor < MOTORS => {
+            Some(MotorTestChange::Start(t)) if may_start && !input.saving && t.motor < MOTORS => {
                 let range = p.compare_range;
                 let span = (range.max_counts - range.min_counts) as f32;
                 let compare = range.to_compare(range.min_counts as f32 + span * capped_duty_pct(t.duty_pct) * 0.01);
@@ -62,6 +65,7 @@ impl Ground {
                 self.motor_test = Some(TestOutput { motor: t.motor, compare, until_tick });
             }
             Some(_) => self.motor_test = None,
+            None if input.saving => self.motor_test = None,
             None => {}
         }
         match input.radio_calibration {
@@ -96,7 +100,12 @@ impl Ground {
             self.radio_calibration_until = None;
         }
         GroundCommands {
-            busy: self.saving || self.motor_test.is_some() || self.moved_during_test || self.radio_calibration_until.is_some(),
+            holds: Holds {
+                motor_test: self.motor_test.is_some() || self.moved_during_test,
+                radio_calibration: self.radio_calibration_until.is_some(),
+                saving: self.saving,
+                rebooting: self.rebooting,
+            },
             disarm: self.disarm.take(),
             calibrate: core::mem::take(&mut self.calibrate),
         }
@@ -202,12 +211,12 @@ mod tests {
         assert!(on[2] > 0);
         let st = b.fc.status();
         assert_eq!(st.state, FlightState::Disarmed);
-        assert!(st.blockers.contains(Blocker::GroundBusy));
+        assert!(st.blockers.contains(Blocker::MotorTest));
         assert_eq!(st.compare, on, "telemetry sees the test's output");
         // 1000 ms is 800 ticks: on until then, off after.
         assert_eq!(b.run(&REST, 797), on);
         assert_eq!(b.run(&REST, 3), [0; 4]);
-        assert!(!b.fc.status().blockers.contains(Blocker::GroundBusy));
+        assert!(!b.fc.status().blockers.contains(Blocker::MotorTest));
     }
 
     #[test]
@@ -243,17 +252,17 @@ mod tests {
         let mut b = Bench::new();
         b.fc.take_ground(&start(0, 10.0, 3000));
         b.run(&REST, 1);
-        assert!(b.fc.status().blockers.contains(Blocker::GroundBusy));
+        assert!(b.fc.status().blockers.contains(Blocker::MotorTest));
         // The gesture's sticks leave their rest: the test stops at once, and the gesture begun
         // during it never arms, held as long as it may be.
         assert_eq!(b.run(&ARM, 1), [0; 4]);
         b.run(&ARM, 1500);
         assert_eq!(b.fc.status().state, FlightState::Disarmed);
-        assert!(b.fc.status().blockers.contains(Blocker::GroundBusy));
+        assert!(b.fc.status().blockers.contains(Blocker::MotorTest));
         b.run(&REST, 2);
         assert_eq!(b.fc.status().state, FlightState::Disarmed);
         // Back at rest, the blocker is gone and a fresh gesture arms.
-        assert!(!b.fc.status().blockers.contains(Blocker::GroundBusy), "{:?}", b.fc.status().blockers);
+        assert!(!b.fc.status().blockers.contains(Blocker::MotorTest), "{:?}", b.fc.status().blockers);
         b.arm();
 
         let mut b = Bench::new();
@@ -273,11 +282,40 @@ mod tests {
         b.run(&ARM, 900);
         b.run(&REST, 2);
         assert_eq!(b.fc.status().state, FlightState::Disarmed);
-        assert!(b.fc.status().blockers.contains(Blocker::GroundBusy));
+        assert!(b.fc.status().blockers.contains(Blocker::Saving));
         b.fc.take_ground(&GroundInput::default());
         b.run(&REST, 2);
         assert!(b.fc.status().blockers.is_empty(), "{:?}", b.fc.status().blockers);
         b.arm();
+    }
+
+    #[test]
+    fn a_pending_reboot_blocks_arming_by_name_until_dropped() {
+        let mut b = Bench::new();
+        b.fc.take_ground(&GroundInput { rebooting: true, ..GroundInput::default() });
+        b.run(&ARM, 900);
+        b.run(&REST, 2);
+        assert_eq!(b.fc.status().state, FlightState::Disarmed);
+        assert!(b.fc.status().blockers.contains(Blocker::RebootPending), "{:?}", b.fc.status().blockers);
+        assert_eq!(Blocker::RebootPending.name(), "reboot-pending");
+        b.fc.take_ground(&GroundInput::default());
+        b.run(&REST, 2);
+        assert!(b.fc.status().blockers.is_empty(), "{:?}", b.fc.status().blockers);
+        b.arm();
+    }
+
+    #[test]
+    fn a_save_stops_a_motor_test_and_refuses_a_new_one() {
+        let mut b = Bench::new();
+        b.fc.take_ground(&start(1, 10.0, 3000));
+        assert_eq!(b.run(&REST, 10)[1], compare_of(10.0));
+        b.fc.take_ground(&GroundInput { saving: true, ..GroundInput::default() });
+        assert_eq!(b.run(&REST, 1), [0; 4], "the motor must not keep its duty through an erase");
+        b.fc.take_ground(&GroundInput { saving: true, ..start(1, 10.0, 3000) });
+        assert_eq!(b.run(&REST, 10), [0; 4], "no test starts while a save is pending");
+        b.fc.take_ground(&GroundInput::default());
+        b.fc.take_ground(&start(1, 10.0, 3000));
+        assert_eq!(b.run(&REST, 1)[1], compare_of(10.0), "after the save, a test starts again");
     }
 
     #[test]
@@ -328,7 +366,7 @@ mod tests {
         b.run(&REST, 2);
         assert!(b.fc.radio_calibration());
         assert_eq!(b.fc.status().state, FlightState::Disarmed);
-        assert!(b.fc.status().blockers.contains(Blocker::GroundBusy));
+        assert!(b.fc.status().blockers.contains(Blocker::RadioCalibration));
         b.fc.take_ground(&GroundInput { radio_calibration: Some(false), ..GroundInput::default() });
         b.run(&REST, 1);
         assert!(!b.fc.radio_calibration() && b.fc.status().blockers.is_empty());
