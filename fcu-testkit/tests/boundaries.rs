@@ -111,7 +111,6 @@ proptest! {
     #![proptest_config(config())]
 
     #[test]
-    #[ignore = "fails until the reboot re-checked against the flight state lands"]
     fn nothing_starts_while_armed(s in scenario()) {
         holds(Invariant::NothingStartsArmed, &s)?;
     }
@@ -169,9 +168,9 @@ fn the_bench_arms_flies_disarms_and_saves() {
 }
 
 /// Finding: a reboot accepted disarmed was carried out later in flight, once the transmit
-/// queue drained (the firmware never looked at the flight state again).
+/// queue drained (the firmware never looked at the flight state again). Now the link goes quiet
+/// for it, arming waits, and the reboot comes first.
 #[test]
-#[ignore = "fails until the reboot re-checked against the flight state lands"]
 fn a_reboot_accepted_disarmed_is_not_carried_out_in_flight() {
     let mut ops = vec![Op::Flood { ms: 500 }, reboot()];
     // The uplink stays full while the pilot arms and takes off: the acknowledgement waits.
@@ -183,8 +182,8 @@ fn a_reboot_accepted_disarmed_is_not_carried_out_in_flight() {
     ops.push(Op::Flood { ms: 500 });
     ops.push(Op::Wait { ms: 3000 });
     let b = bench(ops);
-    assert!(b.counts.arms >= 1, "the pilot armed: {:?}", b.counts);
     assert_holds(&b, Invariant::NothingStartsArmed);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
 }
 
 /// Finding: ANGLE_MAX 60, a legal value, saved and rebooted wiped every parameter.

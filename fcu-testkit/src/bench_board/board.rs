@@ -10,14 +10,17 @@ use fcu_core::parameters::snapshot;
 use fcu_core::rc::{CaptureEdge, EdgeDecoder, Sticks};
 use fcu_core::supervisor::{FlightState, SupervisorConfig};
 use fcu_core::Config;
+use fcu_link::service::{Observed, Service, ToControl};
+use fcu_link::station::Due;
 use fcu_link::LinkConfig;
 
 use super::check::{BootKind, Checker, Invariant};
 use super::flash::{Flash, PowerCut};
 use super::ground::{AnswerReader, GroundFrame};
-use super::task::{Due, Observed, ToControl, Today};
 use crate::safety::{sticks, LevelImu, PwmReceiver, RadioFrame};
 
+/// The link's transmit queue, bytes (the firmware's `LINK_TX_BYTES`).
+pub const LINK_TX_BYTES: usize = 512;
 /// Control ticks per link period (800 Hz, 5 ms).
 pub const TICKS_PER_PERIOD: u32 = 4;
 /// Microseconds per control tick.
@@ -31,9 +34,6 @@ pub const UART_CHUNK_BYTES: usize = 128;
 /// The firmware's receive ring (DMA), bytes: what arrives while nothing reads it beyond that
 /// overwrites the oldest.
 pub const RX_RING_BYTES: usize = 6 * 1024;
-/// How long the firmware's task waits between a reboot's decision and the reset, ms (the
-/// acknowledgement's last bytes).
-pub const REBOOT_PAUSE_MS: u32 = 20;
 /// The battery the bench supply holds, mV.
 pub const BATTERY_MV: u32 = 3900;
 
@@ -104,15 +104,15 @@ struct Boot {
     tick: ControlTick,
     outer: OuterStep,
     decoder: EdgeDecoder,
-    task: Today,
+    task: Service<LINK_TX_BYTES>,
+    /// MAVLink is on the UART (from boot, or since a frame was heard on a board set to text).
+    mavlink_on: bool,
     /// The configuration the control loop last took (the boot's, at first).
     cfg: Config,
     /// Ticks since power-on.
     ticks: u32,
     /// Taken by the control loop before its next tick.
     to_control: ToControl,
-    /// The reset decided, at this tick.
-    reset_at: Option<u32>,
     /// The received bytes not read yet (the DMA ring).
     rx: VecDeque<u8>,
     /// Bytes in the UART's transmit queue.
@@ -139,11 +139,11 @@ impl Boot {
             tick,
             outer,
             decoder,
-            task: Today::new(cfg, defaults, source, LinkConfig::DEFAULT),
+            task: Service::new(cfg, defaults, source, LinkConfig::DEFAULT),
+            mavlink_on: false,
             cfg,
             ticks: 0,
             to_control: ToControl::default(),
-            reset_at: None,
             rx: VecDeque::new(),
             uart_queued: 0,
             status,
@@ -324,11 +324,8 @@ impl Bench {
             b.arm_released_ticks = b.arm_released_ticks.saturating_add(1);
         }
         self.after_tick(was);
-        if self.boot.ticks % TICKS_PER_PERIOD == 0 && self.boot.reset_at.is_none() {
+        if self.boot.ticks % TICKS_PER_PERIOD == 0 {
             self.period();
-        }
-        if self.boot.reset_at.is_some_and(|t| self.boot.ticks.wrapping_sub(t) as i32 >= 0) {
-            self.reset();
         }
     }
 
@@ -410,14 +407,20 @@ impl Bench {
         self.uart_credit -= sent as f64;
     }
 
-    /// One period of the link task.
+    /// One period of the link task, as the firmware's `with_link::step` runs it: the status,
+    /// the bytes received, the period, the UART, and the flash or reset work due, done at once.
     fn period(&mut self) {
+        let observed = Observed { status: self.boot.status, battery_mv: BATTERY_MV, rc_widths_counts: self.radio_frame_widths() };
         let b = &mut self.boot;
         let now_ms = b.now_ms();
-        let observed = Observed { status: b.status, battery_mv: BATTERY_MV, rc_widths_counts: self.radio_frame_widths() };
-        let b = &mut self.boot;
+        b.task.observe(now_ms, &observed);
         let rx: Vec<u8> = b.rx.drain(..).collect();
-        let to = b.task.period(now_ms, Some(observed), &rx);
+        b.task.receive(now_ms, &rx);
+        b.mavlink_on = b.mavlink_on || b.task.speaks_mavlink_from_boot() || b.task.heard();
+        if !b.mavlink_on {
+            return;
+        }
+        let to = b.task.period(now_ms);
         if to.config.is_some() {
             b.to_control.config = to.config;
         }
@@ -445,10 +448,7 @@ impl Bench {
         match self.boot.task.due(now_ms, idle) {
             Due::Nothing => {}
             Due::Save => self.save(),
-            Due::Reboot => {
-                let b = &mut self.boot;
-                b.reset_at = Some(b.ticks.wrapping_add(ms_to_ticks(REBOOT_PAUSE_MS)));
-            }
+            Due::Reboot => self.reset(),
         }
     }
 

@@ -6,8 +6,8 @@
 //!   programming that only clears bits, and a power cut at any word;
 //! - [`ground`]: the ground station's MAVLink frames (any parameter name and value, any command
 //!   number and parameters) and the board's answers read back;
-//! - [`task`]: the link task's period (today's firmware step);
-//! - [`board`]: [`Bench`], the board at 800 Hz with its link period every 4 ticks, the UART at
+//! - [`board`]: [`Bench`], the board at 800 Hz with the firmware's link task
+//!   ([`fcu_link::service::Service`]) every 4 ticks, the UART at
 //!   115200 baud both ways, a level still IMU, the pilot's transmitter;
 //! - [`check`]: the invariants, each a named [`Invariant`], checked as the bench runs.
 //!
@@ -19,7 +19,6 @@ pub mod board;
 pub mod check;
 pub mod flash;
 pub mod ground;
-pub mod task;
 
 pub use board::{Bench, Counts, Op, Pilot};
 pub use check::{Invariant, Violation};
