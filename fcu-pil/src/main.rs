@@ -26,9 +26,10 @@ enum Command {
     /// stack, and the harness's own speed.
     Measure(MeasureArgs),
     /// Run the board at real time on the bench (level; the scenario's sticks, or centred with
-    /// the throttle low) with USART1 bridged to one TCP client: the client's bytes enter
-    /// USART1 RX (PA10) at 115200 baud, USART1's TX bytes go to the client. Reboots keep the
-    /// flash; --flash FILE loads it at power-on and saves it as it changes.
+    /// the throttle low) with USART1 bridged to TCP clients: every client's bytes enter USART1
+    /// RX (PA10) at 115200 baud, USART1's TX bytes go to every client (several ground stations
+    /// at once, as SITL serves them). Reboots keep the flash; --flash FILE loads it at power-on
+    /// and saves it as it changes. Ctrl-C ends it with a summary.
     Serve(ServeArgs),
 }
 
@@ -38,7 +39,7 @@ struct ServeArgs {
     #[arg(long)]
     link: String,
     /// A scenario whose sticks the simulated pilot plays (default: centred, throttle low).
-    #[arg(long)]
+    #[arg(long, help = format!("{} whose sticks the simulated pilot plays (default: centred, throttle low)", fcu_testkit::sim::scenario::help()))]
     scenario: Option<String>,
     /// The flash memory's contents: loaded at power-on if the file exists, saved as it changes.
     #[arg(long)]
@@ -230,6 +231,10 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
 
 fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
     let setup = a.timing.setup()?;
+    // Every argument is checked before the firmware is built (a build takes minutes).
+    if let Some(name) = &a.scenario {
+        fcu_testkit::cli::fly::prepare_scenario(name, None, None).map_err(|e| e.0)?;
+    }
     let elf = firmware::resolve_link_elf(a.elf.as_deref())?;
     let listener = fcu_pil::serve::listen(&a.link)?;
     println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
@@ -243,7 +248,11 @@ fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
         power_cut,
         params: a.params.clone(),
     };
-    let report = fcu_pil::serve::serve_on(listener, &opts)?;
+    // Ctrl-C ends the session at the next control period, with the summary a full one prints.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed)).map_err(|e| format!("Ctrl-C handler: {e}"))?;
+    let report = fcu_pil::serve::serve_until(listener, &opts, stop)?;
     print!("{report}");
     Ok(ExitCode::SUCCESS)
 }

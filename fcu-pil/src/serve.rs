@@ -7,8 +7,11 @@
 //! the bench) paced to the host's clock. Each control period: the client's bytes go onto PA10 at
 //! 115 200 baud ([`Board::push_uart_rx`], so a client that sends faster is held to the line's
 //! rate, as a USB-UART adapter's buffer holds it), and every byte USART1 put on PA9 goes to the
-//! client. Bytes sent while no client is connected are dropped, as with no cable. One client at
-//! a time; a new one is accepted when the last has gone.
+//! clients. Bytes sent while no client is connected are dropped, as with no cable. Several
+//! clients may be connected at once (a ground station and `fcu-ground`, say, as SITL serves
+//! them): each hears everything the board sends, and the bytes of each go onto PA10 as they
+//! come. What happens is printed as it happens (the boot, each client, each board reset), and a
+//! summary at the end or on Ctrl-C.
 //!
 //! A reboot of the board (the firmware's reset request, the watchdog) keeps the flash contents
 //! (see `Board::system_reset`). With `--flash FILE` the flash starts from the file (256 KiB, a
@@ -18,6 +21,8 @@
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use fcu_core::imu::RawImu;
@@ -171,12 +176,22 @@ impl std::fmt::Display for ServeReport {
     }
 }
 
-/// The emulated board between the simulation and the TCP client, paced to the host's clock.
+/// A connected client: its socket and where it came from.
+struct Client {
+    stream: TcpStream,
+    peer: String,
+}
+
+/// The emulated board between the simulation and the TCP clients, paced to the host's clock.
 struct Bridge<'a> {
     board: &'a mut EmulatedBoard,
     listener: TcpListener,
-    client: Option<TcpStream>,
+    clients: Vec<Client>,
     uart_sent: usize,
+    /// Board resets already said.
+    resets_said: usize,
+    /// Set by Ctrl-C: the session ends at the next step, with its summary.
+    stop: Arc<AtomicBool>,
     started: Option<Instant>,
     flash: Option<PathBuf>,
     flash_saved: u64,
@@ -185,35 +200,50 @@ struct Bridge<'a> {
 
 impl Bridge<'_> {
     fn accept(&mut self) {
-        if self.client.is_some() {
-            return;
-        }
-        if let Ok((stream, _)) = self.listener.accept() {
-            if stream.set_nonblocking(true).is_ok() {
-                let _ = stream.set_nodelay(true);
-                self.client = Some(stream);
-                self.report.clients += 1;
+        while let Ok((stream, peer)) = self.listener.accept() {
+            if stream.set_nonblocking(true).is_err() {
+                continue;
             }
+            let _ = stream.set_nodelay(true);
+            println!("fcu-pil serve: client {peer} connected ({} connected)", self.clients.len() + 1);
+            self.clients.push(Client { stream, peer: peer.to_string() });
+            self.report.clients += 1;
         }
     }
 
-    /// The client's bytes onto PA10, from now on at the line's rate.
+    fn drop_client(&mut self, i: usize, why: &str) {
+        if i < self.clients.len() {
+            let c = self.clients.remove(i);
+            println!("fcu-pil serve: client {} {why} ({} connected)", c.peer, self.clients.len());
+        }
+    }
+
+    /// Every client's bytes onto PA10, from now on at the line's rate.
     fn pump_in(&mut self) {
-        let Some(client) = self.client.as_mut() else { return };
-        let mut buf = [0u8; 4096];
-        match client.read(&mut buf) {
-            Ok(0) => self.client = None,
-            Ok(n) => {
-                let now = self.board.machine.now();
-                self.board.machine.board_mut().push_uart_rx(&buf[..n], now);
-                self.report.bytes_in += n as u64;
+        let mut i = 0;
+        while i < self.clients.len() {
+            let mut buf = [0u8; 4096];
+            match self.clients[i].stream.read(&mut buf) {
+                Ok(0) => {
+                    self.drop_client(i, "disconnected");
+                    continue;
+                }
+                Ok(n) => {
+                    let now = self.board.machine.now();
+                    self.board.machine.board_mut().push_uart_rx(&buf[..n], now);
+                    self.report.bytes_in += n as u64;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) => {
+                    self.drop_client(i, &format!("dropped ({e})"));
+                    continue;
+                }
             }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
-            Err(_) => self.client = None,
+            i += 1;
         }
     }
 
-    /// What USART1 put on PA9 since the last call, to the client.
+    /// What USART1 put on PA9 since the last call, to every client.
     fn pump_out(&mut self) {
         let uart = &self.board.machine.board().records.uart;
         let new: Vec<u8> = uart.get(self.uart_sent..).unwrap_or_default().iter().map(|&(_, b)| b).collect();
@@ -221,25 +251,40 @@ impl Bridge<'_> {
         if new.is_empty() {
             return;
         }
-        if let Some(client) = self.client.as_mut() {
+        let mut i = 0;
+        while i < self.clients.len() {
             // A non-blocking socket may take part of it; the rest waits a millisecond at a time
             // (a client that stops reading stalls the bench, as a full adapter would).
             let mut rest = new.as_slice();
+            let mut failed = None;
             while !rest.is_empty() {
-                match client.write(rest) {
+                match self.clients[i].stream.write(rest) {
                     Ok(0) => break,
                     Ok(n) => {
                         self.report.bytes_out += n as u64;
                         rest = &rest[n..];
                     }
                     Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(1)),
-                    Err(_) => {
-                        self.client = None;
+                    Err(e) => {
+                        failed = Some(e);
                         break;
                     }
                 }
             }
+            match failed {
+                Some(e) => self.drop_client(i, &format!("dropped ({e})")),
+                None => i += 1,
+            }
         }
+    }
+
+    /// Says each board reset as it happens.
+    fn say_resets(&mut self) {
+        let resets = &self.board.machine.state().resets;
+        for r in resets.iter().skip(self.resets_said) {
+            println!("fcu-pil serve: board reset ({}), booting again", r.1);
+        }
+        self.resets_said = resets.len();
     }
 
     fn save_flash(&mut self, force: bool) -> Result<(), SimError> {
@@ -267,11 +312,15 @@ impl FlightComputer for Bridge<'_> {
     }
 
     fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        if self.stop.load(Ordering::Relaxed) {
+            return Err(SimError::Computer(STOPPED.into()));
+        }
         self.pace(t_end_s);
         self.accept();
         self.pump_in();
         let compares = self.board.step(t_end_s, edges, imu, battery_v)?;
         self.pump_out();
+        self.say_resets();
         self.save_flash(false)?;
         Ok(compares)
     }
@@ -287,8 +336,16 @@ pub fn listen(link: &str) -> Result<TcpListener, String> {
     TcpListener::bind(addr).map_err(|e| format!("--link {link}: {e}"))
 }
 
+/// Why a session ended early: its stop flag (Ctrl-C).
+const STOPPED: &str = "stopped";
+
 /// Serves the board on `listener` until `duration_s` of emulated time after boot.
 pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeReport, String> {
+    serve_until(listener, opts, Arc::new(AtomicBool::new(false)))
+}
+
+/// [`serve_on`], ending early (with the same report) once `stop` is set, as Ctrl-C sets it.
+pub fn serve_until(listener: TcpListener, opts: &ServeOptions, stop: Arc<AtomicBool>) -> Result<ServeReport, String> {
     listener.set_nonblocking(true).map_err(|e| format!("listener: {e}"))?;
     let duration_s = opts.duration_s.max(0.0);
     let sc = match &opts.scenario {
@@ -314,21 +371,27 @@ pub fn serve_on(listener: TcpListener, opts: &ServeOptions) -> Result<ServeRepor
     }
     board.faults_expected = true;
     board.raw_uart = true;
+    println!("fcu-pil serve: board booted ({}), serving {}", opts.elf.display(), sc.name);
     if let Some(cut) = opts.power_cut {
         board.machine.board_mut().flash.arm_power_cut(cut);
     }
     let mut bridge = Bridge {
         board: &mut board,
         listener,
-        client: None,
+        clients: Vec::new(),
         uart_sent: 0,
+        resets_said: 0,
+        stop,
         started: None,
         flash: opts.flash.clone(),
         flash_saved: u64::MAX,
         report: ServeReport::default(),
     };
     let run = RunOptions { seed: 1, duration_s: Some(duration_s), ..Default::default() };
-    let flown = fcu_testkit::sim::run_with(&mut bridge, &sc, fcu_testkit::Profile::Default, &run).map(|_| ());
+    let flown = match fcu_testkit::sim::run_with(&mut bridge, &sc, fcu_testkit::Profile::Default, &run) {
+        Err(SimError::Computer(why)) if why == STOPPED => Ok(()),
+        other => other.map(|_| ()),
+    };
     bridge.save_flash(true).map_err(|e| e.to_string())?;
     let mut report = std::mem::take(&mut bridge.report);
     flown.map_err(|e| e.to_string())?;

@@ -438,3 +438,67 @@ def record_words():
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class RebootUnderAFlood(unittest.TestCase):
+    """Issue finding: a reboot accepted disarmed under a busy downlink was carried out seconds
+    later, in flight, when the flood stopped and the transmit queue drained."""
+
+    def test_a_reboot_asked_before_the_gesture_never_resets_the_board_armed(self):
+        # The hover scenario's pilot makes the arm gesture from 2.5 s and takes off at 4.5 s.
+        with ServedBoard(scenario="hover") as board:
+            self.assertIsNotNone(board.heartbeat())
+            asked = None
+            armed_seen = False
+            last_boot_ms, last_armed = 0, False
+            resets = []
+            start = time.time()
+            while time.time() - start < 15.0:
+                # About 60 PARAM_REQUEST_READs every 0.1 s for the first 9 s of the test.
+                if time.time() - start < 9.0:
+                    for index in range(6):
+                        board.conn.mav.param_request_read_send(1, 1, b"", index)
+                m = board.conn.recv_match(type=["ATTITUDE", "HEARTBEAT", "COMMAND_ACK"], blocking=True, timeout=0.01)
+                if m is None or m.get_srcSystem() != 1:
+                    continue
+                if m.get_type() == "HEARTBEAT":
+                    last_armed = bool(m.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
+                    armed_seen |= last_armed
+                elif m.get_type() == "COMMAND_ACK" and m.command == MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+                    asked = m.result
+                elif m.get_type() == "ATTITUDE":
+                    if m.time_boot_ms + 500 < last_boot_ms:
+                        resets.append((last_boot_ms, last_armed))
+                        last_armed = False
+                    last_boot_ms = m.time_boot_ms
+                    if asked is None and 2200 <= m.time_boot_ms < 2400 and not resets:
+                        board.conn.mav.command_long_send(1, 1, MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0, 1, 0, 0, 0, 0, 0, 0)
+                        asked = "sent"
+            self.assertEqual(asked, MAV.MAV_RESULT_ACCEPTED, "the reboot's ACK did not come back under the flood")
+            for at_ms, was_armed in resets:
+                self.assertFalse(was_armed, f"the board reset while armed at {at_ms} ms")
+            # Asked at 2.2 s, before the gesture: carried out at once, disarmed, despite the flood.
+            self.assertEqual(len(resets), 1, f"resets: {resets}")
+            self.assertLess(resets[0][0], 3000, f"the reboot waited until {resets[0][0]} ms")
+
+
+class TwoGroundStations(unittest.TestCase):
+    def test_a_second_client_hears_the_board_and_is_heard(self):
+        """A ground station and `fcu-ground` at once, as SITL serves them: the second client
+        used to be accepted and then hear nothing."""
+        from board import mavutil
+        with ServedBoard() as board:
+            self.assertIsNotNone(board.heartbeat())
+            second = mavutil.mavlink_connection(f"tcp:127.0.0.1:{board.port}", source_system=254, source_component=191,
+                                                autoreconnect=False)
+            try:
+                hb = second.recv_match(type="HEARTBEAT", blocking=True, timeout=10)
+                self.assertIsNotNone(hb, "the second client heard no HEARTBEAT")
+                second.mav.param_request_read_send(1, 1, b"RATE_RLL_P", -1)
+                value = second.recv_match(type="PARAM_VALUE", blocking=True, timeout=5)
+                self.assertIsNotNone(value, "the second client's request was not answered")
+                self.assertEqual(value.param_id, "RATE_RLL_P")
+                # The first still hears the board.
+                self.assertIsNotNone(board.heartbeat(5.0))
+            finally:
+                second.close()
