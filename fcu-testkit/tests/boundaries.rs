@@ -236,21 +236,37 @@ fn a_refused_newest_snapshot_falls_back_to_the_one_before() {
     assert_holds(&b, Invariant::RefusedSnapshotFallsBack);
 }
 
-/// A power cut at every word of a save that erases: the set loaded is always one in force.
+/// A power cut at every word a save programs, and at every 61st word of the erase before it:
+/// the set loaded is always one in force, and the erase's stall raises no fault.
 #[test]
 fn a_power_cut_at_any_word_of_an_erasing_save_loads_a_whole_set() {
-    // Both sectors full: the next save erases sector 0.
+    // Both sectors full: the next save erases sector 0 (4096 word operations), then programs.
     let slots = 2 * snapshot::SLOTS as u32;
     let history: Vec<Planted> =
         (1..=slots).map(|k| Planted { sequence: k, changes: vec![(index("RATE_RLL_P"), 50.0 + k as f32)] }).collect();
-    let words = snapshot::SECTOR_WORDS as u32 + snapshot::RECORD_WORDS as u32;
-    for at_word in (0..words).step_by(97).chain([words - 1, words - 2, snapshot::SECTOR_WORDS as u32]) {
+    let erase = snapshot::SECTOR_WORDS as u32;
+    let words = (0..erase).step_by(61).chain([erase - 1]).chain(erase..erase + snapshot::RECORD_WORDS as u32);
+    for at_word in words {
         let ops =
             vec![Op::CutAtWord(PowerCut { at_word, partial_bits: 0x0F0F_F0F0 }), set("ANGLE_MAX", 41.0), save(), Op::Wait { ms: 800 }];
         let b = Scenario { history: history.clone(), seed: 3, ops }.run(&DEFAULTS);
         assert_eq!((b.counts.erases, b.counts.cuts_in_flash), (1, 1), "cut at word {at_word}");
         assert_holds(&b, Invariant::PowerCutLoadsAWholeSet);
         assert_holds(&b, Invariant::SavesKeepTheLoopRunning);
+    }
+}
+
+/// A power cut at every word of a save into an empty slot, whatever the partial word keeps.
+#[test]
+fn a_power_cut_at_any_word_of_a_save_loads_a_whole_set() {
+    let history = vec![Planted { sequence: 1, changes: vec![(index("RATE_RLL_P"), 70.0)] }];
+    for at_word in 0..snapshot::RECORD_WORDS as u32 {
+        for partial_bits in [0, u32::MAX, 0x8000_0001] {
+            let ops = vec![Op::CutAtWord(PowerCut { at_word, partial_bits }), set("ANGLE_MAX", 41.0), save(), Op::Wait { ms: 200 }];
+            let b = Scenario { history: history.clone(), seed: 5, ops }.run(&DEFAULTS);
+            assert_eq!(b.counts.cuts_in_flash, 1, "cut at word {at_word}");
+            assert_holds(&b, Invariant::PowerCutLoadsAWholeSet);
+        }
     }
 }
 
