@@ -336,3 +336,40 @@ impl Checker {
         self.remember(&loaded);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench_board::ground::name16;
+
+    static DEFAULTS: Config = Config::DEFAULT;
+
+    fn index(name: &str) -> usize {
+        parameters::index_of(name.as_bytes()).unwrap()
+    }
+
+    #[test]
+    fn a_loaded_mix_of_two_sets_in_force_is_a_violation() {
+        let mut c = Checker::new(&DEFAULTS);
+        let (roll, angle) = (index("RATE_RLL_P"), index("ANGLE_MAX"));
+        for (i, v) in [(roll, 100.0), (angle, 30.0)] {
+            c.on_sent(&GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v });
+            c.on_answer(&Answer::ParamValue { name: parameters::name(i).unwrap().into(), value: v, index: i as u16 }, 1);
+        }
+        assert_eq!(c.accepted_sets, 2);
+        assert!(c.violations().is_empty(), "{:?}", c.violations());
+        // In force: defaults, then RATE_RLL_P 100, then both. ANGLE_MAX 30 alone never was.
+        let mut mix = DEFAULTS;
+        parameters::set(&mut mix, angle, 30.0, false).unwrap();
+        c.on_boot(&mix, snapshot::Source::NoSnapshot, &Flash::new(), BootKind::PowerCut, 2);
+        assert_eq!(c.first(Invariant::PowerCutLoadsAWholeSet).map(|v| v.invariant), Some(Invariant::PowerCutLoadsAWholeSet));
+    }
+
+    #[test]
+    fn a_value_reported_that_no_set_asked_for_is_a_violation() {
+        let mut c = Checker::new(&DEFAULTS);
+        let angle = index("ANGLE_MAX");
+        c.on_answer(&Answer::ParamValue { name: "ANGLE_MAX".into(), value: 33.0, index: angle as u16 }, 1);
+        assert!(c.first(Invariant::AcceptedIsReportedSavedLoaded).is_some());
+    }
+}
