@@ -22,7 +22,7 @@ fn index(name: &str) -> usize {
 
 /// Parameters the findings were about, picked more often than the rest.
 fn interesting() -> Vec<usize> {
-    ["ANGLE_MAX", "RCMAP_ROLL", "RCMAP_YAW", "RCMAP_THROTTLE", "ARM_HOLD_MS", "LINK_ATT_HZ", "RATE_RLL_P"]
+    ["ANGLE_MAX", "YAW_RATE_MAX", "RCMAP_ROLL", "RCMAP_YAW", "RCMAP_THROTTLE", "ARM_HOLD_MS", "LINK_ATT_HZ", "RATE_RLL_P"]
         .iter()
         .filter_map(|n| parameters::index_of(n.as_bytes()))
         .collect()

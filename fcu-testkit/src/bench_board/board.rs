@@ -171,6 +171,8 @@ pub struct Bench {
     /// Bytes the ground station sent that are still on the wire.
     uplink: VecDeque<u8>,
     uplink_credit: f64,
+    /// Bytes the ground station sent that reached the board's receive ring.
+    uplink_delivered: u64,
     uart_credit: f64,
     gcs_sequence: u8,
     flood_ticks: u32,
@@ -189,7 +191,7 @@ impl Bench {
     pub fn new(flash: Flash, defaults: &'static Config, seed: u64) -> Bench {
         let mut checker = Checker::new(defaults);
         checker.on_flash_history(&flash);
-        let boot = Self::power_on(&flash, defaults, &mut checker, BootKind::First, 0);
+        let boot = Self::power_on(&flash, defaults, &mut checker, BootKind::First, 0, 0);
         Bench {
             flash,
             defaults,
@@ -200,6 +202,7 @@ impl Bench {
             edges: Vec::new(),
             uplink: VecDeque::new(),
             uplink_credit: 0.0,
+            uplink_delivered: 0,
             uart_credit: 0.0,
             gcs_sequence: 0,
             flood_ticks: 0,
@@ -214,9 +217,16 @@ impl Bench {
 
     /// Loads the parameters from flash and boots the board with them. A configuration that
     /// cannot build a controller (a check fails) boots the defaults, so the bench runs on.
-    fn power_on(flash: &Flash, defaults: &'static Config, checker: &mut Checker, kind: BootKind, time_ticks: u64) -> Boot {
+    fn power_on(
+        flash: &Flash,
+        defaults: &'static Config,
+        checker: &mut Checker,
+        kind: BootKind,
+        delivered_bytes: u64,
+        time_ticks: u64,
+    ) -> Boot {
         let (cfg, source) = snapshot::load_config(flash.sectors(), defaults);
-        checker.on_boot(&cfg, source, flash, kind, time_ticks);
+        checker.on_boot(&cfg, source, flash, kind, delivered_bytes, time_ticks);
         match Boot::new(cfg, source, defaults) {
             Ok(b) => b,
             Err(e) => {
@@ -260,7 +270,7 @@ impl Bench {
             Op::Send(frame) => {
                 let bytes = frame.encode(self.gcs_sequence);
                 self.gcs_sequence = self.gcs_sequence.wrapping_add(1);
-                self.checker.on_sent(&frame);
+                self.checker.on_sent(&frame, bytes.len());
                 self.uplink.extend(bytes);
             }
             Op::Pilot(p) => self.pilot = p,
@@ -396,6 +406,7 @@ impl Bench {
         while self.uplink_credit >= 1.0 {
             let Some(byte) = self.uplink.pop_front() else { break };
             self.uplink_credit -= 1.0;
+            self.uplink_delivered += 1;
             if self.boot.rx.len() == RX_RING_BYTES {
                 self.boot.rx.pop_front();
             }
@@ -522,7 +533,7 @@ impl Bench {
     }
 
     fn restart(&mut self, kind: BootKind) {
-        let boot = Self::power_on(&self.flash, self.defaults, &mut self.checker, kind, self.time_ticks);
+        let boot = Self::power_on(&self.flash, self.defaults, &mut self.checker, kind, self.uplink_delivered, self.time_ticks);
         self.boot = boot;
         self.answers = AnswerReader::default();
     }

@@ -93,10 +93,16 @@ const KEEP: usize = 4;
 pub struct Checker {
     defaults: &'static Config,
     model: Config,
-    /// PARAM_SETs sent and not confirmed yet: (index, value).
-    pending_sets: Vec<(usize, f32)>,
-    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1.
-    pending_storage: VecDeque<f32>,
+    /// PARAM_SETs sent and not confirmed yet: (index, value, where the frame starts in the
+    /// bytes sent).
+    pending_sets: Vec<(usize, f32, u64)>,
+    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, and where they
+    /// start.
+    pending_storage: VecDeque<(f32, u64)>,
+    /// Bytes the ground station sent.
+    sent_bytes: u64,
+    /// Values replaced by a set seen in a save or a load before its answer: (index, bits).
+    stale: Vec<(usize, u32)>,
     /// Every set that was in force as a whole, as bits.
     history: Vec<[u32; COUNT]>,
     written: Vec<Written>,
@@ -112,6 +118,8 @@ impl Checker {
             model: *defaults,
             pending_sets: Vec::new(),
             pending_storage: VecDeque::new(),
+            sent_bytes: 0,
+            stale: Vec::new(),
             history: vec![bits(&parameters::values(defaults))],
             written: Vec::new(),
             violations: Vec::new(),
@@ -162,25 +170,39 @@ impl Checker {
         }
     }
 
-    /// A frame the ground station sent.
-    pub fn on_sent(&mut self, frame: &GroundFrame) {
+    /// A frame the ground station sent, `bytes` long.
+    pub fn on_sent(&mut self, frame: &GroundFrame, bytes: usize) {
+        let at = self.sent_bytes;
+        self.sent_bytes += bytes as u64;
         match *frame {
             GroundFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
-                    self.pending_sets.push((i, value));
+                    self.pending_sets.push((i, value, at));
                 }
             }
-            GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back(params[0]),
+            GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at)),
             _ => {}
         }
     }
 
-    /// The board confirmed parameter `i` at `value`, a PARAM_SET having asked for it.
-    fn accept(&mut self, i: usize, value: f32, at: u64) {
-        if let Some(pos) = self.pending_sets.iter().position(|&(j, v)| j == i && v.to_bits() == value.to_bits()) {
-            // Older sets of the same parameter were answered before it, one way or the other.
+    /// The board confirmed parameter `i` at `value`, a PARAM_SET having asked for it; `ahead`
+    /// when that showed in a save or a load before the answers queued ahead of it went out
+    /// (the link goes quiet before a save or a reboot): those may still report the values it
+    /// replaced.
+    fn accept(&mut self, i: usize, value: f32, ahead: bool, at: u64) {
+        let before = parameters::values(&self.model);
+        if let Some(pos) = self.pending_sets.iter().position(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
+            // Older sets of the same parameter were answered before it, one way or the other
+            // (taken and replaced, when their answers are still queued).
+            if ahead {
+                for &(j, v, _) in self.pending_sets.iter().take(pos) {
+                    if j == i {
+                        self.stale.push((j, v.to_bits()));
+                    }
+                }
+            }
             let mut k = 0;
-            self.pending_sets.retain(|&(j, _)| {
+            self.pending_sets.retain(|&(j, _, _)| {
                 let keep = j != i || k > pos;
                 k += 1;
                 keep
@@ -197,6 +219,13 @@ impl Checker {
         }
         self.accepted_sets += 1;
         let v = parameters::values(&self.model);
+        if ahead {
+            for (j, (old, new)) in before.iter().zip(v.iter()).enumerate() {
+                if old.to_bits() != new.to_bits() {
+                    self.stale.push((j, old.to_bits()));
+                }
+            }
+        }
         self.remember(&v);
     }
 
@@ -205,8 +234,8 @@ impl Checker {
     fn reconcile(&mut self, values: &[f32; COUNT], at: u64) {
         for (i, v) in values.iter().enumerate() {
             let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
-            if differs && self.pending_sets.iter().any(|&(j, p)| j == i && p.to_bits() == v.to_bits()) {
-                self.accept(i, *v, at);
+            if differs && self.pending_sets.iter().any(|&(j, p, _)| j == i && p.to_bits() == v.to_bits()) {
+                self.accept(i, *v, true, at);
             }
         }
     }
@@ -231,10 +260,14 @@ impl Checker {
                     );
                 }
                 if current.to_bits() == value.to_bits() {
-                    self.pending_sets.retain(|&(j, v)| j != i || v.to_bits() != value.to_bits());
-                } else if self.pending_sets.iter().any(|&(j, v)| j == i && v.to_bits() == value.to_bits()) {
-                    self.accept(i, *value, at);
-                } else if let Some(&(_, asked)) = self.pending_sets.iter().find(|&&(j, _)| j == i) {
+                    self.pending_sets.retain(|&(j, v, _)| j != i || v.to_bits() != value.to_bits());
+                    // Answered in order: what was queued before the value in force is out.
+                    self.stale.retain(|&(j, _)| j != i);
+                } else if self.stale.contains(&(i, value.to_bits())) {
+                    // Queued before a save or a load showed the value that replaced it.
+                } else if self.pending_sets.iter().any(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
+                    self.accept(i, *value, false, at);
+                } else if let Some(&(_, asked, _)) = self.pending_sets.iter().find(|&&(j, _, _)| j == i) {
                     self.violate(
                         Invariant::AcceptedIsReportedSavedLoaded,
                         at,
@@ -252,7 +285,7 @@ impl Checker {
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
-                if let Some(p1) = self.pending_storage.pop_front() {
+                if let Some((p1, _)) = self.pending_storage.pop_front() {
                     if *result == 0 && p1 == 2.0 {
                         self.model = *self.defaults;
                         let v = parameters::values(&self.model);
@@ -284,8 +317,10 @@ impl Checker {
         });
     }
 
-    /// The board booted with `cfg`, found as `source` in `flash`.
-    pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, at: u64) {
+    /// The board booted with `cfg`, found as `source` in `flash`; the first `delivered_bytes`
+    /// the ground station sent had reached the board before (what they asked died with it,
+    /// unless answered; the frames after them are still on the wire, for the new boot).
+    pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, delivered_bytes: u64, at: u64) {
         let loaded = parameters::values(cfg);
         let sectors = flash.sectors();
         let intact: Vec<&Written> = self
@@ -331,8 +366,9 @@ impl Checker {
             self.violate(invariant, at, what);
         }
         self.model = *cfg;
-        self.pending_sets.clear();
-        self.pending_storage.clear();
+        self.pending_sets.retain(|&(_, _, start)| start >= delivered_bytes);
+        self.stale.clear();
+        self.pending_storage.retain(|&(_, start)| start >= delivered_bytes);
         self.remember(&loaded);
     }
 }
@@ -353,7 +389,7 @@ mod tests {
         let mut c = Checker::new(&DEFAULTS);
         let (roll, angle) = (index("RATE_RLL_P"), index("ANGLE_MAX"));
         for (i, v) in [(roll, 100.0), (angle, 30.0)] {
-            c.on_sent(&GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v });
+            c.on_sent(&GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v }, 35);
             c.on_answer(&Answer::ParamValue { name: parameters::name(i).unwrap().into(), value: v, index: i as u16 }, 1);
         }
         assert_eq!(c.accepted_sets, 2);
@@ -361,7 +397,7 @@ mod tests {
         // In force: defaults, then RATE_RLL_P 100, then both. ANGLE_MAX 30 alone never was.
         let mut mix = DEFAULTS;
         parameters::set(&mut mix, angle, 30.0, false).unwrap();
-        c.on_boot(&mix, snapshot::Source::NoSnapshot, &Flash::new(), BootKind::PowerCut, 2);
+        c.on_boot(&mix, snapshot::Source::NoSnapshot, &Flash::new(), BootKind::PowerCut, 70, 2);
         assert_eq!(c.first(Invariant::PowerCutLoadsAWholeSet).map(|v| v.invariant), Some(Invariant::PowerCutLoadsAWholeSet));
     }
 
