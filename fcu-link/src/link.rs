@@ -271,8 +271,8 @@ impl<const TX: usize> Link<TX> {
     }
 
     /// Runs the schedule at `now_ms`: the motor test's limits, due telemetry, the PARAM_VALUEs
-    /// owed to a PARAM_SET, the next PARAM_VALUE of a download. Call it at 100 Hz or faster (the parameter download sends at
-    /// most one PARAM_VALUE per call).
+    /// owed to a PARAM_SET, the next PARAM_VALUE of a download. Call it at 100 Hz or faster
+    /// (the parameter download sends at most one PARAM_VALUE per call).
     pub fn tick<V: Vehicle>(&mut self, now_ms: u32, vehicle: &mut V) {
         self.core.now_ms = now_ms;
         self.core.tick(vehicle);
@@ -289,9 +289,10 @@ impl<const TX: usize> Link<TX> {
     }
 
     /// Sends a STATUSTEXT now (chunked past 50 bytes, cut at [`crate::text::TEXT_MAX_LEN`]: see
-    /// [`crate::text`]) and again to every ground station that connects later: the first HEARTBEAT after [`STATION_GONE_MS`] of silence from the
-    /// line. For what a station should always hear, once: where the parameters came from at
-    /// boot. A later call replaces the text.
+    /// [`crate::text`]) and again to every ground station that connects later: the first
+    /// HEARTBEAT after [`STATION_GONE_MS`] of silence from the line. For what a station should
+    /// always hear, once: where the parameters came from at boot (a long text is fine: it is
+    /// re-sent in chunks too). A later call replaces the text.
     pub fn greet(&mut self, severity: Severity, text: &[u8]) -> bool {
         let text = Text::new().push_bytes(text);
         self.core.greeting = Some((severity, text));
