@@ -28,7 +28,7 @@
 //!
 //! # What it costs in flash
 //!
-//! In the firmware's image built with the link, `scripts/size-by-part` counts about 13 KB for
+//! In the firmware's image built with the link, `scripts/size-by-part` counts about 14 KB for
 //! the ground-station link (docs/ground-station.md has the table): this crate with what it inlines of fcu-core's parameter table (the
 //! save plan, a set and its checks), the firmware's link task, its receive ring and its flash
 //! store. What keeps it there: each message is serialized and parsed by its own `*_DATA`

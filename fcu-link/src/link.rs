@@ -441,23 +441,13 @@ impl<const TX: usize> Core<TX> {
 
     /// Queues a STATUSTEXT, in chunks when it is longer than one (see [`crate::text`]): all of
     /// them or, when `room` cannot take all, none (a part would leave the receiver waiting for
-    /// the rest).
+    /// the rest). Out of line: one copy for its many callers.
+    #[inline(never)]
     pub(crate) fn text(&mut self, severity: Severity, text: Text, room: Room) -> bool {
         let chunks = text.chunks();
         let id = if chunks == 1 { 0 } else { self.text_id.checked_add(1).unwrap_or(1) };
         let header = frame::Header { id: STATUSTEXT_DATA::ID, extra_crc: STATUSTEXT_DATA::EXTRA_CRC, encoded_len: STATUSTEXT_LEN };
-        let payload = |seq: usize| {
-            let mut payload = [0u8; frame::MAX_PAYLOAD];
-            let data = STATUSTEXT_DATA { severity: severity.mav(), text: mavlink::types::CharArray::new(text.chunk(seq)) };
-            frame::serialize(&data, &mut payload);
-            // The extensions id and chunk_seq, after the 51 bytes the crate writes.
-            let [lo, hi] = id.to_le_bytes();
-            if let Some(ext) = payload.get_mut(1 + TEXT_LEN..STATUSTEXT_LEN) {
-                ext.copy_from_slice(&[lo, hi, seq as u8]);
-            }
-            payload
-        };
-        let need: usize = (0..chunks).map(|seq| frame::frame_len(header, &payload(seq))).sum();
+        let need: usize = (0..chunks).map(|seq| frame::frame_len(header, &statustext(severity, &text, id, seq))).sum();
         if need > self.room(room) {
             for _ in 0..chunks {
                 self.dropped(room);
@@ -468,10 +458,23 @@ impl<const TX: usize> Core<TX> {
             self.text_id = id;
         }
         for seq in 0..chunks {
-            self.queue(header, &mut payload(seq), &[], room);
+            self.queue(header, &mut statustext(severity, &text, id, seq), &[], room);
         }
         true
     }
+}
+
+/// The payload of chunk `seq` of `text`, with the extensions `id` and `chunk_seq` after the 51
+/// bytes the crate writes.
+fn statustext(severity: Severity, text: &Text, id: u16, seq: usize) -> [u8; frame::MAX_PAYLOAD] {
+    let mut payload = [0u8; frame::MAX_PAYLOAD];
+    let data = STATUSTEXT_DATA { severity: severity.mav(), text: mavlink::types::CharArray::new(text.chunk(seq)) };
+    frame::serialize(&data, &mut payload);
+    let [lo, hi] = id.to_le_bytes();
+    if let Some(ext) = payload.get_mut(1 + TEXT_LEN..STATUSTEXT_LEN) {
+        ext.copy_from_slice(&[lo, hi, seq as u8]);
+    }
+    payload
 }
 
 #[cfg(test)]
