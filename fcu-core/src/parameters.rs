@@ -371,8 +371,8 @@ pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
 #[inline(never)]
 pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = *base;
-    c.rc.max_tilt_rad = src.rc.max_tilt_rad;
-    c.rc.yaw_max_step_rad = src.rc.yaw_max_step_rad;
+    c.rc.max_tilt_deg = src.rc.max_tilt_deg;
+    c.rc.yaw_rate_max_deg_s = src.rc.yaw_rate_max_deg_s;
     for (b, s) in
         [(&mut c.control.roll, src.control.roll), (&mut c.control.pitch, src.control.pitch), (&mut c.control.yaw, src.control.yaw)]
     {
