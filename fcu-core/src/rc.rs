@@ -311,7 +311,7 @@ impl RcConfig {
         // Each rule in turn, returning at the first broken: an array of every rule's verdict,
         // searched after, evaluates them all (a kilobyte at fcu-core's opt-level 3).
         let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
-        broken(self.map.is_permutation(), "RCMAP: each input once")
+        broken(self.map.is_permutation(), crate::parameters::RULE_RCMAP)
             .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
             .or_else(|| self.endpoints_problem())
             // A gesture is a stick beyond the threshold while the others are centred: it must
