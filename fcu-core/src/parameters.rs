@@ -5,7 +5,9 @@
 //! `param_id` carries it and MAVProxy writes it), a unit, bounds, a step (any value, whole
 //! numbers, or quarter microseconds, the capture clock's resolution), when a change may apply
 //! ([`Applies`]), and the setting of [`Config`] it reads and writes. Every value is an `f32` (MAVLink's
-//! `REAL32`); whole-number parameters stay far below 2^24, so they are exact.
+//! `REAL32`); whole-number parameters stay far below 2^24, so they are exact. Each is kept in
+//! the units the table shows (an angle in degrees, not radians), so the value a set takes is the
+//! value read back, saved and loaded, bit for bit (a proptest checks every parameter).
 //!
 //! A change goes through [`set`]: a value that is not finite, out of bounds, off its step, not
 //! allowed while armed, or that makes [`Config::validate`] fail is refused with the rule it
