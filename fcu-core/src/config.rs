@@ -570,8 +570,12 @@ mod tests {
     #[allow(clippy::approx_constant)] // 3.141592654 is the reference's own PI literal
     fn reference_constants_round_to_the_golden_bit_patterns() {
         let r = Config::reference();
-        assert_eq!(r.rc.max_tilt_rad.to_bits(), 0x3eb2_b8c2);
-        assert_eq!(r.rc.yaw_max_step_rad.to_bits(), 0x3c56_7750);
+        // Kept in degrees (the parameters' units), derived as the reference's radians.
+        assert_eq!(r.rc.max_tilt_rad().to_bits(), 0x3eb2_b8c2);
+        assert_eq!(r.rc.yaw_max_step_rad(r.timing.outer_hz()).to_bits(), 0x3c56_7750);
+        let d = Config::default();
+        assert_eq!(d.rc.max_tilt_rad().to_bits(), 0x3eb2_b8c2);
+        assert_eq!(d.rc.yaw_max_step_rad(d.timing.outer_hz()).to_bits(), 0x3c56_7750);
         assert_eq!(((3.141_592_654f64 * 20.0 / 180.0) as f32).to_bits(), 0x3eb2_b8c2);
         assert_eq!(r.control.inner_dt_s.to_bits(), 0x3aa3_d70a);
         assert_eq!((1.0 / r.control.inner_dt_s).to_bits(), 0x4448_0000);
@@ -634,7 +638,7 @@ mod tests {
     #[test]
     fn a_non_finite_value_is_an_error() {
         let mut c = Config::default();
-        c.rc.max_tilt_rad = f32::NAN;
+        c.rc.max_tilt_deg = f32::NAN;
         assert_eq!(c.validate(), Err(ConfigError::Rc));
         let mut c = Config::default();
         c.mixer.max_compare = f32::INFINITY;

@@ -5,7 +5,9 @@
 //! `param_id` carries it and MAVProxy writes it), a unit, bounds, a step (any value, whole
 //! numbers, or quarter microseconds, the capture clock's resolution), when a change may apply
 //! ([`Applies`]), and the setting of [`Config`] it reads and writes. Every value is an `f32` (MAVLink's
-//! `REAL32`); whole-number parameters stay far below 2^24, so they are exact.
+//! `REAL32`); whole-number parameters stay far below 2^24, so they are exact. Each is kept in
+//! the units the table shows (an angle in degrees, not radians), so the value a set takes is the
+//! value read back, saved and loaded, bit for bit (a proptest checks every parameter).
 //!
 //! A change goes through [`set`]: a value that is not finite, out of bounds, off its step, not
 //! allowed while armed, or that makes [`Config::validate`] fail is refused with the rule it
@@ -31,9 +33,11 @@
 //!   parameter too; refused, echo [`Refusal::value_in_force`] and send the name and
 //!   [`Refusal::rule`] as a `STATUSTEXT`. An unknown name has no value to echo.
 //! - Saving: [`values`] into [`snapshot::plan_save`]; at boot [`snapshot::load_config`].
-//! - Files in MAVProxy's format: [`write_file`], [`apply_file`].
+//! - Files in MAVProxy's format: [`write_file`]; MAVProxy's and QGroundControl's: [`apply_file`],
+//!   every reader's lines through [`file::lines`].
 
 mod field;
+pub mod file;
 pub mod snapshot;
 
 use crate::config::Config;
@@ -282,17 +286,56 @@ pub fn values(cfg: &Config) -> [f32; COUNT] {
 }
 
 /// `base` with every parameter set to `values` (table order), checked as a whole: the
-/// configuration, or the first rule broken (a value off its bounds or step, or a whole that
-/// does not validate). For a snapshot loaded at boot: one parameter at a time could pass
-/// through invalid combinations.
+/// configuration, or the first rule broken (a value off its bounds or step, a radio map that
+/// is not a permutation, or a whole that does not validate). For a snapshot loaded at boot:
+/// one parameter at a time could pass through invalid combinations.
 pub fn with_values(base: &Config, values: &[f32; COUNT]) -> Result<Config, &'static str> {
-    let mut cfg = *base;
-    for (p, &v) in TABLE.iter().zip(values) {
-        check_value(p, v)?;
-        p.field.set(&mut cfg, v)?;
+    with_values_at(base, values).map_err(|(_, rule)| rule)
+}
+
+/// [`with_values`], with the index of the parameter at fault when one value is (`None` when
+/// only the whole set breaks a rule).
+pub fn with_values_at(base: &Config, values: &[f32; COUNT]) -> Result<Config, (Option<usize>, &'static str)> {
+    for (i, (p, &v)) in TABLE.iter().zip(values).enumerate() {
+        check_value(p, v).map_err(|rule| (Some(i), rule))?;
     }
-    cfg.validate().map_err(|e| e.rule())?;
+    // Set one at a time, a radio map entry gives its input to the function that had it: a
+    // map that is not a permutation would come out silently rearranged.
+    if let Some(i) = repeated_map_entry(values) {
+        return Err((Some(i), RULE_RCMAP));
+    }
+    let mut cfg = *base;
+    for (i, (p, &v)) in TABLE.iter().zip(values).enumerate() {
+        p.field.set(&mut cfg, v).map_err(|rule| (Some(i), rule))?;
+    }
+    cfg.validate().map_err(|e| {
+        let rule = match e {
+            crate::ConfigError::Rc => cfg.rc.problem().unwrap_or(e.rule()),
+            _ => e.rule(),
+        };
+        (None, rule)
+    })?;
     Ok(cfg)
+}
+
+/// The radio map's rule, as [`RcConfig::problem`](crate::rc::RcConfig::problem) words it.
+pub const RULE_RCMAP: &str = "RCMAP: each input once";
+
+/// The first radio map entry (`RCMAP_*`, in table order) that names an input an earlier one
+/// already names, if any.
+fn repeated_map_entry(values: &[f32; COUNT]) -> Option<usize> {
+    let mut seen = [false; crate::rc::CHANNELS + 1];
+    for (i, (p, &v)) in TABLE.iter().zip(values).enumerate() {
+        if let Field::RcMap(_) = p.field {
+            // Checked whole, 1..4.
+            let slot = seen.get_mut(v as usize)?;
+            if *slot {
+                return Some(i);
+            }
+            *slot = true;
+        }
+    }
+    None
 }
 
 /// A parameter file's line that could not be taken.
@@ -312,28 +355,32 @@ pub fn write_file(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::R
     Ok(())
 }
 
-/// `base` with the parameters a file in MAVProxy's `param save` format names (`NAME VALUE`
-/// lines, separated by spaces, tabs or a comma; `#` starts a comment; blank lines skipped),
-/// checked as a whole as [`with_values`] does: a file sets a whole radio, whose endpoints
-/// are valid together but not necessarily one at a time. An unknown name, a value that does
-/// not parse, or a line with more than a name and a value is refused with its line.
+/// `base` with the parameters a file names ([`file`]'s formats: MAVProxy's `NAME VALUE`
+/// lines or QGroundControl's `.params`), checked as a whole as [`with_values`] does: a file
+/// sets a whole radio, whose endpoints are valid together but not necessarily one at a time.
+/// A line that does not read, an unknown name, a name set twice, a value off its own bounds
+/// or step, and a radio map entry that makes the map no permutation are refused with their
+/// line; a set refused as a whole with line 0.
 pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
     let mut v = values(base);
-    for (n, raw) in text.lines().enumerate() {
-        let err = |rule| FileError { line: n + 1, rule };
-        let line = raw.split('#').next().unwrap_or("");
-        let mut words = line.split(|c: char| c.is_whitespace() || c == ',').filter(|w| !w.is_empty());
-        let (Some(name), value, extra) = (words.next(), words.next(), words.next()) else { continue };
-        let (Some(value), None) = (value, extra) else { return Err(err("expected NAME VALUE")) };
-        let i = index_of(name.as_bytes()).ok_or(err(RULE_UNKNOWN))?;
-        let x: f32 = value.parse().map_err(|_| err("value is not a number"))?;
+    let mut from_line = [0usize; COUNT];
+    for entry in file::lines(text) {
+        let entry = entry.map_err(|e| FileError { line: e.line, rule: e.problem.rule() })?;
+        let err = |rule| FileError { line: entry.line, rule };
+        let i = index_of(entry.name.as_bytes()).ok_or(err(RULE_UNKNOWN))?;
+        let (Some(p), Some(slot), Some(line)) = (TABLE.get(i), v.get_mut(i), from_line.get_mut(i)) else {
+            return Err(err(RULE_UNKNOWN));
+        };
+        if *line != 0 {
+            return Err(err(file::RULE_TWICE));
+        }
         // A value out of its own bounds is this line's fault, whatever the others say.
-        if let Some(p) = TABLE.get(i) {
-            check_value(p, x).map_err(err)?;
-        }
-        if let Some(slot) = v.get_mut(i) {
-            *slot = x;
-        }
+        check_value(p, entry.value).map_err(err)?;
+        *slot = entry.value;
+        *line = entry.line;
+    }
+    if let Some(line) = file::repeated_map_line(&v, &from_line) {
+        return Err(FileError { line, rule: RULE_RCMAP });
     }
     with_values(base, &v).map_err(|rule| FileError { line: 0, rule })
 }
@@ -371,8 +418,8 @@ pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
 #[inline(never)]
 pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
     let mut c = *base;
-    c.rc.max_tilt_rad = src.rc.max_tilt_rad;
-    c.rc.yaw_max_step_rad = src.rc.yaw_max_step_rad;
+    c.rc.max_tilt_deg = src.rc.max_tilt_deg;
+    c.rc.yaw_rate_max_deg_s = src.rc.yaw_rate_max_deg_s;
     for (b, s) in
         [(&mut c.control.roll, src.control.roll), (&mut c.control.pitch, src.control.pitch), (&mut c.control.yaw, src.control.yaw)]
     {

@@ -240,6 +240,10 @@ pub const MIN_ENDPOINT_SPAN_COUNTS: u16 = 400;
 /// The largest stick full scale, counts: widths times twice this stay inside an `i32`.
 pub const MAX_FULL_SCALE: StickCounts = StickCounts(8192);
 
+/// The largest roll and pitch target at full stick, degrees (exclusive): short of the 90° at
+/// which the Euler angles the cascade works in break down.
+pub const MAX_TILT_LIMIT_DEG: f32 = 85.0;
+
 /// Radio calibration and stick mapping.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RcConfig {
@@ -253,12 +257,16 @@ pub struct RcConfig {
     pub gesture_threshold: StickCounts,
     /// `MIN_THR`: below it the throttle is "low" (200 DC, 20 ESC).
     pub min_throttle: StickCounts,
-    /// Roll and pitch target at full stick, rad (20° = 0.34906584).
-    pub max_tilt_rad: f32,
+    /// Roll and pitch target at full stick, degrees: the parameter `ANGLE_MAX` as set, so
+    /// that what is set reads back, is saved and loads bit for bit. The targets use
+    /// [`max_tilt_rad`](Self::max_tilt_rad) (20° gives the reference's 0.34906584 exactly).
+    pub max_tilt_deg: f32,
     /// Yaw dead band, counts (600, inclusive).
     pub yaw_deadband: StickCounts,
-    /// Yaw target change per outer step at full rate, rad (120°/s × 6.25 ms).
-    pub yaw_max_step_rad: f32,
+    /// Yaw rate at full stick, degrees per second: the parameter `YAW_RATE_MAX` as set (see
+    /// `max_tilt_deg`). The heading target moves by [`yaw_max_step_rad`](Self::yaw_max_step_rad)
+    /// an outer step (120°/s at 160 Hz gives the reference's 0.01308997 exactly).
+    pub yaw_rate_max_deg_s: f32,
     pub yaw_stick: YawStick,
     pub gesture_throttle: GestureThrottle,
     pub pulses: PulseRules,
@@ -276,10 +284,11 @@ impl RcConfig {
         full_scale: StickCounts(1800),
         gesture_threshold: StickCounts(1200),
         min_throttle: StickCounts(200),
-        // (float)(3.141592654*20/180.0) and (float)(3.141592654*(120.0*0.00625)/180.0)
-        max_tilt_rad: 0.349_065_84,
+        // (float)(3.141592654*20/180.0) and (float)(3.141592654*(120.0*0.00625)/180.0): the
+        // radians derived from these degrees are those bits (config's tests check it).
+        max_tilt_deg: 20.0,
         yaw_deadband: StickCounts(600),
-        yaw_max_step_rad: 0.013_089_97,
+        yaw_rate_max_deg_s: 120.0,
         yaw_stick: YawStick::BangBang,
         gesture_throttle: GestureThrottle::AtBottom,
         pulses: PulseRules::Reference { reset_after_ticks: 25 },
@@ -302,7 +311,7 @@ impl RcConfig {
         // Each rule in turn, returning at the first broken: an array of every rule's verdict,
         // searched after, evaluates them all (a kilobyte at fcu-core's opt-level 3).
         let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
-        broken(self.map.is_permutation(), "RCMAP: each input once")
+        broken(self.map.is_permutation(), crate::parameters::RULE_RCMAP)
             .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
             .or_else(|| self.endpoints_problem())
             // A gesture is a stick beyond the threshold while the others are centred: it must
@@ -314,11 +323,11 @@ impl RcConfig {
                     "THR_MIN past the throttle travel",
                 )
             })
-            .or_else(|| broken(self.max_tilt_rad > 0.0 && self.max_tilt_rad < 1.5, "max angle out of range"))
+            .or_else(|| broken(self.max_tilt_deg > 0.0 && self.max_tilt_deg < MAX_TILT_LIMIT_DEG, "max angle out of range"))
             .or_else(|| {
                 broken(self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale")
             })
-            .or_else(|| broken(crate::config::within(self.yaw_max_step_rad, 0.0, f32::MAX), "yaw rate out of range"))
+            .or_else(|| broken(crate::config::within(self.yaw_rate_max_deg_s, 0.0, f32::MAX), "yaw rate out of range"))
             .or_else(|| broken(self.link_timeout_ticks > 0, "radio timeout is zero"))
             .or_else(|| broken(pulses_ok, "pulse limits invalid"))
     }
@@ -438,12 +447,24 @@ impl RcConfig {
         crate::math::limit(i32::from(v), -i32::from(self.full_scale), i32::from(self.full_scale))
     }
 
+    /// Roll and pitch target at full stick, rad.
+    pub fn max_tilt_rad(&self) -> f32 {
+        self.max_tilt_deg.to_radians()
+    }
+
+    /// Yaw target change of one outer step at full stick, rad, at `outer_hz` outer steps a
+    /// second.
+    pub fn yaw_max_step_rad(&self, outer_hz: f32) -> f32 {
+        self.yaw_rate_max_deg_s.to_radians() / outer_hz
+    }
+
     /// Pitch and roll targets, rad: `(float)(−sat(stick))·max/full_scale` in f32, left to
     /// right, as `GetTargetEulerAngle`. Elevator forward (positive) is nose down.
     pub fn tilt_targets(&self, sticks: &Sticks) -> (f32, f32) {
         let fs = f32::from(self.full_scale.0);
-        let pitch = (-self.saturate(sticks.ele)) as f32 * self.max_tilt_rad / fs;
-        let roll = (-self.saturate(sticks.ail)) as f32 * self.max_tilt_rad / fs;
+        let max_tilt_rad = self.max_tilt_rad();
+        let pitch = (-self.saturate(sticks.ele)) as f32 * max_tilt_rad / fs;
+        let roll = (-self.saturate(sticks.ail)) as f32 * max_tilt_rad / fs;
         (pitch, roll)
     }
 
@@ -455,20 +476,21 @@ impl RcConfig {
         if self.throttle_low(sticks) {
             0.0
         } else {
-            self.yaw_step(sticks) * outer_hz
+            self.yaw_step(sticks, outer_hz) * outer_hz
         }
     }
 
-    /// The yaw target change of one outer step, rad.
-    pub fn yaw_step(&self, sticks: &Sticks) -> f32 {
+    /// The yaw target change of one outer step, rad, at `outer_hz` outer steps a second.
+    pub fn yaw_step(&self, sticks: &Sticks, outer_hz: f32) -> f32 {
+        let max_step_rad = self.yaw_max_step_rad(outer_hz);
         let t = self.saturate(sticks.rud);
         let db = i32::from(self.yaw_deadband);
         match self.yaw_stick {
             YawStick::BangBang => {
                 if t > db {
-                    self.yaw_max_step_rad
+                    max_step_rad
                 } else if t < -db {
-                    -self.yaw_max_step_rad
+                    -max_step_rad
                 } else {
                     0.0
                 }
@@ -482,7 +504,7 @@ impl RcConfig {
                 } else {
                     0.0
                 };
-                self.yaw_max_step_rad * beyond / span
+                max_step_rad * beyond / span
             }
         }
     }
@@ -1010,16 +1032,19 @@ mod tests {
         assert!((p + 0.174_532_93).abs() < 1e-7);
         let (_, r) = REF.tilt_targets(&Sticks { ail: StickCounts(-2500), ..Sticks::default() });
         assert!((r - 0.349_065_87).abs() < 1e-7);
-        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(601), ..Sticks::default() }), 0.013_089_97);
-        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }), 0.0);
+        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(601), ..Sticks::default() }, 160.0), 0.013_089_97);
+        assert_eq!(REF.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }, 160.0), 0.0);
     }
 
     #[test]
     fn proportional_yaw_reaches_the_same_maximum() {
         let cfg = RcConfig { yaw_stick: YawStick::Proportional, ..REF };
-        assert_eq!(cfg.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }), 0.0);
-        assert!((cfg.yaw_step(&Sticks { rud: StickCounts(1800), ..Sticks::default() }) - REF.yaw_max_step_rad).abs() < 1e-9);
-        assert!((cfg.yaw_step(&Sticks { rud: StickCounts(-1200), ..Sticks::default() }) + REF.yaw_max_step_rad * 0.5).abs() < 1e-9);
+        assert_eq!(cfg.yaw_step(&Sticks { rud: StickCounts(600), ..Sticks::default() }, 160.0), 0.0);
+        assert!((cfg.yaw_step(&Sticks { rud: StickCounts(1800), ..Sticks::default() }, 160.0) - REF.yaw_max_step_rad(160.0)).abs() < 1e-9);
+        assert!(
+            (cfg.yaw_step(&Sticks { rud: StickCounts(-1200), ..Sticks::default() }, 160.0) + REF.yaw_max_step_rad(160.0) * 0.5).abs()
+                < 1e-9
+        );
     }
 
     #[test]
@@ -1196,7 +1221,7 @@ mod tests {
             // Full scale gives the configured angle to f32 rounding (the reference's own
             // arithmetic lands one ulp above it), and anything beyond gives exactly that.
             let full = REF.tilt_targets(&Sticks { ele: StickCounts(1800), ail: StickCounts(-1800), ..Sticks::default() });
-            proptest::prop_assert!((full.1 - REF.max_tilt_rad).abs() <= 1e-6 * REF.max_tilt_rad);
+            proptest::prop_assert!((full.1 - REF.max_tilt_rad()).abs() <= 1e-6 * REF.max_tilt_rad());
             proptest::prop_assert!(p.abs() <= full.1 && r.abs() <= full.1);
             if ele >= 1800 { proptest::prop_assert_eq!(p, full.0); }
             if ail <= -1800 { proptest::prop_assert_eq!(r, full.1); }

@@ -25,8 +25,10 @@ fn generated() -> String {
          what a tune changes in the air, as on other autopilots. A set that is not finite, out of\n\
          range, off its step or that makes the configuration invalid is refused with the rule it\n\
          breaks, and the value in force stays. Setting the value a parameter already has is always\n\
-         taken. `RCMAP_*` gives an input to a function and the function that had it the old input,\n\
-         so the map stays a permutation (both are reported).\n\n\
+         taken. A value taken is the value the board reports, saves and loads, bit for bit.\n\
+         `RCMAP_*` gives an input to a function and the function that had it the old input, so the\n\
+         map stays a permutation (both are reported); a whole set (a saved snapshot, a parameter\n\
+         file) whose map is not a permutation is refused.\n\n\
          {table}",
         count = parameters::count(),
     )

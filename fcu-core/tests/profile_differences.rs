@@ -186,9 +186,9 @@ fn d8_yaw_rate_is_proportional_to_the_stick() {
     let full = Sticks { rud: StickCounts(1800), ..Sticks::default() };
     let r = Config::reference().rc;
     let d = Config::default().rc;
-    assert_eq!(r.yaw_step(&half), r.yaw_step(&full));
-    assert!((d.yaw_step(&half) - 0.5 * d.yaw_step(&full)).abs() < 1e-9);
-    assert_eq!(d.yaw_step(&full), r.yaw_step(&full));
+    assert_eq!(r.yaw_step(&half, 160.0), r.yaw_step(&full, 160.0));
+    assert!((d.yaw_step(&half, 160.0) - 0.5 * d.yaw_step(&full, 160.0)).abs() < 1e-9);
+    assert_eq!(d.yaw_step(&full, 160.0), r.yaw_step(&full, 160.0));
 }
 
 #[test]
@@ -233,7 +233,7 @@ fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
 fn d13_a_yaw_stick_commands_its_rate_at_once() {
     let full_left = Sticks { rud: StickCounts(1800), thr: StickCounts(1500), ..Sticks::default() };
     // The rate the stick asks for: one outer step's heading change, 160 steps a second.
-    let stick_rate = |cfg: Config| cfg.rc.yaw_step(&full_left) * 800.0 / 5.0;
+    let stick_rate = |cfg: Config| cfg.rc.yaw_step(&full_left, 160.0) * 800.0 / 5.0;
     // The reference turns only as the heading error builds: after one step, 4 × one step.
     let r = Config::reference();
     assert!(outer_demand(r, full_left)[2] < 0.05 * stick_rate(r), "{:?}", outer_demand(r, full_left));
@@ -272,10 +272,10 @@ const CENTRED: Sticks = Sticks::new(0, 0, 1500, 0);
 fn d16_a_yaw_turn_is_shaped_to_the_airframe_and_ends_on_the_sticks_heading() {
     // Full left for one second (160 outer steps), then centred for one.
     let turn = |k: usize| (if k < 160 { FULL_LEFT } else { CENTRED }, false);
-    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT) * 160.0;
+    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT, 160.0) * 160.0;
     // The reference's heading target moves a whole step at once, and stops at once.
     let r = yaw_turn(Config::reference(), 320, turn);
-    assert!((r[0].0 - Config::reference().rc.yaw_step(&FULL_LEFT) * 160.0).abs() < 1e-3, "{:?}", r[0]);
+    assert!((r[0].0 - Config::reference().rc.yaw_step(&FULL_LEFT, 160.0) * 160.0).abs() < 1e-3, "{:?}", r[0]);
     let d = yaw_turn(Config::default(), 320, turn);
     // The default's starts from rest and rises without overshoot: within 1 % of the stick's
     // rate after 0.15 s (two 20 ms stages), a quarter of it after one step.
@@ -297,7 +297,7 @@ fn d16_the_yaw_rate_demand_leads_the_shaped_rate_by_its_acceleration() {
     let mut cfg = Config::default();
     cfg.control.yaw.outer_kp = 0.0;
     let lead_s = cfg.control.yaw_shaping.map(|y| y.lead_s).unwrap();
-    let stick_rate = cfg.rc.yaw_step(&FULL_LEFT) * 160.0;
+    let stick_rate = cfg.rc.yaw_step(&FULL_LEFT, 160.0) * 160.0;
     let d = yaw_turn(cfg, 320, |k| (if k < 160 { FULL_LEFT } else { CENTRED }, false));
     let ahead: Vec<f32> = d.iter().map(|&(rate, demand)| demand - 0.9 * rate).collect();
     // Speeding up, the demand is ahead of the shaped rate; slowing down, behind it; turning
@@ -317,7 +317,7 @@ fn d16_the_yaw_rate_demand_leads_the_shaped_rate_by_its_acceleration() {
 fn d16_the_shaped_yaw_rate_starts_from_rest_after_the_throttle_was_low() {
     // The arming gesture holds full rudder with the throttle low: nothing of it may be waiting
     // in the shaping when the throttle comes up.
-    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT) * 160.0;
+    let stick_rate = Config::default().rc.yaw_step(&FULL_LEFT, 160.0) * 160.0;
     let low = Sticks { thr: StickCounts(-2000), ..FULL_LEFT };
     let d = yaw_turn(Config::default(), 200, |k| if k < 160 { (low, true) } else { (FULL_LEFT, false) });
     assert!(d[..160].iter().all(|&(rate, demand)| rate == 0.0 && demand == 0.0), "{:?}", &d[..160]);
@@ -334,7 +334,7 @@ fn status_reports_the_yaw_rate_the_stick_asks_for() {
         fc.tick_forced(level, &turning);
     }
     let st = fc.status();
-    let want = fc.config().rc.yaw_step(&st.sticks) * 800.0 / 5.0;
+    let want = fc.config().rc.yaw_step(&st.sticks, 160.0) * 800.0 / 5.0;
     assert!(want.abs() > 0.5, "{want}");
     assert!((st.yaw_rate_target_rad_s - want).abs() < 1e-5, "{} vs {want}", st.yaw_rate_target_rad_s);
     // Throttle low: no turn asked.

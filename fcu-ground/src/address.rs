@@ -40,10 +40,19 @@ impl LinkAddress {
             let host = host.strip_prefix('[').and_then(|h| h.strip_suffix(']')).unwrap_or(host);
             Ok(LinkAddress::Tcp { host: host.to_string(), port })
         } else if let Some(rest) = text.strip_prefix("serial:") {
-            // A baud rate is the part after the last colon when it is all digits: a path may
-            // hold colons of its own (`/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0`).
+            // A baud rate is the part after the last colon when it is one word of letters and
+            // digits (or empty): a path may hold colons of its own, but then the part after
+            // the last one has a dot, dash or slash
+            // (`/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0`). A word that is not a
+            // number is a bad baud rate, never part of the path (`serial:/dev/ttyS0:abc`).
             let (path, baud) = match rest.rsplit_once(':') {
-                Some((path, baud)) if !baud.is_empty() && baud.bytes().all(|b| b.is_ascii_digit()) => {
+                Some((path, baud)) if baud.bytes().all(|b| b.is_ascii_alphanumeric()) => {
+                    if baud.is_empty() {
+                        return Err(format!("`{text}`: the baud rate after the last `:` is empty (expected serial:PATH[:BAUD])"));
+                    }
+                    if !baud.bytes().all(|b| b.is_ascii_digit()) {
+                        return Err(format!("`{text}`: the baud rate `{baud}` is not a number (expected serial:PATH[:BAUD], e.g. 115200)"));
+                    }
                     let baud: u32 = baud.parse().map_err(|_| format!("`{text}`: the baud rate `{baud}` is too large"))?;
                     (path, baud)
                 }
@@ -90,5 +99,9 @@ mod tests {
         assert!(err("serial:").contains("port is empty"));
         assert!(err("serial:/dev/ttyUSB0:0").contains("above 0"));
         assert!(err("serial:/dev/ttyUSB0:99999999999").contains("too large"));
+        // A word after the last colon is a baud rate, not part of the path.
+        assert!(err("serial:/dev/ttyS0:abc").contains("baud rate `abc` is not a number"), "{}", err("serial:/dev/ttyS0:abc"));
+        assert!(err("serial:COM3:115k").contains("baud rate `115k`"));
+        assert!(err("serial:/dev/ttyS0:").contains("baud rate after the last `:` is empty"));
     }
 }

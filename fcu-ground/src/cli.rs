@@ -73,12 +73,23 @@ fn check_names(file: &Path, entries: &[Entry], board: &std::collections::BTreeMa
     }
 }
 
+/// A radio map the file makes (over `board`, if known) that is not a permutation: refused with
+/// its line, before any set is sent.
+fn check_map(file: &Path, entries: &[Entry], board: Option<&std::collections::BTreeMap<String, f32>>) -> Result<(), Failure> {
+    match param_file::map_problem(entries, board) {
+        Some(e) => Err(Failure(format!("{}: {e} (the radio map must be a permutation; nothing was set)", file.display()))),
+        None => Ok(()),
+    }
+}
+
 /// `params push FILE`.
 pub fn push(target: &Target, file: &Path) -> Result<ExitCode, Failure> {
     let entries = read_file(file)?;
+    check_map(file, &entries, None)?;
     let (mut conn, _) = target.connect()?;
     let mut board = params::pull(&mut conn, target.timeout)?.by_name();
     check_names(file, &entries, &board)?;
+    check_map(file, &entries, Some(&board))?;
     let report = params::push(&mut conn, &entries, &mut board, &mut |name, old, new| println!("{name}: {old} -> {new}"))?;
     for r in &report.refused {
         let rule = r.rule.as_deref().unwrap_or("the board named no rule");
@@ -232,6 +243,37 @@ pub fn parse_seconds(text: &str) -> Result<Duration, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_push_whose_radio_map_is_no_permutation_is_refused_before_any_set() {
+        use crate::mock_board::{serve, MockParam, MockState};
+        let map = ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"];
+        let params: Vec<MockParam> =
+            map.iter().enumerate().map(|(i, &name)| MockParam { name, value: i as f32 + 1.0, min: 1.0, max: 4.0 }).collect();
+        let dir = std::env::temp_dir().join(format!("fcu-ground-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let run = |text: &str, file: &str| {
+            let (port, state) = serve(MockState { params: params.clone(), ..MockState::default() });
+            let path = dir.join(file);
+            std::fs::write(&path, text).unwrap();
+            let target = Target { link: LinkAddress::Tcp { host: "127.0.0.1".into(), port }, timeout: Duration::from_secs(5) };
+            let got = push(&target, &path);
+            let sets = state.lock().unwrap().sets.clone();
+            (got, sets)
+        };
+        // Sent one at a time, ROLL 2 swapped with pitch and PITCH 2 swapped back: exit 0 and
+        // the map as before. Refused, naming the line and the rule, and nothing set.
+        let (got, sets) = run("RCMAP_ROLL 2\nRCMAP_PITCH 2\n", "both.param");
+        let e = got.unwrap_err().0;
+        assert!(e.contains("both.param: line 2: RCMAP_PITCH: RCMAP: each input once"), "{e}");
+        assert!(sets.is_empty(), "{sets:?}");
+        // One entry, against the board's map.
+        let (got, sets) = run("RCMAP_ROLL 2\n", "one.param");
+        let e = got.unwrap_err().0;
+        assert!(e.contains("one.param: line 1: RCMAP_ROLL: RCMAP: each input once"), "{e}");
+        assert!(sets.is_empty(), "{sets:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn seconds_are_checked() {

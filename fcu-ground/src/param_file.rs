@@ -1,15 +1,17 @@
-//! Parameter files in MAVProxy's `param save` format, read and written as fcu-core's
-//! `parameters::apply_file` and `parameters::write_file` do (so `cargo pil serve --params` and
-//! `fcu-sim fly --params` take the files this command writes, and the other way round):
+//! Parameter files, read line by line by fcu-core's `parameters::file::lines`, the reader
+//! `cargo pil serve --params` and `fcu-sim fly --params` use too (so each takes the files the
+//! others take, and this command writes):
 //!
-//! - one `NAME VALUE` per line, the two separated by spaces, tabs or a comma (MAVProxy pads the
-//!   name to 16 columns; fcu-core writes one space);
-//! - `#` starts a comment, to the end of the line; blank lines are skipped;
+//! - MAVProxy's `param save`: one `NAME VALUE` per line, the two separated by spaces, tabs or
+//!   a comma (MAVProxy pads the name to 16 columns; fcu-core writes one space);
+//! - QGroundControl's `.params`: `SYS<TAB>COMP<TAB>NAME<TAB>VALUE<TAB>TYPE`;
+//! - `#` starts a comment, to the end of the line; blank lines are skipped; a UTF-8
+//!   byte-order mark at the start is skipped;
 //! - values are written as the shortest text that reads back as the same `f32`.
 //!
-//! This reader is stricter than fcu-core's in what a ground tool should not guess: a name set
-//! twice, a name longer than MAVLink's 16 characters and a value that is not a finite number
-//! are refused, each with its line.
+//! A line that does not read, a name set twice, a name longer than MAVLink's 16 characters
+//! and a value that is not a finite number are refused, each with its line; so is a radio
+//! map (`RCMAP_*`) that is not a permutation ([`map_problem`]).
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -41,33 +43,54 @@ impl fmt::Display for FileError {
 
 /// Reads a parameter file, in file order.
 pub fn parse(text: &str) -> Result<Vec<Entry>, FileError> {
+    use fcu_core::parameters::file::{self, Problem};
     let mut entries: Vec<Entry> = Vec::new();
     let mut seen: BTreeMap<String, usize> = BTreeMap::new();
-    for (n, raw) in text.lines().enumerate() {
-        let line = n + 1;
-        let err = |message: String| FileError { line, message };
-        let content = raw.split('#').next().unwrap_or("");
-        let mut words = content.split(|c: char| c.is_whitespace() || c == ',').filter(|w| !w.is_empty());
-        let (Some(name), value, extra) = (words.next(), words.next(), words.next()) else { continue };
-        let Some(value) = value else {
-            return Err(err(format!("`{}` has no value (expected NAME VALUE)", echo(name))));
-        };
-        if let Some(extra) = extra {
-            return Err(err(format!("`{}` after the value (expected NAME VALUE)", echo(extra))));
+    for read in file::lines(text) {
+        let e = read.map_err(|e| FileError {
+            line: e.line,
+            message: match e.problem {
+                Problem::NoValue { name } => format!("`{}` has no value (expected NAME VALUE)", echo(name)),
+                Problem::Extra { extra } => {
+                    format!("`{}` after the value (expected NAME VALUE, or SYS COMP NAME VALUE TYPE)", echo(extra))
+                }
+                Problem::NameTooLong { name } => format!("`{}` is longer than {NAME_LEN} characters, MAVLink's limit", echo(name)),
+                Problem::NotANumber { name, value } => format!("{}: `{}` is not a number", echo(name), echo(value)),
+                Problem::NotFinite { name } => format!("{}: the value is not a finite number", echo(name)),
+            },
+        })?;
+        if let Some(first) = seen.insert(e.name.to_string(), e.line) {
+            return Err(FileError { line: e.line, message: format!("{} is already set on line {first}", e.name) });
         }
-        if name.len() > NAME_LEN {
-            return Err(err(format!("`{}` is longer than {NAME_LEN} characters, MAVLink's limit", echo(name))));
-        }
-        let value: f32 = value.parse().map_err(|_| err(format!("{name}: `{}` is not a number", echo(value))))?;
-        if !value.is_finite() {
-            return Err(err(format!("{name}: the value is not a finite number")));
-        }
-        if let Some(first) = seen.insert(name.to_string(), line) {
-            return Err(err(format!("{name} is already set on line {first}")));
-        }
-        entries.push(Entry { line, name: name.to_string(), value });
+        entries.push(Entry { line: e.line, name: e.name.to_string(), value: e.value });
     }
     Ok(entries)
+}
+
+/// The radio map the file makes over `board` (name to value; `None`: the file alone) is not
+/// a permutation: the line to blame, with fcu-core's rule, as the board and every other
+/// reader would refuse it. Checked before anything is sent: set one at a time, each entry
+/// would swap with the function holding its input, and the map come out otherwise than the
+/// file says, silently.
+pub fn map_problem(entries: &[Entry], board: Option<&BTreeMap<String, f32>>) -> Option<FileError> {
+    use fcu_core::parameters;
+    // Not on the board, or not asked: NaN, which equals nothing.
+    let mut values = [f32::NAN; parameters::COUNT];
+    let mut lines = [0usize; parameters::COUNT];
+    for (i, v) in values.iter_mut().enumerate() {
+        if let Some(&b) = parameters::name(i).and_then(|n| board.and_then(|b| b.get(n))) {
+            *v = b;
+        }
+    }
+    for e in entries {
+        if let Some(i) = parameters::index_of(e.name.as_bytes()) {
+            values[i] = e.value;
+            lines[i] = e.line;
+        }
+    }
+    let line = parameters::file::repeated_map_line(&values, &lines)?;
+    let name = entries.iter().find(|e| e.line == line).map_or("", |e| e.name.as_str());
+    Some(FileError { line, message: format!("{name}: {}", parameters::RULE_RCMAP) })
 }
 
 /// Writes `params` (name, value) in the given order, one `NAME VALUE` line each.
@@ -150,6 +173,34 @@ mod tests {
         assert_eq!(e.to_string(), "line 3: A is already set on line 1");
         // Sixteen characters is MAVLink's whole param_id: taken.
         assert_eq!(parse("ABCDEFGHIJKLMNOP 1").unwrap().len(), 1);
+    }
+
+    #[test]
+    fn a_byte_order_mark_and_qgroundcontrol_files_read_as_mavproxy_ones() {
+        let mavproxy = parse("ANG_RLL_P 5.5\nRC1_MIN 1000.25\n").unwrap();
+        assert_eq!(parse("\u{feff}ANG_RLL_P 5.5\nRC1_MIN 1000.25\n").unwrap(), mavproxy);
+        let qgc = "# Onboard parameters for Vehicle 1\n#\n# Vehicle-Id Component-Id Name Value Type\n1\t1\tANG_RLL_P\t5.5\t9\n\
+                   1\t1\tRC1_MIN\t1000.25\t9\n";
+        let got: Vec<(String, f32)> = parse(qgc).unwrap().into_iter().map(|e| (e.name, e.value)).collect();
+        assert_eq!(got, [("ANG_RLL_P".to_string(), 5.5), ("RC1_MIN".to_string(), 1000.25)]);
+        assert_eq!(parse("1 1 ANG_RLL_P 5\n").unwrap_err().line, 1);
+    }
+
+    #[test]
+    fn a_radio_map_that_is_no_permutation_is_named_with_its_line() {
+        let map = "RCMAP_ROLL 2\nRCMAP_PITCH 2\nRCMAP_THROTTLE 3\nRCMAP_YAW 4\n";
+        let e = map_problem(&parse(map).unwrap(), None).unwrap();
+        assert_eq!(e.to_string(), "line 2: RCMAP_PITCH: RCMAP: each input once");
+        // One entry against the board's map.
+        let board: BTreeMap<String, f32> = [("RCMAP_ROLL", 1.0), ("RCMAP_PITCH", 2.0), ("RCMAP_THROTTLE", 3.0), ("RCMAP_YAW", 4.0)]
+            .iter()
+            .map(|&(n, v)| (n.to_string(), v))
+            .collect();
+        let one = parse("ANG_RLL_P 5\nRCMAP_ROLL 2\n").unwrap();
+        assert_eq!(map_problem(&one, None), None);
+        assert_eq!(map_problem(&one, Some(&board)).unwrap().to_string(), "line 2: RCMAP_ROLL: RCMAP: each input once");
+        let swap = parse("RCMAP_ROLL 2\nRCMAP_PITCH 1\n").unwrap();
+        assert_eq!(map_problem(&swap, Some(&board)), None);
     }
 
     #[test]

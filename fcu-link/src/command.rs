@@ -11,14 +11,17 @@
 //! | REQUEST_MESSAGE | AUTOPILOT_VERSION (param1 = 148) after the ACK; any other message UNSUPPORTED |
 //! | REQUEST_AUTOPILOT_CAPABILITIES | AUTOPILOT_VERSION after the ACK |
 //!
-//! Any command other than DO_MOTOR_TEST stops a running motor test first. "Disarmed only"
+//! A running motor test is stopped by any other command that is ACCEPTED (after the vehicle
+//! took it, before its ACK); a command answered UNSUPPORTED or refused leaves it running:
+//! MAVProxy asks for GET_HOME_POSITION every 2 s, which this board answers UNSUPPORTED, and
+//! a test must survive that. A DO_MOTOR_TEST accepted replaces the test. "Disarmed only"
 //! refusals are TEMPORARILY_REJECTED, rule refusals DENIED, both with a STATUSTEXT naming the
 //! rule; a refusal by the vehicle is DENIED with its rule.
 
 use mavlink::dialects::common::{MavCmd, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA};
 use mavlink::MessageData;
 
-use crate::link::Core;
+use crate::link::{Core, Room};
 use crate::reader::Frame;
 use crate::text::{Severity, Text};
 use crate::vehicle::{Request, Vehicle, VehicleState};
@@ -114,30 +117,36 @@ pub(crate) enum Then {
 }
 
 /// A refusal: the ACK's result and the STATUSTEXT naming the rule (none when empty).
-pub(crate) struct Refusal(pub(crate) MavResult, pub(crate) Text);
+/// The text is kept as its pieces, put together when it is sent: a [`Text`] holds a long
+/// text, too much to return by value from every rule.
+pub(crate) struct Refusal(pub(crate) MavResult, pub(crate) [&'static str; 3]);
+
+impl Refusal {
+    fn text(&self) -> Text {
+        let [a, b, c] = self.1;
+        Text::new().push(a).push(b).push(c)
+    }
+}
 
 fn unsupported() -> Refusal {
-    Refusal(MavResult::MAV_RESULT_UNSUPPORTED, Text::new())
+    Refusal(MavResult::MAV_RESULT_UNSUPPORTED, [""; 3])
 }
 
-pub(crate) fn while_armed(what: &str) -> Refusal {
-    Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push(what).push(" refused: armed"))
+pub(crate) fn while_armed(what: &'static str) -> Refusal {
+    Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, [what, " refused: armed", ""])
 }
 
-pub(crate) fn denied(what: &str, rule: &str) -> Refusal {
-    Refusal(MavResult::MAV_RESULT_DENIED, Text::new().push(what).push(": ").push(rule))
+pub(crate) fn denied(what: &'static str, rule: &'static str) -> Refusal {
+    Refusal(MavResult::MAV_RESULT_DENIED, [what, ": ", rule])
 }
 
 /// Passes a request on to the vehicle, a refusal coming back DENIED with its rule.
-fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &str) -> Result<Then, Refusal> {
+fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &'static str) -> Result<Then, Refusal> {
     vehicle.request(request).map(|()| Then::Nothing).map_err(|rule| denied(what, rule))
 }
 
 impl<const TX: usize> Core<TX> {
     pub(crate) fn command<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) {
-        if command.id != DO_MOTOR_TEST {
-            self.stop_motor_test(vehicle, "another command");
-        }
         let state = vehicle.state();
         let outcome = match command.id {
             COMPONENT_ARM_DISARM => arm_disarm(command, &state, vehicle),
@@ -157,15 +166,19 @@ impl<const TX: usize> Core<TX> {
         };
         match outcome {
             Ok(then) => {
+                if command.id != DO_MOTOR_TEST {
+                    self.stop_motor_test(vehicle, "another command");
+                }
                 self.ack(command, MavResult::MAV_RESULT_ACCEPTED);
                 if let Then::SendVersion = then {
                     self.autopilot_version();
                 }
             }
-            Err(Refusal(result, text)) => {
-                self.ack(command, result);
+            Err(refusal) => {
+                self.ack(command, refusal.0);
+                let text = refusal.text();
                 if !text.as_bytes().is_empty() {
-                    self.text(Severity::Warning, text);
+                    self.text(Severity::Warning, text, Room::Answer);
                 }
             }
         }
@@ -177,7 +190,11 @@ impl<const TX: usize> Core<TX> {
         // (the crate's struct has neither, see `reader::handled`).
         let [lo, hi] = command.id.to_le_bytes();
         let patches = [(0, lo), (1, hi), (ACK_TARGET_AT, command.system_id), (ACK_TARGET_AT + 1, command.component_id)];
-        self.send_patched(&ack, &patches);
+        // The whole queue, not an answer's share: a ground station that misses the ACK of a
+        // reboot or a save sends the command again, and a flood of parameter requests must not
+        // cost it. Commands come far slower than the line drains their ACKs (22 bytes each),
+        // so they cannot starve the telemetry, which stays due until it has room.
+        self.send_patched(&ack, &patches, Room::Event);
     }
 }
 
@@ -194,10 +211,10 @@ fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut
     }
     let forced = force == FORCE_DISARM;
     if !forced && state.in_air {
-        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: in the air (force 21196)")));
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, ["Disarm refused: in the air (force 21196)", "", ""]));
     }
     if !forced && !state.throttle_low {
-        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, Text::new().push("Disarm refused: throttle not low")));
+        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, ["Disarm refused: throttle not low", "", ""]));
     }
     ask(vehicle, Request::Disarm { forced }, "Disarm refused")
 }

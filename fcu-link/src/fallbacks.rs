@@ -4,7 +4,7 @@
 use mavlink::dialects::common::{FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA};
 
 use crate::frame;
-use crate::link::{bump, for_us, Core};
+use crate::link::{bump, for_us, Core, Room};
 use crate::reader::Frame;
 
 /// MISSION_REQUEST_LIST's `mission_type` offset, and MISSION_COUNT's.
@@ -33,7 +33,7 @@ impl<const TX: usize> Core<TX> {
         }
         let count = MISSION_COUNT_DATA { count: 0, target_system: frame.system_id, target_component: frame.component_id };
         // mission_type is an extension field (see `reader::handled`), written raw.
-        self.send_patched(&count, &[(COUNT_TYPE_AT, mission_type as u8)]);
+        self.send_patched(&count, &[(COUNT_TYPE_AT, mission_type as u8)], Room::Answer);
     }
 
     /// Any FTP request gets a NAK with `UnknownCommand`.
@@ -62,6 +62,6 @@ impl<const TX: usize> Core<TX> {
             target_component: frame.component_id,
             payload,
         };
-        self.send(&nak);
+        self.send(&nak, Room::Answer);
     }
 }

@@ -79,9 +79,7 @@ pub fn encode_payload(
         }
     }
     let patched_len = patches.iter().map(|&(at, _)| at + 1).max().unwrap_or(0);
-    let full = payload.get(..header.encoded_len.max(patched_len)).unwrap_or(payload);
-    // MAVLink 2 drops trailing zero bytes of the payload but always keeps the first.
-    let len = full.iter().rposition(|&b| b != 0).map_or(1, |last| last + 1);
+    let len = payload_len(payload, header.encoded_len.max(patched_len));
     let id = header.id.to_le_bytes();
     let start = [crate::reader::STX_V2, len as u8, 0, 0, sequence, SYSTEM_ID, COMPONENT_ID, id[0], id[1], id[2]];
     out[..V2_HEADER].copy_from_slice(&start);
@@ -94,6 +92,18 @@ pub fn encode_payload(
         dst.copy_from_slice(&crc.to_le_bytes());
     }
     end + 2
+}
+
+/// The payload length sent of the first `full` bytes of `payload`: MAVLink 2 drops trailing
+/// zero bytes of the payload but always keeps the first.
+fn payload_len(payload: &[u8; MAX_PAYLOAD], full: usize) -> usize {
+    let full = payload.get(..full).unwrap_or(payload);
+    full.iter().rposition(|&b| b != 0).map_or(1, |last| last + 1)
+}
+
+/// The length of the frame [`encode_payload`] makes of `payload` (patches written in).
+pub fn frame_len(header: Header, payload: &[u8; MAX_PAYLOAD]) -> usize {
+    V2_HEADER + payload_len(payload, header.encoded_len) + 2
 }
 
 /// Decodes a payload, first reading the raw value of each listed enum field (`(offset,

@@ -5,14 +5,17 @@
 //! hardware: the host application implements [`Vehicle`] (a view of the flight state, the
 //! parameter table and the commands it may take), feeds received bytes to [`Link::receive`],
 //! calls [`Link::tick`] for the telemetry schedule and drains [`Link::poll_tx`] into the UART.
-//! Nothing blocks and nothing allocates; what does not fit is dropped and counted
-//! ([`LinkStats`]).
+//! Nothing blocks and nothing allocates; an answer or event that does not fit is dropped and
+//! counted ([`LinkStats`]), telemetry that does not fit stays due, and answers leave room for
+//! telemetry ([`TELEMETRY_RESERVE`]).
 //!
 //! # Protocol
 //!
 //! - Identity: system [`SYSTEM_ID`], component [`COMPONENT_ID`], `MAV_TYPE_QUADROTOR`,
 //!   `MAV_AUTOPILOT_GENERIC`.
-//! - Receives MAVLink 1 and 2 ([`FrameReader`]), sends MAVLink 2 only. pymavlink starts in
+//! - Receives MAVLink 1 and 2 ([`FrameReader`]), sends MAVLink 2 only. MAVLink 2 signing is
+//!   not supported: a signed frame is counted ([`ReaderStats::signed`]) and dropped, so a
+//!   ground station that signs gets no answer at all. pymavlink starts in
 //!   MAVLink 1 and switches to 2 (and sends 2 from then on) when a read of its port begins with
 //!   the MAVLink 2 start byte; until a read begins with a start byte it keeps looking, so a
 //!   connection that opens mid-frame switches at a later read. `MAVLINK20=1` in its environment
@@ -25,7 +28,7 @@
 //!
 //! # What it costs in flash
 //!
-//! In the firmware's image built with the link, `scripts/size-by-part` counts about 13 KB for
+//! In the firmware's image built with the link, `scripts/size-by-part` counts about 14 KB for
 //! the ground-station link (docs/ground-station.md has the table): this crate with what it inlines of fcu-core's parameter table (the
 //! save plan, a set and its checks), the firmware's link task, its receive ring and its flash
 //! store. What keeps it there: each message is serialized and parsed by its own `*_DATA`
@@ -35,7 +38,8 @@
 //! serializing one message through the dialect's `MavMessage` enum instead costs 91,434 +
 //! 7,980 B (measured in a probe binary holding nothing else); no `MavMessage` symbol is in the
 //! link's image.
-#![no_std]
+// The unit tests run on the host with std (their mock vehicle and decoder allocate).
+#![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
@@ -49,6 +53,13 @@
         clippy::unimplemented
     )
 )]
+
+// The unit tests share the integration tests' mock vehicle and decoder, which name the crate.
+#[cfg(test)]
+extern crate self as fcu_link;
+#[cfg(test)]
+#[path = "../tests/support/mod.rs"]
+mod test_support;
 
 pub mod command;
 pub mod crc;
@@ -66,14 +77,14 @@ pub mod text;
 pub mod tx;
 pub mod vehicle;
 
-pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS};
+pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
 pub use motor_test::{MotorTestState, MOTOR_TEST_MAX_MS, MOTOR_TEST_THROTTLE_CAP_PCT};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
 pub use service::{Observed, Service, ToControl};
 pub use station::Due;
 pub use text::Severity;
-pub use vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Vehicle, VehicleState};
+pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 
 /// Our MAVLink system id.
 pub const SYSTEM_ID: u8 = 1;

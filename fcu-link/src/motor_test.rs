@@ -4,7 +4,8 @@
 //! - param1 the motor, 1 to 4; param2 the throttle type, percent (0) only; param3 the
 //!   throttle, capped to [`MOTOR_TEST_THROTTLE_CAP_PCT`] %; param4 the time in s, capped to
 //!   [`MOTOR_TEST_MAX_MS`]; param5 the motor count, 0 or 1 (one motor at a time);
-//! - stopped ([`Request::StopMotorTest`]) when its time is up, by any other command, when no
+//! - stopped ([`Request::StopMotorTest`]) when its time is up, by any other command that is
+//!   accepted (not by one answered UNSUPPORTED or refused: see [`crate::command`]), when no
 //!   frame came for [`MOTOR_TEST_SILENCE_MS`] (a ground station sends a HEARTBEAT every
 //!   second) and when a radio channel moves more than [`MOTOR_TEST_STICK_MOVE_US`] from where it
 //!   was at the start;
@@ -14,7 +15,7 @@
 //! it does is the flight controller's rule.
 
 use crate::command::{denied, while_armed, Command, Refusal, Then};
-use crate::link::Core;
+use crate::link::{Core, Room};
 use crate::text::{Severity, Text};
 use crate::vehicle::{Request, Vehicle, VehicleState};
 
@@ -106,7 +107,7 @@ impl<const TX: usize> Core<TX> {
         // The vehicle stops the motor whatever it answers: a refusal here has no rule to keep.
         let _ = vehicle.request(Request::StopMotorTest);
         let text = Text::new().push("Motor test stopped: ").push(reason);
-        self.text(Severity::Info, text);
+        self.text(Severity::Info, text, Room::Event);
     }
 
     /// The limits of a running test, once per tick.
@@ -129,5 +130,63 @@ impl<const TX: usize> Core<TX> {
         if let Some(reason) = reason {
             self.stop_motor_test(vehicle, reason);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use mavlink::dialects::common::{MavCmd, MavResult, COMMAND_LONG_DATA};
+    use mavlink::MessageData;
+
+    use crate::test_support::*;
+    use crate::{Link, LinkConfig, Request};
+
+    /// MAV_CMD_GET_HOME_POSITION, which MAVProxy sends every 2 s.
+    const GET_HOME_POSITION: f32 = 410.0;
+
+    fn command(link: &mut TestLink, mock: &mut Mock, cmd: MavCmd, params: [f32; 7], now_ms: u32) -> MavResult {
+        link.receive(&v2(&command_long(cmd, params)), now_ms, mock);
+        let acks = acks(&drain(link));
+        assert_eq!(acks.len(), 1);
+        acks[0].1
+    }
+
+    #[test]
+    fn a_motor_test_survives_unsupported_and_refused_commands() {
+        let mut link: TestLink = Link::new(LinkConfig::DEFAULT);
+        let mut mock = Mock::new();
+        let start = [1.0, 0.0, 10.0, 3.0, 1.0, 0.0, 0.0];
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, start, 0), MavResult::MAV_RESULT_ACCEPTED);
+        mock.requests.clear();
+        // Unsupported: a number the dialect lists, one it does not, and an unsupported variant.
+        let get_home = command_long(MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0; 7]);
+        let mut frame = v2(&get_home);
+        let mut payload = frame[10..frame.len() - 2].to_vec();
+        payload.resize(33, 0);
+        payload[28..30].copy_from_slice(&(GET_HOME_POSITION as u16).to_le_bytes());
+        frame = v2_raw(COMMAND_LONG_DATA::ID, COMMAND_LONG_DATA::EXTRA_CRC, &payload);
+        link.receive(&frame, 100, &mut mock);
+        assert_eq!(acks(&drain(&mut link)), [(410, MavResult::MAV_RESULT_UNSUPPORTED)]);
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7], 200), MavResult::MAV_RESULT_UNSUPPORTED);
+        let shutdown = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(
+            command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, shutdown, 300),
+            MavResult::MAV_RESULT_UNSUPPORTED
+        );
+        // Refused by the link (arming is the stick gesture's) and by the vehicle.
+        let arm = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, arm, 400), MavResult::MAV_RESULT_DENIED);
+        mock.refuse_requests = Some("busy");
+        let save = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save, 500), MavResult::MAV_RESULT_DENIED);
+        mock.refuse_requests = None;
+        assert!(link.motor_test().is_some(), "still running");
+        assert!(!mock.requests.contains(&Request::StopMotorTest), "{:?}", mock.requests);
+
+        // An accepted command ends it.
+        let version = [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_REQUEST_MESSAGE, version, 600), MavResult::MAV_RESULT_ACCEPTED);
+        assert!(link.motor_test().is_none());
+        assert_eq!(mock.requests.last(), Some(&Request::StopMotorTest));
     }
 }

@@ -34,11 +34,14 @@ use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 
 use crate::rates::Rates;
-use crate::vehicle::{Attitude, Battery, Health, Param, Request, SystemStatus, Vehicle, VehicleState};
+use crate::vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
 pub const SAVE_DEBOUNCE_MS: u32 = 2000;
+
+// A set reports every parameter it changed in a mask: the table must fit in one.
+const _: () = assert!(parameters::COUNT <= ParamMask::CAPACITY);
 
 /// Status snapshots showing the arming refusal before a save or a reboot is due (see the module
 /// docs).
@@ -392,16 +395,34 @@ impl Vehicle for Station {
         parameters::index_of(name).map(|i| i as u16)
     }
 
-    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
+    fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str> {
+        let i = usize::from(index);
+        // Compared by value: -0.0 for a 0.0 is no change (no save, and taken armed too), where
+        // fcu-core's set, comparing bit patterns, would take it as a new value.
+        if parameters::value(&self.cfg, i) == Some(value) {
+            return Ok(ParamMask::EMPTY);
+        }
         let armed = self.armed();
         let mut next = self.cfg;
-        let applied = parameters::set(&mut next, usize::from(index), value, armed).map_err(|r| r.rule)?;
-        if !next.is_same_as(&self.cfg) {
+        parameters::set(&mut next, i, value, armed).map_err(|r| r.rule)?;
+        // Every parameter the set moved, whatever the reason (RCMAP_* form a permutation: one
+        // set swaps the channel another had), so that the ground station hears of each.
+        let mut others = ParamMask::EMPTY;
+        let mut any = false;
+        for j in 0..parameters::count() {
+            if parameters::value(&self.cfg, j) != parameters::value(&next, j) {
+                any = true;
+                if j != i {
+                    others.insert(j as u16);
+                }
+            }
+        }
+        if any {
             fcu_core::flight::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
             self.cfg = next;
             self.changed();
         }
-        Ok(applied.value)
+        Ok(others)
     }
 
     fn request(&mut self, request: Request) -> Result<(), &'static str> {
@@ -740,5 +761,50 @@ mod tests {
         assert_eq!(st.request(Request::Reboot), Ok(()));
         assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_REBOOTING));
         assert_eq!(st.request(Request::CalibrateRadio), Err(RULE_REBOOTING));
+    }
+
+    fn index(name: &str) -> u16 {
+        parameters::index_of(name.as_bytes()).unwrap() as u16
+    }
+
+    #[test]
+    fn a_set_reports_every_other_parameter_it_changed() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        let changed = st.set_param(index("RCMAP_ROLL"), 3.0).unwrap();
+        let mut expected = ParamMask::EMPTY;
+        expected.insert(index("RCMAP_THROTTLE"));
+        assert_eq!(changed, expected);
+        assert_eq!(st.param(index("RCMAP_THROTTLE")).map(|p| p.value), Some(1.0));
+        // A set that moves nothing else reports nothing else.
+        assert_eq!(st.set_param(index("RC_TIMEOUT_MS"), 100.0), Ok(ParamMask::EMPTY));
+    }
+
+    /// The link in front of the station: what a ground station hears back of a set.
+    fn echo(st: &mut Station, name: &str, value: f32) -> Vec<f32> {
+        use crate::test_support::{drain, param_set, param_values, v2};
+        let mut link: crate::Link<512> = crate::Link::default();
+        link.receive(&v2(&param_set(name, value)), 0, st);
+        param_values(&drain(&mut link)).into_iter().map(|p| p.1).collect()
+    }
+
+    #[test]
+    fn minus_zero_is_not_taken_as_a_change() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(parameters::value(st.config(), usize::from(index("RATE_YAW_I"))), Some(0.0));
+        let echoed = echo(&mut st, "RATE_YAW_I", -0.0);
+        assert_eq!(echoed.len(), 1);
+        assert_eq!(echoed[0].to_bits(), 0.0f32.to_bits(), "the value in force is echoed, not the -0.0 sent");
+        assert!(!st.unsaved(), "no save");
+        assert_eq!(st.take_change(), None, "nothing for the control loop");
+
+        // Armed, a parameter only changed disarmed takes the value it already has, -0.0 too.
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(echo(&mut st, "YAW_DEADBAND_US", 0.0), [0.0]);
+        st.saved(true);
+        let _ = st.take_change();
+        st.observe(&status(FlightState::Armed, REST, Blockers::default()), 3900, [0; 4], 1000);
+        assert_eq!(st.set_param(index("YAW_DEADBAND_US"), -0.0), Ok(ParamMask::EMPTY));
+        assert!(!st.unsaved());
+        assert_eq!(st.take_change(), None);
     }
 }

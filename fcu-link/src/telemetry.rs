@@ -5,7 +5,7 @@ use mavlink::dialects::common::{
     ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 
-use crate::link::Core;
+use crate::link::{Core, Room};
 use crate::vehicle::{SystemStatus, VehicleState};
 
 /// RC_CHANNELS' value for a channel that is not there.
@@ -24,32 +24,37 @@ fn sensors_present() -> MavSysStatusSensor {
 }
 
 impl<const TX: usize> Core<TX> {
-    /// Every stream that is due.
+    /// Every stream that is due. One that finds no room in the transmit queue stays due and
+    /// goes at a later tick: telemetry is never dropped.
     pub(crate) fn telemetry(&mut self, state: &VehicleState) {
         let now = self.now_ms;
         let rates = self.config.rates;
         let heartbeat_ms = if rates.heartbeat_ms == 0 { crate::Rates::DEFAULT.heartbeat_ms } else { rates.heartbeat_ms };
-        if self.schedule.heartbeat.due(now, heartbeat_ms) {
-            self.heartbeat(state);
+        if self.schedule.heartbeat.ready(now, heartbeat_ms) && self.heartbeat(state) {
+            self.schedule.heartbeat.sent(now, heartbeat_ms);
         }
-        if self.schedule.attitude.due(now, rates.attitude_ms) {
-            self.attitude(state);
+        if self.schedule.attitude.ready(now, rates.attitude_ms) && self.attitude(state) {
+            self.schedule.attitude.sent(now, rates.attitude_ms);
         }
-        if self.schedule.sys_status.due(now, rates.sys_status_ms) {
-            self.sys_status(state);
+        if self.schedule.sys_status.ready(now, rates.sys_status_ms) && self.sys_status(state) {
+            self.schedule.sys_status.sent(now, rates.sys_status_ms);
         }
-        if self.schedule.battery.due(now, rates.battery_ms) {
-            self.battery_status(state);
+        if self.schedule.battery.ready(now, rates.battery_ms) && self.battery_status(state) {
+            self.schedule.battery.sent(now, rates.battery_ms);
         }
-        if self.schedule.rc_channels.due(now, rates.rc_channels_ms) {
-            self.rc_channels(state);
+        if self.schedule.rc_channels.ready(now, rates.rc_channels_ms) && self.rc_channels(state) {
+            self.schedule.rc_channels.sent(now, rates.rc_channels_ms);
         }
-        if self.schedule.servo_output.due(now, rates.servo_output_ms) {
-            self.servo_output(state);
+        if self.schedule.servo_output.ready(now, rates.servo_output_ms) && self.servo_output(state) {
+            self.schedule.servo_output.sent(now, rates.servo_output_ms);
         }
     }
 
-    fn heartbeat(&mut self, state: &VehicleState) {
+    fn send_telemetry<D: mavlink::MessageData>(&mut self, data: &D) -> bool {
+        self.send(data, Room::Telemetry)
+    }
+
+    fn heartbeat(&mut self, state: &VehicleState) -> bool {
         let mut base_mode = MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
         if state.armed {
             base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
@@ -60,19 +65,19 @@ impl<const TX: usize> Core<TX> {
             SystemStatus::Active => MavState::MAV_STATE_ACTIVE,
             SystemStatus::Critical => MavState::MAV_STATE_CRITICAL,
         };
-        self.send(&HEARTBEAT_DATA {
+        self.send_telemetry(&HEARTBEAT_DATA {
             custom_mode: 0,
             mavtype: MavType::MAV_TYPE_QUADROTOR,
             autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
             base_mode,
             system_status,
             mavlink_version: 3,
-        });
+        })
     }
 
-    fn attitude(&mut self, state: &VehicleState) {
+    fn attitude(&mut self, state: &VehicleState) -> bool {
         let a = state.attitude;
-        self.send(&ATTITUDE_DATA {
+        self.send_telemetry(&ATTITUDE_DATA {
             time_boot_ms: self.now_ms,
             roll: a.roll_rad,
             pitch: a.pitch_rad,
@@ -80,10 +85,10 @@ impl<const TX: usize> Core<TX> {
             rollspeed: a.roll_rate_rad_s,
             pitchspeed: a.pitch_rate_rad_s,
             yawspeed: a.yaw_rate_rad_s,
-        });
+        })
     }
 
-    fn sys_status(&mut self, state: &VehicleState) {
+    fn sys_status(&mut self, state: &VehicleState) -> bool {
         let h = state.health;
         // The geofence: not present, so never breached. Its health bit set as autopilots with a
         // fence set it when none is breached: ground stations read a clear bit as a breach
@@ -100,7 +105,7 @@ impl<const TX: usize> Core<TX> {
             | when(h.prearm, MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK);
         let reader = self.stats.reader;
         let errors = reader.bad_crc.saturating_add(reader.bad_length);
-        self.send(&SYS_STATUS_DATA {
+        self.send_telemetry(&SYS_STATUS_DATA {
             onboard_control_sensors_present: sensors_present(),
             onboard_control_sensors_enabled: sensors_present(),
             onboard_control_sensors_health: health,
@@ -114,15 +119,15 @@ impl<const TX: usize> Core<TX> {
             errors_count3: 0,
             errors_count4: 0,
             battery_remaining: state.battery.remaining_pct,
-        });
+        })
     }
 
-    fn battery_status(&mut self, state: &VehicleState) {
+    fn battery_status(&mut self, state: &VehicleState) -> bool {
         // Without cell voltages, the first cell carries the whole battery's and the others are
         // "not there".
         let mut voltages = [u16::MAX; 10];
         voltages[0] = state.battery.voltage_mv;
-        self.send(&BATTERY_STATUS_DATA {
+        self.send_telemetry(&BATTERY_STATUS_DATA {
             current_consumed: -1,
             energy_consumed: -1,
             temperature: i16::MAX,
@@ -132,10 +137,10 @@ impl<const TX: usize> Core<TX> {
             battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
             mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
             battery_remaining: state.battery.remaining_pct,
-        });
+        })
     }
 
-    fn rc_channels(&mut self, state: &VehicleState) {
+    fn rc_channels(&mut self, state: &VehicleState) -> bool {
         let count = usize::from(state.rc_channel_count);
         let mut ch = [NO_CHANNEL; 8];
         for (i, (slot, &width)) in ch.iter_mut().zip(state.rc_widths_us.iter()).enumerate() {
@@ -143,7 +148,7 @@ impl<const TX: usize> Core<TX> {
                 *slot = width;
             }
         }
-        self.send(&RC_CHANNELS_DATA {
+        self.send_telemetry(&RC_CHANNELS_DATA {
             time_boot_ms: self.now_ms,
             chan1_raw: ch[0],
             chan2_raw: ch[1],
@@ -165,12 +170,12 @@ impl<const TX: usize> Core<TX> {
             chan18_raw: NO_CHANNEL,
             chancount: state.rc_channel_count.min(8),
             rssi: u8::MAX,
-        });
+        })
     }
 
-    fn servo_output(&mut self, state: &VehicleState) {
+    fn servo_output(&mut self, state: &VehicleState) -> bool {
         let [m1, m2, m3, m4] = state.motor_outputs_us;
-        self.send(&SERVO_OUTPUT_RAW_DATA {
+        self.send_telemetry(&SERVO_OUTPUT_RAW_DATA {
             time_usec: self.now_ms.wrapping_mul(1000),
             servo1_raw: m1,
             servo2_raw: m2,
@@ -181,23 +186,26 @@ impl<const TX: usize> Core<TX> {
             servo7_raw: 0,
             servo8_raw: 0,
             port: 0,
-        });
+        })
     }
 
     pub(crate) fn autopilot_version(&mut self) {
-        self.send(&AUTOPILOT_VERSION_DATA {
-            capabilities: MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2
-                | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
-            uid: self.config.uid,
-            flight_sw_version: self.config.flight_sw_version,
-            middleware_sw_version: 0,
-            os_sw_version: 0,
-            board_version: 0,
-            vendor_id: 0,
-            product_id: 0,
-            flight_custom_version: [0; 8],
-            middleware_custom_version: [0; 8],
-            os_custom_version: [0; 8],
-        });
+        self.send(
+            &AUTOPILOT_VERSION_DATA {
+                capabilities: MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+                    | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
+                uid: self.config.uid,
+                flight_sw_version: self.config.flight_sw_version,
+                middleware_sw_version: 0,
+                os_sw_version: 0,
+                board_version: 0,
+                vendor_id: 0,
+                product_id: 0,
+                flight_custom_version: [0; 8],
+                middleware_custom_version: [0; 8],
+                os_custom_version: [0; 8],
+            },
+            Room::Answer,
+        );
     }
 }

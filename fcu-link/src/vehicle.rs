@@ -102,6 +102,61 @@ pub struct Param {
     pub value: f32,
 }
 
+/// A set of parameter indices below [`ParamMask::CAPACITY`]: the parameters a PARAM_SET changed
+/// besides the one it set, or the PARAM_VALUEs the link still owes the ground station.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ParamMask {
+    words: [u32; 4],
+}
+
+impl ParamMask {
+    /// Indices a mask can hold: a table with more parameters cannot report the changes of the
+    /// ones past it (fcu-core's station checks its table fits at compile time).
+    pub const CAPACITY: usize = 128;
+
+    /// No index.
+    pub const EMPTY: Self = Self { words: [0; 4] };
+
+    /// Adds `index` (nothing past [`ParamMask::CAPACITY`]).
+    pub fn insert(&mut self, index: u16) {
+        if let Some(word) = self.words.get_mut(usize::from(index / 32)) {
+            *word |= 1 << (index % 32);
+        }
+    }
+
+    /// Takes `index` out.
+    pub fn remove(&mut self, index: u16) {
+        if let Some(word) = self.words.get_mut(usize::from(index / 32)) {
+            *word &= !(1 << (index % 32));
+        }
+    }
+
+    /// Whether `index` is in.
+    pub fn contains(&self, index: u16) -> bool {
+        self.words.get(usize::from(index / 32)).is_some_and(|word| word & (1 << (index % 32)) != 0)
+    }
+
+    /// No index in.
+    pub fn is_empty(&self) -> bool {
+        self.words.iter().all(|&word| word == 0)
+    }
+
+    /// The lowest index in, if any.
+    pub fn first(&self) -> Option<u16> {
+        let (i, word) = self.words.iter().enumerate().find(|(_, &word)| word != 0)?;
+        Some(i as u16 * 32 + word.trailing_zeros() as u16)
+    }
+
+    /// Every index of `self` or `other`.
+    pub fn union(self, other: Self) -> Self {
+        let mut words = self.words;
+        for (word, &o) in words.iter_mut().zip(other.words.iter()) {
+            *word |= o;
+        }
+        Self { words }
+    }
+}
+
 /// What the link asks the vehicle to do, once its own rules let the command through.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Request {
@@ -161,10 +216,13 @@ pub trait Vehicle {
     fn param_index(&self, name: &[u8]) -> Option<u16>;
 
     /// Sets parameter `index` to `value` (finite: the link refuses NaN and infinities before
-    /// asking). `Ok` carries the value now in force, `Err` the rule that refused it (short,
-    /// it goes into a 50-character STATUSTEXT after the parameter's name); on a refusal nothing
-    /// may change.
-    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str>;
+    /// asking). `Ok` carries every other parameter whose value the set changed (a channel map
+    /// swaps the channel another function had), compared by value (-0.0 is 0.0): the link
+    /// echoes `index` with the value now in force ([`Vehicle::param`]), then each of these in
+    /// index order, so that the ground station's copy of the table stays whole. `Err` is the
+    /// rule that refused it (short, it goes into a STATUSTEXT after the parameter's name); on
+    /// a refusal nothing may change.
+    fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str>;
 
     /// Carries out a request, or refuses it naming the rule.
     fn request(&mut self, request: Request) -> Result<(), &'static str>;

@@ -642,11 +642,11 @@ fn motor_test_stops_on_another_command_silence_and_a_stick_move() {
         assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
         mock.requests.clear();
     };
-    // Another command.
+    // Another command, accepted.
     let mut link = link();
     let mut mock = Mock::new();
     start(&mut link, &mut mock);
-    command(&mut link, &mut mock, MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7]);
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_REQUEST_MESSAGE, [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(mock.requests, [Request::StopMotorTest]);
     assert!(link.motor_test().is_none());
 
@@ -705,13 +705,13 @@ fn motor_test_rules() {
 }
 
 #[test]
-fn send_text_goes_out_cut_at_50_bytes() {
+fn send_text_goes_out_in_50_byte_chunks() {
     let mut link = link();
     assert!(link.send_text(Severity::Info, b"Armed"));
     let long = "x".repeat(80);
     assert!(link.send_text(Severity::Warning, long.as_bytes()));
     let sent = drain(&mut link);
-    assert_eq!(texts(&sent), ["Armed".to_string(), "x".repeat(50)]);
+    assert_eq!(texts(&sent), ["Armed".to_string(), "x".repeat(50), "x".repeat(30)]);
     match &sent[0].message {
         MavMessage::STATUSTEXT(t) => assert_eq!(t.severity, common::MavSeverity::MAV_SEVERITY_INFO),
         _ => unreachable!(),

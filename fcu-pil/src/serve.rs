@@ -418,7 +418,7 @@ mod tests {
         let flash = flash_with_parameters(old, "ANGLE_MAX 30\n# a comment\nRC1_TRIM 1500\n").unwrap();
         let (a, b) = (param_sector_words(&flash, 0), param_sector_words(&flash, 1));
         let (cfg, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
-        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
+        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1, passed_over: None });
         let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
         // ANGLE_MAX is kept in radians: it reads back within a float's rounding.
         assert!((value("ANGLE_MAX") - 30.0).abs() < 1e-4, "{}", value("ANGLE_MAX"));
@@ -434,7 +434,7 @@ mod tests {
         let flash = flash_for_flight(saved, Some("RC1_TRIM 1400\n")).unwrap();
         let (cfg, source) =
             snapshot::load_config([&param_sector_words(&flash, 0), &param_sector_words(&flash, 1)], &fcu_core::Config::default());
-        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1 });
+        assert_eq!(source, snapshot::Source::Snapshot { sequence: 1, passed_over: None });
         let value = |name: &str| parameters::value(&cfg, parameters::index_of(name.as_bytes()).unwrap()).unwrap();
         assert!((value("ANGLE_MAX") - 30.0).abs() < 1e-4, "the flash's set kept");
         assert_eq!(value("RC1_TRIM"), 1400.0, "the file over it");

@@ -102,7 +102,7 @@ fn stick_targets_and_yaw_accumulation_are_bit_exact() {
         let n = |i: usize| -> i16 { r[i].parse().unwrap() };
         let s = Sticks::new(n(2), n(3), n(5), n(4));
         let (pitch, roll) = cfg.tilt_targets(&s);
-        let step = cfg.yaw_step(&s);
+        let step = cfg.yaw_step(&s, fcu_core::Config::reference().timing.outer_hz());
         if step != 0.0 {
             yaw += step;
         }

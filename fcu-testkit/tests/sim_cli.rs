@@ -176,6 +176,30 @@ fn fly_help_lists_every_scenario_from_the_table() {
 }
 
 #[test]
+fn a_parameter_file_with_a_byte_order_mark_in_qgroundcontrols_format_flies_and_a_bad_map_is_named() {
+    let dir = tmp("params-formats");
+    let _ = std::fs::create_dir_all(&dir);
+    let out = dir.join("flight");
+    let out = out.to_str().unwrap_or_default();
+    // ANGLE_MAX 60 was saved and pulled as 60.000004, which this reader refused (above the
+    // maximum); a BOM made the first name unknown; QGroundControl's lines did not read.
+    let good = dir.join("qgc.params");
+    let _ =
+        std::fs::write(&good, "\u{feff}# Vehicle-Id Component-Id Name Value Type\n1\t1\tANGLE_MAX\t60\t9\n1\t1\tYAW_RATE_MAX\t120\t9\n");
+    let good = good.to_str().unwrap_or_default();
+    // Taken, the flight runs (half a second of it, so its checks may fail: exit 1, not 2).
+    let (code, stdout, err) = fcu_sim(&["fly", "--scenario", "hover", "--duration", "0.5", "--params", good, "--out", out]);
+    assert!(code != 2 && stdout.contains("profile default"), "{code}: {stdout}\n{err}");
+    // A radio map that is no permutation: its line and the rule, not a map rearranged.
+    let bad = dir.join("map.parm");
+    let _ = std::fs::write(&bad, "RCMAP_ROLL 2\nRCMAP_PITCH 2\n");
+    let bad = bad.to_str().unwrap_or_default();
+    let (code, _, err) = fcu_sim(&["fly", "--scenario", "hover", "--duration", "0.5", "--params", bad, "--out", out]);
+    assert_eq!(code, 2);
+    assert!(err.contains("map.parm: line 2: RCMAP: each input once"), "{err}");
+}
+
+#[test]
 fn a_parameter_file_flies_the_other_transmitter_and_a_bad_one_is_named() {
     let dir = tmp("params");
     let _ = std::fs::create_dir_all(&dir);

@@ -13,7 +13,7 @@
 //!   good CRC (so that the handler, not only the reader, sees arbitrary payloads); 7 ms later.
 #![no_main]
 
-use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 use libfuzzer_sys::fuzz_target;
 use mavlink::dialects::common::{COMMAND_INT_DATA, COMMAND_LONG_DATA, PARAM_SET_DATA};
 use mavlink::MessageData;
@@ -53,7 +53,7 @@ impl Vehicle for Mock {
     fn param_index(&self, name: &[u8]) -> Option<u16> {
         NAMES.iter().position(|n| n.as_bytes() == name).map(|i| i as u16)
     }
-    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
+    fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str> {
         assert!(value.is_finite(), "non-finite value passed on");
         if !(-1000.0..=1000.0).contains(&value) {
             return Err("out of range");
@@ -61,7 +61,14 @@ impl Vehicle for Mock {
         let slot = self.values.get_mut(usize::from(index)).ok_or("index")?;
         *slot = value;
         self.sets.push((index, value));
-        Ok(value)
+        // Parameter 0 moves parameter 1 with it (as a channel map does), so that the echo of
+        // the others a set changed is fuzzed too.
+        let mut others = ParamMask::EMPTY;
+        if index == 0 && self.values[1] != -value {
+            self.values[1] = -value;
+            others.insert(1);
+        }
+        Ok(others)
     }
     fn request(&mut self, request: Request) -> Result<(), &'static str> {
         self.requests.push(request);

@@ -82,7 +82,7 @@ impl HeadingTarget {
         if job.yaw_target_reset {
             self.yaw_target_rad = 0.0;
         }
-        let yaw_step = p.rc.yaw_step(&job.sticks);
+        let yaw_step = p.rc.yaw_step(&job.sticks, p.outer_hz);
         // The heading target moves at the stick's rate, or at its shaped rate, which
         // starts again from rest whenever the throttle has been low.
         let shaped = self.shaper.as_mut().map(|shaper| {

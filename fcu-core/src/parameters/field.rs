@@ -163,8 +163,8 @@ impl Field {
                 Stick::YawDeadband => cfg.rc.yaw_deadband,
             }),
             Field::Safety(which) => safety_ms(cfg, which),
-            Field::AngleMaxDeg => cfg.rc.max_tilt_rad.to_degrees(),
-            Field::YawRateMaxDegS => (cfg.rc.yaw_max_step_rad * cfg.timing.outer_hz()).to_degrees(),
+            Field::AngleMaxDeg => cfg.rc.max_tilt_deg,
+            Field::YawRateMaxDegS => cfg.rc.yaw_rate_max_deg_s,
             Field::Gain(a, which) => gain(axis(cfg, a), which),
             Field::YawFeedforward => cfg.control.yaw_rate_feedforward,
             Field::GyroCutoffHz => gyro_cutoff_hz(cfg),
@@ -205,8 +205,8 @@ impl Field {
                 }
             }
             Field::Safety(which) => return set_safety_ms(cfg, v, which),
-            Field::AngleMaxDeg => cfg.rc.max_tilt_rad = v.to_radians(),
-            Field::YawRateMaxDegS => cfg.rc.yaw_max_step_rad = v.to_radians() / cfg.timing.outer_hz(),
+            Field::AngleMaxDeg => cfg.rc.max_tilt_deg = v,
+            Field::YawRateMaxDegS => cfg.rc.yaw_rate_max_deg_s = v,
             Field::Gain(axis, which) => *gain_mut(cfg, axis, which) = v,
             Field::YawFeedforward => cfg.control.yaw_rate_feedforward = v,
             Field::GyroCutoffHz => return set_gyro_cutoff(cfg, v),

@@ -30,7 +30,10 @@
 //! bits still set), its CRC right and its magic, layout and length those of this firmware:
 //! a cut anywhere in a save leaves the old newest snapshot intact and the new one either whole
 //! or not counted; a cut in an erase leaves the newest snapshot, in the other sector, intact.
-//! Loading takes the valid snapshot with the highest sequence number.
+//! Loading takes the newest valid snapshot, sequence numbers compared in serial-number
+//! arithmetic ([`is_newer`]: after 0xFFFF_FFFF comes 0); one whose values are refused (a rule
+//! they break, or another firmware's table) gives way to the one before it, and [`Source`]
+//! says so.
 //!
 //! # Why not `sequential-storage`
 //!
@@ -150,36 +153,99 @@ pub fn encode(sequence: u32, values: &[f32; COUNT]) -> [u32; RECORD_WORDS] {
 
 /// The snapshot in `words` (one slot), if it is whole and this firmware's.
 pub fn decode(words: &[u32]) -> Option<Snapshot> {
-    let w = words.get(..RECORD_WORDS)?;
-    let at = |i: usize| w.get(i).copied();
-    let ours = at(0)? == MAGIC && at(HASH)? == LAYOUT_HASH && at(LEN)? == COUNT as u32;
-    if !ours || at(COMMIT_AT)? != COMMIT || at(CRC)? != crc32(w.get(..CRC)?) {
+    match inspect(words)? {
+        Record::Ours(s) => Some(s),
+        Record::OtherTable { .. } => None,
+    }
+}
+
+/// A whole record found in a slot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Record {
+    /// This firmware's.
+    Ours(Snapshot),
+    /// Whole (magic, CRC and commit word right) but saved with another table: another
+    /// firmware's, never read into this one's parameters.
+    OtherTable { sequence: u32 },
+}
+
+impl Record {
+    fn sequence(&self) -> u32 {
+        match self {
+            Record::Ours(s) => s.sequence,
+            Record::OtherTable { sequence } => *sequence,
+        }
+    }
+}
+
+/// The whole record starting at `words`, of this table or another (with its own length, if
+/// it fits), or `None`.
+fn inspect(words: &[u32]) -> Option<Record> {
+    let at = |i: usize| words.get(i).copied();
+    if at(0)? != MAGIC {
         return None;
     }
+    let len = usize::try_from(at(LEN)?).ok()?;
+    let crc_at = VALUES.checked_add(len)?;
+    if at(crc_at.checked_add(1)?)? != COMMIT || at(crc_at)? != crc32(words.get(..crc_at)?) {
+        return None;
+    }
+    let sequence = at(SEQ)?;
+    if at(HASH)? != LAYOUT_HASH || len != COUNT {
+        return Some(Record::OtherTable { sequence });
+    }
     let mut values = [0.0; COUNT];
-    for (v, bits) in values.iter_mut().zip(w.get(VALUES..CRC)?) {
+    for (v, bits) in values.iter_mut().zip(words.get(VALUES..CRC)?) {
         *v = f32::from_bits(*bits);
     }
-    Some(Snapshot { sequence: at(SEQ)?, values })
+    Some(Record::Ours(Snapshot { sequence, values }))
 }
 
 fn slot(sector: &[u32], slot: usize) -> &[u32] {
     sector.get(slot * RECORD_WORDS..(slot + 1) * RECORD_WORDS).unwrap_or(&[])
 }
 
-/// The newest valid snapshot in the two sectors, and where it is.
-pub fn newest(sectors: [&[u32]; 2]) -> Option<(Snapshot, Location)> {
-    let mut best: Option<(Snapshot, Location)> = None;
+/// The record from slot `k` of `sector` on (to the sector's end: another table's record may
+/// be longer than a slot).
+fn from_slot(sector: &[u32], k: usize) -> &[u32] {
+    sector.get(k * RECORD_WORDS..).unwrap_or(&[])
+}
+
+/// Sequence number `a` is newer than `b`, in serial-number arithmetic (RFC 1982): `a` is
+/// less than 2^31 saves after `b`, across the wrap from 0xFFFF_FFFF to 0. The two sectors
+/// hold at most `2 · SLOTS` consecutive numbers, so any two are comparable.
+pub fn is_newer(a: u32, b: u32) -> bool {
+    (a.wrapping_sub(b) as i32) > 0
+}
+
+/// The newest whole record older than `before` (all if `None`), with where it is; `ours_only`
+/// skips other tables' records.
+fn newest_record(sectors: [&[u32]; 2], before: Option<u32>, ours_only: bool) -> Option<(Record, Location)> {
+    let mut best: Option<(Record, Location)> = None;
     for (s, words) in sectors.iter().enumerate() {
         for k in 0..SLOTS {
-            if let Some(snap) = decode(slot(words, k)) {
-                if best.is_none_or(|(b, _)| snap.sequence > b.sequence) {
-                    best = Some((snap, Location { sector: s, slot: k }));
-                }
+            // The sequence word first: a record that could not win costs no CRC.
+            let Some(&seq) = slot(words, k).get(SEQ) else { continue };
+            let candidate = before.is_none_or(|b| is_newer(b, seq)) && best.is_none_or(|(r, _)| is_newer(seq, r.sequence()));
+            if !candidate {
+                continue;
+            }
+            match inspect(from_slot(words, k)) {
+                Some(Record::OtherTable { .. }) if ours_only => {}
+                Some(r) => best = Some((r, Location { sector: s, slot: k })),
+                None => {}
             }
         }
     }
     best
+}
+
+/// The newest valid snapshot in the two sectors, and where it is.
+pub fn newest(sectors: [&[u32]; 2]) -> Option<(Snapshot, Location)> {
+    match newest_record(sectors, None, true)? {
+        (Record::Ours(s), at) => Some((s, at)),
+        (Record::OtherTable { .. }, _) => None,
+    }
 }
 
 /// The newest valid snapshot (see [`newest`]).
@@ -187,36 +253,115 @@ pub fn load(sectors: [&[u32]; 2]) -> Option<Snapshot> {
     newest(sectors).map(|(s, _)| s)
 }
 
+/// Why a whole snapshot was not loaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Why {
+    /// Its values break a rule: `parameter` when one value (off its bounds or step, or a
+    /// radio map entry another already has) is at fault, else the whole set's rule.
+    Rule { parameter: Option<&'static str>, rule: &'static str },
+    /// Saved by a firmware with another parameter table.
+    OtherTable,
+}
+
+/// A snapshot passed over at boot: its sequence number and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassedOver {
+    pub sequence: u32,
+    pub why: Why,
+}
+
 /// Where the configuration at boot came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Source {
-    /// The newest valid snapshot, with its sequence number.
-    Snapshot { sequence: u32 },
-    /// No valid snapshot of this firmware's table: the defaults.
+    /// The snapshot with this sequence number: the newest whole one that makes a valid
+    /// configuration. `passed_over`: the newest of the newer ones refused, and why.
+    Snapshot { sequence: u32, passed_over: Option<PassedOver> },
+    /// No whole snapshot of this firmware's table: the defaults.
     NoSnapshot,
-    /// The newest snapshot's values do not make a valid configuration (the rule): the defaults.
+    /// Every snapshot of this table refused (the newest's rule): the defaults.
     Refused(&'static str),
 }
 
-/// The configuration to boot with: `defaults` with the newest valid snapshot's values, or
-/// `defaults` alone (and why), never a mix.
+/// The longest text [`Source::describe`] writes, bytes.
+pub const DESCRIBE_LEN: usize = 150;
+
+impl Source {
+    /// Where the parameters in force came from, for a `STATUSTEXT` (at most [`DESCRIBE_LEN`]
+    /// bytes: longer than one message's 50, the link sends it in chunks), e.g. `parameters
+    /// loaded from flash (snapshot 12); newer snapshot 13 refused: RC1_TRIM: above the
+    /// maximum`.
+    pub fn describe<const N: usize>(&self, out: &mut crate::telemetry::LineBuf<N>) {
+        match self {
+            Source::Snapshot { sequence, passed_over } => {
+                out.push_str("parameters loaded from flash (snapshot ");
+                out.push_uint(*sequence);
+                out.push_str(")");
+                if let Some(p) = passed_over {
+                    out.push_str("; newer snapshot ");
+                    out.push_uint(p.sequence);
+                    out.push_str(" refused: ");
+                    match p.why {
+                        Why::Rule { parameter, rule } => {
+                            if let Some(name) = parameter {
+                                out.push_str(name);
+                                out.push_str(": ");
+                            }
+                            out.push_str(rule);
+                        }
+                        Why::OtherTable => out.push_str("saved by a firmware with another parameter table"),
+                    }
+                }
+            }
+            Source::NoSnapshot => out.push_str("no saved parameters: defaults"),
+            Source::Refused(rule) => {
+                out.push_str("saved parameters refused (");
+                out.push_str(rule);
+                out.push_str("): defaults");
+            }
+        }
+    }
+}
+
+/// The configuration to boot with: `defaults` with the newest whole snapshot's values that
+/// make a valid configuration, or `defaults` alone (and why), never a mix. A newer snapshot
+/// refused (its values break a rule, or another firmware's table) falls back to the older
+/// one, and [`Source`] names the refused one.
 // Out of line: inlined into a firmware's `init` with constant defaults, opt-level 3 builds the
 // defaults field by field once per way out (a kilobyte each) instead of copying them.
 #[inline(never)]
 pub fn load_config(sectors: [&[u32]; 2], defaults: &crate::Config) -> (crate::Config, Source) {
-    match load(sectors) {
+    let mut before = None;
+    let mut passed_over: Option<PassedOver> = None;
+    let mut newest_rule = None;
+    // Each round passes over one record: at most every slot of both sectors.
+    for _ in 0..=2 * SLOTS {
+        let Some((record, _)) = newest_record(sectors, before, false) else { break };
+        let sequence = record.sequence();
+        before = Some(sequence);
+        let why = match record {
+            Record::Ours(s) => match super::with_values_at(defaults, &s.values) {
+                Ok(cfg) => return (cfg, Source::Snapshot { sequence, passed_over }),
+                Err((index, rule)) => {
+                    newest_rule.get_or_insert(rule);
+                    Why::Rule { parameter: index.and_then(super::name), rule }
+                }
+            },
+            Record::OtherTable { .. } => Why::OtherTable,
+        };
+        passed_over.get_or_insert(PassedOver { sequence, why });
+    }
+    match newest_rule {
+        Some(rule) => (*defaults, Source::Refused(rule)),
         None => (*defaults, Source::NoSnapshot),
-        Some(s) => match super::with_values(defaults, &s.values) {
-            Ok(cfg) => (cfg, Source::Snapshot { sequence: s.sequence }),
-            Err(rule) => (*defaults, Source::Refused(rule)),
-        },
     }
 }
 
 /// How to save `values` as the newest snapshot.
 pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
     let found = newest(sectors);
-    let sequence = found.map_or(1, |(s, _)| s.sequence.wrapping_add(1));
+    // After the newest whole record of any table: a snapshot another firmware saved later
+    // stays older than this one.
+    let sequence = newest_record(sectors, None, false).map_or(1, |(r, _)| r.sequence().wrapping_add(1));
     let words = encode(sequence, values);
     // The slot after the last one written to in the newest snapshot's sector (a save cut
     // short leaves its slot used): everything after it is erased, the newest untouched.

@@ -65,9 +65,9 @@ fn every_rule_fits_a_statustext_with_the_name() {
         &|c| c.inputs[0].max_counts = c.inputs[0].trim_counts + 1,
         &|c| c.gesture_threshold = StickCounts(0),
         &|c| c.min_throttle = StickCounts(-1),
-        &|c| c.max_tilt_rad = 2.0,
+        &|c| c.max_tilt_deg = 90.0,
         &|c| c.yaw_deadband = StickCounts(-1),
-        &|c| c.yaw_max_step_rad = -1.0,
+        &|c| c.yaw_rate_max_deg_s = -1.0,
         &|c| c.link_timeout_ticks = 0,
         &|c| c.pulses = crate::rc::PulseRules::Validated { min_counts: 1, max_counts: 0, max_pulse_ticks: 1 },
     ] {
@@ -387,7 +387,7 @@ fn a_whole_set_is_checked_as_a_whole() {
     let c = with_values(&base, &v).unwrap();
     assert_eq!(c.rc.inputs[0].trim_counts, 6000);
     v[idx("RC1_TRIM")] = 2100.0;
-    assert_eq!(with_values(&base, &v), Err(ConfigError::Rc.rule()));
+    assert_eq!(with_values(&base, &v), Err("RCn: need MIN <= TRIM <= MAX"));
     v[idx("RC1_TRIM")] = f32::NAN;
     assert_eq!(with_values(&base, &v), Err(RULE_NOT_FINITE));
 }
@@ -438,4 +438,148 @@ fn a_parameter_file_round_trips_and_bad_lines_are_named() {
     assert_eq!(apply_file(&base, "# a comment\nANG_RLL_P nan\n"), Err(FileError { line: 2, rule: RULE_NOT_FINITE }));
     assert_eq!(apply_file(&base, "RC1_MIN 100\n"), Err(FileError { line: 1, rule: RULE_BELOW_MIN }));
     assert_eq!(apply_file(&base, "RC1_TRIM 2400\n").map_err(|e| e.line), Err(0));
+}
+
+/// `v` (in the parameter's bounds) moved onto its step, rounding down.
+fn on_step(p: &Param, v: f32) -> f32 {
+    match p.step {
+        Step::Any => v,
+        Step::Integer => libm::floorf(v),
+        Step::QuarterUs => libm::floorf(v * 4.0) / 4.0,
+    }
+}
+
+/// The values of `p` every round-trip test tries: its ends, and every multiple of ten (of
+/// degrees for an angle) within its bounds.
+fn ends_and_tens(p: &Param) -> std::vec::Vec<f32> {
+    let mut v = std::vec![p.min, p.max];
+    let mut x = libm::ceilf(p.min / 10.0) * 10.0;
+    while x <= p.max {
+        v.push(x);
+        x += 10.0;
+    }
+    v
+}
+
+/// A set of `v` on parameter `i` of `base`, if taken, reads back, saves and loads as exactly
+/// `v`, and the loaded set is accepted as it is.
+fn assert_round_trip(base: &Config, i: usize, v: f32) {
+    let p = &TABLE[i];
+    let mut cfg = *base;
+    let Ok(applied) = set(&mut cfg, i, v, false) else { return };
+    assert_eq!(applied.value.to_bits(), v.to_bits(), "{} set {v} echoes {}", p.name, applied.value);
+    assert_eq!(p.get(&cfg).to_bits(), v.to_bits(), "{} set {v} reads {}", p.name, p.get(&cfg));
+    let saved = values(&cfg);
+    let words = snapshot::encode(7, &saved);
+    let decoded = snapshot::decode(&words).expect("a snapshot just written decodes");
+    assert_eq!(decoded.values.map(f32::to_bits), saved.map(f32::to_bits), "{} = {v}", p.name);
+    let mut sector = std::vec![snapshot::ERASED; snapshot::SECTOR_WORDS];
+    sector[..words.len()].copy_from_slice(&words);
+    let erased = std::vec![snapshot::ERASED; snapshot::SECTOR_WORDS];
+    let (loaded, source) = snapshot::load_config([&sector, &erased], base);
+    assert_eq!(source, snapshot::Source::Snapshot { sequence: 7, passed_over: None }, "{} = {v}: the saved set is refused", p.name);
+    assert_eq!(values(&loaded).map(f32::to_bits), saved.map(f32::to_bits), "{} = {v}", p.name);
+    assert_eq!(loaded, cfg, "{} = {v}: the loaded configuration differs", p.name);
+    for (j, &x) in saved.iter().enumerate() {
+        assert_eq!(check_value(&TABLE[j], x), Ok(()), "{} = {v}: {} = {x} is off its bounds", p.name, TABLE[j].name);
+    }
+    // Setting the loaded value again changes nothing.
+    let mut again = loaded;
+    assert_eq!(set(&mut again, i, v, false).map(|a| a.value.to_bits()), Ok(v.to_bits()));
+    assert_eq!(again, loaded);
+}
+
+#[test]
+fn every_end_and_multiple_of_ten_reads_saves_and_loads_bit_for_bit() {
+    // ANGLE_MAX 15, 30, 31, 60 and YAW_RATE_MAX 120 were stored in radians and read back as
+    // other floats (60.000004, above the maximum: the saved set was refused at boot).
+    let angle = idx("ANGLE_MAX");
+    let yaw = idx("YAW_RATE_MAX");
+    for base in [Config::default(), Config::esc()] {
+        for (i, p) in TABLE.iter().enumerate() {
+            for v in ends_and_tens(p) {
+                assert_round_trip(&base, i, on_step(p, v));
+            }
+        }
+        for v in [15.0, 30.0, 31.0, 60.0, 5.0, 20.000_002] {
+            assert_round_trip(&base, angle, v);
+        }
+        for deg_s in 1..=72 {
+            assert_round_trip(&base, yaw, deg_s as f32 * 10.0);
+        }
+    }
+    assert_eq!(get(&Config::default(), "YAW_RATE_MAX").to_bits(), 120.0f32.to_bits());
+    assert_eq!(get(&Config::default(), "ANGLE_MAX").to_bits(), 20.0f32.to_bits());
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+
+    #[test]
+    fn any_value_taken_reads_saves_and_loads_bit_for_bit(i in 0..COUNT, t in 0.0f64..=1.0, bits in proptest::num::u32::ANY) {
+        let p = &TABLE[i];
+        // Anywhere in the bounds on the step, and for an any-valued parameter also a value
+        // with arbitrary low mantissa bits (every f32 in the range is a candidate).
+        let spread = (f64::from(p.min) + t * (f64::from(p.max) - f64::from(p.min))) as f32;
+        let v = on_step(p, spread.clamp(p.min, p.max));
+        let v = if p.step == Step::Any { f32::from_bits((v.to_bits() & !0xFFF) | (bits & 0xFFF)).clamp(p.min, p.max) } else { v };
+        assert_round_trip(&Config::default(), i, v);
+    }
+}
+
+#[test]
+fn a_whole_set_with_a_radio_map_that_is_no_permutation_is_refused_not_rearranged() {
+    // One at a time, RCMAP_ROLL 2 would swap with pitch and RCMAP_PITCH 2 swap back: the map
+    // came out as the identity, silently. Whole, it is refused with the entry at fault.
+    let base = Config::default();
+    let mut v = values(&base);
+    v[idx("RCMAP_ROLL")] = 2.0;
+    assert_eq!(with_values_at(&base, &v), Err((Some(idx("RCMAP_PITCH")), RULE_RCMAP)));
+    assert_eq!(with_values(&base, &v), Err(RULE_RCMAP));
+    assert_eq!(base.rc.problem().map(|_| ()), None);
+    let mut broken = base;
+    broken.rc.map.roll = 1;
+    assert_eq!(broken.rc.problem(), Some(RULE_RCMAP));
+    // A permutation in any order loads as given.
+    v[idx("RCMAP_PITCH")] = 1.0;
+    let c = with_values(&base, &v).unwrap();
+    assert_eq!((get(&c, "RCMAP_ROLL"), get(&c, "RCMAP_PITCH")), (2.0, 1.0));
+}
+
+#[test]
+fn a_parameter_file_with_a_radio_map_that_is_no_permutation_is_refused_at_its_line() {
+    let base = Config::default();
+    // Only one entry: it collides with the base's pitch.
+    assert_eq!(apply_file(&base, "ANG_RLL_P 5\nRCMAP_ROLL 2\n"), Err(FileError { line: 2, rule: RULE_RCMAP }));
+    // The whole map, two entries naming input 2: the later line.
+    let text = "RCMAP_ROLL 2\nRCMAP_PITCH 2\nRCMAP_THROTTLE 3\nRCMAP_YAW 4\n";
+    assert_eq!(apply_file(&base, text), Err(FileError { line: 2, rule: RULE_RCMAP }));
+    let text = "RCMAP_ROLL 2\nRCMAP_PITCH 1\nRCMAP_THROTTLE 3\nRCMAP_YAW 4\n";
+    assert_eq!(apply_file(&base, text).map(|c| (get(&c, "RCMAP_ROLL"), get(&c, "RCMAP_PITCH"))), Ok((2.0, 1.0)));
+    // A name twice is refused too (the second would win unseen).
+    assert_eq!(apply_file(&base, "ANG_RLL_P 5\nANG_RLL_P 6\n"), Err(FileError { line: 2, rule: file::RULE_TWICE }));
+}
+
+#[test]
+fn a_parameter_file_may_start_with_a_byte_order_mark() {
+    let base = Config::default();
+    let c = apply_file(&base, "\u{feff}ANG_RLL_P 5\n").unwrap();
+    assert_eq!(get(&c, "ANG_RLL_P"), 5.0);
+    // Only at the start: elsewhere it is part of a name.
+    assert_eq!(apply_file(&base, "ANG_RLL_P 5\n\u{feff}ANG_PIT_P 5\n"), Err(FileError { line: 2, rule: RULE_UNKNOWN }));
+}
+
+#[test]
+fn a_qgroundcontrol_params_file_reads_as_the_same_set() {
+    let base = Config::default();
+    let qgc = "# Onboard parameters for Vehicle 1\n#\n# Vehicle-Id Component-Id Name Value Type\n\
+               1\t1\tANG_RLL_P\t5.5\t9\n1\t1\tRC1_MIN\t1000.25\t9\n1\t1\tRCMAP_YAW\t4\t9\n";
+    let mavproxy = "ANG_RLL_P 5.5\nRC1_MIN 1000.25\nRCMAP_YAW 4\n";
+    let c = apply_file(&base, qgc).unwrap();
+    assert_eq!(c, apply_file(&base, mavproxy).unwrap());
+    assert_eq!((get(&c, "ANG_RLL_P"), get(&c, "RC1_MIN")), (5.5, 1000.25));
+    // Five words that are not SYS COMP NAME VALUE TYPE, or four: refused with the line.
+    assert_eq!(apply_file(&base, "1 1 ANG_RLL_P 5 x\n"), Err(FileError { line: 1, rule: file::RULE_LINE }));
+    assert_eq!(apply_file(&base, "1 1 ANG_RLL_P 5\n"), Err(FileError { line: 1, rule: file::RULE_LINE }));
+    assert_eq!(apply_file(&base, "1\t1\tANG_RLL_P\tfive\t9\n"), Err(FileError { line: 1, rule: file::RULE_NOT_A_NUMBER }));
 }

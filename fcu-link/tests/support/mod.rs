@@ -3,7 +3,7 @@
 
 #![allow(dead_code)]
 
-use fcu_link::{Attitude, Battery, Health, Link, Param, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 use mavlink::dialects::common::{self as common, MavMessage};
 use mavlink::{MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavHeader, Message, MessageData};
 
@@ -79,7 +79,7 @@ impl Vehicle for Mock {
     fn param_index(&self, name: &[u8]) -> Option<u16> {
         self.params.iter().position(|p| p.name.as_bytes() == name).map(|i| i as u16)
     }
-    fn set_param(&mut self, index: u16, value: f32) -> Result<f32, &'static str> {
+    fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str> {
         assert!(value.is_finite(), "the link passed on a non-finite value");
         let p = self.params.get_mut(usize::from(index)).ok_or("no such index")?;
         if value < p.min || value > p.max {
@@ -87,7 +87,8 @@ impl Vehicle for Mock {
         }
         p.value = value;
         self.sets.push((index, value));
-        Ok(value)
+        // The mock's parameters are independent: a set changes no other.
+        Ok(ParamMask::EMPTY)
     }
     fn request(&mut self, request: Request) -> Result<(), &'static str> {
         self.requests.push(request);

@@ -181,8 +181,13 @@ class GroundCommands(unittest.TestCase):
     def test_a_stop_ends_the_motor_test_and_a_bad_motor_is_denied(self):
         self.assertEqual(self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 1, 0, 10.0, 3.0, 0).result, MAV.MAV_RESULT_ACCEPTED)
         self.assertIsNotNone(self.board.recv("SERVO_OUTPUT_RAW", 2.0, lambda m: m.servo1_raw > 1000))
-        # Any other command stops it (here one the board does not support).
-        self.board.command(MAV.MAV_CMD_DO_SET_ROI_LOCATION, 1, 2, 3)
+        # One the board does not support leaves it running (MAVProxy asks for the home position
+        # every 2 s); any other command accepted stops it.
+        ack = self.board.command(MAV.MAV_CMD_DO_SET_ROI_LOCATION, 1, 2, 3)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_UNSUPPORTED)
+        self.assertIsNotNone(self.board.recv("SERVO_OUTPUT_RAW", 1.0, lambda m: m.servo1_raw > 1000))
+        ack = self.board.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
         self.assertIsNotNone(self.board.recv("SERVO_OUTPUT_RAW", 1.0, lambda m: servo_outputs(m) == [1000] * 4))
         self.assertTrue(any("Motor test stopped" in t for t in self.board.texts(0.5)))
         ack = self.board.command(MAV.MAV_CMD_DO_MOTOR_TEST, 5, 0, 10.0, 1.0, 0)

@@ -247,12 +247,110 @@ fn boot_takes_the_newest_set_or_the_defaults_and_says_which() {
     let i = crate::parameters::index_of(b"RATE_RLL_P").unwrap();
     crate::parameters::set(&mut tuned, i, 250.0, false).unwrap();
     f.save(&crate::parameters::values(&tuned));
-    assert_eq!(load_config(f.view(), &defaults), (tuned, Source::Snapshot { sequence: 1 }));
+    assert_eq!(load_config(f.view(), &defaults), (tuned, Source::Snapshot { sequence: 1, passed_over: None }));
     // A set whose values are this table's but do not validate: the defaults, and the rule.
     let mut bad = crate::parameters::values(&defaults);
     bad[crate::parameters::index_of(b"RC1_TRIM").unwrap()] = 2400.0;
     f.save(&bad);
     let (cfg, source) = load_config(f.view(), &defaults);
-    assert_eq!(cfg, defaults);
-    assert!(matches!(source, Source::Refused(_)), "{source:?}");
+    // The newer set is refused: the older one loads, and the refusal is named in full.
+    let passed_over = Some(PassedOver { sequence: 2, why: Why::Rule { parameter: None, rule: "RCn: need MIN <= TRIM <= MAX" } });
+    assert_eq!((cfg, source), (tuned, Source::Snapshot { sequence: 1, passed_over }));
+    // With no older one, the defaults and the rule.
+    let mut only_bad = Flash::erased();
+    only_bad.save(&bad);
+    assert_eq!(load_config(only_bad.view(), &defaults), (defaults, Source::Refused("RCn: need MIN <= TRIM <= MAX")));
+}
+
+/// `defaults`' values with `name` set to `v`, unchecked.
+fn values_with(name: &str, v: f32) -> [f32; COUNT] {
+    let mut values = crate::parameters::values(&crate::Config::default());
+    values[crate::parameters::index_of(name.as_bytes()).unwrap()] = v;
+    values
+}
+
+fn describe(source: &Source) -> std::string::String {
+    let mut line = crate::telemetry::LineBuf::<{ DESCRIBE_LEN }>::new();
+    source.describe(&mut line);
+    assert!(!line.is_truncated());
+    line.as_str().into()
+}
+
+#[test]
+fn a_newest_snapshot_refused_falls_back_to_the_older_one_and_says_why() {
+    let defaults = crate::Config::default();
+    let tuned = values_with("RATE_RLL_P", 250.0);
+    let tuned_cfg = crate::parameters::with_values(&defaults, &tuned).unwrap();
+    // A value above its maximum (as ANGLE_MAX 60 read back as 60.000004 was saved).
+    let mut f = Flash::erased();
+    f.save(&tuned);
+    f.save(&values_with("ANGLE_MAX", 60.000_004));
+    let (cfg, source) = load_config(f.view(), &defaults);
+    assert_eq!(cfg, tuned_cfg);
+    assert_eq!(describe(&source), "parameters loaded from flash (snapshot 1); newer snapshot 2 refused: ANGLE_MAX: above the maximum");
+    // A radio map that is no permutation: refused, not loaded rearranged.
+    let mut f = Flash::erased();
+    f.save(&tuned);
+    f.save(&values_with("RCMAP_ROLL", 2.0));
+    let (cfg, source) = load_config(f.view(), &defaults);
+    assert_eq!(cfg, tuned_cfg);
+    assert_eq!(
+        describe(&source),
+        "parameters loaded from flash (snapshot 1); newer snapshot 2 refused: RCMAP_PITCH: RCMAP: each input once"
+    );
+    // A newer firmware's snapshot (another table, whole): passed over, and the next save
+    // numbered after it.
+    let mut f = Flash::erased();
+    f.save(&tuned);
+    let mut w = encode(2, &values(2));
+    w[2] = LAYOUT_HASH ^ 0x100;
+    w[RECORD_WORDS - 2] = crc32(&w[..RECORD_WORDS - 2]);
+    f.sectors[0][RECORD_WORDS..2 * RECORD_WORDS].copy_from_slice(&w);
+    let (cfg, source) = load_config(f.view(), &defaults);
+    assert_eq!(cfg, tuned_cfg);
+    assert_eq!(
+        describe(&source),
+        "parameters loaded from flash (snapshot 1); newer snapshot 2 refused: saved by a firmware with another parameter table"
+    );
+    assert_eq!(decode(&f.save(&tuned).words).map(|s| s.sequence), Some(3));
+    assert_eq!(load_config(f.view(), &defaults).1, Source::Snapshot { sequence: 3, passed_over: None });
+    // The other sources' texts.
+    assert_eq!(describe(&Source::NoSnapshot), "no saved parameters: defaults");
+    assert_eq!(describe(&Source::Refused("RCMAP: each input once")), "saved parameters refused (RCMAP: each input once): defaults");
+}
+
+#[test]
+fn every_description_fits_its_length() {
+    let mut longest = 0;
+    for i in 0..COUNT {
+        let name = crate::parameters::name(i).unwrap();
+        let source = Source::Snapshot {
+            sequence: u32::MAX,
+            passed_over: Some(PassedOver { sequence: u32::MAX, why: Why::Rule { parameter: Some(name), rule: "x".repeat(32).leak() } }),
+        };
+        longest = longest.max(describe(&source).len());
+    }
+    assert!(longest <= DESCRIBE_LEN, "{longest}");
+}
+
+#[test]
+fn sequence_numbers_wrap_across_both_sectors() {
+    // From a snapshot numbered 0xFFFF_FFFF on, each save must load: the next is 0, which
+    // compared as a plain number would lose to 0xFFFF_FFFF, and both saves be lost.
+    let mut f = Flash::erased();
+    let first = encode(u32::MAX, &values(1));
+    f.sectors[0][..RECORD_WORDS].copy_from_slice(&first);
+    for n in 2..=(2 * SLOTS as u32 + 3) {
+        f.save(&values(n));
+        let got = load(f.view()).expect("a snapshot");
+        assert_eq!(got, Snapshot { sequence: n - 2, values: values(n) }, "save {n}");
+    }
+    // And with the wrap in the middle of the second sector.
+    let mut f = Flash::erased();
+    f.sectors[1][..RECORD_WORDS].copy_from_slice(&encode(u32::MAX - 10, &values(1)));
+    for n in 2..=(SLOTS as u32 + 20) {
+        f.save(&values(n));
+        assert_eq!(load(f.view()).map(|s| s.values), Some(values(n)), "save {n}");
+    }
+    assert!(is_newer(0, u32::MAX) && !is_newer(u32::MAX, 0) && is_newer(5, 3) && !is_newer(3, 3));
 }
