@@ -121,7 +121,6 @@ proptest! {
     }
 
     #[test]
-    #[ignore = "fails until the ANGLE_MAX round trip and the sequence number's wrap are fixed"]
     fn an_accepted_value_is_reported_saved_and_loaded(s in scenario()) {
         holds(Invariant::AcceptedIsReportedSavedLoaded, &s)?;
     }
@@ -132,7 +131,6 @@ proptest! {
     }
 
     #[test]
-    #[ignore = "fails until the load falls back to the newest valid snapshot"]
     fn a_refused_saved_set_falls_back_to_the_newest_valid_one(s in scenario()) {
         holds(Invariant::RefusedSnapshotFallsBack, &s)?;
     }
@@ -188,7 +186,6 @@ fn a_reboot_accepted_disarmed_is_not_carried_out_in_flight() {
 
 /// Finding: ANGLE_MAX 60, a legal value, saved and rebooted wiped every parameter.
 #[test]
-#[ignore = "fails until ANGLE_MAX's degrees survive the round trip through radians"]
 fn angle_max_60_saved_and_rebooted_is_loaded() {
     let b = bench(vec![set("RATE_RLL_P", 100.0), set("ANGLE_MAX", 60.0), save(), Op::Wait { ms: 500 }, reboot(), Op::Wait { ms: 500 }]);
     assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
@@ -198,7 +195,6 @@ fn angle_max_60_saved_and_rebooted_is_loaded() {
 /// Finding: a save after the sequence number wrapped was lost (the older snapshot, numbered
 /// higher, loaded).
 #[test]
-#[ignore = "fails until the snapshot's sequence number wraps safely"]
 fn a_save_after_the_sequence_number_wraps_is_loaded() {
     let history = vec![Planted { sequence: u32::MAX, changes: vec![] }];
     let ops = vec![set("ANGLE_MAX", 40.0), save(), Op::Wait { ms: 500 }, reboot(), Op::Wait { ms: 500 }];
@@ -224,7 +220,6 @@ fn an_rcmap_set_saved_and_rebooted_is_loaded() {
 /// A snapshot today's rules refuse, saved after a valid one: the valid one loads, not the
 /// defaults.
 #[test]
-#[ignore = "fails until the load falls back to the newest valid snapshot"]
 fn a_refused_newest_snapshot_falls_back_to_the_one_before() {
     let angle = index("ANGLE_MAX");
     let max = parameters::param(angle).map(|p| p.max).unwrap_or(60.0);

@@ -119,9 +119,11 @@ struct Boot {
     uart_queued: usize,
     status: Status,
     /// The pilot's arm gesture as the sticks sent it: ticks held in the current (or last)
-    /// hold, and ticks since it ended (0 while held).
+    /// hold, ticks since it ended (0 while held), and ticks of those with the sticks at rest
+    /// (arming completes once every stick is back in a safe place, however long after).
     arm_held_ticks: u32,
     arm_released_ticks: u32,
+    arm_rest_ticks: u32,
     /// A motor test's output was seen on the last tick.
     testing: bool,
     /// A radio calibration ran on the last tick.
@@ -149,6 +151,7 @@ impl Boot {
             status,
             arm_held_ticks: 0,
             arm_released_ticks: u32::MAX,
+            arm_rest_ticks: u32::MAX,
             testing: false,
             radio_calibration: false,
         })
@@ -330,8 +333,12 @@ impl Bench {
         if self.pilot == Pilot::Arm {
             b.arm_held_ticks = if b.arm_released_ticks == 0 { b.arm_held_ticks + 1 } else { 1 };
             b.arm_released_ticks = 0;
+            b.arm_rest_ticks = 0;
         } else {
             b.arm_released_ticks = b.arm_released_ticks.saturating_add(1);
+            if self.pilot == Pilot::Neutral {
+                b.arm_rest_ticks = b.arm_rest_ticks.saturating_add(1);
+            }
         }
         self.after_tick(was);
         if self.boot.ticks % TICKS_PER_PERIOD == 0 {
@@ -359,14 +366,14 @@ impl Bench {
                 SupervisorConfig::Reference => 1,
             };
             // The gesture arms once released (or at once with the reference): held at least
-            // the hold time, released a moment ago at most.
-            if !(recent && b.arm_held_ticks >= hold) {
+            // the hold time, the sticks back at rest a moment ago at most.
+            if !(b.arm_rest_ticks <= 200 && b.arm_held_ticks >= hold) {
                 self.checker.violate(
                     Invariant::ArmedOnlyByGesture,
                     t,
                     format!(
-                        "{:?} -> Armed with the pilot's arm gesture held {} ticks (hold {hold}), released {} ticks ago",
-                        was.state, b.arm_held_ticks, b.arm_released_ticks
+                        "{:?} -> Armed with the pilot's arm gesture held {} ticks (hold {hold}), released {} ticks ago, at rest for {}",
+                        was.state, b.arm_held_ticks, b.arm_released_ticks, b.arm_rest_ticks
                     ),
                 );
             }
