@@ -229,6 +229,18 @@ impl Checker {
         self.remember(&v);
     }
 
+    /// The pending set of another parameter that, taken now, would move parameter `i` to
+    /// `value`.
+    fn moved_by_pending(&self, i: usize, value: f32) -> Option<(usize, f32)> {
+        self.pending_sets.iter().find_map(|&(j, v, _)| {
+            let mut next = self.model;
+            let moved = j != i
+                && parameters::set(&mut next, j, v, false).is_ok()
+                && parameters::value(&next, i).is_some_and(|x| x.to_bits() == value.to_bits());
+            moved.then_some((j, v))
+        })
+    }
+
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
     /// a value a PARAM_SET asked for, the board took it.
     fn reconcile(&mut self, values: &[f32; COUNT], at: u64) {
@@ -267,6 +279,10 @@ impl Checker {
                     // Queued before a save or a load showed the value that replaced it.
                 } else if self.pending_sets.iter().any(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
                     self.accept(i, *value, false, at);
+                } else if let Some((j, v)) = self.moved_by_pending(i, *value) {
+                    // Another parameter's set moved this one (an RCMAP swap), its own answer
+                    // after this one or dropped.
+                    self.accept(j, v, false, at);
                 } else if let Some(&(_, asked, _)) = self.pending_sets.iter().find(|&&(j, _, _)| j == i) {
                     self.violate(
                         Invariant::AcceptedIsReportedSavedLoaded,
