@@ -94,7 +94,7 @@ impl Scenario {
     /// | byte | meaning |
     /// |---|---|
     /// | 0 | the seed |
-    /// | 1 | `h`: a history of `h & 3` snapshots, sequence numbers starting at `u32::MAX - (h >> 2 & 31)` when `h & 0x80`, at 1 otherwise; each snapshot then takes a byte `n` and `n & 3` (index, value) changes of 2 bytes (see below); with `h & 0x40` the last of them fills both sectors (the next save erases) |
+    /// | 1 | `h`: a history of `h & 3` snapshots, sequence numbers starting at `u32::MAX - (h >> 2 & 31)` when `h & 0x80` (at most up to `u32::MAX`, no wrap), at 1 otherwise; each snapshot then takes a byte `n` and `n & 3` (index, value) changes of 2 bytes (see below); with `h & 0x40` the last of them fills both sectors (the next save erases) |
     /// | then `k`, by range | |
     /// | `0x00..=0x3F` | wait `(k + 1) · 20` ms |
     /// | `0x40..=0x44` | the pilot: neutral, arm, fly, disarm, transmitter off |
@@ -114,7 +114,9 @@ impl Scenario {
         let mut next = || it.next().unwrap_or(0);
         let seed = u64::from(next());
         let h = next();
+        // A history a board could have left: one sequence number after another, no wrap.
         let start = if h & 0x80 != 0 { u32::MAX - u32::from((h >> 2) & 0x1F) } else { 1 };
+        let start = start.min(u32::MAX - u32::from(h & 3).saturating_sub(1));
         let mut history = Vec::new();
         for k in 0..u32::from(h & 3) {
             let n = next();
@@ -124,7 +126,7 @@ impl Scenario {
                     (i, value_for(i, next()))
                 })
                 .collect();
-            history.push(Planted { sequence: start.saturating_add(k), changes });
+            history.push(Planted { sequence: start + k, changes });
         }
         if h & 0x40 != 0 {
             if let Some(last) = history.last().cloned() {
@@ -260,4 +262,20 @@ pub fn command_for(c: u8, p: u8, int: bool) -> GroundFrame {
         _ => {}
     }
     GroundFrame::Command { command, params, int }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_history_from_bytes_numbers_its_snapshots_one_after_another_without_a_wrap() {
+        for h in [0x83u8, 0x87, 0xC3, 0xFF, 0x43] {
+            let s = Scenario::from_bytes(&[0, h, 1, 0, 0, 1, 0, 0, 1, 0, 0]);
+            assert!(!s.history.is_empty(), "{h:#x}");
+            for pair in s.history.windows(2) {
+                assert_eq!(pair[0].sequence.checked_add(1), Some(pair[1].sequence), "{h:#x}");
+            }
+        }
+    }
 }
