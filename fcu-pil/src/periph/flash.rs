@@ -207,6 +207,8 @@ pub struct Flash {
     /// When the armed cut falls, once its operation has started.
     cut_at: Option<Time>,
     power_lost: bool,
+    /// When CR was unlocked, each time (KEY2 accepted): where a save began.
+    unlocks: Vec<Time>,
 }
 
 /// A power cut armed at a fraction of the `nth` operation of a kind from now on.
@@ -243,6 +245,7 @@ impl Flash {
             armed_cut: None,
             cut_at: None,
             power_lost: false,
+            unlocks: Vec::new(),
         }
     }
 
@@ -252,7 +255,9 @@ impl Flash {
         self.power_cut(self.seen);
         let memory = std::mem::take(&mut self.memory);
         let (timing, generation, armed_cut) = (self.timing, self.generation, self.armed_cut);
+        let unlocks = std::mem::take(&mut self.unlocks);
         *self = Flash::new();
+        self.unlocks = unlocks;
         self.memory = memory;
         self.timing = timing;
         self.generation = generation;
@@ -334,6 +339,11 @@ impl Flash {
     /// A bus error one of the last accesses caused (a wrong key), once.
     pub fn take_bus_error(&mut self) -> Option<&'static str> {
         self.bus_error.take()
+    }
+
+    /// The instants CR was unlocked (the key sequence's KEY2), since power-on.
+    pub fn unlocks(&self) -> &[Time] {
+        &self.unlocks
     }
 
     /// CR writes ignored because CR was locked.
@@ -469,10 +479,13 @@ impl Flash {
         Ok(())
     }
 
-    fn write_keyr(&mut self, value: u32) -> Result<(), Unmodelled> {
+    fn write_keyr(&mut self, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.keys = match (self.keys, value) {
             (Keys::Locked, KEY1) => Keys::Key1Written,
-            (Keys::Key1Written, KEY2) => Keys::Unlocked,
+            (Keys::Key1Written, KEY2) => {
+                self.unlocks.push(now);
+                Keys::Unlocked
+            }
             (Keys::Unlocked, _) => {
                 return Err(Unmodelled::new("FLASH.KEYR", format!("write of {value:#010x} while unlocked: not described by RM0368")))
             }
@@ -575,7 +588,7 @@ impl Flash {
     pub fn write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.advance(now);
         match offset {
-            KEYR => self.write_keyr(value),
+            KEYR => self.write_keyr(value, now),
             SR => {
                 Unmodelled::check_bits("FLASH.SR", value, SR_RC_W1 | SR_BSY)?;
                 self.flags &= !(value & SR_RC_W1);

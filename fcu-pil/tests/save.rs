@@ -1,0 +1,177 @@
+//! Parameter saves on the image with the ground link (`--features mavlink`), at DS9716's
+//! maximum flash times: what a save costs the control loop and the clock. The ELF is
+//! `FCU_PIL_LINK_ELF` if set, else the mavlink build made now (CI's `FCU_PIL_ELF` names the
+//! image without the link, which keeps no parameters).
+
+use std::sync::OnceLock;
+
+use fcu_pil::elf::Image;
+use fcu_pil::firmware;
+use fcu_pil::periph::flash::FlashTiming;
+use fcu_pil::periph::{Time, TIME_HZ};
+use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
+use mavlink::dialects::common::{MavCmd, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_SET_DATA};
+use mavlink::{MAVLinkV2MessageRaw, MavHeader, MessageData};
+
+fn link_elf() -> &'static std::path::Path {
+    static ELF: OnceLock<std::path::PathBuf> = OnceLock::new();
+    ELF.get_or_init(|| match std::env::var_os("FCU_PIL_LINK_ELF") {
+        Some(p) => p.into(),
+        None => firmware::build_link_elf().unwrap_or_else(|e| panic!("{e}")),
+    })
+}
+
+/// The control tick's period, in emulated time units (800 Hz).
+const TICK: Time = TIME_HZ / 800;
+/// The parameter sectors (1 and 2) in the flash model's memory.
+const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
+
+/// The board with the link, booted at `timing` on `flash` (blank if `None`), its UART left
+/// unparsed (it speaks MAVLink).
+fn boot(flash: Option<Vec<u8>>, timing: FlashTiming) -> EmulatedBoard {
+    let image = Image::load(link_elf()).unwrap_or_else(|e| panic!("{e}"));
+    let setup = BoardSetup { flash_contents: flash, ..BoardSetup::default() };
+    let mut b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap_or_else(|e| panic!("boot: {e}"));
+    assert!(b.flying(), "{}", b.boot_stall());
+    b.raw_uart = true;
+    b.machine.board_mut().flash.set_timing(timing);
+    b
+}
+
+/// Both parameter sectors hold words that are neither a snapshot nor erased: the first save
+/// erases a sector.
+fn flash_needing_an_erase() -> Vec<u8> {
+    let mut flash = vec![0xFF; 256 * 1024];
+    flash[PARAM_SECTORS].fill(0);
+    flash
+}
+
+/// A MAVLink 2 frame from a ground station (system 255, component 190).
+fn frame<D: MessageData>(data: &D) -> Vec<u8> {
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message_data(MavHeader { system_id: 255, component_id: 190, sequence: 0 }, data);
+    raw.raw_bytes().to_vec()
+}
+
+fn send(b: &mut EmulatedBoard, bytes: &[u8]) {
+    let now = b.machine.now();
+    b.machine.board_mut().push_uart_rx(bytes, now);
+}
+
+fn heartbeat() -> Vec<u8> {
+    frame(&HEARTBEAT_DATA { mavtype: mavlink::dialects::common::MavType::MAV_TYPE_GCS, ..HEARTBEAT_DATA::default() })
+}
+
+fn param_set(name: &str, value: f32) -> Vec<u8> {
+    let mut id = [0u8; 16];
+    id[..name.len()].copy_from_slice(name.as_bytes());
+    frame(&PARAM_SET_DATA {
+        param_value: value,
+        target_system: 1,
+        target_component: 1,
+        param_id: id.into(),
+        param_type: mavlink::dialects::common::MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
+}
+
+fn save_command() -> Vec<u8> {
+    frame(&COMMAND_LONG_DATA {
+        param1: 1.0,
+        command: MavCmd::MAV_CMD_PREFLIGHT_STORAGE,
+        target_system: 1,
+        target_component: 1,
+        ..COMMAND_LONG_DATA::default()
+    })
+}
+
+/// Everything the UART sent from byte `from` on.
+fn uart_from(b: &EmulatedBoard, from: usize) -> Vec<u8> {
+    b.machine.board().records.uart.get(from..).unwrap_or_default().iter().map(|&(_, byte)| byte).collect()
+}
+
+fn contains(haystack: &[u8], needle: &[u8]) -> bool {
+    haystack.windows(needle.len()).any(|w| w == needle)
+}
+
+/// A counter of the control task's, read from the firmware's RAM (an RTIC local, found by its
+/// symbol).
+fn control_counter(b: &EmulatedBoard, name: &str) -> u32 {
+    let part = format!("__rtic_internal_local_control_{name}");
+    let at = b.machine.image().symbol_containing(&part).unwrap_or_else(|| panic!("no symbol {part} in the image"));
+    let bytes = b.machine.read_memory(at, 4).unwrap();
+    u32::from_le_bytes(bytes.try_into().unwrap())
+}
+
+/// Failed IMU bursts: what the sensor bus model saw go wrong (overruns, a clock stopped too
+/// early or too late), and the ticks the firmware ran without a sample (its `bus_errors`).
+fn failed_bursts(b: &EmulatedBoard) -> [u32; 2] {
+    let spi = &b.machine.board().spi2;
+    [spi.overruns() + spi.early_stops() + spi.cut_frames(), control_counter(b, "bus_errors")]
+}
+
+/// Asks for a save of a changed gain and runs until the board says it saved (at most 2 s);
+/// returns the instant the save began (its unlock of the flash).
+fn save(b: &mut EmulatedBoard, value: f32) -> Time {
+    let uart_mark = b.machine.board().records.uart.len();
+    let unlocks_before = b.machine.board().flash.unlocks().len();
+    send(b, &heartbeat());
+    send(b, &param_set("RATE_PIT_P", value));
+    send(b, &save_command());
+    let start = b.scenario_s(b.machine.now());
+    let mut t = start;
+    while !contains(&uart_from(b, uart_mark), b"parameters saved") {
+        assert!(!contains(&uart_from(b, uart_mark), b"NOT saved"), "the save failed");
+        assert!(t < start + 2.0, "no \"parameters saved\" within 2 s");
+        t += 0.01;
+        b.run_to(t).unwrap();
+    }
+    let unlocks = b.machine.board().flash.unlocks();
+    assert!(unlocks.len() > unlocks_before, "the save never unlocked the flash");
+    unlocks[unlocks_before]
+}
+
+/// The phase of an instant in the control tick, in µs after the tick (TIM9's update).
+fn tick_phase_us(b: &EmulatedBoard, at: Time) -> u64 {
+    let since_t0 = at - b.time_of(0.0);
+    (since_t0 % TICK) * 1_000_000 / TIME_HZ
+}
+
+/// Finding: a save programs ~56 words, each stalling every fetch from flash (the vector table
+/// and the IMU's end-of-read handler included) for up to 100 µs; one that landed on a burst
+/// cost its sample, and three in a row once. No save may cost one: at DS9716's maximum word
+/// time, saves begun at several phases of the tick leave the sensor bus clean.
+#[test]
+fn saves_at_the_maximum_flash_times_cost_no_imu_sample_at_any_phase_of_the_tick() {
+    let mut b = boot(None, FlashTiming::Maximum);
+    b.run_to(0.5).unwrap();
+    let (failed_before, reads_before) = (failed_bursts(&b), b.machine.board().spi2.sensors().lsm6dsl.reads());
+    let mut phases = Vec::new();
+    for k in 0..8 {
+        let began = save(&mut b, 60.0 + k as f32);
+        phases.push(tick_phase_us(&b, began));
+        assert_eq!(failed_bursts(&b), failed_before, "IMU bursts failed by save {} (begun {} µs after a tick)", k + 1, phases[k]);
+    }
+    let t = b.scenario_s(b.machine.now());
+    b.run_to(t + 0.1).unwrap();
+    let mut distinct = phases.clone();
+    distinct.sort_unstable();
+    distinct.dedup_by(|a, b| a.abs_diff(*b) < 50);
+    assert!(distinct.len() >= 3, "the saves began at too few phases of the tick to show anything: {phases:?} µs");
+    let reads = b.machine.board().spi2.sensors().lsm6dsl.reads() - reads_before;
+    let ticks = (b.scenario_s(b.machine.now()) - 0.5) * 800.0;
+    assert!(reads as f64 >= ticks - 2.0, "{reads} IMU bursts in {ticks:.0} ticks: a burst was skipped");
+}
+
+/// The same with the erase a save makes when both sectors are full or hold no snapshot: the
+/// CPU stalls for the erase (up to 500 ms), and no burst may be cut by it.
+#[test]
+fn a_save_that_erases_at_the_maximum_flash_times_costs_no_imu_sample() {
+    let mut b = boot(Some(flash_needing_an_erase()), FlashTiming::Maximum);
+    b.run_to(0.5).unwrap();
+    let failed_before = failed_bursts(&b);
+    let began = save(&mut b, 70.0);
+    let t = b.scenario_s(b.machine.now());
+    b.run_to(t + 0.1).unwrap();
+    assert!(b.machine.board().flash.memory()[PARAM_SECTORS].iter().any(|&w| w == 0xFF), "no sector was erased");
+    assert_eq!(failed_bursts(&b), failed_before, "IMU bursts failed by the save (begun {} µs after a tick)", tick_phase_us(&b, began));
+}
