@@ -175,3 +175,58 @@ fn a_save_that_erases_at_the_maximum_flash_times_costs_no_imu_sample() {
     assert!(b.machine.board().flash.memory()[PARAM_SECTORS].iter().any(|&w| w == 0xFF), "no sector was erased");
     assert_eq!(failed_bursts(&b), failed_before, "IMU bursts failed by the save (begun {} µs after a tick)", tick_phase_us(&b, began));
 }
+
+/// Each ATTITUDE frame the board sent: (emulated instant its last byte left, its `time_boot_ms`).
+fn attitude_times(b: &EmulatedBoard) -> Vec<(Time, u32)> {
+    const ATTITUDE: u32 = 30;
+    let uart = &b.machine.board().records.uart;
+    let bytes: Vec<u8> = uart.iter().map(|&(_, byte)| byte).collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 12 <= bytes.len() {
+        let len = usize::from(bytes[i + 1]);
+        let end = i + 10 + len + 2;
+        if bytes[i] != 0xFD || end > bytes.len() {
+            i += 1;
+            continue;
+        }
+        let id = u32::from_le_bytes([bytes[i + 7], bytes[i + 8], bytes[i + 9], 0]);
+        let crc = mavlink::calculate_crc(&bytes[i + 1..end - 2], mavlink::dialects::common::ATTITUDE_DATA::EXTRA_CRC);
+        if id == ATTITUDE && crc.to_le_bytes() == bytes[end - 2..end] {
+            let mut field = [0u8; 4];
+            let payload = &bytes[i + 10..i + 10 + len];
+            field[..payload.len().min(4)].copy_from_slice(&payload[..payload.len().min(4)]);
+            out.push((uart[end - 1].0, u32::from_le_bytes(field)));
+            i = end;
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Finding: the monotonic counted SysTick's interrupts, and an erase stalls every one of them
+/// but the first: `time_boot_ms` fell 268 ms behind after one erase. The board's clock must
+/// run through the stall: across a save that erases (500 ms at DS9716's maximum), the time the
+/// board stamps its telemetry with keeps pace with the emulator's clock.
+#[test]
+fn time_boot_ms_keeps_pace_with_the_clock_across_an_erase() {
+    let mut b = boot(Some(flash_needing_an_erase()), FlashTiming::Maximum);
+    b.run_to(0.5).unwrap();
+    send(&mut b, &heartbeat());
+    b.run_to(1.0).unwrap();
+    save(&mut b, 70.0);
+    let t = b.scenario_s(b.machine.now());
+    b.run_to(t + 0.5).unwrap();
+    let (erase_start, erase_end) = b.machine.board().flash.erases().first().copied().expect("no erase");
+    assert!(erase_end - erase_start >= TIME_HZ / 2 - 1, "the erase took {} ms", (erase_end - erase_start) * 1000 / TIME_HZ);
+    let stamps = attitude_times(&b);
+    let lag_ms = |&(at, boot_ms): &(Time, u32)| (at * 1000 / TIME_HZ) as i64 - i64::from(boot_ms);
+    let before: Vec<i64> = stamps.iter().filter(|s| s.0 < erase_start).map(lag_ms).collect();
+    let after: Vec<i64> = stamps.iter().filter(|s| s.0 > erase_end).map(lag_ms).collect();
+    assert!(before.len() >= 5 && after.len() >= 5, "ATTITUDE frames: {} before the erase, {} after", before.len(), after.len());
+    let (lo, hi) = (before.iter().min().unwrap(), before.iter().max().unwrap());
+    for lag in &after {
+        assert!(*lag >= lo - 10 && *lag <= hi + 10, "the emulator's clock minus time_boot_ms: {lo}..{hi} ms before the erase, {lag} ms after");
+    }
+}

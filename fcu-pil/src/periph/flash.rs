@@ -209,6 +209,8 @@ pub struct Flash {
     power_lost: bool,
     /// When CR was unlocked, each time (KEY2 accepted): where a save began.
     unlocks: Vec<Time>,
+    /// Each erase started: (start, end as planned).
+    erases: Vec<(Time, Time)>,
 }
 
 /// A power cut armed at a fraction of the `nth` operation of a kind from now on.
@@ -246,6 +248,7 @@ impl Flash {
             cut_at: None,
             power_lost: false,
             unlocks: Vec::new(),
+            erases: Vec::new(),
         }
     }
 
@@ -255,9 +258,10 @@ impl Flash {
         self.power_cut(self.seen);
         let memory = std::mem::take(&mut self.memory);
         let (timing, generation, armed_cut) = (self.timing, self.generation, self.armed_cut);
-        let unlocks = std::mem::take(&mut self.unlocks);
+        let (unlocks, erases) = (std::mem::take(&mut self.unlocks), std::mem::take(&mut self.erases));
         *self = Flash::new();
         self.unlocks = unlocks;
+        self.erases = erases;
         self.memory = memory;
         self.timing = timing;
         self.generation = generation;
@@ -277,6 +281,9 @@ impl Flash {
 
     /// An operation starts: the armed cut, if it is this one, gets its instant.
     fn starting(&mut self, op: Operation) {
+        if op.erase {
+            self.erases.push((op.start, op.end));
+        }
         if let Some(cut) = self.armed_cut.as_mut().filter(|c| c.erase == op.erase) {
             cut.nth = cut.nth.saturating_sub(1);
             if cut.nth == 0 {
@@ -344,6 +351,11 @@ impl Flash {
     /// The instants CR was unlocked (the key sequence's KEY2), since power-on.
     pub fn unlocks(&self) -> &[Time] {
         &self.unlocks
+    }
+
+    /// Each erase started since power-on: (start, end as planned, a power cut aside).
+    pub fn erases(&self) -> &[(Time, Time)] {
+        &self.erases
     }
 
     /// CR writes ignored because CR was locked.
