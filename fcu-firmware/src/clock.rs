@@ -7,7 +7,9 @@
 //! clock fell 268 ms behind over one erase. The cycle counter is a free-running core register
 //! that counts on while fetches stall: reading it gives the time whatever the interrupts did.
 //! SysTick still interrupts every millisecond, to wake the timer queue's delays and to look at
-//! the counter well within its wrap (2^32 cycles: 51 s at 84 MHz, longer than any stall).
+//! the counter well within its wrap (2^32 cycles: 51 s at 84 MHz, longer than any stall). The
+//! core never sleeps (RTIC's idle is a spin loop, and only a halted boot waits in WFI), so the
+//! counter never pauses for a sleep either.
 
 use core::cell::Cell;
 use cortex_m::interrupt::Mutex;
