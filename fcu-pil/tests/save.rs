@@ -261,3 +261,38 @@ fn two_saves_in_a_row_leave_the_second_set_in_flash() {
     assert_eq!(fcu_core::parameters::value(&cfg, index), Some(62.0));
     assert!(b.machine.board().flash.stale_ranges().is_empty(), "the data cache was left holding old words");
 }
+
+/// An erase's length is the chip's (DS9716 bounds it, 500 ms at most, and no more), so it can
+/// end anywhere in a tick: here 30 µs before one, after the burst for it was due (CC1, 60 µs
+/// before the tick). Both TIM9 events are then pending together, one of them from a period the
+/// stall swallowed; the tick that follows must still have its sample.
+#[test]
+fn an_erase_that_ends_between_a_burst_start_and_its_tick_costs_no_imu_sample() {
+    let mut b = boot(Some(flash_needing_an_erase()), FlashTiming::Maximum);
+    b.run_to(0.5).unwrap();
+    let failed_before = failed_bursts(&b);
+    send(&mut b, &heartbeat());
+    send(&mut b, &param_set("RATE_PIT_P", 70.0));
+    send(&mut b, &save_command());
+    let mut t = 0.5;
+    while b.machine.board().flash.erases().is_empty() {
+        assert!(t < 2.5, "no erase within 2 s");
+        t += 0.001;
+        b.run_to(t).unwrap();
+    }
+    let (start, _) = b.machine.board().flash.erases()[0];
+    // 30 µs before the first tick at least 300 ms after the erase's start.
+    let ticks = (start + TIME_HZ * 3 / 10 - b.time_of(0.0)).div_ceil(TICK);
+    let end = b.time_of(0.0) + ticks * TICK - TIME_HZ * 30 / 1_000_000;
+    b.machine.board_mut().flash.retime_operation(end);
+    let mut t = b.scenario_s(b.machine.now());
+    let uart_mark = b.machine.board().records.uart.len();
+    while !contains(&uart_from(&b, uart_mark), b"parameters saved") {
+        assert!(t < 4.0, "no \"parameters saved\"");
+        t += 0.01;
+        b.run_to(t).unwrap();
+    }
+    b.run_to(t + 0.1).unwrap();
+    assert_eq!(b.machine.board().flash.erases()[0].1, end);
+    assert_eq!(failed_bursts(&b), failed_before, "IMU bursts failed around the erase's end");
+}

@@ -325,6 +325,17 @@ impl Flash {
         self.op = Some(op);
     }
 
+    /// Moves the end of the operation in progress to `end` (not before its start): a test's way
+    /// to end an erase at a chosen instant, DS9716 giving only a typical and a maximum time.
+    pub fn retime_operation(&mut self, end: Time) {
+        if let Some(op) = self.op.as_mut() {
+            op.end = end.max(op.start + 1);
+            if let Some(last) = self.erases.last_mut().filter(|e| op.erase && e.0 == op.start) {
+                last.1 = op.end;
+            }
+        }
+    }
+
     /// Takes DS9716's typical or maximum times from now on.
     pub fn set_timing(&mut self, timing: FlashTiming) {
         self.timing = timing;
