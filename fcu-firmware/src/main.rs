@@ -23,6 +23,7 @@
 #![no_std]
 #![no_main]
 
+mod clock;
 mod cycles;
 mod ground;
 #[cfg(feature = "mavlink")]
@@ -36,7 +37,9 @@ mod watchdog;
 use defmt_rtt as _;
 use fcu_core::mixer::MixerConfig;
 
-rtic_monotonics::systick_monotonic!(Mono, 1000);
+/// The tasks' clock: milliseconds on the cycle counter, which runs through a flash stall
+/// (`clock`).
+pub use clock::Mono;
 
 /// The flight profile this build flies: the product (`Config::DEFAULT`), or its ESC variant
 /// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the ground link keeps
@@ -284,7 +287,8 @@ mod app {
         let dp = cx.device;
         let mut core = cx.core;
         let (mut rcc, clocks) = start_clocks(dp.RCC, &mut core.DCB, &mut core.DWT);
-        // The LED codes and the fault line keep their pace at either clock.
+        // The LED codes and the fault line keep their pace at either clock. After
+        // `start_clocks`, which starts the cycle counter the clock counts.
         Mono::start(core.SYST, rcc.clocks.sysclk().raw());
         // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
         // so no resource ceiling counts on its priority. At its reset priority, 0, the highest,

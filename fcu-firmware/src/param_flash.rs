@@ -7,8 +7,18 @@
 //! and data read from flash waits. Interrupts wait with it, the control tick included, so the
 //! caller erases only while disarmed, with the watchdog's timeout stretched over the erase.
 //! What the words mean (the snapshot format) is fcu-core's; this module only moves them.
+//!
+//! **Between IMU bursts.** The IMU burst's end-of-read interrupt must stop the SPI clock within
+//! one byte (about 3 µs) of its DMA's completion; a stall there clocks in extra bytes and the
+//! sample is lost. So every operation starts only in the tick's quiet time: no burst in flight,
+//! no TIM9 event waiting for the control task, and the next burst start (TIM9's CC1) at least a
+//! word's worst-case programming time away ([`QUIET_CYCLES`]). The check and the store that
+//! starts the operation are one critical section. A word then ends before the next burst
+//! starts; an erase, which outlasts hundreds of ticks, stalls the tick whole (no burst starts
+//! until it ends) instead of cutting one. `docs/firmware.md#parameter-saves` says why this and
+//! not code in RAM.
 
-use stm32f4xx_hal::pac::FLASH;
+use stm32f4xx_hal::pac::{FLASH, TIM9};
 
 /// One parameter sector: 16 KiB.
 pub const SECTOR_BYTES: u32 = 16 * 1024;
@@ -25,6 +35,14 @@ const KEY2: u32 = 0xCDEF_89AB;
 const ERASE_BOUND_CYCLES: u32 = 84_000_000;
 /// How long one word may take to program: ten times the 100 µs maximum.
 const PROGRAM_BOUND_CYCLES: u32 = 84_000;
+/// How far the next burst start must be for an operation to start: DS9716's 100 µs maximum
+/// word time, plus 20 µs for the look at TIM9 and the store after it (a few cycles) and for
+/// the burst's interrupt entry once the stall ends. On the 84 MHz timer clock, which TIM9's
+/// counts times (PSC + 1) give.
+const QUIET_CYCLES: u32 = 120 * 84;
+/// How long an operation waits for the quiet time: four ticks (5 ms); each 1.25 ms tick has
+/// about 1 ms of it, so only a stopped or broken tick timer runs this out.
+const QUIET_WAIT_BOUND_CYCLES: u32 = 420_000;
 
 /// Why a flash operation failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,6 +56,8 @@ pub enum FlashError {
     Refused(u32),
     /// A sector index other than 0 or 1, or an address outside the parameter sectors.
     OutOfRange,
+    /// The tick never left the flash a quiet time to start in (see the module's comment).
+    NoQuietTime,
 }
 
 /// OPERR | WRPERR | PGAERR | PGPERR | PGSERR (SR bits 1, 4..7).
@@ -73,7 +93,9 @@ impl ParamFlash {
                 unsafe { w.snb().bits(snb) };
                 w.psize().psize32().ser().set_bit()
             });
-            self.flash.cr().modify(|_, w| w.strt().set_bit());
+            when_quiet(|| {
+                self.flash.cr().modify(|_, w| w.strt().set_bit());
+            })?;
             self.finish(ERASE_BOUND_CYCLES)
         });
         self.flash.cr().modify(|_, w| w.ser().clear_bit());
@@ -96,11 +118,13 @@ impl ParamFlash {
             self.flash.cr().modify(|_, w| w.psize().psize32().pg().set_bit());
             let mut at = address;
             for &word in words {
-                // SAFETY: `at` is a word-aligned address inside a parameter sector (checked
-                // above); with CR.PG set, a store there is a program request to the interface,
-                // which the bus holds until it is taken.
-                unsafe { core::ptr::write_volatile(at as *mut u32, word) };
-                cortex_m::asm::dsb();
+                when_quiet(|| {
+                    // SAFETY: `at` is a word-aligned address inside a parameter sector (checked
+                    // above); with CR.PG set, a store there is a program request to the
+                    // interface, which the bus holds until it is taken.
+                    unsafe { core::ptr::write_volatile(at as *mut u32, word) };
+                    cortex_m::asm::dsb();
+                })?;
                 self.finish(PROGRAM_BOUND_CYCLES)?;
                 at += 4;
             }
@@ -153,4 +177,42 @@ impl ParamFlash {
         self.flash.acr().modify(|_, w| w.dcrst().set_bit());
         self.flash.acr().modify(|_, w| w.dcrst().clear_bit().dcen().set_bit());
     }
+}
+
+/// Runs `start` (the store or the CR write that starts a flash operation) once the tick leaves
+/// the time the operation needs, the look and the start in one critical section so that no
+/// interrupt moves the tick on between them.
+fn when_quiet(start: impl FnOnce()) -> Result<(), FlashError> {
+    let mut start = Some(start);
+    crate::cycles::poll(QUIET_WAIT_BOUND_CYCLES, || {
+        cortex_m::interrupt::free(|_| {
+            if !quiet() {
+                return None;
+            }
+            start.take().map(|start| start())
+        })
+    })
+    .ok_or(FlashError::NoQuietTime)
+}
+
+/// Whether an operation started now ends before the next IMU burst starts, and none is in
+/// flight: TIM9 (the control tick's timer) stopped, or counting before its CC1 (the burst's
+/// start) with no event of it waiting for the control task and CC1 [`QUIET_CYCLES`] or more
+/// away. Between CC1 and the update the burst is in flight; a pending flag means the control
+/// task has yet to run (start the burst, or tick).
+fn quiet() -> bool {
+    // SAFETY: reads only (CR1, SR, CNT, CCR1, PSC): TIM9 is the control task's, which alone
+    // writes it; a read changes nothing in a timer (SR's flags clear on a write of 0).
+    let tim = unsafe { &*TIM9::ptr() };
+    if tim.cr1().read().cen().bit_is_clear() {
+        return true;
+    }
+    let sr = tim.sr().read();
+    if sr.uif().bit_is_set() || sr.cc1if().bit_is_set() {
+        return false;
+    }
+    let count = u32::from(tim.cnt().read().cnt().bits());
+    let burst_at = u32::from(tim.ccr1().read().ccr().bits());
+    let cycles_per_count = u32::from(tim.psc().read().psc().bits()) + 1;
+    count < burst_at && (burst_at - count).saturating_mul(cycles_per_count) >= QUIET_CYCLES
 }

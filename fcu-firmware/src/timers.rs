@@ -266,9 +266,29 @@ impl TickTimer {
 
     /// Which of the interrupt's events are pending, each cleared (rc_w0: a 0 clears, a 1
     /// leaves the flag alone, so a flag rising meanwhile is not lost).
+    ///
+    /// Both at once, with the counter past CC1, means the CPU was stalled through at least a
+    /// period (a flash erase: every fetch waits, up to 500 ms): the update flag is a swallowed
+    /// period's, and this period's update is still to come. The burst starts now and the tick
+    /// waits for its update, as in any period, instead of ticking now without the burst's
+    /// sample. Should the update come while this is decided (the counter wrapped meanwhile),
+    /// the tick is due after all.
     pub fn take_events(&mut self) -> TickEvents {
         let sr = self.tim.sr().read();
         let events = TickEvents { read_due: sr.cc1if().bit_is_set(), tick_due: sr.uif().bit_is_set() };
+        if events.read_due && events.tick_due {
+            let count = self.tim.cnt().read().cnt().bits();
+            if count >= self.tim.ccr1().read().ccr().bits() {
+                self.tim.sr().write(|w| w.uif().clear_bit().cc1if().clear_bit());
+                let wrapped = self.tim.cnt().read().cnt().bits() < count;
+                if wrapped {
+                    // The update taken here: its flag, if it rose after the write, is cleared
+                    // (CC1IF written 1 stays as it is).
+                    self.tim.sr().write(|w| w.uif().clear_bit().cc1if().bit(true));
+                }
+                return TickEvents { read_due: true, tick_due: wrapped };
+            }
+        }
         self.tim.sr().write(|w| w.uif().bit(!events.tick_due).cc1if().bit(!events.read_due));
         events
     }

@@ -178,19 +178,17 @@ impl<const TX: usize> Service<TX> {
         &self.station
     }
 
-    /// Says where the parameters in force came from: a STATUSTEXT once the link runs, and again
-    /// to each ground station that connects later (it missed the boot).
+    /// Says where the parameters in force came from (the snapshot loaded, and why a newer one
+    /// was passed over, in full: long texts go in chunks): a STATUSTEXT once the link runs, and
+    /// again to each ground station that connects later (it missed the boot).
     fn announce(&mut self) {
-        let _queued = match self.source {
-            snapshot::Source::Snapshot { .. } => self.link.greet(Severity::Info, b"parameters loaded from flash"),
-            snapshot::Source::NoSnapshot => self.link.greet(Severity::Notice, b"no saved parameters: defaults"),
-            snapshot::Source::Refused(rule) => {
-                let mut text = LineBuf::<64>::new();
-                text.push_str("saved parameters refused (");
-                text.push_str(rule);
-                text.push_str("): defaults");
-                self.link.greet(Severity::Warning, text.as_bytes())
-            }
+        let severity = match self.source {
+            snapshot::Source::Snapshot { passed_over: None, .. } => Severity::Info,
+            snapshot::Source::NoSnapshot => Severity::Notice,
+            snapshot::Source::Snapshot { passed_over: Some(_), .. } | snapshot::Source::Refused(_) => Severity::Warning,
         };
+        let mut text = LineBuf::<{ snapshot::DESCRIBE_LEN }>::new();
+        self.source.describe(&mut text);
+        let _queued = self.link.greet(severity, text.as_bytes());
     }
 }

@@ -1478,6 +1478,13 @@ fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size
             st.flash_dirty = true;
             st.flash_watch = true;
             pull_deadline(st);
+            // A data read from flash later in the same block (a literal load) waits for the
+            // operation the store started, as the fetch of the next block will (RM0368 §3.5).
+            if literal_load_after_store(uc) {
+                let st = uc.get_data_mut();
+                let at = st.now;
+                stall_while_flash_busy(st, at);
+            }
             true
         }
         Err(e) => {
@@ -1485,6 +1492,33 @@ fn flash_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, offset: u32, size
             false
         }
     }
+}
+
+/// Whether the block running holds a PC-relative (literal) load after the store at the PC:
+/// a data read from flash that comes after the store within the block.
+fn literal_load_after_store<P: Peripherals>(uc: &Unicorn<'_, State<P>>) -> bool {
+    let Ok(pc) = uc.reg_read(RegisterARM::PC) else { return false };
+    let st = uc.get_data();
+    let (start, end) = (u64::from(st.block_pc), u64::from(st.block_pc) + u64::from(st.block_size));
+    if pc < start || pc >= end {
+        return false;
+    }
+    let Ok(code) = uc.mem_read_as_vec(pc, (end - pc) as usize) else { return false };
+    let halfword = |i: usize| code.get(2 * i..2 * i + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let is_32_bit = |hw: u16| hw >> 11 >= 0b11101;
+    // Past the store itself, instruction by instruction.
+    let mut i = match halfword(0) {
+        Some(hw) if is_32_bit(hw) => 2,
+        Some(_) => 1,
+        None => return false,
+    };
+    while let Some(hw) = halfword(i) {
+        if timing::is_literal_load(hw) {
+            return true;
+        }
+        i += if is_32_bit(hw) { 2 } else { 1 };
+    }
+    false
 }
 
 /// FLASH_CR (RM0368 §3.8.5): "not accessible in write mode when the BSY bit is set": a write
@@ -1561,6 +1595,8 @@ fn mmio_write<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32, size: u
     let mut now = access_time(st, target, transfers);
     if target & !0x3FF == flash::BASE {
         st.flash_watch = true;
+        // An ACR write that empties the data cache makes stale words readable again.
+        st.flash_dirty = true;
         if target & !3 == FLASH_CR {
             now = stall_while_flash_busy(st, now);
         }

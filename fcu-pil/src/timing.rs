@@ -350,7 +350,7 @@ pub fn block_cycles(size_bytes: u32, halfword: impl Fn(u32) -> u16) -> BlockCost
 }
 
 /// LDR (literal), 16- or 32-bit (byte, halfword, word, signed; LDRD and VLDR from the PC apart).
-fn is_literal_load(hw1: u16) -> bool {
+pub(crate) fn is_literal_load(hw1: u16) -> bool {
     if !is_32_bit(hw1) {
         return hw1 >> 11 == 0b01001;
     }

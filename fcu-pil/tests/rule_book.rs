@@ -1371,6 +1371,53 @@ mod flash_program {
         }
     }
 
+    /// RM0368 §3.5: a data read from flash stalls while BSY, as a fetch does. A literal load
+    /// right after the programming store, in the same block, waits for the word: the FLASH_SR
+    /// read after it sees BSY clear. Without the literal load the same read comes while BSY
+    /// (a register read does not wait). Pessimistic profile: its accesses are dated where they
+    /// run in the block.
+    #[test]
+    fn a_data_read_from_flash_right_after_a_program_waits_for_it() {
+        for literal in [true, false] {
+            let mut code: Vec<u16> = Vec::new();
+            code.extend(mov32(0, FLASH));
+            for key in [0x4567_0123, 0xCDEF_89AB] {
+                code.extend(mov32(1, key));
+                code.push(str_(1, 0, 0x04));
+            }
+            code.extend(mov32(1, PG_X32));
+            code.push(str_(1, 0, 0x10));
+            code.extend(mov32(2, SECTOR1));
+            code.extend(mov32(3, 0x1234_5678));
+            code.extend(mov32(4, RESULTS));
+            code.push(str_(3, 2, 0));
+            if literal {
+                code.push(0x4900); // ldr r1, [pc, #0]: a word of this code, in flash
+            }
+            code.push(ldr(5, 0, 0x0C));
+            code.push(str_(5, 4, 0));
+            code.push(0xE7FE);
+            let mut flash = vec![0u8; 0x400];
+            flash[0..4].copy_from_slice(&0x2001_0000u32.to_le_bytes());
+            flash[4..8].copy_from_slice(&0x0800_0101u32.to_le_bytes());
+            for (i, h) in code.iter().enumerate() {
+                flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
+            }
+            let image = Image {
+                path: "flash_read_stall".into(),
+                segments: vec![Segment { address: 0x0800_0000, data: flash }],
+                initial_sp: 0x2001_0000,
+                symbols: HashMap::new(),
+                functions: Vec::new(),
+                flash_bytes: 0x400,
+                ram_bytes: 0,
+            };
+            let m = run(image, TimingProfile::Pessimistic, MS);
+            let sr = words(&m, RESULTS, 1)[0];
+            assert_eq!(sr & (1 << 16) == 0, literal, "literal load {literal}: SR read {sr:#x}");
+        }
+    }
+
     /// The wrong sequence: the store without PG. PGSERR, and the word stays erased in the model
     /// and in the core's view of it (Unicorn's copy is restored from the model).
     #[test]

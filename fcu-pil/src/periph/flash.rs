@@ -32,9 +32,16 @@
 //! - PGSERR: a write into flash with PG clear (the control register "not correctly
 //!   configured"), including while locked, or with PG and SER/MER together (an assumption: the
 //!   RM lists no other case);
-//! - PGPERR: an access size other than PSIZE (a word write with PSIZE x8, a byte with x32);
-//! - PGAERR: an access not aligned to its size (it would be split across the 128-bit row or
-//!   into narrower accesses; an assumption, the RM names only the row crossing);
+//! - PGPERR (FLASH_SR bit 6: "the size of the access ... does not correspond to the parallelism
+//!   configuration PSIZE"): an access size other than PSIZE (a word write with PSIZE x8, a byte
+//!   with x32). An unaligned store is split by the Cortex-M4 into aligned byte and halfword
+//!   transfers (ARMv7-M A3.2.1), so the interface never sees it unaligned: an unaligned word at
+//!   x32 is halfwords or bytes, PGPERR. A split whose transfers would each program (an
+//!   unaligned word at x16 or x8) is refused: successive programs from one store are not
+//!   modelled;
+//! - PGAERR (bit 5: "the data to program cannot be contained in the same 128-bit Flash memory
+//!   row") never: only an x64 access could cross a row, and x64 needs VPP, which the F401 has
+//!   not;
 //! - OPERR additionally, only with ERRIE; WRPERR never (the option bytes, all sectors
 //!   unprotected at delivery, are not modelled).
 //!
@@ -46,7 +53,18 @@
 //! while BSY (RM0368 §3.8.5: "any attempt to write to it with the BSY bit set will cause the AHB
 //! bus to stall until the BSY bit is cleared") waits on the bus: the machine completes it at
 //! BSY's end, so the model itself refuses one that reaches it while busy. Data reads from flash
-//! while BSY (from code in RAM) are not stalled: the machine has no read hook on flash.
+//! stall too: one in a block that runs from flash waits with the block's fetch, and a literal
+//! load after the programming store in the store's own block waits for BSY's end (the machine
+//! looks for one when the store starts an operation). A data read from flash by code in RAM
+//! through a register is not seen (the machine has no read hook on flash; the firmware runs no
+//! code from RAM).
+//!
+//! **The data cache (RM0368 §3.4, FLASH_ACR DCRST).** An operation does not update the ART's
+//! data cache: words it held from before read stale until it is emptied (DCRST, written with
+//! DCEN off). The model takes every word an operation changed as cached whenever DCEN has been
+//! set since the last DCRST (an assumption: the cache holds 8 lines of 128 bits, and which ones
+//! is not modelled), and the machine's view of the range keeps the old words until DCRST or a
+//! reset ([`Flash::stale_ranges`]), so a missing flush shows on any read-back.
 //!
 //! **A power cut** ([`Flash::power_cut`]) or a system reset during an operation leaves the
 //! memory part-way: an erase is modelled as a sweep through the sector's words in address order
@@ -207,6 +225,16 @@ pub struct Flash {
     /// When the armed cut falls, once its operation has started.
     cut_at: Option<Time>,
     power_lost: bool,
+    /// When CR was unlocked, each time (KEY2 accepted): where a save began.
+    unlocks: Vec<Time>,
+    /// Each erase started: (start, end as planned).
+    erases: Vec<(Time, Time)>,
+    /// DCEN has been set since the data cache was last emptied (DCRST) or reset: the cache may
+    /// hold words of the flash.
+    dcache_used: bool,
+    /// Ranges an operation changed while the data cache may have held them, with the words they
+    /// held before (what a data read still sees until DCRST): (offset, old bytes).
+    stale: Vec<(u32, Vec<u8>)>,
 }
 
 /// A power cut armed at a fraction of the `nth` operation of a kind from now on.
@@ -243,6 +271,10 @@ impl Flash {
             armed_cut: None,
             cut_at: None,
             power_lost: false,
+            unlocks: Vec::new(),
+            erases: Vec::new(),
+            dcache_used: false,
+            stale: Vec::new(),
         }
     }
 
@@ -252,7 +284,14 @@ impl Flash {
         self.power_cut(self.seen);
         let memory = std::mem::take(&mut self.memory);
         let (timing, generation, armed_cut) = (self.timing, self.generation, self.armed_cut);
+        let (unlocks, erases) = (std::mem::take(&mut self.unlocks), std::mem::take(&mut self.erases));
+        // The reset empties the data cache: what it held stale is read from the memory again.
+        let refresh: Vec<(u32, u32)> =
+            self.stale.iter().map(|(o, old)| (*o, old.len() as u32)).chain(self.changed.iter().copied()).collect();
         *self = Flash::new();
+        self.unlocks = unlocks;
+        self.erases = erases;
+        self.changed = refresh;
         self.memory = memory;
         self.timing = timing;
         self.generation = generation;
@@ -272,6 +311,9 @@ impl Flash {
 
     /// An operation starts: the armed cut, if it is this one, gets its instant.
     fn starting(&mut self, op: Operation) {
+        if op.erase {
+            self.erases.push((op.start, op.end));
+        }
         if let Some(cut) = self.armed_cut.as_mut().filter(|c| c.erase == op.erase) {
             cut.nth = cut.nth.saturating_sub(1);
             if cut.nth == 0 {
@@ -281,6 +323,17 @@ impl Flash {
             }
         }
         self.op = Some(op);
+    }
+
+    /// Moves the end of the operation in progress to `end` (not before its start): a test's way
+    /// to end an erase at a chosen instant, DS9716 giving only a typical and a maximum time.
+    pub fn retime_operation(&mut self, end: Time) {
+        if let Some(op) = self.op.as_mut() {
+            op.end = end.max(op.start + 1);
+            if let Some(last) = self.erases.last_mut().filter(|e| op.erase && e.0 == op.start) {
+                last.1 = op.end;
+            }
+        }
     }
 
     /// Takes DS9716's typical or maximum times from now on.
@@ -317,8 +370,29 @@ impl Flash {
     }
 
     /// The ranges changed since the last call, with their contents, for the machine's copy.
+    /// A data read sees a stale range's old words (the data cache's) until DCRST; the earliest
+    /// stale copy of a byte is the one the cache holds.
     pub fn take_changes(&mut self) -> Vec<(u32, Vec<u8>)> {
-        std::mem::take(&mut self.changed).into_iter().map(|(o, n)| (o, self.memory[o as usize..(o + n) as usize].to_vec())).collect()
+        let changed = std::mem::take(&mut self.changed);
+        changed
+            .into_iter()
+            .map(|(o, n)| {
+                let mut bytes = self.memory[o as usize..(o + n) as usize].to_vec();
+                for (so, old) in self.stale.iter().rev() {
+                    let from = o.max(*so);
+                    let to = (o + n).min(*so + old.len() as u32);
+                    if from < to {
+                        bytes[(from - o) as usize..(to - o) as usize].copy_from_slice(&old[(from - so) as usize..(to - so) as usize]);
+                    }
+                }
+                (o, bytes)
+            })
+            .collect()
+    }
+
+    /// Ranges whose old words the data cache may still return (see [`Flash::take_changes`]).
+    pub fn stale_ranges(&self) -> Vec<(u32, u32)> {
+        self.stale.iter().map(|(o, old)| (*o, old.len() as u32)).collect()
     }
 
     /// Until when BSY stays set (None: idle).
@@ -334,6 +408,16 @@ impl Flash {
     /// A bus error one of the last accesses caused (a wrong key), once.
     pub fn take_bus_error(&mut self) -> Option<&'static str> {
         self.bus_error.take()
+    }
+
+    /// The instants CR was unlocked (the key sequence's KEY2), since power-on.
+    pub fn unlocks(&self) -> &[Time] {
+        &self.unlocks
+    }
+
+    /// Each erase started since power-on: (start, end as planned, a power cut aside).
+    pub fn erases(&self) -> &[(Time, Time)] {
+        &self.erases
     }
 
     /// CR writes ignored because CR was locked.
@@ -360,7 +444,11 @@ impl Flash {
             self.power_lost = true;
         }
         if let Some(op) = self.op.take_if(|op| op.end <= now) {
-            self.memory[op.offset as usize..(op.offset + op.len) as usize].copy_from_slice(&op.target);
+            let range = op.offset as usize..(op.offset + op.len) as usize;
+            if self.dcache_used {
+                self.stale.push((op.offset, self.memory[range.clone()].to_vec()));
+            }
+            self.memory[range].copy_from_slice(&op.target);
             self.changed.push((op.offset, op.len));
             self.generation += 1;
             if self.cr & CR_EOPIE != 0 {
@@ -446,12 +534,21 @@ impl Flash {
             return Err(Unmodelled::new(name, "a write while BSY: the bus stalls until the operation ends (not modelled)"));
         }
         let unlocked = self.keys == Keys::Unlocked;
+        if offset as usize + size as usize > MEMORY_SIZE {
+            return Err(Unmodelled::new(name, "a store past the end of the flash memory"));
+        }
+        // The Cortex-M4 splits an unaligned store into aligned byte and halfword transfers
+        // (ARMv7-M A3.2.1): the interface sees those, never an unaligned one.
+        let transfers = aligned_transfers(offset, size);
         let error = if !unlocked || self.cr & CR_PG == 0 || self.cr & (CR_SER | CR_MER) != 0 {
             Some(SR_PGSERR)
-        } else if size != self.psize_bytes() {
+        } else if transfers.iter().all(|&(_, n)| n != self.psize_bytes()) {
             Some(SR_PGPERR)
-        } else if offset % size != 0 || offset as usize + size as usize > MEMORY_SIZE {
-            Some(SR_PGAERR)
+        } else if transfers.len() > 1 {
+            return Err(Unmodelled::new(
+                name,
+                format!("an unaligned {size}-byte store split into transfers of which some match PSIZE: successive programs from one store are not modelled"),
+            ));
         } else {
             None
         };
@@ -469,10 +566,13 @@ impl Flash {
         Ok(())
     }
 
-    fn write_keyr(&mut self, value: u32) -> Result<(), Unmodelled> {
+    fn write_keyr(&mut self, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.keys = match (self.keys, value) {
             (Keys::Locked, KEY1) => Keys::Key1Written,
-            (Keys::Key1Written, KEY2) => Keys::Unlocked,
+            (Keys::Key1Written, KEY2) => {
+                self.unlocks.push(now);
+                Keys::Unlocked
+            }
             (Keys::Unlocked, _) => {
                 return Err(Unmodelled::new("FLASH.KEYR", format!("write of {value:#010x} while unlocked: not described by RM0368")))
             }
@@ -575,7 +675,7 @@ impl Flash {
     pub fn write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
         self.advance(now);
         match offset {
-            KEYR => self.write_keyr(value),
+            KEYR => self.write_keyr(value, now),
             SR => {
                 Unmodelled::check_bits("FLASH.SR", value, SR_RC_W1 | SR_BSY)?;
                 self.flags &= !(value & SR_RC_W1);
@@ -599,6 +699,14 @@ impl Flash {
                     ));
                 }
                 self.acr = value & ACR_FIELDS;
+                if value & ACR_DCRST != 0 && value & ACR_DCEN == 0 {
+                    // The cache emptied: every stale range reads from the memory again.
+                    let refreshed: Vec<(u32, u32)> = self.stale_ranges();
+                    self.changed.extend(refreshed);
+                    self.stale.clear();
+                    self.dcache_used = false;
+                }
+                self.dcache_used |= value & ACR_DCEN != 0;
                 Ok(())
             }
             _ => Err(Unmodelled::offset(NAME, offset, true)),
@@ -626,6 +734,23 @@ impl super::Peripheral for Flash {
     fn irq_line(&self, _line: usize) -> bool {
         Flash::irq_line(self)
     }
+}
+
+/// The aligned bus transfers a Cortex-M4 makes of a store of `size` bytes at `offset`:
+/// (offset, size) each. Aligned: the store itself; otherwise bytes and halfwords, each
+/// aligned (ARMv7-M A3.2.1: unaligned word and halfword accesses are split).
+fn aligned_transfers(offset: u32, size: u32) -> Vec<(u32, u32)> {
+    if offset % size == 0 {
+        return vec![(offset, size)];
+    }
+    let mut out = Vec::new();
+    let (mut at, end) = (offset, offset + size);
+    while at < end {
+        let n = if at % 2 == 0 && end - at >= 2 { 2 } else { 1 };
+        out.push((at, n));
+        at += n;
+    }
+    out
 }
 
 /// The lowest `fraction` of the set bits of `bits` (rounded down): the bits an interrupted
@@ -825,12 +950,13 @@ mod tests {
     /// The wrong sequences of RM0368 §3.8.4, each refused with its flag and the memory unchanged.
     #[test]
     fn a_write_with_a_wrong_set_up_sets_its_error_flag_and_programs_nothing() {
-        let cases: [(&str, u32, u32, u32, u32); 6] = [
+        let cases: [(&str, u32, u32, u32, u32); 7] = [
             ("PG clear", X32, 0x4000, 4, SR_PGSERR),
             ("PG with SER", CR_PG | CR_SER | X32, 0x4000, 4, SR_PGSERR),
             ("a word at x8", CR_PG | X8, 0x4000, 4, SR_PGPERR),
             ("a byte at x32", CR_PG | X32, 0x4000, 1, SR_PGPERR),
-            ("unaligned", CR_PG | X32, 0x4002, 4, SR_PGAERR),
+            ("an unaligned word at x32: split into halfwords", CR_PG | X32, 0x4002, 4, SR_PGPERR),
+            ("an unaligned word at x32: split into a byte, a halfword, a byte", CR_PG | X32, 0x4001, 4, SR_PGPERR),
             ("ERRIE adds OPERR", CR_PG | X8 | CR_ERRIE, 0x4000, 2, SR_PGPERR | SR_OPERR),
         ];
         for (what, cr, offset, size, flags) in cases {
@@ -848,6 +974,39 @@ mod tests {
         let mut f = Flash::new();
         f.write_memory(0x4000, 4, 0, 0).unwrap();
         assert_eq!(f.read(SR, 0), Ok(SR_PGSERR));
+    }
+
+    /// Rule (RM0368 §3.5, FLASH_ACR.DCRST): an operation does not update the data cache; a
+    /// word cached before it reads stale until the cache is emptied (DCRST with DCEN off).
+    /// Assumption: every word of the range may be cached (the F401's D-cache holds 8 lines of
+    /// 128 bits, which words is not modelled), so a missing DCRST shows on any read-back.
+    #[test]
+    fn with_the_data_cache_on_a_programmed_word_reads_stale_until_dcrst() {
+        let mut f = unlocked();
+        f.write(ACR, 2 | ACR_DCEN, 0).unwrap();
+        f.write(CR, CR_PG | X32, 0).unwrap();
+        f.write_memory(0x4000, 4, 0x1234_5678, 0).unwrap();
+        f.touch(0x4000, 4);
+        f.advance(20 * US);
+        assert_eq!(word(&f, 0x4000), 0x1234_5678, "the memory holds the new word");
+        let seen: Vec<(u32, Vec<u8>)> = f.take_changes();
+        assert!(seen.iter().all(|(o, b)| *o != 0x4000 || b[..4] == [0xFF; 4]), "a read still sees the cached word: {seen:x?}");
+        f.write(ACR, 2, 20 * US).unwrap();
+        f.write(ACR, 2 | ACR_DCRST, 20 * US).unwrap();
+        f.write(ACR, 2 | ACR_DCEN, 20 * US).unwrap();
+        let seen = f.take_changes();
+        assert!(seen.iter().any(|(o, b)| *o == 0x4000 && b[..4] == 0x1234_5678u32.to_le_bytes()), "after DCRST: {seen:x?}");
+        assert!(f.stale_ranges().is_empty());
+    }
+
+    /// With the data cache never on, nothing is stale: the read-back sees the word at once.
+    #[test]
+    fn with_the_data_cache_off_a_programmed_word_reads_back_at_once() {
+        let mut f = unlocked();
+        f.write(CR, CR_PG | X32, 0).unwrap();
+        f.write_memory(0x4000, 4, 0x1234_5678, 0).unwrap();
+        f.advance(20 * US);
+        assert!(f.take_changes().iter().any(|(o, b)| *o == 0x4000 && b[..4] == 0x1234_5678u32.to_le_bytes()));
     }
 
     #[test]
