@@ -40,6 +40,10 @@ pub struct BoardSetup {
     pub hse_dead: bool,
     /// The PLL never locks.
     pub pll_dead: bool,
+    /// The LSI's frequency, Hz (`None`: its nominal 32 kHz; DS9716 allows 17–47 kHz).
+    pub lsi_hz: Option<u64>,
+    /// VDD, volts (`None`: the board's 3.3 V regulator).
+    pub vdd_volts: Option<f64>,
     /// How the emulator prices time ([`crate::timing`]); `None`: `FCU_PIL_TIMING` from the
     /// environment, optimistic if it is not set (a value that names no profile is an error).
     pub timing: Option<TimingProfile>,
@@ -101,6 +105,12 @@ impl EmulatedBoard {
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
         board.rcc.set_hse_dead(setup.hse_dead);
         board.rcc.set_pll_dead(setup.pll_dead);
+        if let Some(hz) = setup.lsi_hz {
+            board.iwdg.set_lsi_hz(hz);
+        }
+        if let Some(volts) = setup.vdd_volts {
+            board.pwr.set_vdd_volts(volts);
+        }
         if let Some(contents) = &setup.flash_contents {
             board.flash.load_memory(contents);
         }
