@@ -28,6 +28,7 @@ mod ground;
 #[cfg(feature = "mavlink")]
 mod param_flash;
 mod sensor_bus;
+mod supply;
 mod timers;
 #[cfg(feature = "mavlink")]
 mod uart_rx;
@@ -284,6 +285,7 @@ mod app {
         let dp = cx.device;
         let mut core = cx.core;
         let (mut rcc, clocks) = start_clocks(dp.RCC, &mut core.DCB, &mut core.DWT);
+        crate::supply::start(dp.PWR, &mut rcc, clocks.crystal_ready);
         // The LED codes and the fault line keep their pace at either clock.
         Mono::start(core.SYST, rcc.clocks.sysclk().raw());
         // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
