@@ -114,6 +114,9 @@ impl EmulatedBoard {
         if let Some(contents) = &setup.flash_contents {
             board.flash.load_memory(contents);
         }
+        // An image with the ground link and no saved parameters speaks MAVLink from boot: its
+        // UART is binary, not lines (a frame's bytes may happen to look like a debug line).
+        let speaks_mavlink = crate::firmware::has_ground_link(&image) && setup.flash_contents.is_none();
         let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,
@@ -125,7 +128,7 @@ impl EmulatedBoard {
             view: ComputerView::default(),
             line_errors: Vec::new(),
             faults_expected: false,
-            raw_uart: false,
+            raw_uart: speaks_mavlink,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
