@@ -272,7 +272,7 @@ mod with_link {
             uart.is_idle()
         });
         // Asked at the instant of acting, and acted on at once.
-        match g.service.due(now_ms, uart_idle) {
+        match g.service.due(now_ms, uart_idle, crate::supply::vdd_ok_for_flash()) {
             Due::Nothing => {}
             Due::Save => {
                 let saved = save_parameters(&g.service, &mut g.flash, &mut s.watchdog);

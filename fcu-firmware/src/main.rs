@@ -29,6 +29,7 @@ mod ground;
 #[cfg(feature = "mavlink")]
 mod param_flash;
 mod sensor_bus;
+mod supply;
 mod timers;
 #[cfg(feature = "mavlink")]
 mod uart_rx;
@@ -287,6 +288,7 @@ mod app {
         let dp = cx.device;
         let mut core = cx.core;
         let (mut rcc, clocks) = start_clocks(dp.RCC, &mut core.DCB, &mut core.DWT);
+        crate::supply::start(dp.PWR, &mut rcc, clocks.crystal_ready);
         // The LED codes and the fault line keep their pace at either clock. After
         // `start_clocks`, which starts the cycle counter the clock counts.
         Mono::start(core.SYST, rcc.clocks.sysclk().raw());

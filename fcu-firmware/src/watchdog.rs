@@ -66,11 +66,15 @@ impl Watchdog {
     }
 
     #[cfg(feature = "mavlink")]
-    /// New values while running: reload first (the count starts full under the old values),
-    /// then PR and RLR, then a bounded wait for them to land, then a reload with them.
+    /// New values while running: a bounded wait for any earlier update to have landed (RM0368
+    /// IWDG_SR: PR can be changed only with PVU clear, RLR only with RVU clear; a write while
+    /// one is under way is not taken), a reload (the count starts full under the old values),
+    /// then PR and RLR, a bounded wait for them to land, and a reload with them.
     fn set(&mut self, prescaler: u8, reload: u16) -> Result<(), LsiNotRunning> {
         let iwdg = &self.iwdg;
+        let idle = crate::cycles::poll(UPDATE_BOUND_CYCLES, || (iwdg.sr().read().bits() == 0).then_some(()));
         iwdg.kr().write(|w| w.key().feed());
+        idle.ok_or(LsiNotRunning)?;
         iwdg.kr().write(|w| w.key().unlock());
         iwdg.pr().write(|w| w.pr().set(prescaler));
         iwdg.rlr().write(|w| w.rl().set(reload));

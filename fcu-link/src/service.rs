@@ -133,12 +133,17 @@ impl<const TX: usize> Service<TX> {
     }
 
     /// The flash or reset work to carry out now, given whether the UART has sent everything it
-    /// was given. The station decides ([`Station::due`]) at this instant; the link must be
-    /// quiet (see the module docs). The owner acts on the answer at once: a save then reports
-    /// with [`Service::saved`].
-    pub fn due(&mut self, now_ms: u32, uart_idle: bool) -> Due {
+    /// was given and whether the supply is high enough for the flash's writes (VDD ≥ 2.7 V for
+    /// x32 programming, RM0368 §3.5.1). The station decides ([`Station::due`]) at this instant;
+    /// the link must be quiet (see the module docs). The owner acts on the answer at once: a
+    /// save then reports with [`Service::saved`].
+    pub fn due(&mut self, now_ms: u32, uart_idle: bool, flash_supply_ok: bool) -> Due {
         self.now_ms = now_ms;
-        let due = self.station.due();
+        let mut due = self.station.due();
+        if due == Due::Save && !flash_supply_ok {
+            self.station.supply_low();
+            due = Due::Nothing;
+        }
         let quiet = uart_idle && self.owed_bytes == Some(0);
         if due == Due::Nothing || !quiet {
             self.quiet_since_ms = None;

@@ -267,11 +267,31 @@ impl Station {
     pub fn saved(&mut self, ok: bool) {
         if ok {
             self.unsaved_since_ms = None;
-        } else if self.reboot_asked_ms.take().is_some() {
-            // A reboot would lose what failed to save: the ground station decides again.
-            self.notice = Some(b"reboot dropped: the save before it failed");
+        } else {
+            self.save_failed();
         }
         self.save_asked_ms = None;
+    }
+
+    /// A save was due but the supply is too low for the flash's writes (under 2.7 V): not
+    /// attempted, said, and tried again after [`SAVE_DEBOUNCE_MS`] if the changes are still
+    /// unsaved.
+    pub fn supply_low(&mut self) {
+        self.save_failed();
+        self.save_asked_ms = None;
+        self.notice = Some(b"parameters NOT saved: supply below 2.7 V");
+    }
+
+    /// A save failed or was not attempted: a reboot waiting for it is dropped (it would lose
+    /// the changes: the ground station decides again), and the changes wait a debounce before
+    /// the next try, not one link period.
+    fn save_failed(&mut self) {
+        if self.reboot_asked_ms.take().is_some() {
+            self.notice = Some(b"reboot dropped: the save before it failed");
+        }
+        if self.unsaved_since_ms.is_some() {
+            self.unsaved_since_ms = Some(self.now_ms);
+        }
     }
 
     /// Whether a save is still to be made (a reboot waits for it).
@@ -806,5 +826,24 @@ mod tests {
         assert_eq!(st.set_param(index("YAW_DEADBAND_US"), -0.0), Ok(ParamMask::EMPTY));
         assert!(!st.unsaved());
         assert_eq!(st.take_change(), None);
+    }
+
+    #[test]
+    fn a_save_with_the_supply_too_low_is_not_attempted_said_and_tried_again_after_the_debounce() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
+        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        let _ = st.take_ground();
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1005);
+        feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1010);
+        assert_eq!(st.due(), Due::Save);
+        st.supply_low();
+        assert_eq!(st.take_notice(), Some(&b"parameters NOT saved: supply below 2.7 V"[..]));
+        assert!(st.unsaved(), "the change is still to be saved");
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed meanwhile");
+        feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS - 20);
+        assert_eq!(st.take_ground(), None, "not every period: after a debounce");
+        feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS);
+        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
     }
 }

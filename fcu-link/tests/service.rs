@@ -76,7 +76,7 @@ impl Board {
         let n = self.service.poll_tx(&mut out[..room]);
         self.sent.extend_from_slice(&out[..n]);
         self.uart_queue += n;
-        self.service.due(self.now_ms, self.uart_queue == 0)
+        self.service.due(self.now_ms, self.uart_queue == 0, true)
     }
 
     fn state(&self) -> FlightState {

@@ -772,6 +772,14 @@ impl Peripherals for Board {
         self.flash.take_power_lost()
     }
 
+    fn nmi_line(&self) -> bool {
+        self.rcc.nmi_line()
+    }
+
+    fn core_clock_stopped(&self) -> bool {
+        self.rcc.core_clock_stopped()
+    }
+
     /// A system reset, and what only a power-on resets: RCC's reset flags, DBGMCU.
     fn power_on_reset(&mut self) {
         self.system_reset(false);
@@ -802,6 +810,9 @@ impl Peripherals for Board {
         // reset (RM0368 §23, their register descriptions).
         let dbgmcu = std::mem::take(&mut self.dbgmcu);
         let battery = self.battery_divider_volts;
+        // The supply and the LSI's frequency are the board's and the chip's, not registers.
+        let vdd_volts = self.pwr.vdd_volts();
+        let lsi_hz = self.iwdg.lsi_hz();
         // The flash memory keeps its contents; an operation in progress is cut.
         let mut flash = std::mem::take(&mut self.flash);
         flash.system_reset();
@@ -809,6 +820,8 @@ impl Peripherals for Board {
         self.flash = flash;
         self.dbgmcu = dbgmcu;
         self.battery_divider_volts = battery;
+        self.pwr.set_vdd_volts(vdd_volts);
+        self.iwdg.set_lsi_hz(lsi_hz);
         self.rcc = rcc;
         self.records = records;
         self.edges = edges;

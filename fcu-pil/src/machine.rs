@@ -53,6 +53,8 @@ const ENTRY_CYCLES: u64 = 12;
 const RETURN_CYCLES: u64 = 10;
 /// The `until` address of `emu_start`: never executed.
 const NEVER: u64 = 0xFFFF_FFFE;
+/// The NMI's exception number (ARMv7-M B1.5.2).
+const NMI: usize = 2;
 /// Value painted over the stack region at power-on, to find the high-water mark.
 pub const STACK_PAINT: u8 = 0xA5;
 
@@ -104,6 +106,16 @@ pub trait Peripherals {
     }
     /// Whether the board lost its power (an injected cut), once: the machine powers it on again.
     fn take_power_cut(&mut self) -> bool {
+        false
+    }
+    /// The level of the line wired to the core's NMI (the clock security system's CSSF): the
+    /// machine pends the NMI while it is high and the NMI is not being served.
+    fn nmi_line(&self) -> bool {
+        false
+    }
+    /// The system clock is gone (a failed crystal with no clock security system): the core
+    /// executes nothing until a reset; the peripherals and the watchdog go on.
+    fn core_clock_stopped(&self) -> bool {
         false
     }
     /// Every model back to power-on, except what keeps without power (the flash memory).
@@ -1069,6 +1081,9 @@ impl<P: Peripherals + 'static> Machine<P> {
         let watchdog =
             st.board.advance(now, &mut |irq, level| lines.push((irq, level))).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         st.sample_lines(now, &lines);
+        if st.board.nmi_line() && !st.scs.is_active(NMI) {
+            st.scs.set_pending(NMI);
+        }
         store_memory_writes(&mut self.uc).map_err(|error| Fault::Unmodelled { error, pc, at: now })?;
         let st = self.uc.get_data_mut();
         match st.board.units_per_cycle() {
@@ -1107,7 +1122,7 @@ impl<P: Peripherals + 'static> Machine<P> {
                 return Ok(());
             }
             let st = self.uc.get_data_mut();
-            if st.locked_up {
+            if st.locked_up || st.board.core_clock_stopped() {
                 // Nothing runs and nothing wakes the core: on to the next event (the watchdog's
                 // expiry resets the board in `service`).
                 let next = [st.board.next_event(), st.scs.next_event(now)].into_iter().flatten().filter(|&t| t > now).min();

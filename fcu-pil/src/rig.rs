@@ -40,6 +40,10 @@ pub struct BoardSetup {
     pub hse_dead: bool,
     /// The PLL never locks.
     pub pll_dead: bool,
+    /// The LSI's frequency, Hz (`None`: its nominal 32 kHz; DS9716 allows 17–47 kHz).
+    pub lsi_hz: Option<u64>,
+    /// VDD, volts (`None`: the board's 3.3 V regulator).
+    pub vdd_volts: Option<f64>,
     /// How the emulator prices time ([`crate::timing`]); `None`: `FCU_PIL_TIMING` from the
     /// environment, optimistic if it is not set (a value that names no profile is an error).
     pub timing: Option<TimingProfile>,
@@ -101,9 +105,18 @@ impl EmulatedBoard {
         board.set_battery_volts(if setup.boot_battery_v > 0.0 { setup.boot_battery_v } else { 4.0 });
         board.rcc.set_hse_dead(setup.hse_dead);
         board.rcc.set_pll_dead(setup.pll_dead);
+        if let Some(hz) = setup.lsi_hz {
+            board.iwdg.set_lsi_hz(hz);
+        }
+        if let Some(volts) = setup.vdd_volts {
+            board.pwr.set_vdd_volts(volts);
+        }
         if let Some(contents) = &setup.flash_contents {
             board.flash.load_memory(contents);
         }
+        // An image with the ground link and no saved parameters speaks MAVLink from boot: its
+        // UART is binary, not lines (a frame's bytes may happen to look like a debug line).
+        let speaks_mavlink = crate::firmware::has_ground_link(&image) && setup.flash_contents.is_none();
         let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,
@@ -115,7 +128,7 @@ impl EmulatedBoard {
             view: ComputerView::default(),
             line_errors: Vec::new(),
             faults_expected: false,
-            raw_uart: false,
+            raw_uart: speaks_mavlink,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);

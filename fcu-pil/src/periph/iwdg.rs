@@ -24,7 +24,9 @@
 //!   `HAL_IWDG_Init` writes 0xCCCC first, "LSI is turned on automatically", then the values,
 //!   then polls SR with a time-out).
 //!
-//! Assumptions: LSI at its nominal 32 kHz once running (the datasheet allows 17–47 kHz); the
+//! The LSI runs at its nominal 32 kHz unless the board sets another frequency
+//! ([`Iwdg::set_lsi_hz`]): DS9716 allows 17–47 kHz over parts, supply and temperature, and the
+//! firmware's timeouts must hold at both ends. Assumptions: the
 //! option byte WDG_SW selects the software watchdog (the counter only runs after 0xCCCC); no
 //! debugger, so DBG_IWDG_STOP has no effect. When a PR update completes while the counter runs,
 //! the counter continues from its current value with the new prescaler from that instant (the
@@ -43,8 +45,12 @@ pub const NAME: &str = "IWDG";
 pub const LSI_HZ: u64 = 32_000;
 /// One LSI cycle in [`Time`] units (10 500).
 pub const LSI_CYCLE: Time = TIME_HZ / LSI_HZ;
-/// PR/RLR update time into the VDD domain: 5 LSI cycles (RM0368 IWDG_SR description).
+/// PR/RLR update time into the VDD domain: 5 LSI cycles (RM0368 IWDG_SR description), at the
+/// nominal LSI.
 pub const UPDATE_TIME: Time = 5 * LSI_CYCLE;
+/// DS9716's LSI range (f_LSI, min and max).
+pub const LSI_MIN_HZ: u64 = 17_000;
+pub const LSI_MAX_HZ: u64 = 47_000;
 
 const KR: u32 = 0x00;
 const PR: u32 = 0x04;
@@ -62,11 +68,6 @@ const COUNTER_START: u32 = 0x0FFF;
 /// Prescaler divider for PR (RM0368 IWDG_PR description: 4, 8, …, 256; 0b111 is also /256).
 fn divider(pr: u32) -> u64 {
     4u64 << (pr & 0b111).min(6)
-}
-
-/// One counter tick in [`Time`] units.
-fn tick(pr: u32) -> Time {
-    divider(pr) * LSI_CYCLE
 }
 
 /// The IWDG model.
@@ -87,6 +88,9 @@ pub struct Iwdg {
     counter: u32,
     reference: Time,
     ignored_writes: u32,
+    /// The LSI's frequency and one of its cycles in [`Time`] units.
+    lsi_hz: u64,
+    lsi_cycle: Time,
 }
 
 impl Default for Iwdg {
@@ -109,7 +113,26 @@ impl Iwdg {
             counter: COUNTER_START,
             reference: 0,
             ignored_writes: 0,
+            lsi_hz: LSI_HZ,
+            lsi_cycle: LSI_CYCLE,
         }
+    }
+
+    /// The LSI runs at `hz` (a part at one end of DS9716's 17–47 kHz, rounded to whole
+    /// [`Time`] units per cycle). It is the chip's: the board keeps it through resets.
+    pub fn set_lsi_hz(&mut self, hz: u64) {
+        self.lsi_hz = hz.max(1);
+        self.lsi_cycle = (TIME_HZ + self.lsi_hz / 2) / self.lsi_hz;
+    }
+
+    /// The LSI's frequency.
+    pub fn lsi_hz(&self) -> u64 {
+        self.lsi_hz
+    }
+
+    /// One counter tick in [`Time`] units.
+    fn tick(&self, pr: u32) -> Time {
+        divider(pr) * self.lsi_cycle
     }
 
     /// Whether the watchdog has been started (KR = 0xCCCC).
@@ -125,7 +148,7 @@ impl Iwdg {
     /// When a PR/RLR value written at `written` reaches the watchdog's domain (never while
     /// the LSI is off).
     fn lands_at(&self, written: Time) -> Option<Time> {
-        self.lsi_ready_at.map(|lsi| written.max(lsi) + UPDATE_TIME)
+        self.lsi_ready_at.map(|lsi| written.max(lsi) + 5 * self.lsi_cycle)
     }
 
     /// The counter's reference time: it cannot count before the LSI runs.
@@ -149,14 +172,14 @@ impl Iwdg {
     }
 
     /// Timeout after a reload with the configured PR and RLR (pending writes included), in
-    /// seconds at the nominal LSI; `None` when not started.
+    /// seconds at the LSI's frequency; `None` when not started.
     pub fn timeout_s(&self) -> Option<f64> {
         if !self.started {
             return None;
         }
         let pr = self.pr_pending.map_or(self.pr, |(v, _)| v);
         let rlr = self.rlr_pending.map_or(self.rlr, |(v, _)| v);
-        Some((f64::from(rlr) + 1.0) * divider(pr) as f64 / LSI_HZ as f64)
+        Some((f64::from(rlr) + 1.0) * divider(pr) as f64 / self.lsi_hz as f64)
     }
 
     /// Completes PR/RLR updates due by `now`.
@@ -170,7 +193,7 @@ impl Iwdg {
         if let Some((value, written)) = self.pr_pending {
             if let Some(done) = self.lands_at(written).filter(|&done| done <= now) {
                 if let Some(from) = self.counting_from().filter(|&from| self.started && done > from) {
-                    let elapsed = (done - from) / tick(self.pr);
+                    let elapsed = (done - from) / self.tick(self.pr);
                     self.counter = self.counter.saturating_sub(u32::try_from(elapsed).unwrap_or(u32::MAX));
                     self.reference = done;
                 }
@@ -188,17 +211,17 @@ impl Iwdg {
         let mut reference = self.counting_from()?;
         let mut pr = self.pr;
         if let Some((new_pr, done)) = self.pr_pending.and_then(|(v, written)| Some((v, self.lands_at(written)?))) {
-            let old = reference + (counter + 1) * tick(pr);
+            let old = reference + (counter + 1) * self.tick(pr);
             if old <= done {
                 return Some(old);
             }
             if done > reference {
-                counter -= (done - reference) / tick(pr);
+                counter -= (done - reference) / self.tick(pr);
                 reference = done;
             }
             pr = new_pr;
         }
-        Some(reference + (counter + 1) * tick(pr))
+        Some(reference + (counter + 1) * self.tick(pr))
     }
 
     pub fn read(&mut self, offset: u32, now: Time) -> Result<u32, Unmodelled> {
@@ -447,6 +470,28 @@ mod tests {
         w.write(KR, KEY_RELOAD, lsi + UPDATE_TIME).unwrap();
         assert_eq!(w.next_event(), Some(lsi + UPDATE_TIME + 200 * 8 * LSI_CYCLE), "50 ms after the reload");
         assert!((w.timeout_s().unwrap() - 0.050).abs() < 1e-12);
+    }
+
+    /// The LSI at either end of DS9716's range: the timeout and the update time scale with it
+    /// (the firmware's 200 counts at /8: 94 ms at 17 kHz, 34 ms at 47 kHz).
+    #[test]
+    fn the_timeout_follows_the_lsi_across_its_range() {
+        for (hz, timeout_ms) in [(LSI_MIN_HZ, 94.1), (LSI_MAX_HZ, 34.0)] {
+            let mut w = Iwdg::new();
+            w.set_lsi_hz(hz);
+            w.set_lsi(Some(0));
+            w.write(KR, KEY_START, 0).unwrap();
+            w.write(KR, KEY_UNLOCK, 0).unwrap();
+            w.write(PR, 1, 0).unwrap();
+            w.write(RLR, 199, 0).unwrap();
+            let update = 5 * TIME_HZ / hz;
+            assert_eq!(w.read(SR, update - 10), Ok(0b11), "{hz} Hz");
+            assert_eq!(w.read(SR, update + 10), Ok(0), "{hz} Hz");
+            w.write(KR, KEY_RELOAD, update + 10).unwrap();
+            let expiry_ms = (w.next_event().unwrap() - (update + 10)) as f64 * 1e3 / TIME_HZ as f64;
+            assert!((expiry_ms - timeout_ms).abs() < 0.1, "{hz} Hz: {expiry_ms:.2} ms");
+            assert!((w.timeout_s().unwrap() * 1e3 - timeout_ms).abs() < 0.1);
+        }
     }
 
     /// The counter does not move while the LSI starts: the first period is counted from the

@@ -2,8 +2,13 @@
 //!
 //! Modelled: CR.VOS (regulator voltage scaling) and the flag-clear bits CWUF/CSBF (their flags
 //! never set: Stop/Standby are not modelled), CSR.VOSRDY (always 1: the regulator is assumed ready
-//! before the firmware runs). Not modelled (an [`Unmodelled`] error when set): low-power modes
-//! (LPDS, PDDS, FPDS, LPLVDS, MRLVDS), the PVD (PVDE, PLS), backup-domain access (DBP), ADCDC1,
+//! before the firmware runs), and the programmable voltage detector (RM0368 §5.2.3): CR.PVDE and
+//! CR.PLS, CSR.PVDO = 1 while VDD is below the selected threshold. VDD is the board's
+//! ([`Pwr::set_vdd_volts`], 3.3 V from the board's regulator unless a test sets it); each level's
+//! thresholds are the datasheet's typical values ([`PVD_THRESHOLDS_V`]), with its hysteresis: the
+//! falling threshold while PVDO = 0, the rising one while PVDO = 1. The PVD's EXTI line 16 is not
+//! modelled (the firmware polls PVDO). Not modelled (an [`Unmodelled`] error when set): low-power
+//! modes (LPDS, PDDS, FPDS, LPLVDS, MRLVDS), backup-domain access (DBP), ADCDC1,
 //! the wake-up pin (EWUP) and the backup regulator (BRE). The HAL's F401 code paths do not touch
 //! PWR at all (over-drive is only for F427/F446/F469).
 //!
@@ -24,11 +29,24 @@ const CSR: u32 = 0x04;
 const CR_RESET: u32 = 0x0000_8000;
 const CR_CWUF: u32 = 1 << 2;
 const CR_CSBF: u32 = 1 << 3;
+const CR_PVDE: u32 = 1 << 4;
+const CR_PLS_SHIFT: u32 = 5;
+const CR_PLS: u32 = 0b111 << CR_PLS_SHIFT;
 const CR_VOS: u32 = 0b11 << 14;
 
 /// CSR read-only flags: WUF, SBF, PVDO, BRR, VOSRDY. Writes to them are ignored.
 const CSR_READ_ONLY: u32 = 0x0000_400F;
 const CSR_VOSRDY: u32 = 1 << 14;
+const CSR_PVDO: u32 = 1 << 2;
+
+/// The PVD's thresholds per PLS level, (falling, rising) in volts, typical (DS9716, "embedded
+/// reset and power control block characteristics"; the F4 datasheets share the table).
+#[expect(clippy::approx_constant, reason = "3.14 V is level 7's rising threshold, not π")]
+pub const PVD_THRESHOLDS_V: [(f64, f64); 8] =
+    [(2.04, 2.14), (2.19, 2.30), (2.35, 2.45), (2.51, 2.60), (2.66, 2.76), (2.84, 2.93), (2.93, 3.03), (3.03, 3.14)];
+
+/// VDD on the board: its 3.3 V regulator's output.
+pub const BOARD_VDD_VOLTS: f64 = 3.3;
 
 /// Maximum HCLK for each voltage scale (STM32F401xB/C datasheet, general operating conditions).
 pub const SCALE2_HCLK_MAX_HZ: u64 = 84_000_000;
@@ -38,6 +56,10 @@ pub const SCALE3_HCLK_MAX_HZ: u64 = 60_000_000;
 #[derive(Clone, Debug)]
 pub struct Pwr {
     cr: u32,
+    /// The supply, set by the board (not a register: it survives resets).
+    vdd_volts: f64,
+    /// CSR.PVDO as last evaluated (the hysteresis needs it).
+    pvdo: bool,
 }
 
 impl Default for Pwr {
@@ -49,7 +71,43 @@ impl Default for Pwr {
 impl Pwr {
     /// Reset state: VOS = scale 2 (RM0368), everything else off.
     pub fn new() -> Self {
-        Pwr { cr: CR_RESET }
+        Pwr { cr: CR_RESET, vdd_volts: BOARD_VDD_VOLTS, pvdo: false }
+    }
+
+    /// The supply on VDD from now on (a board set-up or a sagging regulator).
+    pub fn set_vdd_volts(&mut self, volts: f64) {
+        self.vdd_volts = volts;
+        self.refresh_pvdo();
+    }
+
+    /// The supply on VDD.
+    pub fn vdd_volts(&self) -> f64 {
+        self.vdd_volts
+    }
+
+    /// Whether the PVD is on (CR.PVDE).
+    pub fn pvd_enabled(&self) -> bool {
+        self.cr & CR_PVDE != 0
+    }
+
+    /// CR.PLS, the PVD's level (0..7).
+    pub fn pvd_level(&self) -> u32 {
+        (self.cr & CR_PLS) >> CR_PLS_SHIFT
+    }
+
+    /// CSR.PVDO: VDD below the threshold of the selected level (0 with the PVD off).
+    pub fn pvdo(&self) -> bool {
+        self.pvdo
+    }
+
+    fn refresh_pvdo(&mut self) {
+        if !self.pvd_enabled() {
+            self.pvdo = false;
+            return;
+        }
+        let (falling, rising) = PVD_THRESHOLDS_V[self.pvd_level() as usize];
+        let threshold = if self.pvdo { rising } else { falling };
+        self.pvdo = self.vdd_volts < threshold;
     }
 
     /// The selected voltage scale: 2 or 3. RM0368: 0b01 is scale 3, 0b10 scale 2; the reserved
@@ -89,7 +147,7 @@ impl Pwr {
         match offset {
             // CWUF and CSBF always read 0.
             CR => Ok(self.cr & !(CR_CWUF | CR_CSBF)),
-            CSR => Ok(CSR_VOSRDY),
+            CSR => Ok(CSR_VOSRDY | if self.pvdo { CSR_PVDO } else { 0 }),
             _ => Err(Unmodelled::offset(NAME, offset, false)),
         }
     }
@@ -97,14 +155,15 @@ impl Pwr {
     pub fn write(&mut self, offset: u32, value: u32, _now: Time) -> Result<(), Unmodelled> {
         match offset {
             CR => {
-                Unmodelled::check_bits("PWR.CR", value, CR_VOS | CR_CWUF | CR_CSBF)?;
+                Unmodelled::check_bits("PWR.CR", value, CR_VOS | CR_CWUF | CR_CSBF | CR_PVDE | CR_PLS)?;
                 let vos = (value & CR_VOS) >> 14;
                 if vos == 0b00 || vos == 0b11 {
                     return Err(Unmodelled::new("PWR.CR", format!("VOS = {vos:#04b}: reserved value (RM0368 PWR_CR)")));
                 }
                 // RM0368: VOS "can be modified only when the PLL is OFF"; the PLL state lives in
                 // the RCC model, so the machine may check `Rcc` before forwarding this write.
-                self.cr = value & CR_VOS;
+                self.cr = value & (CR_VOS | CR_PVDE | CR_PLS);
+                self.refresh_pvdo();
                 Ok(())
             }
             CSR => Unmodelled::check_bits("PWR.CSR", value, CSR_READ_ONLY),
@@ -123,7 +182,9 @@ impl Peripheral for Pwr {
     }
 
     fn reset(&mut self) {
+        let vdd = self.vdd_volts;
         *self = Pwr::new();
+        self.vdd_volts = vdd;
     }
 }
 
@@ -158,6 +219,32 @@ mod tests {
         assert!(pwr.write(CR, CR_RESET | (1 << 8), 0).is_err(), "DBP");
         assert!(pwr.write(CR, CR_RESET | CR_CWUF | CR_CSBF, 0).is_ok());
         assert_eq!(pwr.read(CR, 0), Ok(CR_RESET));
+    }
+
+    /// Rule (RM0368 §5.2.3, PWR_CSR.PVDO): with PVDE, PVDO tells whether VDD is under the
+    /// level's threshold, with the datasheet's hysteresis; with the PVD off it reads 0.
+    #[test]
+    fn pvdo_follows_vdd_against_the_selected_level_with_hysteresis() {
+        let mut pwr = Pwr::new();
+        pwr.set_vdd_volts(2.5);
+        assert_eq!(pwr.read(CSR, 0).unwrap() & CSR_PVDO, 0, "PVD off");
+        let level6 = CR_RESET | CR_PVDE | (6 << CR_PLS_SHIFT);
+        pwr.write(CR, level6, 0).unwrap();
+        assert_eq!(pwr.read(CR, 0), Ok(level6));
+        assert_eq!(pwr.read(CSR, 0).unwrap() & CSR_PVDO, CSR_PVDO, "2.5 V under level 6");
+        pwr.set_vdd_volts(3.0);
+        assert!(pwr.pvdo(), "3.0 V: still under the rising threshold (3.03 V)");
+        pwr.set_vdd_volts(3.3);
+        assert!(!pwr.pvdo());
+        pwr.set_vdd_volts(2.95);
+        assert!(!pwr.pvdo(), "2.95 V: above the falling threshold (2.93 V)");
+        pwr.set_vdd_volts(2.7);
+        assert!(pwr.pvdo());
+        // The supply is the board's: a reset of PWR keeps it (and turns the PVD off).
+        Peripheral::reset(&mut pwr);
+        assert!(!pwr.pvdo() && !pwr.pvd_enabled());
+        pwr.write(CR, level6, 0).unwrap();
+        assert!(pwr.pvdo(), "2.7 V kept through the reset");
     }
 
     #[test]

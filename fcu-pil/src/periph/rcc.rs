@@ -4,11 +4,23 @@
 //! ready flags and start-up times, the system clock switch (SW → SWS), the AHB/APB prescalers, the
 //! peripheral clock enables and resets of AHB1/APB1/APB2, the reset flags in CSR and the LSI
 //! enable. Everything the HAL's `Rcc::freeze` (stm32f4xx-hal 0.23, `rcc/f4/mod.rs`) and the
-//! `Enable`/`Reset` traits (`rcc/f4/enable.rs`) touch on an F401. Not modelled (an access is an
-//! [`Unmodelled`] error): the clock security system, HSE bypass, HSI trimming, the I2S PLL, MCO
+//! `Enable`/`Reset` traits (`rcc/f4/enable.rs`) touch on an F401, and the clock security system
+//! (below). Not modelled (an access is an [`Unmodelled`] error): HSE bypass, HSI trimming, the I2S PLL, MCO
 //! outputs, the RTC prescaler and clock (BDCR), the clock interrupts (CIR enables), the
 //! low-power clock enables (xLPENR, untouched by the HAL's code paths the firmware uses), AHB2
 //! (USB OTG, not initialised), SSCGR, PLLI2SCFGR and DCKCFGR.TIMPRE.
+//!
+//! **Clock security system (RM0368 §6.2.7).** CR.CSSON arms the detector, which runs while the
+//! HSE is ready. A crystal that stops ([`Rcc::fail_hse`], a fault the harness injects) with the
+//! detector running: the HSE is turned off (HSEON and CSSON clear), the PLL too if the HSE feeds
+//! it and it is the system clock, the system clock switches to the HSI (SW and SWS = HSI), and
+//! CIR.CSSF sets, which is the NMI's line ([`Rcc::nmi_line`]) until CIR.CSSC clears it ("the NMI
+//! is executed indefinitely unless the CSS interrupt pending bit is cleared"). The same failure
+//! without the detector: HSERDY clears and, when the HSE drives SYSCLK directly or through the
+//! PLL, the system clock is gone ([`Rcc::core_clock_stopped`]): the core stops until a reset
+//! (the watchdog runs on the LSI). The other models keep counting at the clocks they had (an
+//! assumption: on silicon the bus clocks stop too and TIM4 holds its output levels, which to the
+//! motors is the same as holding their duty).
 //!
 //! Register layout, reset values and field positions are from the `stm32f4` 0.16 PAC
 //! (`stm32f401/rcc/*.rs`, generated from ST's SVD); behaviour from RM0368 §6.
@@ -65,6 +77,7 @@ const CR_HSIRDY: u32 = 1 << 1;
 const CR_HSITRIM_RESET: u32 = 16 << 3;
 const CR_HSEON: u32 = 1 << 16;
 const CR_HSERDY: u32 = 1 << 17;
+const CR_CSSON: u32 = 1 << 19;
 const CR_PLLON: u32 = 1 << 24;
 const CR_PLLRDY: u32 = 1 << 25;
 /// Read-only fields of CR: HSIRDY, HSICAL, HSERDY, PLLRDY, PLLI2SRDY. Writes to them are ignored.
@@ -84,6 +97,9 @@ const CFGR_SWS: u32 = 0b11 << 2;
 // CIR: the ready-interrupt flags (read-only) and their clear bits (write-only) are accepted;
 // the interrupt enables (bits 13:8) are not modelled, so the flags never set.
 const CIR_FLAGS_AND_CLEARS: u32 = 0x00BF_00BF;
+/// CIR.CSSF, the clock security system's flag (read-only), and CSSC, its clear bit.
+const CIR_CSSF: u32 = 1 << 7;
+const CIR_CSSC: u32 = 1 << 23;
 
 // Peripheral reset and enable fields (identical bit sets for RSTR and ENR on each bus).
 const AHB1_FIELDS: u32 = 0x0060_109F; // GPIOA..E, GPIOH, CRC, DMA1, DMA2
@@ -166,6 +182,12 @@ pub struct Rcc {
     hse_dead: bool,
     /// A chip whose PLL never locks (a fault to inject): PLLRDY never sets.
     pll_dead: bool,
+    /// CR.CSSON: the clock security system is armed.
+    csson: bool,
+    /// CIR.CSSF: the clock security system saw the HSE fail (the NMI's line).
+    cssf: bool,
+    /// The HSE failed while it drove SYSCLK and no detector switched away from it: no clock.
+    clock_lost: bool,
     pllcfgr: u32,
     /// CFGR without SWS.
     cfgr: u32,
@@ -201,6 +223,9 @@ impl Rcc {
             lsi_forced: false,
             hse_dead: false,
             pll_dead: false,
+            csson: false,
+            cssf: false,
+            clock_lost: false,
             pllcfgr: PLLCFGR_RESET,
             cfgr: 0,
             sws: Source::Hsi,
@@ -260,6 +285,46 @@ impl Rcc {
     /// resets: it is the board's, not the chip's.
     pub fn set_hse_dead(&mut self, dead: bool) {
         self.hse_dead = dead;
+    }
+
+    /// The HSE crystal stops at `now` (a fault injected in flight) and stays dead through
+    /// resets. What follows depends on the clock security system (RM0368 §6.2.7, module
+    /// documentation): with CSSON and the HSE ready, the switch to the HSI and CSSF; without,
+    /// a system clock fed by the HSE is lost.
+    pub fn fail_hse(&mut self, now: Time) {
+        self.settle(now);
+        self.hse_dead = true;
+        let Some(ready_at) = self.hse_ready_at else { return };
+        let was_running = ready_at <= self.last;
+        let pll_from_hse = self.pllcfgr & PLLCFGR_PLLSRC != 0;
+        let feeds_sysclk = self.sws == Source::Hse || (self.sws == Source::Pll && pll_from_hse);
+        if self.csson && was_running {
+            self.hse_ready_at = None;
+            self.csson = false;
+            self.cssf = true;
+            if feeds_sysclk {
+                if self.sws == Source::Pll {
+                    self.pll_on_at = None;
+                }
+                self.cfgr &= !0b11;
+                self.sws = Source::Hsi;
+            }
+        } else {
+            // HSEON stays as software wrote it; HSERDY (and a PLL fed by it) never comes back.
+            self.hse_ready_at = Some(NEVER);
+            self.clock_lost |= was_running && feeds_sysclk;
+        }
+    }
+
+    /// CIR.CSSF: the clock security system's interrupt, wired to the core's NMI.
+    pub fn nmi_line(&self) -> bool {
+        self.cssf
+    }
+
+    /// The system clock is gone (the HSE failed under it with no clock security system): the
+    /// core executes nothing until a reset.
+    pub fn core_clock_stopped(&self) -> bool {
+        self.clock_lost
     }
 
     /// Makes the PLL dead (a fault injected on the chip): PLLON is accepted and PLLRDY never
@@ -389,7 +454,13 @@ impl Rcc {
             CR => self.cr(now),
             PLLCFGR => self.pllcfgr,
             CFGR => self.cfgr | (self.sws.bits() << 2),
-            CIR => 0,
+            CIR => {
+                if self.cssf {
+                    CIR_CSSF
+                } else {
+                    0
+                }
+            }
             AHB1RSTR => self.ahb1rstr,
             APB1RSTR => self.apb1rstr,
             APB2RSTR => self.apb2rstr,
@@ -434,7 +505,12 @@ impl Rcc {
                 self.cfgr = value & CFGR_FIELDS & !CFGR_SWS;
                 self.settle(now);
             }
-            CIR => check_reset("RCC.CIR", value, CIR_FLAGS_AND_CLEARS, 0)?,
+            CIR => {
+                check_reset("RCC.CIR", value, CIR_FLAGS_AND_CLEARS, 0)?;
+                if value & CIR_CSSC != 0 {
+                    self.cssf = false;
+                }
+            }
             AHB1RSTR => self.write_rstr(Bus::Ahb1, value)?,
             APB1RSTR => self.write_rstr(Bus::Apb1, value)?,
             APB2RSTR => self.write_rstr(Bus::Apb2, value)?,
@@ -509,6 +585,9 @@ impl Rcc {
         if self.is_ready(Source::Hse, now) {
             v |= CR_HSERDY;
         }
+        if self.csson {
+            v |= CR_CSSON;
+        }
         if self.pll_on_at.is_some() {
             v |= CR_PLLON;
         }
@@ -519,8 +598,9 @@ impl Rcc {
     }
 
     fn write_cr(&mut self, value: u32, now: Time) -> Result<(), Unmodelled> {
-        // HSITRIM must stay 16, HSEBYP, CSSON and PLLI2SON 0: not modelled.
-        check_reset("RCC.CR", value, CR_READ_ONLY | CR_HSION | CR_HSEON | CR_PLLON, CR_RESET)?;
+        // HSITRIM must stay 16, HSEBYP and PLLI2SON 0: not modelled.
+        check_reset("RCC.CR", value, CR_READ_ONLY | CR_HSION | CR_HSEON | CR_PLLON | CR_CSSON, CR_RESET)?;
+        self.csson = value & CR_CSSON != 0;
         let pll_src_hse = self.pllcfgr & PLLCFGR_PLLSRC != 0;
         let pll_is_sys = self.sws == Source::Pll;
 
@@ -818,9 +898,8 @@ mod tests {
     }
 
     #[test]
-    fn csson_and_hsebyp_are_unmodelled() {
+    fn hsebyp_is_unmodelled() {
         let mut rcc = Rcc::new();
-        assert!(rcc.write(CR, 0x83 | (1 << 19), 0).is_err());
         assert!(rcc.write(CR, 0x83 | (1 << 18), 0).is_err());
         // Read-only ready flags and HSICAL written back by a read-modify-write are ignored.
         assert!(rcc.write(CR, 0x83 | CR_HSERDY | 0xFF00, 0).is_ok());
@@ -942,6 +1021,71 @@ mod tests {
         // SW = PLL is accepted, SWS stays on the HSI: the clock never switches.
         rcc.write(CFGR, 0b10, 2 * much_later).unwrap();
         assert_eq!(read(&mut rcc, CFGR, 3 * much_later) & 0b1100, 0);
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
+    }
+
+    /// The board running from the crystal through the PLL at 84 MHz; returns since when.
+    fn on_the_crystal(rcc: &mut Rcc, csson: bool) -> Time {
+        rcc.write(PLLCFGR, PLLCFGR_84MHZ, 0).unwrap();
+        let css = if csson { CR_CSSON } else { 0 };
+        rcc.write(CR, CR_RESET | CR_HSEON | CR_PLLON | css, 0).unwrap();
+        // PPRE1 /2 keeps PCLK1 at 42 MHz.
+        rcc.write(CFGR, 0b10 | (0b100 << 10), 0).unwrap();
+        let running = HSE_STARTUP + PLL_LOCK;
+        rcc.advance(running);
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, 84_000_000);
+        assert_eq!(read(rcc, CR, running) & CR_CSSON, css);
+        running
+    }
+
+    /// Rule (RM0368 §6.2.7): with CSSON, a failed crystal turns the HSE and the PLL it feeds
+    /// off, switches SYSCLK to the HSI, and raises CSSF (the NMI) until CSSC clears it.
+    #[test]
+    fn a_crystal_failure_under_the_clock_security_system_switches_to_the_hsi_and_raises_the_nmi() {
+        let mut rcc = Rcc::new();
+        let t = on_the_crystal(&mut rcc, true) + 1000;
+        rcc.advance(t);
+        rcc.fail_hse(t);
+        assert!(rcc.nmi_line(), "CSSF");
+        assert!(!rcc.core_clock_stopped());
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ, "SYSCLK on the HSI");
+        assert_eq!(read(&mut rcc, CFGR, t) & 0b1111, 0, "SW and SWS = HSI");
+        assert_eq!(read(&mut rcc, CR, t) & (CR_HSEON | CR_HSERDY | CR_CSSON | CR_PLLON | CR_PLLRDY), 0);
+        assert_eq!(read(&mut rcc, CIR, t), CIR_CSSF);
+        rcc.write(CIR, CIR_CSSC, t + 10).unwrap();
+        assert!(!rcc.nmi_line(), "CSSC clears CSSF");
+        assert_eq!(read(&mut rcc, CIR, t + 10), 0);
+        // The crystal stays dead through a reset; the reset clears the detector's state.
+        rcc.system_reset();
+        assert!(!rcc.nmi_line() && !rcc.core_clock_stopped());
+        rcc.write(CR, CR_RESET | CR_HSEON, t + 20).unwrap();
+        assert_eq!(read(&mut rcc, CR, t + 20 + 10 * HSE_STARTUP) & CR_HSERDY, 0);
+    }
+
+    /// Without the clock security system, the same failure takes the system clock away: no NMI,
+    /// and the core stops (until the watchdog's reset).
+    #[test]
+    fn a_crystal_failure_without_the_clock_security_system_stops_the_core() {
+        let mut rcc = Rcc::new();
+        let t = on_the_crystal(&mut rcc, false) + 1000;
+        rcc.advance(t);
+        rcc.fail_hse(t);
+        assert!(!rcc.nmi_line());
+        assert!(rcc.core_clock_stopped());
+        assert_eq!(read(&mut rcc, CR, t) & (CR_HSERDY | CR_PLLRDY), 0);
+        rcc.system_reset();
+        assert!(!rcc.core_clock_stopped(), "a reset starts again on the HSI");
+        assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
+    }
+
+    /// A crystal that fails while the HSI is the system clock stops nothing.
+    #[test]
+    fn a_crystal_failure_off_the_system_clock_leaves_the_core_running() {
+        let mut rcc = Rcc::new();
+        rcc.write(CR, CR_RESET | CR_HSEON, 0).unwrap();
+        rcc.advance(HSE_STARTUP);
+        rcc.fail_hse(HSE_STARTUP);
+        assert!(!rcc.core_clock_stopped() && !rcc.nmi_line());
         assert_eq!(rcc.clocks().unwrap().sysclk_hz, HSI_HZ);
     }
 

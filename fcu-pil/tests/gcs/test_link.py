@@ -476,13 +476,15 @@ class RebootUnderAFlood(unittest.TestCase):
                         resets.append((last_boot_ms, last_armed))
                         last_armed = False
                     last_boot_ms = m.time_boot_ms
-                    if asked is None and 2200 <= m.time_boot_ms < 2400 and not resets:
+                    # Early enough that a client lagging behind the flood's answers still
+                    # asks before the gesture begins (at 2.5 s a board that is arming refuses).
+                    if asked is None and 1500 <= m.time_boot_ms < 2400 and not resets:
                         board.conn.mav.command_long_send(1, 1, MAV.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0, 1, 0, 0, 0, 0, 0, 0)
                         asked = "sent"
             self.assertEqual(asked, MAV.MAV_RESULT_ACCEPTED, "the reboot's ACK did not come back under the flood")
             for at_ms, was_armed in resets:
                 self.assertFalse(was_armed, f"the board reset while armed at {at_ms} ms")
-            # Asked at 2.2 s, before the gesture: carried out at once, disarmed, despite the flood.
+            # Asked before the gesture: carried out at once, disarmed, despite the flood.
             self.assertEqual(len(resets), 1, f"resets: {resets}")
             self.assertLess(resets[0][0], 3000, f"the reboot waited until {resets[0][0]} ms")
 

@@ -463,7 +463,7 @@ impl Bench {
                 format!("the board's output is not whole frames: {}", e.0),
             ),
         }
-        match self.boot.task.due(now_ms, idle) {
+        match self.boot.task.due(now_ms, idle, true) {
             Due::Nothing => {}
             Due::Save => self.save(),
             Due::Reboot => self.reset(),
