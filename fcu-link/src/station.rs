@@ -136,7 +136,11 @@ impl Station {
                 self.notice = Some(b"reboot dropped: the board armed");
             }
             if self.save_asked_ms.take().is_some() {
-                self.notice = Some(b"save dropped: the board armed (saved after disarm)");
+                self.notice = Some(if self.unsaved_since_ms.is_some() {
+                    b"save dropped: the board armed (the changes are saved after the disarm)"
+                } else {
+                    b"save dropped: the board armed"
+                });
             }
         }
     }
@@ -731,7 +735,7 @@ mod tests {
         assert_eq!(st.request(Request::SaveParams), Ok(()));
         let _ = st.take_ground();
         feed(&mut st, FlightState::Armed, &[], 1005);
-        assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (saved after disarm)"[..]));
+        assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (the changes are saved after the disarm)"[..]));
         assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "no save while armed");
         for t in (1010..10_000).step_by(5) {
             feed(&mut st, FlightState::Armed, &[], t);
