@@ -355,7 +355,7 @@ pub fn write_file(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::R
     Ok(())
 }
 
-/// `base` with the parameters a file names ([`file`]'s formats: MAVProxy's `NAME VALUE`
+/// `base` with the parameters a file names ([`mod@file`]'s formats: MAVProxy's `NAME VALUE`
 /// lines or QGroundControl's `.params`), checked as a whole as [`with_values`] does: a file
 /// sets a whole radio, whose endpoints are valid together but not necessarily one at a time.
 /// A line that does not read, an unknown name, a name set twice, a value off its own bounds
