@@ -191,7 +191,9 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
     let uart_path = a.out.join("uart.log");
     std::fs::write(&uart_path, &flight.uart_log).map_err(|e| format!("writing {}: {e}", uart_path.display()))?;
     let timing = setup.timing_profile()?;
-    let title = format!("fcu-pil fly: {} — firmware image {}, seed {}, {timing} timing", sc.name, elf.display(), a.seed);
+    // The image's file name, not its path: a full path is cut at the plot's left edge.
+    let image = elf.file_name().map_or_else(|| elf.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let title = format!("fcu-pil fly: {} — firmware image {image}, seed {}, {timing} timing", sc.name, a.seed);
     // The board's rows are retimed from its own tick count once the flight is over: written then.
     let mut csv = host::FlightCsv::create(&a.out).map_err(|e| e.0)?;
     csv.rows(&flight.log).map_err(|e| csv.abandon(e).0)?;
