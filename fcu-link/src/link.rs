@@ -441,8 +441,7 @@ impl<const TX: usize> Core<TX> {
 
     /// Queues a STATUSTEXT, in chunks when it is longer than one (see [`crate::text`]): all of
     /// them or, when `room` cannot take all, none (a part would leave the receiver waiting for
-    /// the rest). Out of line: one copy for its many callers.
-    #[inline(never)]
+    /// the rest).
     pub(crate) fn text(&mut self, severity: Severity, text: Text, room: Room) -> bool {
         let chunks = text.chunks();
         let id = if chunks == 1 { 0 } else { self.text_id.checked_add(1).unwrap_or(1) };
