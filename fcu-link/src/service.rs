@@ -61,7 +61,6 @@ pub struct Service<const TX: usize> {
     owed_bytes: Option<usize>,
     /// Since when the UART has been idle with the link quiet.
     quiet_since_ms: Option<u32>,
-    now_ms: u32,
 }
 
 impl<const TX: usize> Service<TX> {
@@ -71,7 +70,7 @@ impl<const TX: usize> Service<TX> {
         let station = Station::new(cfg, defaults);
         let mut link = Link::new(link_config);
         link.set_rates(station.rates());
-        Service { link, station, source, announced: false, owed_bytes: None, quiet_since_ms: None, now_ms: 0 }
+        Service { link, station, source, announced: false, owed_bytes: None, quiet_since_ms: None }
     }
 
     /// MAVLink from boot, or text lines until a ground station speaks MAVLink (the link's
@@ -82,13 +81,11 @@ impl<const TX: usize> Service<TX> {
 
     /// The control loop's latest report.
     pub fn observe(&mut self, now_ms: u32, observed: &Observed) {
-        self.now_ms = now_ms;
         self.station.observe(&observed.status, observed.battery_mv, observed.rc_widths_counts, now_ms);
     }
 
     /// Bytes the UART received (any number, any content).
     pub fn receive(&mut self, now_ms: u32, bytes: &[u8]) {
-        self.now_ms = now_ms;
         self.link.receive(bytes, now_ms, &mut self.station);
     }
 
@@ -101,7 +98,6 @@ impl<const TX: usize> Service<TX> {
     /// telemetry schedule, the texts about dropped actions, and what the control loop is to
     /// take.
     pub fn period(&mut self, now_ms: u32) -> ToControl {
-        self.now_ms = now_ms;
         if !self.announced {
             self.announced = true;
             self.announce();
@@ -138,7 +134,6 @@ impl<const TX: usize> Service<TX> {
     /// the link must be quiet (see the module docs). The owner acts on the answer at once: a
     /// save then reports with [`Service::saved`].
     pub fn due(&mut self, now_ms: u32, uart_idle: bool, flash_supply_ok: bool) -> Due {
-        self.now_ms = now_ms;
         let mut due = self.station.due();
         if due == Due::Save && !flash_supply_ok {
             self.station.supply_low();
