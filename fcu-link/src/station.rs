@@ -232,7 +232,7 @@ impl Station {
     /// Whether the board should reset now: asked for, nothing left to save, and the control
     /// tick refuses to arm for it.
     fn reboot_due(&self) -> bool {
-        self.reboot_asked_ms.is_some() && !self.unsaved() && !self.armed() && self.held(self.ground.rebooting)
+        self.reboot_asked_ms.is_some() && !self.unsaved() && self.held(self.ground.rebooting)
     }
 
     /// The control tick shows the refusal `level` asks for (always, for the reference's
