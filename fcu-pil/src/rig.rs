@@ -152,6 +152,24 @@ impl EmulatedBoard {
         Ok(b)
     }
 
+    /// Hangs the control task: runs until its interrupt (TIM9) is the active exception, then
+    /// makes it call the image's endless loop (`DefaultHandler_`), as a stalled control task
+    /// would. For the watchdog's tests.
+    pub fn hang_control_task(&mut self) -> Result<(), Fault> {
+        let control = 16 + crate::periph::irq::TIM1_BRK_TIM9 as usize;
+        let endless = self
+            .machine
+            .image()
+            .symbol("DefaultHandler_")
+            .ok_or_else(|| Fault::Setup("no DefaultHandler_ (an endless loop) in the image".into()))?;
+        let mut t = self.machine.now();
+        while self.machine.current_exception() != control {
+            t += time_from_s(2e-6);
+            self.machine.run_until(t)?;
+        }
+        self.machine.inject_call(endless, 0)
+    }
+
     /// Whether the firmware started its control timer at boot.
     pub fn flying(&self) -> bool {
         self.t0.is_some()

@@ -71,14 +71,7 @@ fn the_watchdog_holds_in_flight_at_47_khz_and_catches_a_stall_within_95_ms_at_17
     let (mut b, _log) = hover_to(&slow, 8.0);
     let timeout_s = b.machine.board().iwdg.timeout_s().expect("watchdog not started");
     assert!((timeout_s - 0.0941).abs() < 0.0005, "{timeout_s}");
-    let control = 16 + fcu_pil::periph::irq::TIM1_BRK_TIM9 as usize;
-    let endless = b.machine.image().symbol("DefaultHandler_").expect("no DefaultHandler_ (an endless loop) in the image");
-    let mut t = b.machine.now();
-    while b.machine.current_exception() != control {
-        t += time_from_s(2e-6);
-        b.machine.run_until(t).unwrap();
-    }
-    b.machine.inject_call(endless, 0).unwrap();
+    b.hang_control_task().unwrap();
     let stalled_at = b.machine.now();
     b.machine.run_until(stalled_at + time_from_s(0.2)).unwrap();
     let (reset_at, why) = *b.machine.state().resets.first().expect("no reset after a stall at 17 kHz");

@@ -344,16 +344,7 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
 fn a_stalled_control_task_is_reset_by_the_watchdog_with_the_motors_off() {
     // 12 s: the reboot takes about 2 s (the barometer's 1 s wait), and boot lines leave the
     // UART only once `init` has ended.
-    let (log, c) = fly_and_inject("hover", 8.0, 12.0, |b| {
-        let control = 16 + fcu_pil::periph::irq::TIM1_BRK_TIM9 as usize;
-        let endless = b.machine.image().symbol("DefaultHandler_").expect("no DefaultHandler_ (an endless loop) in the image");
-        let mut t = b.machine.now();
-        while b.machine.current_exception() != control {
-            t += time_from_s(2e-6);
-            b.machine.run_until(t).unwrap();
-        }
-        b.machine.inject_call(endless, 0).unwrap();
-    });
+    let (log, c) = fly_and_inject("hover", 8.0, 12.0, |b| b.hang_control_task().unwrap());
     let resets = &c.board.machine.state().resets;
     assert!(resets.iter().any(|(_, why)| *why == "watchdog"), "no watchdog reset: {resets:?}");
     let reset_at = c.board.scenario_s(resets[0].0);
