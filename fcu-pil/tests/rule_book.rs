@@ -1397,22 +1397,7 @@ mod flash_program {
             code.push(ldr(5, 0, 0x0C));
             code.push(str_(5, 4, 0));
             code.push(0xE7FE);
-            let mut flash = vec![0u8; 0x400];
-            flash[0..4].copy_from_slice(&0x2001_0000u32.to_le_bytes());
-            flash[4..8].copy_from_slice(&0x0800_0101u32.to_le_bytes());
-            for (i, h) in code.iter().enumerate() {
-                flash[0x100 + 2 * i..0x102 + 2 * i].copy_from_slice(&h.to_le_bytes());
-            }
-            let image = Image {
-                path: "flash_read_stall".into(),
-                segments: vec![Segment { address: 0x0800_0000, data: flash }],
-                initial_sp: 0x2001_0000,
-                symbols: HashMap::new(),
-                functions: Vec::new(),
-                flash_bytes: 0x400,
-                ram_bytes: 0,
-            };
-            let m = run(image, TimingProfile::Pessimistic, MS);
+            let m = run(with_code(&code), TimingProfile::Pessimistic, MS);
             let sr = words(&m, RESULTS, 1)[0];
             assert_eq!(sr & (1 << 16) == 0, literal, "literal load {literal}: SR read {sr:#x}");
         }
@@ -1485,7 +1470,6 @@ mod flash_program {
 
     /// A program of register writes (r0 = address, r1 = value, `str r1, [r0]`), then `b .`.
     fn register_writes(writes: &[(u32, u32)]) -> Image {
-        let mut image = program([0, 0], 0);
         let mut code: Vec<u16> = Vec::new();
         for &(addr, value) in writes {
             code.extend(mov32(0, addr));
@@ -1493,6 +1477,13 @@ mod flash_program {
             code.push(str_(1, 0, 0));
         }
         code.push(0xE7FE);
+        with_code(&code)
+    }
+
+    /// An image whose reset handler is `code` (at 0x100, the rest of the flash zeroed; the
+    /// vectors as [`program`]'s).
+    fn with_code(code: &[u16]) -> Image {
+        let mut image = program([0, 0], 0);
         let flash = &mut image.segments[0].data;
         flash[0x100..].fill(0);
         for (i, h) in code.iter().enumerate() {
