@@ -127,6 +127,8 @@ pub struct AltitudeEstimator {
     average_pa: f32,
     steps_since_baro: u32,
     gated_in_a_row: u16,
+    /// The last step's `on_ground`, to see the lift-off.
+    on_ground: bool,
 }
 
 impl AltitudeEstimator {
@@ -142,6 +144,7 @@ impl AltitudeEstimator {
             average_pa: 0.0,
             steps_since_baro: 0,
             gated_in_a_row: 0,
+            on_ground: false,
         }
     }
 
@@ -170,8 +173,15 @@ impl AltitudeEstimator {
 
     /// One outer step: `accel_up_m_s2` from [`vertical_accel_m_s2`], `pressure_pa` when the
     /// barometer made a new, healthy sample since the last step, `thrust` the collective
-    /// command (0 stopped … 1 full).
-    pub fn update(&mut self, accel_up_m_s2: f32, pressure_pa: Option<f32>, thrust: f32) -> AltitudeEstimate {
+    /// command (0 stopped … 1 full), `on_ground` while the drone sits on the floor (armed before
+    /// the take-off, or landed: the supervisor's verdict).
+    ///
+    /// On the ground the floor is the height measurement (height 0, which also teaches the
+    /// accelerometer's bias), and the barometer's reading, loaded by the spinning props' wash
+    /// and ground effect, is only averaged. At lift-off (the first step off the ground) that
+    /// loaded average becomes the reference: the take-off thrust's pressure error is taken out
+    /// instead of reading as a jump.
+    pub fn update(&mut self, accel_up_m_s2: f32, pressure_pa: Option<f32>, thrust: f32, on_ground: bool) -> AltitudeEstimate {
         let dt = self.cfg.step_dt_s;
         // A non-finite acceleration (a fault the IMU's checks report) is coasted through.
         let accel = if accel_up_m_s2.is_finite() { accel_up_m_s2 - self.bias_m_s2 } else { 0.0 };
@@ -180,9 +190,19 @@ impl AltitudeEstimator {
         self.steps_since_baro = self.steps_since_baro.saturating_add(1);
 
         let thrust = if thrust.is_finite() { crate::math::limit(thrust, 0.0, 1.0) } else { 0.0 };
-        if let Some(p) = pressure_pa.filter(|p| p.is_finite() && *p > 0.0) {
-            self.correct(p - self.cfg.thrust_scale_pa * thrust, thrust);
+        let pressure = pressure_pa.filter(|p| p.is_finite() && *p > 0.0).map(|p| p - self.cfg.thrust_scale_pa * thrust);
+        let sample = pressure.and_then(|p| self.track(p).map(|dt_b| (p, dt_b)));
+        if on_ground {
+            self.apply(-self.height_m, dt);
+        } else {
+            if self.on_ground {
+                self.reference_pa = self.reference_pa.map(|_| self.average_pa);
+            }
+            if let Some((p, dt_b)) = sample {
+                self.correct(p, dt_b, thrust);
+            }
         }
+        self.on_ground = on_ground;
         if !(self.height_m.is_finite() && self.speed_m_s.is_finite() && self.bias_m_s2.is_finite()) {
             // Only a configuration of absurd numbers gets here; start again from the reference.
             self.height_m = 0.0;
@@ -192,18 +212,26 @@ impl AltitudeEstimator {
         self.estimate()
     }
 
-    fn correct(&mut self, pressure_pa: f32, thrust: f32) {
+    /// Average a new (compensated) pressure for the re-zero; the very first sets the reference.
+    /// The time since the previous sample, s, when there is a reference to correct against.
+    fn track(&mut self, pressure_pa: f32) -> Option<f32> {
         let dt_b = (self.steps_since_baro as f32 * self.cfg.step_dt_s).min(MAX_CORRECTION_DT_S);
         self.steps_since_baro = 0;
-        let Some(reference) = self.reference_pa else {
-            // The first sample: its level is the reference until a re-zero says otherwise.
+        if self.reference_pa.is_none() {
+            // Its level is the reference until a re-zero says otherwise.
             self.reference_pa = Some(pressure_pa);
             self.average_pa = pressure_pa;
-            return;
-        };
+            return None;
+        }
         let alpha = dt_b / (self.cfg.zero_average_s + dt_b);
         self.average_pa += alpha * (pressure_pa - self.average_pa);
+        Some(dt_b)
+    }
 
+    fn correct(&mut self, pressure_pa: f32, dt_b: f32, thrust: f32) {
+        let Some(reference) = self.reference_pa else {
+            return;
+        };
         let baro_height = baro_height_m(pressure_pa, reference);
         let innovation = baro_height - self.height_m;
         // NaN (a reference of absurd numbers) counts as outside.
@@ -220,7 +248,12 @@ impl AltitudeEstimator {
         let in_ground_effect = self.height_m < self.cfg.ground_effect_height_m && thrust >= self.cfg.ground_effect_min_thrust;
         let innovation =
             if in_ground_effect && innovation < 0.0 { (innovation + self.cfg.ground_effect_dead_zone_m).min(0.0) } else { innovation };
-        let e = innovation * dt_b;
+        self.apply(innovation, dt_b);
+    }
+
+    /// The filter's correction by a height innovation, m, over `dt_s`.
+    fn apply(&mut self, innovation_m: f32, dt_s: f32) {
+        let e = innovation_m * dt_s;
         let [k1, k2, k3] = self.k;
         self.height_m += k1 * e;
         self.speed_m_s += k2 * e;
@@ -259,7 +292,7 @@ mod tests {
     fn at_ground() -> AltitudeEstimator {
         let mut est = AltitudeEstimator::new(AltitudeConfig::DEFAULT);
         for _ in 0..16 {
-            est.update(0.0, Some(P0), 0.0);
+            est.update(0.0, Some(P0), 0.0, false);
         }
         assert!(est.rezero());
         est
@@ -298,7 +331,7 @@ mod tests {
         let mut est = AltitudeEstimator::new(AltitudeConfig::DEFAULT);
         assert!(!est.rezero());
         assert!(!est.estimate().referenced);
-        est.update(0.0, Some(P0), 0.0);
+        est.update(0.0, Some(P0), 0.0, false);
         assert!(est.estimate().referenced);
         assert!(est.rezero());
     }
@@ -309,7 +342,7 @@ mod tests {
         let p = pressure_at(1.0);
         let mut at_5_tau = 0.0;
         for step in 0..20 * STEPS_PER_S {
-            let e = est.update(0.0, baro_due(step).then_some(p), 0.5);
+            let e = est.update(0.0, baro_due(step).then_some(p), 0.5, false);
             if step == (7.5 * STEPS_PER_S as f32) as usize {
                 at_5_tau = e.height_m;
             }
@@ -341,7 +374,7 @@ mod tests {
             v += a * dt;
             // The datasheet's 0.75 Pa RMS: uniform ±1.3 Pa has that RMS.
             let p = baro_due(step).then(|| pressure_at(h) + noise.next(1.3));
-            let e = est.update(a + noise.next(0.05), p, 0.4);
+            let e = est.update(a + noise.next(0.05), p, 0.4, false);
             worst = worst.max((e.height_m - h).abs());
         }
         let e = est.estimate();
@@ -355,12 +388,12 @@ mod tests {
         let mut est = at_ground();
         for step in 0..STEPS_PER_S {
             let p = if step == 80 { pressure_at(10.0) } else { P0 };
-            est.update(0.0, baro_due(step).then_some(p), 0.5);
+            est.update(0.0, baro_due(step).then_some(p), 0.5, false);
         }
         assert!(est.estimate().height_m.abs() < 1e-3, "{:?}", est.estimate());
         // The same 10 m held for over a second: the estimate was wrong, it moves.
         for step in 0..2 * STEPS_PER_S {
-            est.update(0.0, baro_due(step).then_some(pressure_at(10.0)), 0.5);
+            est.update(0.0, baro_due(step).then_some(pressure_at(10.0)), 0.5, false);
         }
         assert!((est.estimate().height_m - 10.0).abs() < 0.5, "{:?}", est.estimate());
     }
@@ -371,7 +404,7 @@ mod tests {
         // The accelerometer says 0.3 m/s² up while the drone stays at the P0 level (motors
         // stopped: no ground effect either).
         for step in 0..60 * STEPS_PER_S {
-            est.update(0.3, baro_due(step).then_some(P0), 0.0);
+            est.update(0.3, baro_due(step).then_some(P0), 0.0, false);
         }
         let e = est.estimate();
         assert!((e.accel_bias_m_s2 - 0.3).abs() < 0.01, "{e:?}");
@@ -391,11 +424,11 @@ mod tests {
             let cfg = AltitudeConfig { thrust_scale_pa: scale, ground_effect_min_thrust: 2.0, ..AltitudeConfig::DEFAULT };
             let mut est = AltitudeEstimator::new(cfg);
             for step in 0..16 {
-                est.update(0.0, baro_due(step).then_some(wash(0.0)), 0.0);
+                est.update(0.0, baro_due(step).then_some(wash(0.0)), 0.0, false);
             }
             est.rezero();
             for step in 0..20 * STEPS_PER_S {
-                est.update(0.0, baro_due(step).then_some(wash(0.5)), 0.5);
+                est.update(0.0, baro_due(step).then_some(wash(0.5)), 0.5, false);
             }
             est.estimate().height_m
         };
@@ -409,7 +442,7 @@ mod tests {
         let after_2_s = |p: f32, thrust: f32| {
             let mut est = at_ground();
             for step in 0..2 * STEPS_PER_S {
-                est.update(0.0, baro_due(step).then_some(p), thrust);
+                est.update(0.0, baro_due(step).then_some(p), thrust, false);
             }
             est.estimate().height_m
         };
@@ -431,21 +464,68 @@ mod tests {
         // Above the ground-effect height the barometer counts fully again.
         let mut est = at_ground();
         for step in 0..20 * STEPS_PER_S {
-            est.update(0.0, baro_due(step).then_some(pressure_at(1.0)), 0.5);
+            est.update(0.0, baro_due(step).then_some(pressure_at(1.0)), 0.5, false);
         }
         assert!((est.estimate().height_m - 1.0).abs() < 0.01, "{:?}", est.estimate());
+    }
+
+    /// Spin-up on the floor then a climb to 1 m, with the props' wash making the barometer
+    /// read 5 Pa low (0.4 m high) from the spin-up on. Returns the worst height error after
+    /// the spin-up and the largest height seen while on the floor.
+    fn take_off(tell_on_ground: bool) -> (f32, f32) {
+        let mut est = at_ground();
+        let mut on_floor_max = 0.0f32;
+        for step in 0..2 * STEPS_PER_S {
+            let e = est.update(0.0, baro_due(step).then_some(P0 - 5.0), 0.4, tell_on_ground);
+            on_floor_max = on_floor_max.max(e.height_m.abs());
+        }
+        let (mut h, mut v, mut worst) = (0.0f32, 0.0f32, 0.0f32);
+        let dt = 1.0 / STEPS_PER_S as f32;
+        for step in 0..6 * STEPS_PER_S {
+            let a = match step / STEPS_PER_S {
+                0 => 1.0,
+                1 => -1.0,
+                _ => 0.0,
+            };
+            h += (v + 0.5 * a * dt) * dt;
+            v += a * dt;
+            let e = est.update(a, baro_due(step).then_some(pressure_at(h) - 5.0), 0.4, false);
+            worst = worst.max((e.height_m - h).abs());
+        }
+        (worst, on_floor_max)
+    }
+
+    #[test]
+    fn on_the_ground_the_floor_is_the_height_and_lift_off_takes_the_wash_out() {
+        let (told, told_on_floor) = take_off(true);
+        assert!(told_on_floor < 1e-3, "{told_on_floor}");
+        assert!(told < 0.02, "{told}");
+        // Without the hint the wash reads as a jump on the floor and stays in the height.
+        let (blind, blind_on_floor) = take_off(false);
+        assert!(blind_on_floor > 0.3 && blind > 0.3, "{blind_on_floor} {blind}");
+    }
+
+    #[test]
+    fn on_the_ground_the_accelerometer_bias_is_learned_from_the_floor() {
+        let mut est = at_ground();
+        // No barometer at all: the floor alone teaches the bias.
+        for _ in 0..60 * STEPS_PER_S {
+            est.update(0.3, None, 0.0, true);
+        }
+        let e = est.estimate();
+        assert!((e.accel_bias_m_s2 - 0.3).abs() < 0.01 && e.height_m.abs() < 0.01, "{e:?}");
     }
 
     #[test]
     fn rezero_makes_the_current_level_zero() {
         let mut est = at_ground();
         for step in 0..20 * STEPS_PER_S {
-            est.update(0.0, baro_due(step).then_some(pressure_at(2.0)), 0.0);
+            est.update(0.0, baro_due(step).then_some(pressure_at(2.0)), 0.0, false);
         }
         assert!((est.estimate().height_m - 2.0).abs() < 0.01);
         assert!(est.rezero());
         for step in 0..STEPS_PER_S {
-            est.update(0.0, baro_due(step).then_some(pressure_at(2.0)), 0.0);
+            est.update(0.0, baro_due(step).then_some(pressure_at(2.0)), 0.0, false);
         }
         let e = est.estimate();
         assert!(e.height_m.abs() < 0.01 && e.vertical_speed_m_s.abs() < 0.01, "{e:?}");
@@ -458,14 +538,14 @@ mod tests {
             [(f32::NAN, Some(P0), 0.5), (0.0, Some(f32::NAN), f32::NAN), (0.0, Some(-5.0), 2.0), (f32::INFINITY, Some(0.0), -1.0)]
         {
             for _ in 0..10 {
-                let e = est.update(a, p, u);
+                let e = est.update(a, p, u, false);
                 assert!(e.height_m.is_finite() && e.vertical_speed_m_s.is_finite() && e.accel_bias_m_s2.is_finite(), "{e:?}");
             }
         }
         // A configuration of zeros (τ = 0 gives infinite gains) still gives finite numbers.
         let mut est = AltitudeEstimator::new(AltitudeConfig { time_constant_s: 0.0, ..AltitudeConfig::DEFAULT });
         for step in 0..100 {
-            let e = est.update(1.0, baro_due(step).then_some(P0 + step as f32), 0.5);
+            let e = est.update(1.0, baro_due(step).then_some(P0 + step as f32), 0.5, false);
             assert!(e.height_m.is_finite() && e.vertical_speed_m_s.is_finite(), "{e:?}");
         }
     }
