@@ -294,7 +294,7 @@ fn run_profile(cfg: Config, cal: &Calibration, needs_armed_state: bool) -> Resul
 /// Outer steps of the altitude estimator's recording: 10 s at 160 Hz.
 const ALT_STEPS: usize = 1600;
 
-type AltitudeFn = fn(&mut AltitudeEstimator, f32, Option<f32>, f32) -> AltitudeEstimate;
+type AltitudeFn = fn(&mut AltitudeEstimator, f32, Option<f32>, f32, bool) -> AltitudeEstimate;
 type VerticalFn = fn(Quat, Vec3) -> f32;
 type BaroCheckFn = fn(&mut BaroMonitor, &[u8; baro::registers::BURST_LEN]) -> Result<Option<BaroSample>, BaroFault>;
 
@@ -343,7 +343,7 @@ fn run_altitude(cal: &Calibration) -> AltitudeStats {
             *slot = cal.instructions(c);
         }
         let pressure = checked.ok().flatten().map(|s| s.pressure_pa);
-        let (_, c) = counts(|| update(&mut est, black_box(accel_up), black_box(pressure), black_box(0.4)));
+        let (_, c) = counts(|| update(&mut est, black_box(accel_up), black_box(pressure), black_box(0.4), black_box(false)));
         // The first second sets the reference; the statistics are of the steady filter.
         if k >= 160 {
             let slot = if pressure.is_some() { with_baro.get_mut(n_with) } else { without_baro.get_mut(n_without) };
