@@ -43,8 +43,9 @@ pub struct AltitudeConfig {
     /// `1/(2π·τ)` Hz, the accelerometer above. All three poles sit at `−1/τ`.
     pub time_constant_s: f32,
     /// Prop wash: the pressure error the motors cause at full collective thrust, Pa, taken off
-    /// the reading in proportion to the thrust (a parameter, as ArduPilot's `BARO1_THST_SCALE`,
-    /// measured per airframe from a log; 0 = no compensation).
+    /// the reading in proportion to the thrust (a parameter, as ArduPilot's barometer thrust
+    /// scale, measured per airframe from a log; 0 = no compensation). Not learned: in a hold the
+    /// thrust barely changes, so the wash looks exactly like a height offset (`docs/altitude.md`).
     pub thrust_scale_pa: f32,
     /// Below this estimated height with the motors above [`Self::ground_effect_min_thrust`],
     /// the rotor wash off the floor raises the pressure under the drone, so the barometer reads

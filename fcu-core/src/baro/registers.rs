@@ -11,10 +11,10 @@
 //! The control tick is 800 Hz and the outer step, where the height estimate runs, 160 Hz
 //! ([`crate::config::Timing::outer_hz`]). The sensor's fastest rate, 75 Hz, is still below the
 //! outer step's, so every sample the part makes is used, each at most 13 ms old when the step
-//! reads it. The estimator trusts the barometer only below about 0.2 Hz (its time constant,
-//! [`crate::altitude::AltitudeConfig::time_constant_s`]); above that the accelerometer carries
-//! the height. The strongest filter, a bandwidth of ODR/20 = 3.75 Hz, is still 20 times that
-//! crossover, so its delay (about 1/(2π·3.75 Hz) = 42 ms) costs the estimate nothing, while it
+//! reads it. The estimator trusts the barometer only below about 0.1 Hz (`1/(2π·τ)` with its
+//! time constant τ = 1.5 s, [`crate::altitude::AltitudeConfig::time_constant_s`]); above that
+//! the accelerometer carries the height. The strongest filter, a bandwidth of ODR/20 = 3.75 Hz,
+//! is still 35 times that crossover, so its delay (about 1/(2π·3.75 Hz) = 42 ms) costs the estimate nothing, while it
 //! gives the datasheet's lowest noise (0.0075 hPa RMS, about 6 cm of height) and smooths the
 //! prop wash's pressure flicker before it is sampled. ODR/9 (8.3 Hz) would only add noise
 //! the estimator has to average out again.
