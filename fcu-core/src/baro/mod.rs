@@ -179,7 +179,7 @@ impl BaroMonitor {
         if let Some(accepted) = self.accepted_pa {
             let elapsed_s = self.samples_since_accepted as f32 / self.cfg.odr_hz;
             let limit_pa = self.cfg.spike_margin_pa + self.cfg.max_vertical_speed_m_s * PA_PER_M_SEA_LEVEL * elapsed_s;
-            // So that a NaN limit (a zero rate) rejects rather than accepts.
+            // So that a NaN limit (absurd numbers in the configuration) rejects rather than accepts.
             let possible = (sample.pressure_pa - accepted).abs() <= limit_pa;
             if !possible {
                 return Err(BaroFault::Spike);
