@@ -21,8 +21,11 @@ use core::sync::atomic::{compiler_fence, Ordering};
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
+use fcu_core::altitude::{self, AltitudeConfig, AltitudeEstimate, AltitudeEstimator};
+use fcu_core::baro::{self, BaroFault, BaroHealthConfig, BaroMonitor, BaroSample};
 use fcu_core::flight::{FlightController, OuterJob, TickOutput};
 use fcu_core::imu::RawImu;
+use fcu_core::math::{Quat, Vec3};
 use fcu_core::rc::PulseBatch;
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
@@ -288,6 +291,80 @@ fn run_profile(cfg: Config, cal: &Calibration, needs_armed_state: bool) -> Resul
     })
 }
 
+/// Outer steps of the altitude estimator's recording: 10 s at 160 Hz.
+const ALT_STEPS: usize = 1600;
+
+type AltitudeFn = fn(&mut AltitudeEstimator, f32, Option<f32>, f32, bool) -> AltitudeEstimate;
+type VerticalFn = fn(Quat, Vec3) -> f32;
+type BaroCheckFn = fn(&mut BaroMonitor, &[u8; baro::registers::BURST_LEN]) -> Result<Option<BaroSample>, BaroFault>;
+
+/// What the outer step will do with the LPS22HB's burst: decode it and check it.
+fn decode_and_check(monitor: &mut BaroMonitor, burst: &[u8; baro::registers::BURST_LEN]) -> Result<Option<BaroSample>, BaroFault> {
+    monitor.check(Some(baro::decode_burst(burst)))
+}
+
+/// Instructions of the altitude estimator (`fcu_core::altitude`, not yet in the outer step):
+/// one update per outer step, with a barometer sample on 75 of 160 (the LPS22HB at 75 Hz) and
+/// without on the others, and the rotation of the accelerometer to the earth's vertical. The
+/// recording: a noisy barometer (±1.3 Pa, the datasheet's 0.75 Pa RMS) over a slow climb, a
+/// slightly tilted, noisy accelerometer, hover thrust. Medians and maxima of each kind, and of
+/// decoding and checking the barometer's burst.
+struct AltitudeStats {
+    baro_check: (u32, u32),
+    with_baro: (u32, u32),
+    without_baro: (u32, u32),
+    vertical: (u32, u32),
+}
+
+fn run_altitude(cal: &Calibration) -> AltitudeStats {
+    let update: AltitudeFn = black_box(AltitudeEstimator::update);
+    let vertical: VerticalFn = black_box(altitude::vertical_accel_m_s2);
+    let check: BaroCheckFn = black_box(decode_and_check);
+    let mut monitor = BaroMonitor::new(BaroHealthConfig::DEFAULT);
+    let mut check_instr = [0u32; ALT_STEPS];
+    let mut est = AltitudeEstimator::new(AltitudeConfig::DEFAULT);
+    let mut lcg = Lcg(0x1234_5678);
+    let q = Quat::from_axis_angle(Vec3::new(0.6, 0.8, 0.0), 0.05);
+    let mut with_baro = [0u32; ALT_STEPS];
+    let mut without_baro = [0u32; ALT_STEPS];
+    let mut vertical_instr = [0u32; ALT_STEPS];
+    let (mut n_with, mut n_without) = (0usize, 0usize);
+    for (k, v_slot) in vertical_instr.iter_mut().enumerate() {
+        let accel_mg = Vec3::new(f32::from(lcg.noise(20)), f32::from(lcg.noise(20)), 1000.0 + f32::from(lcg.noise(20)));
+        let (accel_up, c) = counts(|| vertical(black_box(q), black_box(accel_mg)));
+        *v_slot = cal.instructions(c);
+        let baro_due = (k * 75) / 160 != ((k + 1) * 75) / 160;
+        // 1013.25 hPa, 0.1 m/s of climb (1.2 Pa/s), ±53 counts of noise (±1.3 Pa), 25 °C.
+        let counts_now = 4_150_272 - (k as i32 * 4096 * 12 / 1000 / 160) + i32::from(lcg.noise(53));
+        let [_, h, l, xl] = counts_now.to_be_bytes();
+        let burst = [u8::from(baro_due), xl, l, h, 0xC4, 0x09];
+        let (checked, c) = counts(|| check(&mut monitor, black_box(&burst)));
+        if let Some(slot) = check_instr.get_mut(k) {
+            *slot = cal.instructions(c);
+        }
+        let pressure = checked.ok().flatten().map(|s| s.pressure_pa);
+        let (_, c) = counts(|| update(&mut est, black_box(accel_up), black_box(pressure), black_box(0.4), black_box(false)));
+        // The first second sets the reference; the statistics are of the steady filter.
+        if k >= 160 {
+            let slot = if pressure.is_some() { with_baro.get_mut(n_with) } else { without_baro.get_mut(n_without) };
+            if let Some(slot) = slot {
+                *slot = cal.instructions(c);
+            }
+            if pressure.is_some() {
+                n_with += 1;
+            } else {
+                n_without += 1;
+            }
+        }
+    }
+    AltitudeStats {
+        baro_check: median_max(check_instr.get_mut(160..).unwrap_or(&mut [])),
+        with_baro: median_max(with_baro.get_mut(..n_with).unwrap_or(&mut [])),
+        without_baro: median_max(without_baro.get_mut(..n_without).unwrap_or(&mut [])),
+        vertical: median_max(vertical_instr.get_mut(160..).unwrap_or(&mut [])),
+    }
+}
+
 #[entry]
 fn main() -> ! {
     let code = match bench() {
@@ -349,6 +426,18 @@ fn bench() -> Result<(), &'static str> {
         FLY_START,
         s.disarmed.0,
         s.disarmed.1
+    );
+    let alt = run_altitude(&cal);
+    hprintln!(
+        "altitude estimator (fcu_core::altitude, not yet in the outer step), median / max: update with a barometer sample {} / {}, without {} / {}; vertical acceleration {} / {}; barometer burst decoded and checked {} / {}",
+        alt.with_baro.0,
+        alt.with_baro.1,
+        alt.without_baro.0,
+        alt.without_baro.1,
+        alt.vertical.0,
+        alt.vertical.1,
+        alt.baro_check.0,
+        alt.baro_check.1
     );
     if cfg!(feature = "reference") {
         return Ok(());

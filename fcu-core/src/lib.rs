@@ -49,6 +49,8 @@
 extern crate std;
 
 pub mod ahrs;
+pub mod altitude;
+pub mod baro;
 pub mod boot;
 pub mod config;
 pub mod control;

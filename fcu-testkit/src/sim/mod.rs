@@ -9,6 +9,7 @@
 //! 3. at the end of the tick the core reads the IMU words and the pulses, returns compare
 //!    values, and runs its outer step inline when one is due (as the replay does).
 
+pub mod baro_model;
 pub mod imu_model;
 pub mod loop_id;
 pub mod metrics;
