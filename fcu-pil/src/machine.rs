@@ -458,6 +458,9 @@ pub struct State<P: Peripherals> {
     pending_since: Vec<Option<Time>>,
     /// When the interrupt lines were last sampled.
     lines_sampled_at: Time,
+    /// The last exception return was charged as the start of a tail-chain: the entry that
+    /// follows pays the rest ([`Timing::tail_chain_cycles`]).
+    tail_chaining: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -504,6 +507,7 @@ impl<P: Peripherals> State<P> {
             masking: None,
             pending_since: vec![None; scs::EXCEPTIONS],
             lines_sampled_at: 0,
+            tail_chaining: false,
         })
     }
 
@@ -877,8 +881,12 @@ impl<P: Peripherals + 'static> Machine<P> {
         let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
         let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
         self.set_reg(RegisterARM::PC, vector | 1)?;
-        let extra = self.uc.get_data().timing.entry_cycles();
-        self.add_cycles(ENTRY_CYCLES + extra);
+        let tail_chain = std::mem::take(&mut self.uc.get_data_mut().tail_chaining);
+        let entry = match self.uc.get_data().timing.tail_chain_cycles() {
+            Some(cycles) if tail_chain => cycles,
+            _ => ENTRY_CYCLES + self.uc.get_data().timing.entry_cycles(),
+        };
+        self.add_cycles(entry);
         self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active && stacked, saved: false });
         self.uc.get_data_mut().timing.exception_boundary();
 
@@ -979,7 +987,15 @@ impl<P: Peripherals + 'static> Machine<P> {
         self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
         let saved = self.uc.get_data_mut().fp_frames_owed.pop().is_some_and(|f| f.saved);
         let extra = self.uc.get_data().timing.return_cycles(saved);
-        self.add_cycles(RETURN_CYCLES + extra);
+        // An exception that can preempt as the return starts is tail-chained onto it: where
+        // the profile prices that as a whole, the entry charges it.
+        let basepri = self.reg(RegisterARM::BASEPRI)?;
+        let primask = self.reg(RegisterARM::PRIMASK)? & 1 != 0;
+        let st = self.uc.get_data_mut();
+        st.tail_chaining = st.timing.tail_chain_cycles().is_some() && st.scs.takeable(basepri, primask).is_some();
+        if !st.tail_chaining {
+            self.add_cycles(RETURN_CYCLES + extra);
+        }
         self.uc.get_data_mut().timing.exception_boundary();
         let st = self.uc.get_data_mut();
         if to_thread && st.scs.sleep_on_exit() {
@@ -1222,6 +1238,7 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
     if stop_before_block(uc) {
         return;
     }
+    uc.get_data_mut().tail_chaining = false;
     if uc.get_data().masking.is_some() {
         track_masking(uc);
     }
@@ -1792,6 +1809,34 @@ mod tests {
         0xE7FE, // b .
     ];
     const IRQ_HANDLER: [u16; 2] = [0x2307, 0x4770]; // movs r3, #7; bx lr
+
+    /// IRQ0 and IRQ1 enabled and pended together: IRQ1 is tail-chained onto IRQ0's return.
+    const TWO_IRQ_PROGRAM: [u16; 12] = [
+        0xF24E, 0x1100, // movw r1, #0xE100
+        0xF2CE, 0x0100, // movt r1, #0xE000   (NVIC_ISER0)
+        0x2003, // movs r0, #3
+        0x6008, // str r0, [r1]
+        0xF24E, 0x2200, // movw r2, #0xE200
+        0xF2CE, 0x0200, // movt r2, #0xE000   (NVIC_ISPR0)
+        0x6010, // str r0, [r2]
+        0xE7FE, // b .
+    ];
+
+    /// A tail-chained entry costs the optimistic profile the Cortex-M4's 6 cycles, return and
+    /// entry together (the firmware's DMA stop counts on that minimum); the pessimistic one
+    /// a full return and entry.
+    #[test]
+    fn a_tail_chained_entry_costs_6_cycles_optimistic_and_a_return_and_entry_pessimistic() {
+        let image = || program_with(&TWO_IRQ_PROGRAM, &[(16, &IRQ_HANDLER), (17, &IRQ_HANDLER)], 0x140);
+        let m = run(image(), TimingProfile::Optimistic, 2000);
+        let (irq0, irq1) = (m.state().exception_stats[&16].spans[0], m.state().exception_stats[&17].spans[0]);
+        assert_eq!(irq1.0, irq0.1, "no return cycles before the chained entry");
+        assert_eq!(irq1.1 - irq1.0, UPC * (timing::TAIL_CHAIN_CYCLES + 2), "6 cycles, then the handler's 2 instructions");
+        let m = run(image(), TimingProfile::Pessimistic, 4000);
+        let (irq0, irq1) = (m.state().exception_stats[&16].spans[0], m.state().exception_stats[&17].spans[0]);
+        assert!(irq1.0 >= irq0.1 + UPC * RETURN_CYCLES, "a full return: {irq0:?} then {irq1:?}");
+        assert!(irq1.1 - irq1.0 >= UPC * (ENTRY_CYCLES + 2), "a full entry: {irq1:?}");
+    }
 
     #[test]
     fn the_optimistic_profile_is_the_instruction_count_clock() {

@@ -22,9 +22,10 @@
 //!   fast": the core may fold an IT instruction into its neighbour, 0 cycles; it is counted as
 //!   one, so the lower bound is off by at most one cycle per IT executed.)
 //! - exception entry 12 cycles, return 10 (Cortex-M4 TRM §5.5, zero-wait-state memory); the
-//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). (A second
-//!   caveat: an exception tail-chained onto a return costs the core 6 cycles, here a return and
-//!   an entry, 22: up to 16 cycles late per tail-chain.)
+//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). An
+//!   exception tail-chained onto a return (pending and able to preempt when the return starts)
+//!   costs the silicon minimum, 6 cycles for the return and the entry together (the TRM's
+//!   tail-chaining figure), so a handler may start as early as 6 cycles after the return began.
 //! - a memory-mapped access is time-stamped at the start of its block, the earliest instant
 //!   the block allows. Unicorn's MMIO callbacks see a stale PC (QEMU's `io_readx`/`io_writex`
 //!   do not restore the CPU state), so the accessing instruction is not known. A memory hook
@@ -170,6 +171,9 @@ impl FromStr for TimingProfile {
 pub const BRANCH_REFILL_CYCLES: u64 = 3;
 /// The lazy save (or the restore) of S0–S15 and FPSCR (AN298: 29 cycles against 12).
 pub const FP_STATE_CYCLES: u64 = 17;
+/// A tail-chain on a Cortex-M4: the return and the next entry together (TRM §3.3.1, interrupt
+/// latency: "tail-chaining … 6 cycles").
+pub const TAIL_CHAIN_CYCLES: u64 = 6;
 /// A Thumb-2 halfword whose top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit
 /// instruction.
 pub fn is_32_bit(hw1: u16) -> bool {
@@ -615,6 +619,13 @@ impl Timing {
         } else {
             0
         }
+    }
+
+    /// A return with an exception tail-chained onto it, return and entry together: the
+    /// Cortex-M4's 6 cycles under the optimistic profile; `None` under the pessimistic one,
+    /// which charges a full return and entry.
+    pub fn tail_chain_cycles(&self) -> Option<u64> {
+        (!self.pessimistic()).then_some(TAIL_CHAIN_CYCLES)
     }
 
     /// Cycles added to exception return (10) when it restores an FP state that was saved.
