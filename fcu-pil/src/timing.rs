@@ -192,44 +192,59 @@ pub enum Class {
 /// Cycles of one instruction in the pessimistic profile (a taken branch's refill is charged
 /// where the next block starts, a load's address stall by [`block_cycles`]), and its class.
 pub fn instruction_cycles(hw1: u16, hw2: u16) -> (u64, Class) {
-    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
-    let count = |bits: u32| u64::from(bits.count_ones());
-    if !is_32_bit(hw1) {
-        return match hw1 >> 12 {
-            0b0000..=0b0011 => (1, Dp),
-            0b0100 => match hw1 >> 10 {
-                0b01_0000 => (1, Dp),
-                0b01_0001 => (1, if (hw1 >> 8) & 3 == 0b11 { Other } else { Dp }),
-                // LDR (literal).
-                _ => (3, Ls),
-            },
-            0b0101..=0b1001 => (2, Ls),
-            0b1010 => (1, Dp),
-            0b1011 => {
-                if hw1 & 0xFE00 == 0xB400 || hw1 & 0xFE00 == 0xBC00 {
-                    // PUSH / POP: the list, plus LR or PC in bit 8.
-                    (1 + count(u32::from(hw1 & 0x1FF)), Ls)
-                } else if hw1 & 0xF500 == 0xB100 || hw1 & 0xFF00 == 0xBF00 || hw1 & 0xFF00 == 0xBE00 || hw1 & 0xFFE0 == 0xB660 {
-                    // CBZ/CBNZ, IT and hints, BKPT, CPS.
-                    (1, Other)
-                } else {
-                    // ADD/SUB SP, extends, reverses.
-                    (1, Dp)
-                }
-            }
-            // STMIA / LDMIA.
-            0b1100 => (1 + count(u32::from(hw1 & 0xFF)), Ls),
-            // B<c>, UDF, SVC, B.
-            _ => (1, Other),
-        };
+    if is_32_bit(hw1) {
+        wide_instruction_cycles(hw1, hw2)
+    } else {
+        narrow_instruction_cycles(hw1)
     }
+}
+
+fn register_count(bits: u16) -> u64 {
+    u64::from(bits.count_ones())
+}
+
+/// A 16-bit Thumb instruction's cycles and class.
+fn narrow_instruction_cycles(hw1: u16) -> (u64, Class) {
+    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
+    match hw1 >> 12 {
+        0b0000..=0b0011 => (1, Dp),
+        0b0100 => match hw1 >> 10 {
+            0b01_0000 => (1, Dp),
+            0b01_0001 => (1, if (hw1 >> 8) & 3 == 0b11 { Other } else { Dp }),
+            // LDR (literal).
+            _ => (3, Ls),
+        },
+        0b0101..=0b1001 => (2, Ls),
+        0b1010 => (1, Dp),
+        0b1011 => {
+            if hw1 & 0xFE00 == 0xB400 || hw1 & 0xFE00 == 0xBC00 {
+                // PUSH / POP: the list, plus LR or PC in bit 8.
+                (1 + register_count(hw1 & 0x1FF), Ls)
+            } else if hw1 & 0xF500 == 0xB100 || hw1 & 0xFF00 == 0xBF00 || hw1 & 0xFF00 == 0xBE00 || hw1 & 0xFFE0 == 0xB660 {
+                // CBZ/CBNZ, IT and hints, BKPT, CPS.
+                (1, Other)
+            } else {
+                // ADD/SUB SP, extends, reverses.
+                (1, Dp)
+            }
+        }
+        // STMIA / LDMIA.
+        0b1100 => (1 + register_count(hw1 & 0xFF), Ls),
+        // B<c>, UDF, SVC, B.
+        _ => (1, Other),
+    }
+}
+
+/// A 32-bit Thumb-2 instruction's cycles and class (its halfwords `hw1`, `hw2`).
+fn wide_instruction_cycles(hw1: u16, hw2: u16) -> (u64, Class) {
+    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
     let op1 = (hw1 >> 11) & 3;
     let op2 = (hw1 >> 4) & 0x7F;
     match op1 {
         0b01 => {
             if op2 & 0b110_0100 == 0 {
                 // LDM/STM (PUSH.W/POP.W): the register list in the second halfword.
-                (1 + count(u32::from(hw2)), Ls)
+                (1 + register_count(hw2), Ls)
             } else if op2 & 0b110_0100 == 0b000_0100 {
                 if hw1 & 0xFFF0 == 0xE8D0 && hw2 & 0xFFE0 == 0xF000 {
                     // TBB / TBH.
