@@ -13,7 +13,7 @@
 use core::sync::atomic::{fence, AtomicBool, AtomicU8, Ordering};
 use fcu_core::imu::registers::{read_address, write_address, Sensor};
 use stm32f4xx_hal::gpio::{AnyPin, Output};
-use stm32f4xx_hal::pac::{DMA1, SPI2};
+use stm32f4xx_hal::pac::{Interrupt, DMA1, NVIC, SPI2};
 
 /// Busy-wait bound for one status flag. One byte at 2.625 MHz is about 260 CPU cycles; the
 /// bound is far above that and only ends a wait on a broken bus.
@@ -38,8 +38,17 @@ const SCK_CYCLES: u32 = 84_000_000 / SPI_HZ;
 /// states.)
 const STOP_AFTER_CYCLES: u32 = SCK_CYCLES + SCK_CYCLES / 2;
 /// The same stop, timed from the DMA's transfer-complete interrupt entry (see
-/// [`SensorBus::on_dma_complete`]).
-const DMA_STOP_AFTER_ENTRY_CYCLES: u32 = SCK_CYCLES / 2;
+/// [`SensorBus::on_dma_complete`]): one SPI clock, the window's whole early side, since a
+/// tail-chained entry comes only 6 cycles after the flag.
+const DMA_STOP_AFTER_ENTRY_CYCLES: u32 = SCK_CYCLES;
+/// How long a frame clocked in receive mode may still run once SPE is cleared: the clock stops
+/// at its end, at most eight SPI clocks on (SPE cleared at its very start), plus the CR1
+/// write's way to the peripheral. BSY cannot say it: in bidirectional receive mode it stays
+/// low on silicon (RM0090 §28.3.7, the F401's SPI block).
+const FRAME_END_AFTER_STOP_CYCLES: u32 = 8 * SCK_CYCLES + SCK_CYCLES / 2;
+/// Bound on waiting for a disabled stream's EN to read 0: the transfer in flight ends within
+/// a few bus cycles; the bound only ends a wait on a broken bus.
+const STREAM_STOP_WAIT_CYCLES: u32 = 840;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
 pub enum BusError {
@@ -58,6 +67,9 @@ pub struct SensorBus {
     dma: DMA1,
     /// The burst in flight, until taken.
     burst: Option<Burst>,
+    /// The cycle count when SPE was last cleared in receive mode: the line is the sensor's
+    /// until the frame in flight then has ended ([`FRAME_END_AFTER_STOP_CYCLES`]).
+    rx_stopped_at: u32,
 }
 
 /// Bytes of the one burst read in flight: the IMU's accel + gyro block.
@@ -113,7 +125,7 @@ impl SensorBus {
     /// transmitting), DMA1 with its clock on, and the three chip-select outputs, which must
     /// already be high.
     pub fn new(spi: SPI2, cs: [AnyPin<Output>; 3], dma: DMA1) -> Self {
-        SensorBus { spi, cs, dma, burst: None }
+        SensorBus { spi, cs, dma, burst: None, rx_stopped_at: crate::cycles::now() }
     }
 
     fn cs_index(sensor: Sensor) -> usize {
@@ -207,7 +219,7 @@ impl SensorBus {
         }
         crate::cycles::wait_since(last_byte_started, STOP_AFTER_CYCLES);
         // Clearing SPE now stops the clock at the end of the byte in flight: the last one.
-        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.stop_rx_clock();
         if result.is_ok() {
             result = self.wait(|spi| spi.sr().read().rxne().bit_is_set());
             *last = self.spi.dr().read().dr().bits() as u8;
@@ -215,12 +227,39 @@ impl SensorBus {
         result
     }
 
+    /// Clears SPE in receive mode: the clock stops at the end of the frame in flight.
+    fn stop_rx_clock(&mut self) {
+        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.rx_stopped_at = crate::cycles::now();
+    }
+
+    /// The line back to MCU output once the last received frame has ended: timed from the
+    /// stop on the cycle counter, as BSY stays low in bidirectional receive mode. Long past
+    /// when the last byte was read; a turn mid-byte would drive the line while the clock
+    /// still runs.
     fn back_to_tx(&mut self) -> Result<(), BusError> {
-        let idle = self.wait(|spi| spi.sr().read().bsy().bit_is_clear());
+        if self.spi.cr1().read().spe().bit_is_set() && self.spi.cr1().read().bidioe().bit_is_clear() {
+            self.stop_rx_clock();
+        }
+        crate::cycles::wait_since(self.rx_stopped_at, FRAME_END_AFTER_STOP_CYCLES);
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr1().modify(|_, w| w.bidioe().set_bit());
         self.spi.cr1().modify(|_, w| w.spe().set_bit());
-        idle
+        Ok(())
+    }
+
+    /// Disables the receive stream and waits for EN to read 0: a stream stops only once the
+    /// transfer in flight has finished (RM0368 §9.3.17, "Stream configuration procedure", step
+    /// 1), and until then its registers ignore writes. The transfer-complete flag that the
+    /// stop raises is cleared, and its interrupt unpended, so no completion path runs for a
+    /// stream stopped here.
+    fn stop_stream(&mut self) -> Result<(), BusError> {
+        let stream = self.dma.st(RX_STREAM);
+        stream.cr().modify(|_, w| w.en().clear_bit());
+        let stopped = crate::cycles::poll(STREAM_STOP_WAIT_CYCLES, || stream.cr().read().en().bit_is_clear().then_some(()));
+        self.clear_stream_flags();
+        NVIC::unpend(Interrupt::DMA1_STREAM3);
+        stopped.ok_or(BusError::Timeout)
     }
 
     /// Starts a burst read of [`BURST_BYTES`] from `addr`, in two steps so that no lock is
@@ -239,12 +278,11 @@ impl SensorBus {
             // having let go when it was deselected.
             self.back_to_tx()?;
         }
-        // ST's stream configuration procedure (RM0368 §9.3.18): stream off, its flags
-        // cleared, addresses, count, then the configuration and EN. SPI2 asks for nothing
-        // until RXDMAEN.
+        // ST's stream configuration procedure (RM0368 §9.3.17): stream off and EN read back
+        // as 0, its flags cleared, addresses, count, then the configuration. EN is set once
+        // SPI2's RXDMAEN is (RM0368 §20.3.9), in `receive_burst`.
+        self.stop_stream()?;
         let stream = self.dma.st(RX_STREAM);
-        stream.cr().write(|w| w.en().clear_bit());
-        self.clear_stream_flags();
         let dr = self.spi.dr().as_ptr() as u32;
         let memory = BURST_DMA.as_ptr() as u32;
         // SAFETY: the stream reads SPI2's data register and writes BURST_DMA, a static of
@@ -255,11 +293,9 @@ impl SensorBus {
         }
         stream.ndtr().write(|w| w.ndt().set((BURST_BYTES - 1) as u16));
         stream.cr().write(|w| w.chsel().set(0).dir().peripheral_to_memory().minc().set_bit().tcie().set_bit().pl().high());
-        stream.cr().modify(|_, w| w.en().set_bit());
         self.select(sensor, true);
         if let Err(e) = self.send(read_address(addr)) {
             self.select(sensor, false);
-            self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().clear_bit());
             return Err(e);
         }
         self.burst = Some(Burst { sensor, stage: Stage::Address });
@@ -283,7 +319,9 @@ impl SensorBus {
         let _status = self.spi.sr().read().bits();
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
         self.spi.cr1().modify(|_, w| w.bidioe().clear_bit());
+        // RM0368 §20.3.9 (SPI communication using DMA): RXDMAEN, then the stream's EN, then SPE.
         self.spi.cr2().modify(|_, w| w.rxdmaen().set_bit());
+        self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().set_bit());
         // Setting SPE in 1-line receive mode starts the clock.
         self.spi.cr1().modify(|_, w| w.spe().set_bit());
         Ok(())
@@ -296,15 +334,19 @@ impl SensorBus {
     pub fn on_dma_complete(&mut self) {
         let seen = crate::cycles::now();
         self.dma.lifcr().write(|w| w.ctcif3().clear().chtif3().clear());
-        let Some(burst) = self.burst.as_mut().filter(|b| b.stage == Stage::Streaming) else {
+        // A stream that stopped with bytes still to move was disabled, not completed (a stop
+        // on the error path raises TCIF too): no completion then.
+        let completed = self.dma.st(RX_STREAM).ndtr().read().ndt().bits() == 0;
+        let Some(burst) = self.burst.as_mut().filter(|b| b.stage == Stage::Streaming && completed) else {
             return;
         };
         // The window opens one SCK period (32 cycles) after the last RXNE the DMA served:
-        // this entry comes at least 12 cycles after the transfer-complete flag, which follows
-        // the DMA's read of that byte, and half a period more makes sure. The window closes
-        // 256 cycles after that RXNE: nothing more is waited for here.
+        // this entry comes at least 6 cycles (tail-chained) after the transfer-complete flag,
+        // which follows the DMA's read of that byte, and a whole period more makes sure. The
+        // window closes 256 cycles after that RXNE: nothing more is waited for here.
         crate::cycles::wait_since(seen, DMA_STOP_AFTER_ENTRY_CYCLES);
         self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        self.rx_stopped_at = crate::cycles::now();
         self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
         burst.stage = Stage::LastByte;
         LAST_BYTE_STARTED.store(true, Ordering::Release);
@@ -329,13 +371,23 @@ impl SensorBus {
         self.dma.lifcr().write(|w| w.cfeif3().clear().cdmeif3().clear().cteif3().clear().chtif3().clear().ctcif3().clear());
     }
 
-    /// Stops a burst that did not finish: stream off, clock off, sensor deselected, bus back
-    /// to transmit.
+    /// Stops a burst that did not finish: stream off (EN read back as 0), clock off, the last
+    /// frame awaited, sensor deselected, bus back to transmit.
     pub fn abandon_burst(&mut self) {
-        self.dma.st(RX_STREAM).cr().modify(|_, w| w.en().clear_bit());
-        self.clear_stream_flags();
-        self.spi.cr1().modify(|_, w| w.spe().clear_bit());
+        let _stopped = self.stop_stream();
+        let receiving = self.spi.cr1().read().bidioe().bit_is_clear();
+        if receiving {
+            self.stop_rx_clock();
+        }
         self.spi.cr2().modify(|_, w| w.rxdmaen().clear_bit());
+        if receiving {
+            // The frame in flight still clocks to its end: its RXNE (after the stale byte is
+            // dropped) says it is over. Bounded: a frame stopped in its first clock never
+            // comes.
+            let _stale = self.spi.dr().read().bits();
+            let spi = &self.spi;
+            let _last = crate::cycles::poll(FRAME_END_AFTER_STOP_CYCLES, || spi.sr().read().rxne().bit_is_set().then_some(()));
+        }
         if let Some(b) = self.burst.take() {
             self.select(b.sensor, false);
         }

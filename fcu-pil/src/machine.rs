@@ -458,6 +458,9 @@ pub struct State<P: Peripherals> {
     pending_since: Vec<Option<Time>>,
     /// When the interrupt lines were last sampled.
     lines_sampled_at: Time,
+    /// The last exception return was charged as the start of a tail-chain: the entry that
+    /// follows pays the rest ([`Timing::tail_chain_cycles`]).
+    tail_chaining: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -504,6 +507,7 @@ impl<P: Peripherals> State<P> {
             masking: None,
             pending_since: vec![None; scs::EXCEPTIONS],
             lines_sampled_at: 0,
+            tail_chaining: false,
         })
     }
 
@@ -809,6 +813,28 @@ impl<P: Peripherals + 'static> Machine<P> {
             });
         }
         let fp_active = control & 4 != 0;
+        let xpsr = self.reg(RegisterARM::XPSR)?;
+        let (frame_sp, bytes) = self.exception_frame(return_pc, xpsr, fp_active)?;
+        let stacked = frame_sp >= SRAM_BASE && frame_sp.wrapping_add(bytes.len() as u32) <= SRAM_BASE + SRAM_SIZE;
+        // A push that faults is abandoned (ARMv7-M B1.5.6, PushStack): which of its words
+        // reached RAM is not specified; none do here.
+        if stacked {
+            self.uc.mem_write(u64::from(frame_sp), &bytes).map_err(emu)?;
+        }
+        self.set_reg(RegisterARM::SP, frame_sp)?;
+        let exc = if stacked { exc } else { self.stacking_fault(exc, frame_sp, return_pc, now) };
+        self.branch_to_handler(exc, xpsr, control)?;
+        self.charge_entry();
+        self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active && stacked, saved: false });
+        self.uc.get_data_mut().timing.exception_boundary();
+        self.uc.get_data_mut().record_entry(exc, now, fp_active && stacked);
+        Ok(())
+    }
+
+    /// The frame an entry pushes, with where it goes: R0–R3, R12, LR, the return address and
+    /// xPSR, then with an active FP context S0–S15, FPSCR and a reserved word; 8-byte aligned
+    /// (STKALIGN), the stacked xPSR's bit 9 saying whether a word of padding was added.
+    fn exception_frame(&mut self, return_pc: u32, xpsr: u32, fp_active: bool) -> Result<(u32, Vec<u8>), Fault> {
         let mut regs = [0u32; 8];
         for (slot, r) in
             regs.iter_mut().zip([RegisterARM::R0, RegisterARM::R1, RegisterARM::R2, RegisterARM::R3, RegisterARM::R12, RegisterARM::LR])
@@ -816,7 +842,6 @@ impl<P: Peripherals + 'static> Machine<P> {
             *slot = self.reg(r)?;
         }
         regs[6] = return_pc & !1;
-        let xpsr = self.reg(RegisterARM::XPSR)?;
         let sp = self.reg(RegisterARM::SP)?;
         let frame_bytes: u32 = if fp_active { 0x68 } else { 0x20 };
         let mut frame_sp = sp.wrapping_sub(frame_bytes);
@@ -837,35 +862,32 @@ impl<P: Peripherals + 'static> Machine<P> {
             words.push(self.reg(RegisterARM::FPSCR)?);
             words.push(0);
         }
-        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        let stacked = frame_sp >= SRAM_BASE && frame_sp.wrapping_add(bytes.len() as u32) <= SRAM_BASE + SRAM_SIZE;
-        // A push that faults is abandoned (ARMv7-M B1.5.6, PushStack): which of its words
-        // reached RAM is not specified; none do here.
-        if stacked {
-            self.uc.mem_write(u64::from(frame_sp), &bytes).map_err(emu)?;
-        }
-        self.set_reg(RegisterARM::SP, frame_sp)?;
-        let exc = if stacked {
+        Ok((frame_sp, words.iter().flat_map(|w| w.to_le_bytes()).collect()))
+    }
+
+    /// A frame that did not fit in RAM: STKERR, and the exception whose handler runs instead
+    /// (HardFault, unless HardFault or NMI itself is being entered; see
+    /// [`Machine::enter_exception`]).
+    fn stacking_fault(&mut self, exc: usize, frame_sp: u32, return_pc: u32, now: Time) -> usize {
+        let st = self.uc.get_data_mut();
+        let cause = format!(
+            "BusFault on stacking (STKERR) entering exception {exc}: its frame at {frame_sp:#010x} is outside RAM (stack overflow)"
+        );
+        st.hard_faults.push(HardFaultEvent { at: now, pc: return_pc, cause });
+        if exc == scs::HARD_FAULT || exc == NMI {
+            st.scs.cfsr |= CFSR_STKERR;
             exc
         } else {
-            let st = self.uc.get_data_mut();
-            let cause = format!(
-                "BusFault on stacking (STKERR) entering exception {exc}: its frame at {frame_sp:#010x} is outside RAM (stack overflow)"
-            );
-            if exc == scs::HARD_FAULT || exc == 2 {
-                st.scs.cfsr |= CFSR_STKERR;
-                st.hard_faults.push(HardFaultEvent { at: now, pc: return_pc, cause });
-                exc
-            } else {
-                st.scs.record_forced_fault(CFSR_STKERR);
-                st.hard_faults.push(HardFaultEvent { at: now, pc: return_pc, cause });
-                scs::HARD_FAULT
-            }
-        };
+            st.scs.record_forced_fault(CFSR_STKERR);
+            scs::HARD_FAULT
+        }
+    }
 
+    /// LR to EXC_RETURN, CONTROL.FPCA cleared, IPSR to `exc`, and the PC to its vector.
+    fn branch_to_handler(&mut self, exc: usize, xpsr: u32, control: u32) -> Result<(), Fault> {
         let in_handler = xpsr & 0x1FF != 0;
         let mut exc_return: u32 = if in_handler { 0xFFFF_FFF1 } else { 0xFFFF_FFF9 };
-        if fp_active {
+        if control & 4 != 0 {
             exc_return &= !0x10;
         }
         self.set_reg(RegisterARM::LR, exc_return)?;
@@ -876,34 +898,18 @@ impl<P: Peripherals + 'static> Machine<P> {
         let vtor = self.uc.get_data().scs.vtor;
         let v = self.read_memory(vtor + 4 * exc as u32, 4)?;
         let vector = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
-        self.set_reg(RegisterARM::PC, vector | 1)?;
-        let extra = self.uc.get_data().timing.entry_cycles();
-        self.add_cycles(ENTRY_CYCLES + extra);
-        self.uc.get_data_mut().fp_frames_owed.push(LazyFp { owed: fp_active && stacked, saved: false });
-        self.uc.get_data_mut().timing.exception_boundary();
+        self.set_reg(RegisterARM::PC, vector | 1)
+    }
 
-        let st = self.uc.get_data_mut();
-        st.scs.activate(exc);
-        st.exc_stack.push(exc);
-        st.current_exception = exc;
-        if let Some(c) = st.exc_instructions.get_mut(exc) {
-            *c = 0;
-        }
-        if let Some(t) = st.exc_entered_at.get_mut(exc) {
-            *t = now;
-        }
-        st.exception_stats.entry(exc).or_default().entries += 1;
-        st.fp_frames += u64::from(fp_active && stacked);
-        st.sleeping = false;
-        if st.masking.is_some() {
-            if let (Some(since), Some(stats)) = (st.pending_since.get_mut(exc).and_then(Option::take), st.exception_stats.get_mut(&exc)) {
-                let wait = now - since;
-                if stats.longest_pending.is_none_or(|(w, _)| w < wait) {
-                    stats.longest_pending = Some((wait, now));
-                }
-            }
-        }
-        Ok(())
+    /// The entry's cycles: the rest of a tail-chain where the profile prices one as a whole,
+    /// else a full entry.
+    fn charge_entry(&mut self) {
+        let tail_chain = std::mem::take(&mut self.uc.get_data_mut().tail_chaining);
+        let entry = match self.uc.get_data().timing.tail_chain_cycles() {
+            Some(cycles) if tail_chain => cycles,
+            _ => ENTRY_CYCLES + self.uc.get_data().timing.entry_cycles(),
+        };
+        self.add_cycles(entry);
     }
 
     /// Exception return (ARMv7-M B1.5.8).
@@ -924,23 +930,34 @@ impl<P: Peripherals + 'static> Machine<P> {
         }
         let xpsr = self.reg(RegisterARM::XPSR)?;
         let exc = (xpsr & 0x1FF) as usize;
-        {
-            let st = self.uc.get_data_mut();
-            if !st.scs.deactivate(exc) {
-                return Err(bad(self));
-            }
-            let instructions = st.exc_instructions.get(exc).copied().unwrap_or(0);
-            let entered = st.exc_entered_at.get(exc).copied().unwrap_or(0);
-            let stats = st.exception_stats.entry(exc).or_default();
-            // Keep the last 100 000 activations: enough for every statistic over a flight.
-            if stats.instructions.len() < 100_000 {
-                stats.instructions.push(instructions);
-                stats.spans.push((entered, now));
-            }
-            st.exc_stack.pop();
-            st.current_exception = st.exc_stack.last().copied().unwrap_or(0);
+        if !self.uc.get_data_mut().record_return(exc, now) {
+            return Err(bad(self));
         }
         let fp_frame = exc_return & 0x10 == 0;
+        let (ret_pc, stacked_xpsr) = self.pop_frame(fp_frame, pc, now)?;
+        let to_thread = exc_return & 8 != 0;
+        let stacked_exc = stacked_xpsr & 0x1FF;
+        if to_thread != (stacked_exc == 0) {
+            return Err(bad(self));
+        }
+        let control = self.reg(RegisterARM::CONTROL)?;
+        self.set_reg(RegisterARM::CONTROL, if fp_frame { control | 4 } else { control & !4 })?;
+        self.set_reg(RegisterARM::XPSR_NZCVQG, stacked_xpsr & !(1 << 9))?;
+        self.rebuild_flags()?;
+        let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
+        self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
+        self.charge_return()?;
+        self.uc.get_data_mut().timing.exception_boundary();
+        let st = self.uc.get_data_mut();
+        if to_thread && st.scs.sleep_on_exit() {
+            st.sleeping = true;
+        }
+        Ok(())
+    }
+
+    /// Unstacks the frame at SP (extended with `fp_frame`) into the registers and moves SP
+    /// past it and its padding: the return address and the stacked xPSR.
+    fn pop_frame(&mut self, fp_frame: bool, pc: u32, now: Time) -> Result<(u32, u32), Fault> {
         let sp = self.reg(RegisterARM::SP)?;
         let frame_bytes: u32 = if fp_frame { 0x68 } else { 0x20 };
         if sp < SRAM_BASE || sp.wrapping_add(frame_bytes) > SRAM_BASE + SRAM_SIZE {
@@ -953,7 +970,6 @@ impl<P: Peripherals + 'static> Machine<P> {
         {
             self.set_reg(r, word(i))?;
         }
-        let ret_pc = word(6);
         let stacked_xpsr = word(7);
         if fp_frame {
             for i in 0..16 {
@@ -966,24 +982,20 @@ impl<P: Peripherals + 'static> Machine<P> {
             new_sp += 4;
         }
         self.set_reg(RegisterARM::SP, new_sp)?;
-        let to_thread = exc_return & 8 != 0;
-        let stacked_exc = stacked_xpsr & 0x1FF;
-        if to_thread != (stacked_exc == 0) {
-            return Err(bad(self));
-        }
-        let control = self.reg(RegisterARM::CONTROL)?;
-        self.set_reg(RegisterARM::CONTROL, if fp_frame { control | 4 } else { control & !4 })?;
-        self.set_reg(RegisterARM::XPSR_NZCVQG, stacked_xpsr & !(1 << 9))?;
-        self.rebuild_flags()?;
-        let thumb = if stacked_xpsr & (1 << 24) != 0 { 1 } else { 0 };
-        self.set_reg(RegisterARM::PC, (ret_pc & !1) | thumb)?;
+        Ok((word(6), stacked_xpsr))
+    }
+
+    /// The return's cycles, unless an exception that can preempt as it starts is tail-chained
+    /// onto it and the profile prices that as a whole (the entry then charges it).
+    fn charge_return(&mut self) -> Result<(), Fault> {
         let saved = self.uc.get_data_mut().fp_frames_owed.pop().is_some_and(|f| f.saved);
         let extra = self.uc.get_data().timing.return_cycles(saved);
-        self.add_cycles(RETURN_CYCLES + extra);
-        self.uc.get_data_mut().timing.exception_boundary();
+        let basepri = self.reg(RegisterARM::BASEPRI)?;
+        let primask = self.reg(RegisterARM::PRIMASK)? & 1 != 0;
         let st = self.uc.get_data_mut();
-        if to_thread && st.scs.sleep_on_exit() {
-            st.sleeping = true;
+        st.tail_chaining = st.timing.tail_chain_cycles().is_some() && st.scs.takeable(basepri, primask).is_some();
+        if !st.tail_chaining {
+            self.add_cycles(RETURN_CYCLES + extra);
         }
         Ok(())
     }
@@ -1206,27 +1218,69 @@ impl<P: Peripherals + 'static> Machine<P> {
 /// block twice whenever an event fell inside it, and never let a block run that is longer than
 /// the spacing of the events.
 fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size: u32) {
-    if uc.get_data().flash_watch {
-        if uc.get_data().flash_dirty {
-            if let Err(e) = sync_flash(uc) {
-                fail(uc, e);
-                return;
-            }
-        }
-        if stall_on_flash(uc, address as u32) {
-            return;
-        }
-        let st = uc.get_data_mut();
-        st.flash_watch = st.board.flash_busy_until().is_some();
+    if uc.get_data().flash_watch && stalled_by_flash(uc, address as u32) {
+        return;
     }
     if stop_before_block(uc) {
         return;
     }
+    uc.get_data_mut().tail_chaining = false;
     if uc.get_data().masking.is_some() {
         track_masking(uc);
     }
-    let st = uc.get_data_mut();
     let addr = address as u32;
+    let (kind, n, body) = charge_block(uc.get_data_mut(), addr, size);
+    match kind {
+        BlockKind::Plain => {}
+        BlockKind::IdleSpin => {
+            skip_idle_spin(uc.get_data_mut(), addr, size, (n, body));
+            let _ = uc.emu_stop();
+        }
+        BlockKind::CycleCountWait { addr: reg_addr, start, limit } => {
+            let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
+            let (a, s0, l) = (reg(uc, reg_addr), reg(uc, start), reg(uc, limit));
+            if a == scs::DWT_BASE + scs::reg::DWT_CYCCNT {
+                skip_cycle_count_wait(uc.get_data_mut(), addr, size, (n, body), (s0, l));
+            }
+        }
+        BlockKind::Countdown(reg) => {
+            // `subs rN, #1; bne`: rN laps of two instructions. Run all but the last at once
+            // (no further than the deadline), exactly as executing them would: the register
+            // ends one above zero and the block's own execution finishes the countdown.
+            let r = RegisterARM::R0 as i32 + i32::from(reg);
+            let laps_left = uc.reg_read(r).unwrap_or(0);
+            let skip = skip_countdown(uc.get_data_mut(), addr, size, (n, body), laps_left);
+            if skip > 0 {
+                let _ = uc.reg_write(r, laps_left - skip);
+            }
+        }
+    }
+    let st = uc.get_data_mut();
+    st.block_started_at = st.now - body * st.units_per_cycle;
+}
+
+/// While a flash operation may run: the flash copy brought up to date, and whether the block
+/// at `addr` stalls on it (the emulation then stops before it). Stops watching once the
+/// flash is idle.
+fn stalled_by_flash<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, addr: u32) -> bool {
+    if uc.get_data().flash_dirty {
+        if let Err(e) = sync_flash(uc) {
+            fail(uc, e);
+            return true;
+        }
+    }
+    if stall_on_flash(uc, addr) {
+        return true;
+    }
+    let st = uc.get_data_mut();
+    st.flash_watch = st.board.flash_busy_until().is_some();
+    false
+}
+
+/// Charges the block at `addr` (its start's refill and literal loads, a lazy FP save it
+/// triggers, its instructions) to the clock and to the measured region: its kind and its
+/// instructions and its body's cycles.
+fn charge_block<P: Peripherals>(st: &mut State<P>, addr: u32, size: u32) -> (BlockKind, u64, u64) {
     let info = st.code.block(addr, size);
     let (n, kind) = (info.instructions, info.kind);
     let body = st.timing.body_cycles(n, info.cycles);
@@ -1250,66 +1304,61 @@ fn block_hook<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>, address: u64, size
             *time += (entry + body) * upc;
         }
     }
-    match kind {
-        BlockKind::Plain => {}
-        BlockKind::IdleSpin => {
-            // `b .`: spin until the deadline without translating every lap.
-            if st.deadline > st.now {
-                let lap = st.timing.steady_lap_cycles(addr, size, body) * upc;
-                let laps = (st.deadline - st.now).div_ceil(lap);
-                st.now += laps * lap;
-                st.idle_time += laps * lap;
-                st.instructions += laps * n;
-            }
-            st.stop = Some(Stop::Deadline);
-            let _ = uc.emu_stop();
-        }
-        BlockKind::CycleCountWait { addr: reg_addr, start, limit } => {
-            // The lap that exits is the first whose CYCCNT read satisfies the test; every lap
-            // before it only re-reads the counter. Skip to that lap (no further than the
-            // deadline); the block then runs it.
-            let reg = |uc: &Unicorn<'_, State<P>>, r: u8| uc.reg_read(RegisterARM::R0 as i32 + i32::from(r)).unwrap_or(0) as u32;
-            let (a, s0, l) = (reg(uc, reg_addr), reg(uc, start), reg(uc, limit));
-            let st = uc.get_data_mut();
-            if a == scs::DWT_BASE + scs::reg::DWT_CYCCNT && st.scs.cyccnt_running() {
-                // The read is the block's first instruction: at its start under the optimistic
-                // profile, at its end under the pessimistic (as `access_time` stamps it).
-                let read_at = match st.timing.profile {
-                    TimingProfile::Optimistic => st.now - body * upc,
-                    TimingProfile::Pessimistic => st.now,
-                };
-                let elapsed = st.scs.cyccnt(read_at).wrapping_sub(s0);
-                if elapsed < l {
-                    let lap = st.timing.steady_lap_cycles(addr, size, body);
-                    let laps = u64::from(l - elapsed).div_ceil(lap);
-                    let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
-                    let skip = laps.min(affordable);
-                    st.now += skip * lap * upc;
-                    st.instructions += skip * n;
-                    st.attribute(skip * n);
-                }
-            }
-        }
-        BlockKind::Countdown(reg) => {
-            // `subs rN, #1; bne`: rN laps of two instructions. Run all but the last at once
-            // (no further than the deadline), exactly as executing them would: the register
-            // ends one above zero and the block's own execution finishes the countdown.
-            let r = RegisterARM::R0 as i32 + i32::from(reg);
-            let laps_left = uc.reg_read(r).unwrap_or(0);
-            let st = uc.get_data_mut();
-            let lap = st.timing.steady_lap_cycles(addr, size, body);
-            let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
-            let skip = laps_left.saturating_sub(1).min(affordable);
-            if skip > 0 {
-                st.now += skip * lap * upc;
-                st.instructions += skip * n;
-                st.attribute(skip * n);
-                let _ = uc.reg_write(r, laps_left - skip);
-            }
-        }
+    (kind, n, body)
+}
+
+/// `b .`: spins until the deadline without translating every lap; the emulation stops there.
+fn skip_idle_spin<P: Peripherals>(st: &mut State<P>, addr: u32, size: u32, (n, body): (u64, u64)) {
+    let upc = st.units_per_cycle;
+    if st.deadline > st.now {
+        let lap = st.timing.steady_lap_cycles(addr, size, body) * upc;
+        let laps = (st.deadline - st.now).div_ceil(lap);
+        st.now += laps * lap;
+        st.idle_time += laps * lap;
+        st.instructions += laps * n;
     }
-    let st = uc.get_data_mut();
-    st.block_started_at = st.now - body * st.units_per_cycle;
+    st.stop = Some(Stop::Deadline);
+}
+
+/// A wait on the cycle counter (`(start, limit)` in its registers): the lap that exits is the
+/// first whose CYCCNT read satisfies the test, and every lap before it only re-reads the
+/// counter. Skips to that lap (no further than the deadline); the block then runs it.
+fn skip_cycle_count_wait<P: Peripherals>(st: &mut State<P>, addr: u32, size: u32, (n, body): (u64, u64), (start, limit): (u32, u32)) {
+    if !st.scs.cyccnt_running() {
+        return;
+    }
+    let upc = st.units_per_cycle;
+    // The read is the block's first instruction: at its start under the optimistic profile,
+    // at its end under the pessimistic (as `access_time` stamps it).
+    let read_at = match st.timing.profile {
+        TimingProfile::Optimistic => st.now - body * upc,
+        TimingProfile::Pessimistic => st.now,
+    };
+    let elapsed = st.scs.cyccnt(read_at).wrapping_sub(start);
+    if elapsed < limit {
+        let lap = st.timing.steady_lap_cycles(addr, size, body);
+        let laps = u64::from(limit - elapsed).div_ceil(lap);
+        let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
+        let skip = laps.min(affordable);
+        st.now += skip * lap * upc;
+        st.instructions += skip * n;
+        st.attribute(skip * n);
+    }
+}
+
+/// A countdown loop with `laps_left` laps: all but the last charged at once (no further than
+/// the deadline). Returns how many laps were skipped.
+fn skip_countdown<P: Peripherals>(st: &mut State<P>, addr: u32, size: u32, (n, body): (u64, u64), laps_left: u64) -> u64 {
+    let upc = st.units_per_cycle;
+    let lap = st.timing.steady_lap_cycles(addr, size, body);
+    let affordable = st.deadline.saturating_sub(st.now) / (lap * upc);
+    let skip = laps_left.saturating_sub(1).min(affordable);
+    if skip > 0 {
+        st.now += skip * lap * upc;
+        st.instructions += skip * n;
+        st.attribute(skip * n);
+    }
+    skip
 }
 
 /// At the start of a block, before it is charged, and at exception entry: whether PRIMASK or
@@ -1325,6 +1374,52 @@ fn track_masking<P: Peripherals>(uc: &mut Unicorn<'_, State<P>>) {
 }
 
 impl<P: Peripherals> State<P> {
+    /// An entry into `exc` at `now` (its handler about to run): the active and current
+    /// exception, the statistics, and how long it waited when masking is measured.
+    fn record_entry(&mut self, exc: usize, now: Time, fp_frame: bool) {
+        let st = self;
+        st.scs.activate(exc);
+        st.exc_stack.push(exc);
+        st.current_exception = exc;
+        if let Some(c) = st.exc_instructions.get_mut(exc) {
+            *c = 0;
+        }
+        if let Some(t) = st.exc_entered_at.get_mut(exc) {
+            *t = now;
+        }
+        st.exception_stats.entry(exc).or_default().entries += 1;
+        st.fp_frames += u64::from(fp_frame);
+        st.sleeping = false;
+        if st.masking.is_some() {
+            if let (Some(since), Some(stats)) = (st.pending_since.get_mut(exc).and_then(Option::take), st.exception_stats.get_mut(&exc)) {
+                let wait = now - since;
+                if stats.longest_pending.is_none_or(|(w, _)| w < wait) {
+                    stats.longest_pending = Some((wait, now));
+                }
+            }
+        }
+    }
+
+    /// The return from `exc` at `now`: no longer active (false if it was not: a bad return),
+    /// its activation in the statistics, the current exception the one it preempted.
+    fn record_return(&mut self, exc: usize, now: Time) -> bool {
+        let st = self;
+        if !st.scs.deactivate(exc) {
+            return false;
+        }
+        let instructions = st.exc_instructions.get(exc).copied().unwrap_or(0);
+        let entered = st.exc_entered_at.get(exc).copied().unwrap_or(0);
+        let stats = st.exception_stats.entry(exc).or_default();
+        // Keep the last 100 000 activations: enough for every statistic over a flight.
+        if stats.instructions.len() < 100_000 {
+            stats.instructions.push(instructions);
+            stats.spans.push((entered, now));
+        }
+        st.exc_stack.pop();
+        st.current_exception = st.exc_stack.last().copied().unwrap_or(0);
+        true
+    }
+
     /// Opens or closes the masked interval with the masks as they are now (see
     /// [`track_masking`]).
     fn observe_masks(&mut self, primask: bool, basepri: u32) {
@@ -1792,6 +1887,34 @@ mod tests {
         0xE7FE, // b .
     ];
     const IRQ_HANDLER: [u16; 2] = [0x2307, 0x4770]; // movs r3, #7; bx lr
+
+    /// IRQ0 and IRQ1 enabled and pended together: IRQ1 is tail-chained onto IRQ0's return.
+    const TWO_IRQ_PROGRAM: [u16; 12] = [
+        0xF24E, 0x1100, // movw r1, #0xE100
+        0xF2CE, 0x0100, // movt r1, #0xE000   (NVIC_ISER0)
+        0x2003, // movs r0, #3
+        0x6008, // str r0, [r1]
+        0xF24E, 0x2200, // movw r2, #0xE200
+        0xF2CE, 0x0200, // movt r2, #0xE000   (NVIC_ISPR0)
+        0x6010, // str r0, [r2]
+        0xE7FE, // b .
+    ];
+
+    /// A tail-chained entry costs the optimistic profile the Cortex-M4's 6 cycles, return and
+    /// entry together (the firmware's DMA stop counts on that minimum); the pessimistic one
+    /// a full return and entry.
+    #[test]
+    fn a_tail_chained_entry_costs_6_cycles_optimistic_and_a_return_and_entry_pessimistic() {
+        let image = || program_with(&TWO_IRQ_PROGRAM, &[(16, &IRQ_HANDLER), (17, &IRQ_HANDLER)], 0x140);
+        let m = run(image(), TimingProfile::Optimistic, 2000);
+        let (irq0, irq1) = (m.state().exception_stats[&16].spans[0], m.state().exception_stats[&17].spans[0]);
+        assert_eq!(irq1.0, irq0.1, "no return cycles before the chained entry");
+        assert_eq!(irq1.1 - irq1.0, UPC * (timing::TAIL_CHAIN_CYCLES + 2), "6 cycles, then the handler's 2 instructions");
+        let m = run(image(), TimingProfile::Pessimistic, 4000);
+        let (irq0, irq1) = (m.state().exception_stats[&16].spans[0], m.state().exception_stats[&17].spans[0]);
+        assert!(irq1.0 >= irq0.1 + UPC * RETURN_CYCLES, "a full return: {irq0:?} then {irq1:?}");
+        assert!(irq1.1 - irq1.0 >= UPC * (ENTRY_CYCLES + 2), "a full entry: {irq1:?}");
+    }
 
     #[test]
     fn the_optimistic_profile_is_the_instruction_count_clock() {

@@ -56,6 +56,10 @@ struct ServeArgs {
     /// Emulated seconds to serve after boot (default one hour).
     #[arg(long, default_value_t = 3600.0)]
     duration: f64,
+    /// The LSI's frequency in Hz, 17000 to 47000 (DS9716's range; default its nominal 32000):
+    /// the independent watchdog's timeout scales with it.
+    #[arg(long, value_name = "17000..=47000", value_parser = fcu_pil::serve::parse_lsi_hz)]
+    lsi_hz: Option<u64>,
     #[arg(long)]
     /// The firmware ELF (default: FCU_PIL_ELF, else the `mavlink` build, built now; an image
     /// without the link is refused).
@@ -232,7 +236,7 @@ fn measure_cmd(a: &MeasureArgs) -> Result<ExitCode, String> {
 }
 
 fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
-    let setup = a.timing.setup()?;
+    let setup = rig::BoardSetup { lsi_hz: a.lsi_hz, ..a.timing.setup()? };
     // Every argument is checked before the firmware is built (a build takes minutes).
     if let Some(name) = &a.scenario {
         fcu_testkit::cli::fly::prepare_scenario(name, None, None).map_err(|e| e.0)?;

@@ -150,23 +150,89 @@ pub fn measure(
     let st = m.state();
     let board = m.board();
     let t0 = board.records.tick_timer_starts.first().copied().unwrap_or(0);
-
     let control = st.exception_stats.get(&CONTROL_EXCEPTION).cloned().unwrap_or_default();
-    let mut instr: Vec<u64> = control.instructions.clone();
-    instr.sort_unstable();
-    let control_instructions_median = instr.get(instr.len() / 2).copied().unwrap_or(0);
-    let control_instructions_max = instr.last().copied().unwrap_or(0);
-    let mut durations: Vec<f64> = control.spans.iter().map(|&(entered, returned)| us(returned - entered)).collect();
-    let control_duration_us_max = durations.iter().copied().fold(0.0, f64::max);
-    let control_duration_us_median = median(&mut durations);
+    let c = ControlFigures::of(&control, &board.records.ccr_writes, t0);
+    let capture = CaptureFigures::of(&board.records.capture_reads, &control.spans, &st.exception_stats, m.image());
 
-    // The TIM9 update that started each control interrupt: the last update at or before its
-    // entry (updates come every 1.25 ms from the timer's start).
+    let flown = m.now().saturating_sub(t0);
+    let share_pct = |t: Time| 100.0 * time_to_s(t) / time_to_s(flown).max(1e-9);
+    let masking = st.masking.clone().unwrap_or_default();
+    let masked = masking.longest;
+    Ok(Report {
+        scenario: scenario.name.clone(),
+        timing,
+        emulated_s: flight.emulated_s,
+        wall_s: flight.wall_s,
+        control_interrupts: control.instructions.len(),
+        control_instructions_median: c.instructions_median,
+        control_instructions_max: c.instructions_max,
+        control_duration_us_median: c.duration_us_median,
+        control_duration_us_max: c.duration_us_max,
+        tick_to_last_ccr_us_median: c.tick_to_last_ccr_us_median,
+        tick_to_last_ccr_us_max: c.tick_to_last_ccr_us_max,
+        // Idle time after boot: the boot's busy waits count as busy.
+        cpu_load_pct: 100.0 - share_pct(st.idle_time.min(flown)),
+        link_cpu_pct: st.region.as_ref().map(|&(_, t)| share_pct(t)),
+        stack_used_bytes: m.stack_high_water().map_or(0, |low| m.stack_top - low),
+        stack_size_bytes: m.stack_top - SRAM_BASE,
+        capture_latency_us_median: capture.median_us,
+        capture_latency_us_max: capture.max_us,
+        capture_latency_during_control_us_max: capture.during_control_max_us,
+        capture_latency_worst_in: capture.worst_in,
+        masked_us_max: masked.map_or(0.0, |i| us(i.to - i.from)),
+        masked_from_pc: masked.map(|i| i.pc),
+        masked_from_function: masked.and_then(|i| m.image().function_at(i.pc)),
+        masked_intervals: masking.intervals,
+        masked_pct: share_pct(masking.total),
+        capture_pending_us_max: st
+            .exception_stats
+            .get(&CAPTURE_EXCEPTION)
+            .and_then(|s| s.longest_pending)
+            .map_or(0.0, |(wait, _)| us(wait)),
+        flash_bytes: m.image().flash_bytes,
+        ram_bytes: m.image().ram_bytes,
+        exception_entries: st.exception_stats.values().map(|e| e.entries).sum(),
+        fp_frames: st.fp_frames,
+    })
+}
+
+/// The control interrupt's own figures over a flight.
+struct ControlFigures {
+    instructions_median: u64,
+    instructions_max: u64,
+    duration_us_median: f64,
+    duration_us_max: f64,
+    tick_to_last_ccr_us_median: f64,
+    tick_to_last_ccr_us_max: f64,
+}
+
+impl ControlFigures {
+    /// From its activations, the TIM4 compare writes `(instant, channel, value)` and the
+    /// tick timer's start `t0`.
+    fn of(control: &crate::machine::ExceptionStats, ccr_writes: &[(Time, usize, u32)], t0: Time) -> ControlFigures {
+        let mut instr: Vec<u64> = control.instructions.clone();
+        instr.sort_unstable();
+        let mut durations: Vec<f64> = control.spans.iter().map(|&(entered, returned)| us(returned - entered)).collect();
+        let mut latencies = tick_to_last_ccr_us(&control.spans, ccr_writes, t0);
+        ControlFigures {
+            instructions_median: instr.get(instr.len() / 2).copied().unwrap_or(0),
+            instructions_max: instr.last().copied().unwrap_or(0),
+            duration_us_max: durations.iter().copied().fold(0.0, f64::max),
+            duration_us_median: median(&mut durations),
+            tick_to_last_ccr_us_max: latencies.iter().copied().fold(0.0, f64::max),
+            tick_to_last_ccr_us_median: median(&mut latencies),
+        }
+    }
+}
+
+/// Per control interrupt that wrote a compare, µs from the TIM9 update that started it (the
+/// last update at or before its entry: they come every 1.25 ms from the timer's start `t0`)
+/// to its last TIM4 compare write.
+fn tick_to_last_ccr_us(spans: &[(Time, Time)], writes: &[(Time, usize, u32)], t0: Time) -> Vec<f64> {
     let period = periph::time_from_s(1.0 / rig::TICK_HZ);
     let mut latencies = Vec::new();
-    let writes = &board.records.ccr_writes;
     let mut w = 0;
-    for &(entered, returned) in &control.spans {
+    for &(entered, returned) in spans {
         let update = t0 + (entered.saturating_sub(t0) / period) * period;
         while w < writes.len() && writes[w].0 < entered {
             w += 1;
@@ -180,76 +246,41 @@ pub fn measure(
             latencies.push(us(last - update));
         }
     }
-    let tick_to_last_ccr_us_max = latencies.iter().copied().fold(0.0, f64::max);
-    let tick_to_last_ccr_us_median = median(&mut latencies);
+    latencies
+}
 
-    let flown = m.now().saturating_sub(t0);
-    // Idle time after boot: the boot's busy waits count as busy.
-    let cpu_load_pct = 100.0 * (1.0 - time_to_s(st.idle_time.min(flown)) / time_to_s(flown).max(1e-9));
+/// The radio capture's latency, from each TIM2 capture to its register read.
+struct CaptureFigures {
+    median_us: f64,
+    max_us: f64,
+    /// The longest of those that landed while the control interrupt ran.
+    during_control_max_us: f64,
+    /// What ran when the longest one was captured.
+    worst_in: String,
+}
 
-    let link_cpu_pct = st.region.as_ref().map(|&(_, t)| 100.0 * time_to_s(t) / time_to_s(flown).max(1e-9));
-
-    let stack_size_bytes = m.stack_top - SRAM_BASE;
-    let stack_used_bytes = m.stack_high_water().map_or(0, |low| m.stack_top - low);
-
-    let mut lat: Vec<f64> = board.records.capture_reads.iter().map(|&(c, r)| us(r - c)).collect();
-    let capture_latency_us_max = lat.iter().copied().fold(0.0, f64::max);
-    let capture_latency_us_median = median(&mut lat);
-    let during: f64 = board
-        .records
-        .capture_reads
-        .iter()
-        .filter(|&&(c, _)| {
-            // Spans are in time order: the last one starting at or before the capture.
-            let i = control.spans.partition_point(|&(a, _)| a <= c);
-            i > 0 && c <= control.spans[i - 1].1
-        })
-        .map(|&(c, r)| us(r - c))
-        .fold(0.0, f64::max);
-
-    let capture_latency_worst_in = board
-        .records
-        .capture_reads
-        .iter()
-        .max_by_key(|&&(c, r)| r - c)
-        .map_or_else(String::new, |&(c, _)| running_at(&st.exception_stats, c, m.image()));
-
-    let masking = st.masking.clone().unwrap_or_default();
-    let masked = masking.longest;
-    let capture_pending_us_max =
-        st.exception_stats.get(&CAPTURE_EXCEPTION).and_then(|s| s.longest_pending).map_or(0.0, |(wait, _)| us(wait));
-
-    Ok(Report {
-        scenario: scenario.name.clone(),
-        timing,
-        emulated_s: flight.emulated_s,
-        wall_s: flight.wall_s,
-        control_interrupts: control.instructions.len(),
-        control_instructions_median,
-        control_instructions_max,
-        control_duration_us_median,
-        control_duration_us_max,
-        tick_to_last_ccr_us_median,
-        tick_to_last_ccr_us_max,
-        cpu_load_pct,
-        link_cpu_pct,
-        stack_used_bytes,
-        stack_size_bytes,
-        capture_latency_us_median,
-        capture_latency_us_max,
-        capture_latency_during_control_us_max: during,
-        capture_latency_worst_in,
-        masked_us_max: masked.map_or(0.0, |i| us(i.to - i.from)),
-        masked_from_pc: masked.map(|i| i.pc),
-        masked_from_function: masked.and_then(|i| m.image().function_at(i.pc)),
-        masked_intervals: masking.intervals,
-        masked_pct: 100.0 * time_to_s(masking.total) / time_to_s(flown).max(1e-9),
-        capture_pending_us_max,
-        flash_bytes: m.image().flash_bytes,
-        ram_bytes: m.image().ram_bytes,
-        exception_entries: st.exception_stats.values().map(|e| e.entries).sum(),
-        fp_frames: st.fp_frames,
-    })
+impl CaptureFigures {
+    /// From the (capture, read) instants, the control interrupt's activations (in time order)
+    /// and every exception's.
+    fn of(
+        reads: &[(Time, Time)],
+        control_spans: &[(Time, Time)],
+        stats: &std::collections::HashMap<usize, crate::machine::ExceptionStats>,
+        image: &crate::elf::Image,
+    ) -> CaptureFigures {
+        let mut lat: Vec<f64> = reads.iter().map(|&(c, r)| us(r - c)).collect();
+        let during_control_max_us = reads
+            .iter()
+            .filter(|&&(c, _)| {
+                // Spans are in time order: the last one starting at or before the capture.
+                let i = control_spans.partition_point(|&(a, _)| a <= c);
+                i > 0 && c <= control_spans[i - 1].1
+            })
+            .map(|&(c, r)| us(r - c))
+            .fold(0.0, f64::max);
+        let worst_in = reads.iter().max_by_key(|&&(c, r)| r - c).map_or_else(String::new, |&(c, _)| running_at(stats, c, image));
+        CaptureFigures { max_us: lat.iter().copied().fold(0.0, f64::max), median_us: median(&mut lat), during_control_max_us, worst_in }
+    }
 }
 
 /// The control interrupt's latency targets on the board, which the image must meet under

@@ -117,6 +117,20 @@ fn flash_with_config(mut flash: Vec<u8>, cfg: &fcu_core::Config) -> Result<Vec<u
     Ok(flash)
 }
 
+/// `--lsi-hz`: the LSI's frequency in Hz, within DS9716's 17–47 kHz (the chip's spread over
+/// parts, supply and temperature; the watchdog's timeout follows it). A value outside is
+/// refused with the range.
+pub fn parse_lsi_hz(text: &str) -> Result<u64, String> {
+    use crate::periph::iwdg::{LSI_MAX_HZ, LSI_MIN_HZ};
+    let range = format!("the LSI runs at {LSI_MIN_HZ} to {LSI_MAX_HZ} Hz (DS9716)");
+    let hz: u64 = text.trim().parse().map_err(|_| format!("--lsi-hz {text}: not a frequency in Hz; {range}"))?;
+    if (LSI_MIN_HZ..=LSI_MAX_HZ).contains(&hz) {
+        Ok(hz)
+    } else {
+        Err(format!("--lsi-hz {text}: outside {LSI_MIN_HZ}..={LSI_MAX_HZ}; {range}"))
+    }
+}
+
 /// of flash operation, the fraction of it at which the power fails, and which one.
 pub fn parse_power_cut(text: &str) -> Result<ArmedCut, String> {
     let bad = || format!("--power-cut {text}: expected erase|program:FRACTION[@N], e.g. erase:3/8 or program:0.5@2");
@@ -409,6 +423,16 @@ pub fn serve_until(listener: TcpListener, opts: &ServeOptions, stop: Arc<AtomicB
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_lsi_frequency_outside_17_to_47_khz_is_refused_with_the_range() {
+        assert_eq!(parse_lsi_hz("17000"), Ok(17_000));
+        assert_eq!(parse_lsi_hz("47000"), Ok(47_000));
+        for bad in ["16999", "47001", "0", "32k", "-1"] {
+            let err = parse_lsi_hz(bad).unwrap_err();
+            assert!(err.contains(&format!("--lsi-hz {bad}")) && err.contains("17000") && err.contains("47000"), "{err}");
+        }
+    }
 
     #[test]
     fn a_parameter_file_becomes_the_only_saved_set() {

@@ -22,9 +22,10 @@
 //!   fast": the core may fold an IT instruction into its neighbour, 0 cycles; it is counted as
 //!   one, so the lower bound is off by at most one cycle per IT executed.)
 //! - exception entry 12 cycles, return 10 (Cortex-M4 TRM §5.5, zero-wait-state memory); the
-//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). (A second
-//!   caveat: an exception tail-chained onto a return costs the core 6 cycles, here a return and
-//!   an entry, 22: up to 16 cycles late per tail-chain.)
+//!   extended FP frame costs nothing more (lazy stacking deferred the FP registers). An
+//!   exception tail-chained onto a return (pending and able to preempt when the return starts)
+//!   costs the silicon minimum, 6 cycles for the return and the entry together (the TRM's
+//!   tail-chaining figure), so a handler may start as early as 6 cycles after the return began.
 //! - a memory-mapped access is time-stamped at the start of its block, the earliest instant
 //!   the block allows. Unicorn's MMIO callbacks see a stale PC (QEMU's `io_readx`/`io_writex`
 //!   do not restore the CPU state), so the accessing instruction is not known. A memory hook
@@ -170,6 +171,9 @@ impl FromStr for TimingProfile {
 pub const BRANCH_REFILL_CYCLES: u64 = 3;
 /// The lazy save (or the restore) of S0–S15 and FPSCR (AN298: 29 cycles against 12).
 pub const FP_STATE_CYCLES: u64 = 17;
+/// A tail-chain on a Cortex-M4: the return and the next entry together (TRM §3.3.1, interrupt
+/// latency: "tail-chaining … 6 cycles").
+pub const TAIL_CHAIN_CYCLES: u64 = 6;
 /// A Thumb-2 halfword whose top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit
 /// instruction.
 pub fn is_32_bit(hw1: u16) -> bool {
@@ -188,44 +192,59 @@ pub enum Class {
 /// Cycles of one instruction in the pessimistic profile (a taken branch's refill is charged
 /// where the next block starts, a load's address stall by [`block_cycles`]), and its class.
 pub fn instruction_cycles(hw1: u16, hw2: u16) -> (u64, Class) {
-    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
-    let count = |bits: u32| u64::from(bits.count_ones());
-    if !is_32_bit(hw1) {
-        return match hw1 >> 12 {
-            0b0000..=0b0011 => (1, Dp),
-            0b0100 => match hw1 >> 10 {
-                0b01_0000 => (1, Dp),
-                0b01_0001 => (1, if (hw1 >> 8) & 3 == 0b11 { Other } else { Dp }),
-                // LDR (literal).
-                _ => (3, Ls),
-            },
-            0b0101..=0b1001 => (2, Ls),
-            0b1010 => (1, Dp),
-            0b1011 => {
-                if hw1 & 0xFE00 == 0xB400 || hw1 & 0xFE00 == 0xBC00 {
-                    // PUSH / POP: the list, plus LR or PC in bit 8.
-                    (1 + count(u32::from(hw1 & 0x1FF)), Ls)
-                } else if hw1 & 0xF500 == 0xB100 || hw1 & 0xFF00 == 0xBF00 || hw1 & 0xFF00 == 0xBE00 || hw1 & 0xFFE0 == 0xB660 {
-                    // CBZ/CBNZ, IT and hints, BKPT, CPS.
-                    (1, Other)
-                } else {
-                    // ADD/SUB SP, extends, reverses.
-                    (1, Dp)
-                }
-            }
-            // STMIA / LDMIA.
-            0b1100 => (1 + count(u32::from(hw1 & 0xFF)), Ls),
-            // B<c>, UDF, SVC, B.
-            _ => (1, Other),
-        };
+    if is_32_bit(hw1) {
+        wide_instruction_cycles(hw1, hw2)
+    } else {
+        narrow_instruction_cycles(hw1)
     }
+}
+
+fn register_count(bits: u16) -> u64 {
+    u64::from(bits.count_ones())
+}
+
+/// A 16-bit Thumb instruction's cycles and class.
+fn narrow_instruction_cycles(hw1: u16) -> (u64, Class) {
+    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
+    match hw1 >> 12 {
+        0b0000..=0b0011 => (1, Dp),
+        0b0100 => match hw1 >> 10 {
+            0b01_0000 => (1, Dp),
+            0b01_0001 => (1, if (hw1 >> 8) & 3 == 0b11 { Other } else { Dp }),
+            // LDR (literal).
+            _ => (3, Ls),
+        },
+        0b0101..=0b1001 => (2, Ls),
+        0b1010 => (1, Dp),
+        0b1011 => {
+            if hw1 & 0xFE00 == 0xB400 || hw1 & 0xFE00 == 0xBC00 {
+                // PUSH / POP: the list, plus LR or PC in bit 8.
+                (1 + register_count(hw1 & 0x1FF), Ls)
+            } else if hw1 & 0xF500 == 0xB100 || hw1 & 0xFF00 == 0xBF00 || hw1 & 0xFF00 == 0xBE00 || hw1 & 0xFFE0 == 0xB660 {
+                // CBZ/CBNZ, IT and hints, BKPT, CPS.
+                (1, Other)
+            } else {
+                // ADD/SUB SP, extends, reverses.
+                (1, Dp)
+            }
+        }
+        // STMIA / LDMIA.
+        0b1100 => (1 + register_count(hw1 & 0xFF), Ls),
+        // B<c>, UDF, SVC, B.
+        _ => (1, Other),
+    }
+}
+
+/// A 32-bit Thumb-2 instruction's cycles and class (its halfwords `hw1`, `hw2`).
+fn wide_instruction_cycles(hw1: u16, hw2: u16) -> (u64, Class) {
+    use Class::{DataProcessing as Dp, LoadStore as Ls, Other};
     let op1 = (hw1 >> 11) & 3;
     let op2 = (hw1 >> 4) & 0x7F;
     match op1 {
         0b01 => {
             if op2 & 0b110_0100 == 0 {
                 // LDM/STM (PUSH.W/POP.W): the register list in the second halfword.
-                (1 + count(u32::from(hw2)), Ls)
+                (1 + register_count(hw2), Ls)
             } else if op2 & 0b110_0100 == 0b000_0100 {
                 if hw1 & 0xFFF0 == 0xE8D0 && hw2 & 0xFFE0 == 0xF000 {
                     // TBB / TBH.
@@ -615,6 +634,13 @@ impl Timing {
         } else {
             0
         }
+    }
+
+    /// A return with an exception tail-chained onto it, return and entry together: the
+    /// Cortex-M4's 6 cycles under the optimistic profile; `None` under the pessimistic one,
+    /// which charges a full return and entry.
+    pub fn tail_chain_cycles(&self) -> Option<u64> {
+        (!self.pessimistic()).then_some(TAIL_CHAIN_CYCLES)
     }
 
     /// Cycles added to exception return (10) when it restores an FP state that was saved.

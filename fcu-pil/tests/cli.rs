@@ -33,3 +33,12 @@ fn an_unknown_scenario_is_named() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("loop-the-loop"), "{err}");
 }
+
+#[test]
+fn an_lsi_frequency_outside_its_range_is_refused_before_serving() {
+    for bad in ["16999", "47001"] {
+        let (code, err) = fcu_pil(&["serve", "--link", "tcp:127.0.0.1:0", "--lsi-hz", bad, "--elf", "/nonexistent"]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(&format!("--lsi-hz {bad}")) && err.contains("17000") && err.contains("47000"), "{err}");
+    }
+}

@@ -545,11 +545,104 @@ fn the_sensor_bus_is_clean_on_the_image() {
     // and the end of the last byte), at both ends.
     assert_eq!(spi.early_stops(), 0, "SPE cleared within one SCK of the second-to-last RXNE: the last byte never came");
     assert_eq!(spi.cut_frames(), 0, "SPE cleared after the last byte: an extra byte clocked as the chip select rose");
+    assert_eq!(spi.mid_frame_turns(), 0, "the line turned back to transmit while a received byte was still clocked");
+    assert_eq!(spi.dma_order_errors(), 0, "RXDMAEN set after the DMA stream was enabled (RM0368 §20.3.9)");
+    let board = b.machine.board();
+    assert_eq!(board.dma1.ignored_writes(), 0, "DMA stream configuration written while EN still read 1");
+    assert_eq!(dma_entries(&b), board.dma1.completions(3), "DMA1 stream 3 interrupts that were not a completed burst");
     let bus_errors: Vec<u32> = b.statuses.iter().map(|(_, s)| s.bus_errors).collect();
     assert!(!bus_errors.is_empty() && bus_errors.iter().all(|&n| n == 0), "sensor reads that failed, by status line: {bus_errors:?}");
     let sensors = spi.sensors();
     assert_eq!(sensors.unexpected_writes(), 0, "writes to read-only or reserved sensor registers");
     assert!(sensors.lsm6dsl.reads() >= 4000, "the control task read the IMU {} times in 6 s", sensors.lsm6dsl.reads());
+}
+
+/// Entries into the DMA1 stream 3 interrupt (the IMU burst's transfer complete).
+fn dma_entries(b: &EmulatedBoard) -> u32 {
+    let exc = 16 + fcu_pil::periph::irq::DMA1_STREAM3 as usize;
+    b.machine.state().exception_stats.get(&exc).map_or(0, |s| s.entries as u32)
+}
+
+/// A flight whose DMA1 stream 3 is starved (its SPI2_RX requests held back, as a stream the
+/// arbiter never grants) in short windows: each burst started in one never completes, the
+/// receive clock runs on, and the control task abandons it.
+struct Starving {
+    board: EmulatedBoard,
+    windows_s: Vec<(f64, f64)>,
+}
+
+impl FlightComputer for Starving {
+    fn tick_hz(&self) -> f64 {
+        self.board.tick_hz()
+    }
+    fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: RawImu, battery_v: f64) -> Result<[u16; 4], SimError> {
+        let starved = self.windows_s.iter().any(|&(from, to)| (from..to).contains(&t_end_s));
+        self.board.machine.board_mut().dma1.set_starved(3, starved);
+        self.board.step(t_end_s, edges, imu, battery_v)
+    }
+    fn view(&self) -> ComputerView {
+        self.board.view()
+    }
+}
+
+/// What the abandoned bursts left on the bus and the DMA.
+struct AbandonedBursts {
+    mid_frame_turns: u32,
+    contentions: u32,
+    dma_entries: u32,
+    completions: u32,
+    ignored_writes: u32,
+    flying_after: bool,
+    imu_reads_after: u64,
+}
+
+/// Hover, with DMA1 stream 3 starved for a millisecond (one burst at most, fewer than the
+/// misses that latch the IMU fault) every half second from 7 s to 10 s; flown once for the
+/// tests below.
+fn abandoned_bursts() -> &'static AbandonedBursts {
+    static FLIGHT: OnceLock<AbandonedBursts> = OnceLock::new();
+    FLIGHT.get_or_init(|| {
+        let sc = scenario("hover");
+        let opts = RunOptions { seed: 1, duration_s: Some(11.0), ..RunOptions::default() };
+        let windows_s = (0..7).map(|k| 7.0 + 0.5 * f64::from(k)).map(|t| (t, t + 0.001)).collect();
+        let mut c = Starving { board: boot(&BoardSetup::default()), windows_s };
+        let log = sim::run_with(&mut c, &sc, Profile::Default, &opts).unwrap_or_else(|e| panic!("{e}"));
+        let b = &c.board;
+        let spi = &b.machine.board().spi2;
+        let flying_after = log.rows.iter().filter(|r| r.t_s > 10.0).all(|r| r.armed && r.motors.iter().all(|&m| m > 0));
+        AbandonedBursts {
+            mid_frame_turns: spi.mid_frame_turns(),
+            contentions: spi.contentions(),
+            dma_entries: dma_entries(b),
+            completions: b.machine.board().dma1.completions(3),
+            ignored_writes: b.machine.board().dma1.ignored_writes(),
+            flying_after,
+            imu_reads_after: spi.sensors().lsm6dsl.reads(),
+        }
+    })
+}
+
+/// SPI2 BSY stays low in bidirectional receive mode (RM0090 §28.3.7): an abandoned burst's
+/// clock is stopped and its last frame awaited (on the cycle counter) before the line turns
+/// back to transmit, never mid-byte, and the sensor is never driven against.
+#[test]
+fn an_abandoned_burst_turns_the_line_back_only_after_its_last_frame() {
+    let f = abandoned_bursts();
+    assert_eq!(f.mid_frame_turns, 0, "the line turned back to transmit while a received byte was still clocked");
+    assert_eq!(f.contentions, 0, "MCU and sensor drove the data line together");
+    assert!(f.flying_after, "the drone did not fly on after the abandoned bursts");
+    assert!(f.imu_reads_after >= 4000, "the IMU was read {} times", f.imu_reads_after);
+}
+
+/// Disabling the burst's stream on the error path raises TCIF: the firmware waits for EN to
+/// read 0, clears it and unpends the interrupt, so every DMA1 stream 3 interrupt is a
+/// completed burst; and no configuration is written while EN still reads 1 (RM0368 §9.3.17).
+#[test]
+fn an_abandoned_burst_raises_no_dma_interrupt_and_reconfigures_a_stopped_stream() {
+    let f = abandoned_bursts();
+    assert!(f.completions > 4000, "{} completed bursts", f.completions);
+    assert_eq!(f.dma_entries, f.completions, "DMA1 stream 3 interrupts that were not a completed burst");
+    assert_eq!(f.ignored_writes, 0, "DMA stream configuration written while EN still read 1");
 }
 
 /// The independent watchdog's timeout as the image programs it (nominal 32 kHz LSI), and the

@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 use fcu_pil::elf::Image;
 use fcu_pil::firmware;
 use fcu_pil::periph::flash::FlashTiming;
+use fcu_pil::periph::iwdg::{LSI_MAX_HZ, LSI_MIN_HZ};
 use fcu_pil::periph::{Time, TIME_HZ};
 use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
 use mavlink::dialects::common::{MavCmd, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_SET_DATA};
@@ -29,8 +30,13 @@ const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
 /// The board with the link, booted at `timing` on `flash` (blank if `None`), its UART left
 /// unparsed (it speaks MAVLink).
 fn boot(flash: Option<Vec<u8>>, timing: FlashTiming) -> EmulatedBoard {
+    boot_with_lsi(flash, timing, None)
+}
+
+/// [`boot`] with the LSI at `lsi_hz` (`None`: its nominal 32 kHz).
+fn boot_with_lsi(flash: Option<Vec<u8>>, timing: FlashTiming, lsi_hz: Option<u64>) -> EmulatedBoard {
     let image = Image::load(link_elf()).unwrap_or_else(|e| panic!("{e}"));
-    let setup = BoardSetup { flash_contents: flash, ..BoardSetup::default() };
+    let setup = BoardSetup { flash_contents: flash, lsi_hz, ..BoardSetup::default() };
     let mut b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap_or_else(|e| panic!("boot: {e}"));
     assert!(b.flying(), "{}", b.boot_stall());
     b.raw_uart = true;
@@ -295,4 +301,26 @@ fn an_erase_that_ends_between_a_burst_start_and_its_tick_costs_no_imu_sample() {
     b.run_to(t + 0.1).unwrap();
     assert_eq!(b.machine.board().flash.erases()[0].1, end);
     assert_eq!(failed_bursts(&b), failed_before, "IMU bursts failed around the erase's end");
+}
+
+/// The watchdog over a save at both ends of the LSI's range (DS9716: 17–47 kHz, as `cargo pil
+/// serve --lsi-hz` sets it): a save that erases, at the maximum flash times, with the
+/// watchdog's timeout at its shortest (47 kHz) and longest (17 kHz), saves and never resets the
+/// board.
+#[test]
+fn a_save_over_the_link_at_an_lsi_of_17_and_47_khz_resets_nothing() {
+    for hz in [LSI_MIN_HZ, LSI_MAX_HZ] {
+        let mut b = boot_with_lsi(Some(flash_needing_an_erase()), FlashTiming::Maximum, Some(hz));
+        b.run_to(0.5).unwrap();
+        save(&mut b, 63.0);
+        save(&mut b, 64.0);
+        let t = b.scenario_s(b.machine.now());
+        b.run_to(t + 0.2).unwrap();
+        let resets = &b.machine.state().resets;
+        assert!(resets.is_empty(), "LSI {hz} Hz: the board was reset: {resets:?}");
+        assert!(b.machine.board().flash.erases().len() == 1, "LSI {hz} Hz: the first save did not erase");
+        let (cfg, _) = saved_set(&b);
+        let index = fcu_core::parameters::index_of(b"RATE_PIT_P").unwrap();
+        assert_eq!(fcu_core::parameters::value(&cfg, index), Some(64.0), "LSI {hz} Hz");
+    }
 }

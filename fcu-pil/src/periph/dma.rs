@@ -13,7 +13,7 @@
 //! Behaviour (RM0368 §9.3 and §9.5):
 //! - a stream's configuration (SxCR but EN, SxNDTR, SxPAR, SxM0AR, SxFCR) can be written only
 //!   while EN = 0; a write while it is 1 is ignored (counted in [`Dma::ignored_writes`]);
-//! - before EN is set, the stream's event flags must have been cleared (RM0368 §9.3.18 "Stream
+//! - before EN is set, the stream's event flags must have been cleared (RM0368 §9.3.17 "Stream
 //!   configuration procedure", step 9 and the SxCR EN description): setting EN with a flag still
 //!   up is refused here (the RM does not say what the stream then does);
 //! - each request from the peripheral moves one data item; SxNDTR counts down; HTIF at the
@@ -24,7 +24,16 @@
 //!   whatever the CPU does (a flash erase stalls the CPU, not the DMA: RM0368 §3.5, the AHB bus
 //!   matrix gives the DMA its own path to SRAM);
 //! - EN cleared by software during a transfer stops the stream and sets TCIF (SxCR EN: "when
-//!   cleared by software … the transfer complete flag is set").
+//!   cleared by software … the transfer complete flag is set"), but not at once: the stream
+//!   finishes the transfer in flight first, and EN reads 1 until then (RM0368 §9.3.17, step 1:
+//!   "writing this bit to 0 is not immediately effective since it is actually written to 0
+//!   once all the current transfers have finished"; read EN back before configuring). The
+//!   model takes one transfer ([`STOP_LATENCY_HCLK_CYCLES`]) for every stop, as if a request
+//!   were always in flight: configuration writes meanwhile are ignored as on the part, and the
+//!   TCIF comes after them, so a flag cleared right after the EN write is up again.
+//!
+//! Fault injection: [`Dma::set_starved`] holds a stream's requests back (a stream the arbiter
+//! never grants), so the peripheral's data waits and a transfer never completes.
 //!
 //! Modelled: the three routes above, peripheral to memory, PSIZE = MSIZE = byte, direct mode
 //! (FCR.DMDIS = 0), normal or circular mode, no double-buffer mode, single transfers, the
@@ -76,6 +85,11 @@ pub const FLAG_HTIF: u32 = 1 << 4;
 pub const FLAG_TCIF: u32 = 1 << 5;
 const FLAGS: u32 = 0b11_1101;
 
+/// HCLK cycles from a software EN = 0 to the stream's stop: one transfer from an APB1
+/// peripheral to SRAM (arbitration, the read through the AHB/APB bridge, two PCLK1 cycles at
+/// half HCLK, the SRAM write).
+pub const STOP_LATENCY_HCLK_CYCLES: u64 = 10;
+
 /// The stream of SPI2_RX on DMA1.
 pub const SPI2_RX_STREAM: usize = 3;
 /// SPI2's data register.
@@ -126,6 +140,12 @@ struct Stream {
     moved: u32,
     /// NDTR when EN was set (for the half-transfer flag).
     started_with: u32,
+    /// When a software EN = 0 takes effect (EN reads 1 until then).
+    stops_at: Option<Time>,
+    /// Requests are held back (fault injection, [`Dma::set_starved`]).
+    starved: bool,
+    /// Transfers that completed (NDTR reached 0).
+    completions: u32,
 }
 
 /// A DMA controller's model.
@@ -135,6 +155,8 @@ pub struct Dma {
     streams: [Stream; 8],
     writes: Vec<(u32, u8)>,
     ignored_writes: u32,
+    /// Time units per HCLK cycle (reset: HSI 16 MHz).
+    hclk_units: Time,
 }
 
 impl Default for Dma {
@@ -155,7 +177,8 @@ impl Dma {
     }
 
     fn of(controller: Controller) -> Dma {
-        let mut d = Dma { controller, streams: Default::default(), writes: Vec::new(), ignored_writes: 0 };
+        let hclk_units = super::TIME_HZ / super::Clocks::RESET.hclk_hz;
+        let mut d = Dma { controller, streams: Default::default(), writes: Vec::new(), ignored_writes: 0, hclk_units };
         for s in &mut d.streams {
             s.fcr = FCR_RESET;
         }
@@ -174,7 +197,8 @@ impl Dma {
     fn serving(&self, request: Request) -> Option<usize> {
         ROUTES.iter().find_map(|&(c, stream, channel, r, _)| {
             let s = &self.streams[stream];
-            (c == self.controller && r == request && s.cr & CR_EN != 0 && (s.cr & CR_CHSEL) >> 25 == channel).then_some(stream)
+            (c == self.controller && r == request && s.cr & CR_EN != 0 && !s.starved && (s.cr & CR_CHSEL) >> 25 == channel)
+                .then_some(stream)
         })
     }
 
@@ -205,14 +229,40 @@ impl Dma {
         }
         if s.ndtr == 0 {
             s.flags |= FLAG_TCIF;
+            s.completions += 1;
             if s.cr & CR_CIRC != 0 {
                 s.ndtr = s.started_with;
                 s.moved = 0;
             } else {
                 s.cr &= !CR_EN;
+                s.stops_at = None;
             }
         }
         true
+    }
+
+    /// Holds back (or again serves) the requests of `stream`: a stream the arbiter does not
+    /// grant. Its peripheral's data waits; an enabled transfer does not complete.
+    pub fn set_starved(&mut self, stream: usize, starved: bool) {
+        if let Some(s) = self.streams.get_mut(stream) {
+            s.starved = starved;
+        }
+    }
+
+    /// Transfers of `stream` that completed (NDTR reached 0), not counting stops by software.
+    pub fn completions(&self, stream: usize) -> u32 {
+        self.streams.get(stream).map_or(0, |s| s.completions)
+    }
+
+    /// The software stops whose time has come by `now`: EN reads 0, TCIF up.
+    fn finish_stops(&mut self, now: Time) {
+        for s in &mut self.streams {
+            if s.stops_at.is_some_and(|t| t <= now) {
+                s.stops_at = None;
+                s.cr &= !CR_EN;
+                s.flags |= FLAG_TCIF;
+            }
+        }
     }
 
     /// Configuration writes ignored because their stream was enabled.
@@ -251,7 +301,8 @@ impl Dma {
         })
     }
 
-    pub fn read(&mut self, offset: u32, _now: Time) -> Result<u32, Unmodelled> {
+    pub fn read(&mut self, offset: u32, now: Time) -> Result<u32, Unmodelled> {
+        self.finish_stops(now);
         match offset {
             LISR => Ok(self.flags_register(false)),
             HISR => Ok(self.flags_register(true)),
@@ -271,7 +322,8 @@ impl Dma {
         }
     }
 
-    pub fn write(&mut self, offset: u32, value: u32, _now: Time) -> Result<(), Unmodelled> {
+    pub fn write(&mut self, offset: u32, value: u32, now: Time) -> Result<(), Unmodelled> {
+        self.finish_stops(now);
         match offset {
             LISR | HISR => Ok(()),
             LIFCR | HIFCR => {
@@ -285,7 +337,7 @@ impl Dma {
             _ => {
                 let (stream, reg) = stream_register(offset).ok_or_else(|| Unmodelled::offset(self.name(), offset, true))?;
                 if reg == 0x00 {
-                    return self.write_cr(stream, value);
+                    return self.write_cr(stream, value, now);
                 }
                 let name = self.name();
                 let s = &mut self.streams[stream];
@@ -308,17 +360,20 @@ impl Dma {
         }
     }
 
-    fn write_cr(&mut self, stream: usize, value: u32) -> Result<(), Unmodelled> {
+    fn write_cr(&mut self, stream: usize, value: u32, now: Time) -> Result<(), Unmodelled> {
         let name = format!("{}.S{stream}CR", self.name());
         Unmodelled::check_bits(&name, value, CR_FIELDS)?;
         let controller = self.controller;
+        let stop_latency = STOP_LATENCY_HCLK_CYCLES * self.hclk_units;
         let s = &mut self.streams[stream];
         if s.cr & CR_EN != 0 {
-            // Enabled: only EN can change; clearing it stops the stream (TCIF set).
+            // Enabled: only EN can change; clearing it stops the stream once the transfer in
+            // flight is done (TCIF set then).
             if value & CR_EN == 0 {
-                s.cr &= !CR_EN;
-                s.flags |= FLAG_TCIF;
-            } else if value != s.cr {
+                if s.stops_at.is_none() {
+                    s.stops_at = Some(now + stop_latency);
+                }
+            } else if value != s.cr || s.stops_at.is_some() {
                 self.ignored_writes += 1;
             }
             return Ok(());
@@ -330,7 +385,7 @@ impl Dma {
         if s.flags != 0 {
             return Err(Unmodelled::new(
                 name,
-                format!("EN set with the stream's event flags {:#04x} still up (RM0368 §9.3.18: clear them first)", s.flags),
+                format!("EN set with the stream's event flags {:#04x} still up (RM0368 §9.3.17: clear them first)", s.flags),
             ));
         }
         let route = ROUTES.iter().find(|&&(c, st, _, _, _)| c == controller && st == stream);
@@ -377,24 +432,45 @@ impl super::Peripheral for Dma {
         Dma::write(self, offset, value, now)
     }
 
+    fn next_event(&self) -> Option<Time> {
+        self.streams.iter().filter_map(|s| s.stops_at).min()
+    }
+
+    fn advance(&mut self, now: Time, _clocks: super::Clocks) {
+        self.finish_stops(now);
+    }
+
+    fn set_clocks(&mut self, _now: Time, clocks: super::Clocks) {
+        self.hclk_units = (super::TIME_HZ / clocks.hclk_hz.max(1)).max(1);
+    }
+
     fn irq_line(&self, stream: usize) -> bool {
         Dma::irq_line(self, stream)
     }
 
     /// Back to reset, still the same controller (DMA1 and DMA2 have their own reset bits).
+    /// What was injected and counted is the board's and stays.
     fn reset(&mut self) {
-        *self = Dma::of(self.controller);
+        let mut fresh = Dma::of(self.controller);
+        fresh.hclk_units = self.hclk_units;
+        fresh.ignored_writes = self.ignored_writes;
+        for (new, old) in fresh.streams.iter_mut().zip(&self.streams) {
+            new.starved = old.starved;
+            new.completions = old.completions;
+        }
+        *self = fresh;
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::periph::Peripheral;
 
     const S3: u32 = STREAM0 + 3 * STREAM_STRIDE;
     const BUF: u32 = 0x2000_1000;
 
-    /// ST's stream configuration procedure (RM0368 §9.3.18) for SPI2_RX into `BUF`.
+    /// ST's stream configuration procedure (RM0368 §9.3.17) for SPI2_RX into `BUF`.
     fn configure(d: &mut Dma, n: u32) {
         d.write(S3, 0, 0).unwrap();
         d.write(LIFCR, 0b11_1101 << 22, 0).unwrap();
@@ -432,7 +508,7 @@ mod tests {
         assert!(!d.irq_line(3));
     }
 
-    /// Rule (RM0368 §9.3.18): the stream's flags must be cleared before EN is set again.
+    /// Rule (RM0368 §9.3.17): the stream's flags must be cleared before EN is set again.
     #[test]
     fn enabling_with_the_last_transfers_flags_up_is_refused() {
         let mut d = Dma::new();
@@ -453,16 +529,58 @@ mod tests {
         assert_eq!(d.ignored_writes(), 2);
     }
 
-    /// Rule (SxCR EN): cleared by software mid-transfer, the stream stops with TCIF set.
+    /// Rule (SxCR EN): cleared by software mid-transfer, the stream stops with TCIF set, once
+    /// the transfer in flight is done.
     #[test]
     fn disabling_mid_transfer_stops_with_tcif() {
         let mut d = Dma::new();
         configure(&mut d, 4);
         d.spi2_rx(1);
         d.write(S3, CR_MINC | CR_TCIE, 0).unwrap();
+        let stop = STOP_LATENCY_HCLK_CYCLES * d.hclk_units;
+        assert_eq!(d.next_event(), Some(stop));
+        d.advance(stop, super::super::Clocks::RESET);
         assert_eq!(d.spi2_rx_capacity(), 0);
-        assert_eq!(d.read(LISR, 0).unwrap() >> 22 & FLAG_TCIF, FLAG_TCIF);
-        assert_eq!(d.read(S3 + 0x04, 0), Ok(3), "NDTR keeps what was left");
+        assert_eq!(d.read(LISR, stop).unwrap() >> 22 & FLAG_TCIF, FLAG_TCIF);
+        assert_eq!(d.read(S3 + 0x04, stop), Ok(3), "NDTR keeps what was left");
+        assert_eq!(d.completions(3), 0, "a stop is not a completion");
+    }
+
+    /// Rule (RM0368 §9.3.17, step 1): EN = 0 takes effect after the transfer in flight; until
+    /// EN reads 0 the stream ignores its configuration, and the TCIF the stop raises comes
+    /// after a flag clear written right behind the EN write. The wrong sequence (reconfigure
+    /// at once) keeps the old addresses and leaves a flag up that raises the interrupt.
+    #[test]
+    fn a_stream_reconfigured_before_en_reads_0_keeps_its_old_configuration() {
+        let mut d = Dma::new();
+        configure(&mut d, 4);
+        d.write(S3, CR_MINC | CR_TCIE, 10).unwrap();
+        assert_ne!(d.read(S3, 10).unwrap() & CR_EN, 0, "EN still reads 1");
+        d.write(LIFCR, 0b11_1101 << 22, 10).unwrap();
+        d.write(S3 + 0x0C, 0x2000_2000, 10).unwrap();
+        d.write(S3 + 0x04, 7, 10).unwrap();
+        assert_eq!(d.ignored_writes(), 2, "both configuration writes ignored");
+        let later = 10 + STOP_LATENCY_HCLK_CYCLES * d.hclk_units;
+        assert_eq!(d.read(S3, later).unwrap() & CR_EN, 0, "EN reads 0 once the transfer is done");
+        assert!(d.irq_line(3), "the stop's TCIF came after the clear");
+        assert_eq!((d.read(S3 + 0x0C, later), d.read(S3 + 0x04, later)), (Ok(BUF), Ok(4)));
+        // The right sequence: EN read back as 0, then the flags and the configuration.
+        d.write(LIFCR, 0b11_1101 << 22, later).unwrap();
+        d.write(S3 + 0x04, 7, later).unwrap();
+        assert_eq!((d.read(S3 + 0x04, later), d.ignored_writes(), d.irq_line(3)), (Ok(7), 2, false));
+    }
+
+    /// A starved stream takes no request, and takes them again once granted.
+    #[test]
+    fn a_starved_stream_takes_no_request() {
+        let mut d = Dma::new();
+        configure(&mut d, 2);
+        d.set_starved(3, true);
+        assert_eq!(d.spi2_rx_capacity(), 0);
+        d.set_starved(3, false);
+        d.spi2_rx(1);
+        d.spi2_rx(2);
+        assert_eq!(d.completions(3), 1);
     }
 
     #[test]

@@ -29,6 +29,10 @@
 //!   Cleared by a DR read followed by an SR read.
 //! - MODF: a master whose internal NSS is low (SSM = 1 and SSI = 0) gets MODF set, SPE and MSTR
 //!   cleared; cleared by an SR access while MODF is set followed by a CR1 write.
+//! - BSY (RM0090 §28.3.7): set while a frame shifts, but in bidirectional receive mode
+//!   (BIDIMODE = 1, BIDIOE = 0) it stays low on silicon however the clock runs, so it cannot
+//!   tell when the last received frame has ended. Turning the line back to transmit while a
+//!   receive frame is still clocked is counted ([`Spi2::mid_frame_turns`]).
 //! - Bidirectional transmit (BIDIOE = 1): the receiver is not fed (RXNE/OVR do not follow the
 //!   transmitted bytes). The RM only says the procedure is "similar to transmit-only"; ST's own
 //!   HAL clears OVR after a transmit only in 2-line mode, which we take as the hardware's
@@ -46,7 +50,9 @@
 //! - DFF = 1, CRC (CRCEN/CRCNEXT), TI frame format (FRF), slave mode, hardware NSS input and I²S
 //!   mode are not modelled. RXDMAEN hands each received byte to the DMA stream the board says is
 //!   ready for it ([`Spi2::set_dma_budget`]), as the request is served at once; TXDMAEN is
-//!   stored only (no transmit request is ever served).
+//!   stored only (no transmit request is ever served). RXDMAEN set while a stream already
+//!   stands ready is counted ([`Spi2::dma_order_errors`]): RM0368 §20.3.9 enables the stream
+//!   after it.
 
 use super::sensors::{Sensors, UNDRIVEN};
 use super::{Clocks, Peripheral, Time, Unmodelled, TIME_HZ};
@@ -167,6 +173,8 @@ pub struct Spi2 {
     cut_frames: u32,
     mode_errors: u32,
     truncated_writes: u32,
+    mid_frame_turns: u32,
+    dma_order_errors: u32,
     frames: u64,
 }
 
@@ -215,6 +223,8 @@ impl Spi2 {
             cut_frames: 0,
             mode_errors: 0,
             truncated_writes: 0,
+            mid_frame_turns: 0,
+            dma_order_errors: 0,
             frames: 0,
         }
     }
@@ -240,6 +250,8 @@ impl Spi2 {
             cut_frames: self.cut_frames,
             mode_errors: self.mode_errors,
             truncated_writes: self.truncated_writes,
+            mid_frame_turns: self.mid_frame_turns,
+            dma_order_errors: self.dma_order_errors,
             frames: self.frames,
             pclk1_hz: self.pclk1_hz,
             ..Spi2::new()
@@ -516,10 +528,16 @@ impl Spi2 {
         if self.ovr {
             v |= SR_OVR;
         }
-        if self.frame.is_some() {
+        if self.frame.is_some() && !Self::bidi_receive(self.cr1) {
             v |= SR_BSY;
         }
         v
+    }
+
+    /// Bidirectional receive mode (BIDIMODE = 1, BIDIOE = 0), where BSY stays low on silicon
+    /// while frames are clocked (RM0090 §28.3.7, the F401's SPI block).
+    fn bidi_receive(cr1: u32) -> bool {
+        cr1 & CR1_BIDIMODE != 0 && cr1 & CR1_BIDIOE == 0
     }
 
     /// A 32-bit read at `offset`; `clocks` are the RCC's now (PCLK1 times the frames).
@@ -562,6 +580,10 @@ impl Spi2 {
             CR1 => self.write_cr1(value, now),
             CR2 => {
                 Unmodelled::check_bits("SPI2.CR2", value, CR2_RXDMAEN | CR2_TXDMAEN | CR2_SSOE | CR2_ERRIE | CR2_RXNEIE | CR2_TXEIE)?;
+                if value & !self.cr2 & CR2_RXDMAEN != 0 && self.dma_budget > 0 {
+                    // RM0368 §20.3.9: RXDMAEN first, then the stream, then SPE.
+                    self.dma_order_errors += 1;
+                }
                 self.cr2 = value;
                 Ok(())
             }
@@ -661,6 +683,10 @@ impl Spi2 {
                 }
             }
         }
+        if Self::bidi_receive(old) && !Self::bidi_receive(value) && self.frame.is_some_and(|f| f.dir == Dir::Rx) {
+            // The MCU takes the line back while a received byte is still being clocked.
+            self.mid_frame_turns += 1;
+        }
         if !drove && drives && self.sensor_driving(now) {
             self.contentions += 1;
         }
@@ -706,6 +732,19 @@ impl Spi2 {
     /// Transmit frames whose output was switched off (BIDIOE cleared) before their last bit.
     pub fn truncated_writes(&self) -> u32 {
         self.truncated_writes
+    }
+
+    /// Times the line was turned back to transmit (BIDIOE set) while a receive frame was still
+    /// being clocked: on silicon BSY does not show that frame, so a firmware that waits on BSY
+    /// before the turn does it mid-byte.
+    pub fn mid_frame_turns(&self) -> u32 {
+        self.mid_frame_turns
+    }
+
+    /// Times RXDMAEN was set while a DMA stream already stood ready for SPI2_RX: the order of
+    /// RM0368 §20.3.9 ("SPI communication using DMA") is RXDMAEN, then the stream, then SPE.
+    pub fn dma_order_errors(&self) -> u32 {
+        self.dma_order_errors
     }
 
     /// Frames clocked since reset.
@@ -957,9 +996,11 @@ mod tests {
         let t = fw.t;
         fw.spi.write(CR1, fw.spi.cr1 & !CR1_BIDIOE, t, Clocks::PLL_84_MHZ).unwrap();
         fw.spi.write(CR1, fw.spi.cr1 & !CR1_SPE, t + BYTE / 2, Clocks::PLL_84_MHZ).unwrap();
-        assert_ne!(fw.spi.read(SR, t + BYTE - 1, Clocks::PLL_84_MHZ).unwrap() & SR_BSY, 0, "still shifting");
+        assert!(fw.spi.busy(), "still shifting");
+        assert_eq!(fw.spi.read(SR, t + BYTE - 1, Clocks::PLL_84_MHZ).unwrap() & (SR_RXNE | SR_BSY), 0, "BSY stays low in receive");
         let sr = fw.spi.read(SR, t + BYTE, Clocks::PLL_84_MHZ).unwrap();
         assert_eq!(sr & (SR_RXNE | SR_BSY), SR_RXNE, "byte received, clock stopped");
+        assert!(!fw.spi.busy());
         assert_eq!(fw.spi.read(DR, t + BYTE + 1, Clocks::PLL_84_MHZ).unwrap(), 0x6A);
         fw.spi.advance_to(t + 10 * BYTE);
         assert_eq!(fw.spi.frames(), 4, "0x12, 0x0C, the address, one received byte, no more");
@@ -1082,6 +1123,45 @@ mod tests {
         fw.w(CR1, cr1 | CR1_BIDIOE | CR1_SPE);
         assert_eq!(fw.spi.contentions(), 1);
         fw.cs(0, false);
+    }
+
+    /// Rule (RM0090 §28.3.7): BSY stays low in bidirectional receive mode, so a wait on it
+    /// passes while the last frame still clocks. The wrong sequence, SPE cleared and the line
+    /// turned back once BSY reads 0, turns it mid-byte.
+    #[test]
+    fn turning_the_line_on_bsy_after_a_receive_turns_it_mid_byte() {
+        let mut fw = Fw::new();
+        fw.write_reg(0, 0x12, &[0x0C]);
+        fw.cs(0, true);
+        fw.send(&[0x8F]);
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 & !CR1_BIDIOE);
+        fw.t += 2 * 128;
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 & !CR1_SPE);
+        fw.wait(SR_BSY, false);
+        assert!(fw.spi.busy(), "the frame still clocks");
+        fw.cs(0, false);
+        let cr1 = fw.r(CR1);
+        fw.w(CR1, cr1 | CR1_BIDIOE);
+        assert_eq!(fw.spi.mid_frame_turns(), 1);
+        // Waiting out the frame (its RXNE) first turns it between bytes.
+        let mut fw = Fw::new();
+        fw.read_reg(0, 0x0F, 1);
+        assert_eq!(fw.spi.mid_frame_turns(), 0);
+    }
+
+    /// Rule (RM0368 §20.3.9): RXDMAEN before the stream is enabled. Set after, it is counted.
+    #[test]
+    fn rxdmaen_set_after_the_stream_is_counted() {
+        let mut fw = Fw::new();
+        fw.spi.set_dma_budget(11);
+        fw.w(CR2, CR2_RXDMAEN);
+        assert_eq!(fw.spi.dma_order_errors(), 1);
+        let mut fw = Fw::new();
+        fw.w(CR2, CR2_RXDMAEN);
+        fw.spi.set_dma_budget(11);
+        assert_eq!(fw.spi.dma_order_errors(), 0);
     }
 
     #[test]

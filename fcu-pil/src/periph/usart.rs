@@ -423,68 +423,9 @@ impl Usart {
                     self.rx.rxne = false;
                 }
             }
-            DR => {
-                Unmodelled::check_bits("USART1.DR", value, 0x1FF)?;
-                if !self.transmitter_enabled() {
-                    return Err(Unmodelled::new(
-                        "USART1.DR",
-                        format!("write of {value:#04x} with the transmitter disabled (CR1.UE/TE = 0)"),
-                    ));
-                }
-                // With M = 0 only DR[7:0] is sent.
-                let byte = (value & 0xFF) as u8;
-                let timing = self.frame_timing(clocks)?;
-                if std::mem::take(&mut self.sr_read) {
-                    self.tc = false;
-                }
-                if self.shift.is_none() {
-                    self.shift = Some(Frame::new(Some(byte), now, timing));
-                } else {
-                    if self.tdr.is_some() {
-                        self.lost_bytes = self.lost_bytes.saturating_add(1);
-                    }
-                    self.tdr = Some((byte, timing));
-                }
-            }
-            BRR => {
-                Unmodelled::check_bits("USART1.BRR", value, 0xFFFF)?;
-                let previous = std::mem::replace(&mut self.brr, value);
-                if let Some((byte, _)) = self.tdr {
-                    match self.frame_timing(clocks) {
-                        Ok(timing) => self.tdr = Some((byte, timing)),
-                        Err(e) => {
-                            self.brr = previous;
-                            return Err(e);
-                        }
-                    }
-                }
-                if let Some(frame) = self.shift.as_mut() {
-                    frame.garbled |= value != previous;
-                }
-            }
-            CR1 => {
-                Unmodelled::check_bits("USART1.CR1", value, CR1_MODELLED)?;
-                let was_enabled = self.transmitter_enabled();
-                let enabled = value & (CR1_UE | CR1_TE) == CR1_UE | CR1_TE;
-                if was_enabled && !enabled && (self.shift.is_some() || self.tdr.is_some()) {
-                    return Err(Unmodelled::new(
-                        "USART1.CR1",
-                        format!("write of {value:#06x} disables the transmitter during a frame: not modelled"),
-                    ));
-                }
-                let previous = std::mem::replace(&mut self.cr1, value);
-                if enabled && !was_enabled {
-                    // RM0368: "Setting the TE bit drives the USART to send an idle frame before
-                    // the first data frame."
-                    match self.frame_timing(clocks) {
-                        Ok(timing) => self.shift = Some(Frame::new(None, now, timing)),
-                        Err(e) => {
-                            self.cr1 = previous;
-                            return Err(e);
-                        }
-                    }
-                }
-            }
+            DR => self.write_dr(value, now, clocks)?,
+            BRR => self.write_brr(value, clocks)?,
+            CR1 => self.write_cr1(value, now, clocks)?,
             CR2 => {
                 Unmodelled::check_bits("USART1.CR2", value, CR2_STOP)?;
                 self.cr2 = value;
@@ -495,6 +436,76 @@ impl Usart {
             }
             GTPR => Unmodelled::check_bits("USART1.GTPR", value, 0)?,
             _ => return Err(Unmodelled::offset(NAME, offset, true)),
+        }
+        Ok(())
+    }
+
+    /// DR: a byte to send, into the shift register if it is free, else the transmit buffer
+    /// (overwriting one that waits there).
+    fn write_dr(&mut self, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
+        Unmodelled::check_bits("USART1.DR", value, 0x1FF)?;
+        if !self.transmitter_enabled() {
+            return Err(Unmodelled::new("USART1.DR", format!("write of {value:#04x} with the transmitter disabled (CR1.UE/TE = 0)")));
+        }
+        // With M = 0 only DR[7:0] is sent.
+        let byte = (value & 0xFF) as u8;
+        let timing = self.frame_timing(clocks)?;
+        if std::mem::take(&mut self.sr_read) {
+            self.tc = false;
+        }
+        if self.shift.is_none() {
+            self.shift = Some(Frame::new(Some(byte), now, timing));
+        } else {
+            if self.tdr.is_some() {
+                self.lost_bytes = self.lost_bytes.saturating_add(1);
+            }
+            self.tdr = Some((byte, timing));
+        }
+        Ok(())
+    }
+
+    /// BRR: the baud rate of the frames to come; a frame shifting meanwhile is garbled.
+    fn write_brr(&mut self, value: u32, clocks: Clocks) -> Result<(), Unmodelled> {
+        Unmodelled::check_bits("USART1.BRR", value, 0xFFFF)?;
+        let previous = std::mem::replace(&mut self.brr, value);
+        if let Some((byte, _)) = self.tdr {
+            match self.frame_timing(clocks) {
+                Ok(timing) => self.tdr = Some((byte, timing)),
+                Err(e) => {
+                    self.brr = previous;
+                    return Err(e);
+                }
+            }
+        }
+        if let Some(frame) = self.shift.as_mut() {
+            frame.garbled |= value != previous;
+        }
+        Ok(())
+    }
+
+    /// CR1: UE and TE enable the transmitter (an idle frame first); disabling it mid-frame is
+    /// not modelled.
+    fn write_cr1(&mut self, value: u32, now: Time, clocks: Clocks) -> Result<(), Unmodelled> {
+        Unmodelled::check_bits("USART1.CR1", value, CR1_MODELLED)?;
+        let was_enabled = self.transmitter_enabled();
+        let enabled = value & (CR1_UE | CR1_TE) == CR1_UE | CR1_TE;
+        if was_enabled && !enabled && (self.shift.is_some() || self.tdr.is_some()) {
+            return Err(Unmodelled::new(
+                "USART1.CR1",
+                format!("write of {value:#06x} disables the transmitter during a frame: not modelled"),
+            ));
+        }
+        let previous = std::mem::replace(&mut self.cr1, value);
+        if enabled && !was_enabled {
+            // RM0368: "Setting the TE bit drives the USART to send an idle frame before
+            // the first data frame."
+            match self.frame_timing(clocks) {
+                Ok(timing) => self.shift = Some(Frame::new(None, now, timing)),
+                Err(e) => {
+                    self.cr1 = previous;
+                    return Err(e);
+                }
+            }
         }
         Ok(())
     }
