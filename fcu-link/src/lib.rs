@@ -70,8 +70,6 @@ mod motor_test;
 mod params;
 pub mod rates;
 pub mod reader;
-pub mod service;
-pub mod station;
 mod telemetry;
 pub mod text;
 pub mod tx;
@@ -81,8 +79,6 @@ pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
 pub use motor_test::{MotorTestState, MOTOR_TEST_MAX_MS, MOTOR_TEST_THROTTLE_CAP_PCT};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
-pub use service::{Observed, Service, ToControl};
-pub use station::Due;
 pub use text::Severity;
 pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 

@@ -7,7 +7,7 @@
 //! - [`ground`]: the ground station's MAVLink frames (any parameter name and value, any command
 //!   number and parameters) and the board's answers read back;
 //! - [`board`]: [`Bench`], the board at 800 Hz with the firmware's link task
-//!   ([`fcu_link::service::Service`]) every 4 ticks, the UART at
+//!   ([`fcu_gcs::Service`]) every 4 ticks, the UART at
 //!   115200 baud both ways, a level still IMU, the pilot's transmitter;
 //! - [`check`]: the invariants, each a named [`Invariant`], checked as the bench runs.
 //!

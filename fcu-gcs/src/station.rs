@@ -33,8 +33,8 @@ use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 
-use crate::rates::Rates;
-use crate::vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_link::Rates;
+use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
@@ -806,7 +806,7 @@ mod tests {
     /// The link in front of the station: what a ground station hears back of a set.
     fn echo(st: &mut Station, name: &str, value: f32) -> Vec<f32> {
         use crate::test_support::{drain, param_set, param_values, v2};
-        let mut link: crate::Link<512> = crate::Link::default();
+        let mut link: fcu_link::Link<512> = fcu_link::Link::default();
         link.receive(&v2(&param_set(name, value)), 0, st);
         param_values(&drain(&mut link)).into_iter().map(|p| p.1).collect()
     }

@@ -1,6 +1,7 @@
-//! The link task ([`fcu_link::Service`]) in front of the real control loop: a reboot or a save
+//! The link task ([`fcu_gcs::Service`]) in front of the real control loop: a reboot or a save
 //! asked for under a flood of requests, while the pilot makes the arm gesture.
 
+#[path = "../../fcu-link/tests/support/mod.rs"]
 mod support;
 
 use fcu_core::flight::FlightController;
@@ -8,7 +9,8 @@ use fcu_core::imu::RawImu;
 use fcu_core::rc::PulseBatch;
 use fcu_core::supervisor::{Blocker, FlightState};
 use fcu_core::Config;
-use fcu_link::{Due, LinkConfig, Observed, Service};
+use fcu_gcs::{Due, Observed, Service};
+use fcu_link::LinkConfig;
 use mavlink::dialects::common::{self, MavCmd, MavResult};
 use support::*;
 
