@@ -23,8 +23,8 @@ use fcu_core::parameters::snapshot;
 use fcu_core::telemetry::LineBuf;
 use fcu_core::Config;
 
-use fcu_link::{Link, LinkConfig, Severity};
 use crate::station::{Due, Station};
+use fcu_link::{Link, LinkConfig, Severity};
 
 /// How long the UART must have been idle, with the link quiet, before a reset: its shift
 /// register still holds the last byte when its queue empties.

@@ -26,7 +26,6 @@ fn ack_of(sent: &[Sent]) -> (u16, MavResult) {
     acks[0]
 }
 
-
 fn station(state: FlightState, sticks: Sticks) -> Station {
     let mut s: Status = FlightController::new(Config::default()).unwrap().status();
     s.state = state;
@@ -82,7 +81,13 @@ fn motor_test_accepted_disarmed_refused_armed_and_while_calibrating() {
         other => panic!("{other:?}"),
     }
     let mut st = station(FlightState::Armed, REST);
-    assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
+    assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: disarmed only".to_string()]));
+    assert_eq!(st.take_ground(), None);
+    // Which motors there are is the flight controller's rule too.
+    let mut st = station(FlightState::Disarmed, REST);
+    let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, [5.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]);
+    assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: motor must be 1 to 4".to_string()]));
     assert_eq!(st.take_ground(), None);
     let mut st = station(FlightState::Calibrating, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
@@ -168,8 +173,7 @@ fn param_values_a_set_owes_go_out_on_the_next_tick_when_the_queue_is_full() {
     // A STATUSTEXT of 50 bytes is a 63-byte frame, of 10 bytes a 23-byte one; answers may
     // fill the queue up to its size less the telemetry's reserve.
     let fifty = [b'x'; 50];
-    for (texts, sent_at_once) in [(&[&fifty[..], &fifty, &fifty, &fifty][..], 0), (&[&fifty[..], &fifty, &fifty, b"0123456789"][..], 1)]
-    {
+    for (texts, sent_at_once) in [(&[&fifty[..], &fifty, &fifty, &fifty][..], 0), (&[&fifty[..], &fifty, &fifty, b"0123456789"][..], 1)] {
         let mut link = quiet_link();
         let mut st = booted_station();
         link.tick(0, &mut st);

@@ -5,7 +5,8 @@
 use std::collections::VecDeque;
 use std::fmt::Write as _;
 
-use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavState, MavSysStatusSensor};
+use fcu_core::supervisor::FlightState;
+use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavSysStatusSensor};
 
 /// STATUSTEXT lines kept on screen.
 const TEXTS_SHOWN: usize = 6;
@@ -15,8 +16,8 @@ const STALE_S: f64 = 3.0;
 /// What the screen shows, from the board's messages.
 #[derive(Clone, Debug, Default)]
 pub struct View {
-    /// (armed, system status, when) of the latest HEARTBEAT.
-    heartbeat: Option<(bool, MavState, f64)>,
+    /// (armed, flight state, when) of the latest HEARTBEAT.
+    heartbeat: Option<(bool, FlightState, f64)>,
     /// Roll, pitch, yaw, degrees.
     attitude_deg: Option<[f64; 3]>,
     /// Channel widths, µs (None: no pulses on it).
@@ -43,27 +44,13 @@ pub fn severity_name(s: MavSeverity) -> &'static str {
     }
 }
 
-fn status_name(s: MavState) -> &'static str {
-    match s {
-        MavState::MAV_STATE_UNINIT => "uninit",
-        MavState::MAV_STATE_BOOT => "boot (calibrating)",
-        MavState::MAV_STATE_CALIBRATING => "calibrating",
-        MavState::MAV_STATE_STANDBY => "standby",
-        MavState::MAV_STATE_ACTIVE => "active",
-        MavState::MAV_STATE_CRITICAL => "critical (failsafe or fault)",
-        MavState::MAV_STATE_EMERGENCY => "emergency",
-        MavState::MAV_STATE_POWEROFF => "power off",
-        MavState::MAV_STATE_FLIGHT_TERMINATION => "flight termination",
-    }
-}
-
 impl View {
     /// Takes one message received at `now_s` (the watch's clock).
     pub fn on_message(&mut self, msg: &MavMessage, now_s: f64) {
         match msg {
             MavMessage::HEARTBEAT(h) => {
                 let armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-                self.heartbeat = Some((armed, h.system_status, now_s));
+                self.heartbeat = Some((armed, fcu_link::heartbeat::flight_state(h), now_s));
             }
             MavMessage::ATTITUDE(a) => {
                 self.attitude_deg = Some([a.roll, a.pitch, a.yaw].map(|r| f64::from(r).to_degrees()));
@@ -105,9 +92,9 @@ impl View {
         let _ = writeln!(out, "{title}");
         let waiting = "(nothing received yet)";
         match self.heartbeat {
-            Some((armed, status, at)) => {
+            Some((armed, state, at)) => {
                 let armed = if armed { "ARMED" } else { "disarmed" };
-                let _ = write!(out, "state      {armed:<9} system status {}", status_name(status));
+                let _ = write!(out, "state      {armed:<9} flight state {}", state.name());
                 let age = now_s - at;
                 if age > STALE_S {
                     let _ = write!(out, "   NO HEARTBEAT FOR {age:.0} s");
@@ -213,7 +200,7 @@ mod tests {
         let mut v = View::default();
         let empty = v.render("t", 0.0);
         assert!(empty.contains("state      (nothing received yet)"), "{empty}");
-        v.on_message(&heartbeat(MavState::MAV_STATE_ACTIVE, true), 1.0);
+        v.on_message(&heartbeat(FlightState::Armed), 1.0);
         v.on_message(&MavMessage::ATTITUDE(ATTITUDE_DATA { roll: 0.1, pitch: -0.2, yaw: 3.0, ..ATTITUDE_DATA::default() }), 1.0);
         v.on_message(
             &MavMessage::RC_CHANNELS(RC_CHANNELS_DATA {
@@ -247,7 +234,7 @@ mod tests {
         );
         v.on_message(&text("RC1_MIN: below the minimum"), 1.5);
         let s = v.render("t", 2.0);
-        assert!(s.contains("state      ARMED     system status active"), "{s}");
+        assert!(s.contains("state      ARMED     flight state armed"), "{s}");
         assert!(s.contains("roll    +5.7°   pitch   -11.5°   yaw  +171.9°"), "{s}");
         assert!(s.contains(" ch1 1500 ch2 1499 ch3 1100 ch4  ---"), "{s}");
         assert!(s.contains("m1 1200  m2 1300  m3 1400  m4 1500"), "{s}");
