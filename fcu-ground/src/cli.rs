@@ -139,9 +139,9 @@ fn finished(started: Instant, duration: Option<Duration>, interrupted: &AtomicBo
 
 /// `record --out DIR [--duration S]`.
 pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result<ExitCode, Failure> {
-    let dir = fcu_testkit::cli::fly::OutputDir::prepare(out).map_err(|e| Failure(e.0))?;
+    let dir = fcu_log::OutputDir::prepare(out).map_err(Failure)?;
     // A directory this run created goes again if the run fails.
-    let fail = |message: String| Failure(dir.abandon(fcu_testkit::cli::CliError(message)).0);
+    let fail = |message: String| dir.abandon(Failure(message));
     let (mut conn, hb) = target.connect().map_err(|e| fail(e.0))?;
     let throttle = match params::read_by_name(&mut conn, "RCMAP_THROTTLE") {
         Ok(Some(v)) if (1.0..=8.0).contains(&v) => Some(v as u8),

@@ -138,7 +138,7 @@ pub fn diff(file: &[Entry], board: &BTreeMap<String, f32>) -> Vec<Difference> {
 
 /// A piece of a line as it may appear in a message: control characters escaped, cut at 40.
 fn echo(text: &str) -> String {
-    fcu_testkit::csv::echo(text)
+    fcu_log::csv::echo(text)
 }
 
 #[cfg(test)]

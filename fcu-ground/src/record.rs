@@ -2,8 +2,8 @@
 //! writes, so a flight on the board and one in the simulator are read the same way.
 //!
 //! One row per ATTITUDE (25 Hz at the board's default rate), carrying the latest of the other
-//! messages. The header is fcu-testkit's [`CSV_HEADER`] and each row goes through fcu-testkit's
-//! own writer ([`LogRow::write_csv`]), then the columns this row has no value for are emptied.
+//! messages. The header is fcu-log's [`CSV_HEADER`] and each row goes through fcu-log's
+//! writer ([`LogRow::write_csv`]), then the columns this row has no value for are emptied.
 //! The columns, and where each comes from:
 //!
 //! | column | from |
@@ -30,7 +30,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use fcu_core::supervisor::FlightState;
-use fcu_testkit::sim::{FlightLog, LogRow, CSV_HEADER};
+use fcu_log::{LogRow, CSV_HEADER};
 use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSysStatusSensor};
 
 /// The columns a recording never has: the simulator's truth and the targets.
@@ -56,7 +56,7 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// The row as fcu-testkit logs it: absent values are NaN (not drawn on the plot).
+    /// The row as fcu-log logs it: absent values are NaN (not drawn on the plot).
     pub fn log_row(&self) -> LogRow {
         LogRow {
             t_s: self.t_s,
@@ -257,16 +257,7 @@ impl Recording {
         let text_path = self.dir.join("statustext.txt");
         self.csv.flush().map_err(|e| format!("writing {}: {e}", csv_path.display()))?;
         std::fs::rename(&self.partial, &csv_path).map_err(|e| format!("writing {}: {e}", csv_path.display()))?;
-        let span_s = self.rows.last().map_or(0.0, |r| r.t_s);
-        let log = FlightLog {
-            scenario: "record".into(),
-            profile: fcu_testkit::Profile::Default,
-            seed: 0,
-            tick_hz: if span_s > 0.0 { self.rows.len().saturating_sub(1) as f64 / span_s } else { 0.0 },
-            plant: Default::default(),
-            rows: std::mem::take(&mut self.rows),
-        };
-        fcu_testkit::sim::plot::write_svg(&log, title, &svg_path)?;
+        fcu_log::plot::write_svg(&self.rows, title, &svg_path)?;
         let mut text = self.texts.join("\n");
         if !text.is_empty() {
             text.push('\n');
@@ -285,7 +276,7 @@ impl Recording {
 mod tests {
     use super::*;
     use crate::test_messages::heartbeat;
-    use fcu_testkit::csv::{data_lines, Header, Row};
+    use fcu_log::csv::{data_lines, Header, Row};
     use mavlink::dialects::common::{ATTITUDE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA};
 
     fn attitude(ms: u32, roll_rad: f32, pitch_rad: f32) -> MavMessage {

@@ -65,7 +65,7 @@ pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
     if a.extra_delay_ticks > MAX_EXTRA_DELAY_TICKS {
         return Err(CliError(format!("--extra-delay-ticks: {} is more than {MAX_EXTRA_DELAY_TICKS}", a.extra_delay_ticks)));
     }
-    let out = a.out.as_deref().map(OutputDir::prepare).transpose()?;
+    let out = a.out.as_deref().map(OutputDir::prepare).transpose().map_err(CliError)?;
     let opts = RunOptions { seed: a.seed, plant_spread: spread, extra_delay_ticks: a.extra_delay_ticks, ..RunOptions::default() };
     let abandon = |e: CliError| match &out {
         Some(o) => o.abandon(e),
