@@ -276,6 +276,45 @@ mod tests {
     }
 
     #[test]
+    fn params_push_and_diff_take_qgroundcontrol_and_mavproxy_files_alike() {
+        use crate::mock_board::{serve, MockParam, MockState};
+        let table = |lo: f32, hi: f32| {
+            vec![
+                MockParam { name: "ANGLE_MAX", value: 30.0, min: 5.0, max: 60.0 },
+                MockParam { name: "LO", value: lo, min: 0.0, max: 100.0 },
+                MockParam { name: "HI", value: hi, min: 0.0, max: 100.0 },
+            ]
+        };
+        let dir = std::env::temp_dir().join(format!("fcu-ground-formats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = |port| Target { link: LinkAddress::Tcp { host: "127.0.0.1".into(), port }, timeout: Duration::from_secs(5) };
+        // QGroundControl's `.params` (its header, tabs, the vehicle's ids and the type), with the
+        // byte-order mark a Windows editor adds; MAVProxy's `param save` (names padded to 16).
+        let qgc = "\u{feff}# Onboard parameters for Vehicle 1\n#\n# Vehicle-Id\tComponent-Id\tName\tValue\tType\n\
+                   1\t1\tHI\t40.000000000000000000\t9\n1\t1\tLO\t30\t9\n";
+        let mavproxy = "HI               40.000000\nLO               30.000000\n";
+        for (file, text) in [("board.params", qgc), ("board.parm", mavproxy)] {
+            let path = dir.join(file);
+            std::fs::write(&path, text).unwrap();
+            let (port, _) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+            assert_eq!(diff(&target(port), &path), Ok(ExitCode::from(EXIT_DIFFERENT)), "{file}");
+            let (port, state) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+            assert_eq!(push(&target(port), &path), Ok(ExitCode::SUCCESS), "{file}");
+            let values: Vec<(&str, f32)> = state.lock().unwrap().params.iter().map(|p| (p.name, p.value)).collect();
+            assert_eq!(values, [("ANGLE_MAX", 30.0), ("LO", 30.0), ("HI", 40.0)], "{file}");
+            let (port, _) = serve(MockState { params: table(30.0, 40.0), ..MockState::default() });
+            assert_eq!(diff(&target(port), &path), Ok(ExitCode::SUCCESS), "{file}");
+        }
+        // A QGroundControl line whose ids are not whole numbers is not taken for one.
+        let path = dir.join("bad.params");
+        std::fs::write(&path, "1\t1.5\tHI\t40\t9\n").unwrap();
+        let (port, _) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+        let e = push(&target(port), &path).unwrap_err().0;
+        assert!(e.contains("bad.params: line 1: `HI` after the value"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn seconds_are_checked() {
         assert_eq!(parse_seconds("2.5"), Ok(Duration::from_millis(2500)));
         for bad in ["0", "-1", "nan", "inf", "1e300", "x", ""] {

@@ -16,8 +16,8 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-/// MAVLink's `param_id` holds at most 16 characters.
-pub const NAME_LEN: usize = 16;
+/// MAVLink's `param_id` holds at most 16 characters (fcu-core's reader refuses longer names).
+pub use fcu_core::parameters::NAME_LEN;
 
 /// One `NAME VALUE` line.
 #[derive(Clone, Debug, PartialEq)]
