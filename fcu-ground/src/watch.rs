@@ -10,6 +10,8 @@ use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavSysStat
 
 /// STATUSTEXT lines kept on screen.
 const TEXTS_SHOWN: usize = 6;
+/// What a line shows before its message came.
+const WAITING: &str = "(nothing received yet)";
 /// A HEARTBEAT older than this is called out: the board (or the link) has gone quiet.
 const STALE_S: f64 = 3.0;
 
@@ -90,7 +92,21 @@ impl View {
     pub fn render(&self, title: &str, now_s: f64) -> String {
         let mut out = String::new();
         let _ = writeln!(out, "{title}");
-        let waiting = "(nothing received yet)";
+        self.write_state(&mut out, now_s);
+        self.write_radio(&mut out);
+        self.write_outputs(&mut out);
+        let _ = writeln!(out, "messages");
+        if self.texts.is_empty() {
+            let _ = writeln!(out, "  (none yet)");
+        }
+        for t in &self.texts {
+            let _ = writeln!(out, "  {t}");
+        }
+        out
+    }
+
+    /// The flight state (and how old it is) and the attitude.
+    fn write_state(&self, out: &mut String, now_s: f64) {
         match self.heartbeat {
             Some((armed, state, at)) => {
                 let armed = if armed { "ARMED" } else { "disarmed" };
@@ -102,7 +118,7 @@ impl View {
                 out.push('\n');
             }
             None => {
-                let _ = writeln!(out, "state      {waiting}");
+                let _ = writeln!(out, "state      {WAITING}");
             }
         }
         match self.attitude_deg {
@@ -110,9 +126,13 @@ impl View {
                 let _ = writeln!(out, "attitude   roll {r:+7.1}°   pitch {p:+7.1}°   yaw {y:+7.1}°");
             }
             None => {
-                let _ = writeln!(out, "attitude   {waiting}");
+                let _ = writeln!(out, "attitude   {WAITING}");
             }
         }
+    }
+
+    /// The radio's channels.
+    fn write_radio(&self, out: &mut String) {
         match &self.radio_us {
             Some(ch) if !ch.is_empty() => {
                 let _ = write!(out, "radio µs  ");
@@ -132,15 +152,19 @@ impl View {
                 let _ = writeln!(out, "radio µs   no channels");
             }
             None => {
-                let _ = writeln!(out, "radio µs   {waiting}");
+                let _ = writeln!(out, "radio µs   {WAITING}");
             }
         }
+    }
+
+    /// The motors, the battery and the sensors' health.
+    fn write_outputs(&self, out: &mut String) {
         match self.motors {
             Some(m) => {
                 let _ = writeln!(out, "motors     m1 {:4}  m2 {:4}  m3 {:4}  m4 {:4}   (1000 off .. 2000 full)", m[0], m[1], m[2], m[3]);
             }
             None => {
-                let _ = writeln!(out, "motors     {waiting}");
+                let _ = writeln!(out, "motors     {WAITING}");
             }
         }
         match self.battery {
@@ -150,7 +174,7 @@ impl View {
                 let _ = writeln!(out, "battery    {v}{pct}");
             }
             None => {
-                let _ = writeln!(out, "battery    {waiting}");
+                let _ = writeln!(out, "battery    {WAITING}");
             }
         }
         match self.health {
@@ -159,17 +183,9 @@ impl View {
                 let _ = writeln!(out, "health     {}", parts.join(", "));
             }
             None => {
-                let _ = writeln!(out, "health     {waiting}");
+                let _ = writeln!(out, "health     {WAITING}");
             }
         }
-        let _ = writeln!(out, "messages");
-        if self.texts.is_empty() {
-            let _ = writeln!(out, "  (none yet)");
-        }
-        for t in &self.texts {
-            let _ = writeln!(out, "  {t}");
-        }
-        out
     }
 }
 
