@@ -33,8 +33,7 @@ use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 
-use fcu_link::Rates;
-use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Request, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
