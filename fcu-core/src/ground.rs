@@ -2,8 +2,8 @@
 //! it: a disarm, a motor test, an IMU calibration, a radio calibration, and that arming waits
 //! while a flash save runs.
 //!
-//! The ground station's side (fcu-link's station) checks a request with the same rules
-//! ([`disarm_rule`], [`ground_test_rule`]) to answer it, then hands a [`GroundInput`] to the
+//! The ground station's side (fcu-gcs's station) checks a request with the same rules
+//! ([`disarm_rule`], [`ground_test_rule`], [`MotorTest::checked`]) to answer it, then hands a [`GroundInput`] to the
 //! control tick ([`crate::flight::ControlTick::take_ground`], between ticks). The tick decides
 //! again with the state it is in when the input arrives: the station's view may be a few
 //! milliseconds old.
@@ -65,7 +65,7 @@ pub struct Disarm {
     pub forced: bool,
 }
 
-/// A motor test as asked (the tick caps it again).
+/// A motor test as asked ([`MotorTest::checked`] says how it runs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotorTest {
     /// Motor index, 0-based.
@@ -74,6 +74,20 @@ pub struct MotorTest {
     pub duty_pct: f32,
     /// How long, ms.
     pub duration_ms: u32,
+}
+
+impl MotorTest {
+    /// The test as it runs when it may start in `state`: disarmed ([`ground_test_rule`]), one of
+    /// the board's [`MOTORS`], the duty capped ([`capped_duty_pct`]) and the time to
+    /// [`MOTOR_TEST_MAX_MS`]. The one place these rules are written: the ground station's side
+    /// answers with it, and the tick applies it again with the state it is in.
+    pub fn checked(self, state: FlightState) -> Result<MotorTest, &'static str> {
+        ground_test_rule(state)?;
+        if self.motor >= MOTORS {
+            return Err(RULE_NO_SUCH_MOTOR);
+        }
+        Ok(MotorTest { motor: self.motor, duty_pct: capped_duty_pct(self.duty_pct), duration_ms: self.duration_ms.min(MOTOR_TEST_MAX_MS) })
+    }
 }
 
 /// A motor test to start, or the running one to stop.
@@ -208,6 +222,17 @@ mod tests {
         assert_eq!(capped_duty_pct(-3.0), 0.0);
         assert_eq!(capped_duty_pct(f32::NAN), 0.0);
         const { assert!(MOTOR_TEST_MAX_DUTY_PCT <= 15.0 && MOTOR_TEST_MAX_MS <= 3000) };
+    }
+
+    #[test]
+    fn a_motor_test_runs_disarmed_on_a_motor_the_board_has_capped_in_duty_and_time() {
+        let asked = |motor, duty_pct, duration_ms| MotorTest { motor, duty_pct, duration_ms };
+        let runs = asked(3, 80.0, 60_000).checked(FlightState::Disarmed);
+        assert_eq!(runs, Ok(asked(3, MOTOR_TEST_MAX_DUTY_PCT, MOTOR_TEST_MAX_MS)));
+        assert_eq!(asked(0, 5.0, 1500).checked(FlightState::Disarmed), Ok(asked(0, 5.0, 1500)));
+        assert_eq!(asked(4, 5.0, 1500).checked(FlightState::Disarmed), Err(RULE_NO_SUCH_MOTOR));
+        assert_eq!(asked(0, 5.0, 1500).checked(FlightState::Armed), Err(RULE_DISARMED_ONLY));
+        assert_eq!(asked(0, 5.0, 1500).checked(FlightState::Calibrating), Err(RULE_CALIBRATING));
     }
 
     #[test]

@@ -136,8 +136,7 @@ mod with_link {
     use crate::Mono;
     use fcu_core::parameters::snapshot;
     use fcu_core::telemetry::LineBuf;
-    use fcu_link::service::{Observed, Service};
-    use fcu_link::station::Due;
+    use fcu_gcs::{Due, Observed, Service};
     use fcu_link::{LinkConfig, Severity};
     use rtic::Mutex;
     use rtic_monotonics::systick::prelude::*;

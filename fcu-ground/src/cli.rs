@@ -139,9 +139,9 @@ fn finished(started: Instant, duration: Option<Duration>, interrupted: &AtomicBo
 
 /// `record --out DIR [--duration S]`.
 pub fn record(target: &Target, out: &Path, duration: Option<Duration>) -> Result<ExitCode, Failure> {
-    let dir = fcu_testkit::cli::fly::OutputDir::prepare(out).map_err(|e| Failure(e.0))?;
+    let dir = fcu_log::OutputDir::prepare(out).map_err(Failure)?;
     // A directory this run created goes again if the run fails.
-    let fail = |message: String| Failure(dir.abandon(fcu_testkit::cli::CliError(message)).0);
+    let fail = |message: String| dir.abandon(Failure(message));
     let (mut conn, hb) = target.connect().map_err(|e| fail(e.0))?;
     let throttle = match params::read_by_name(&mut conn, "RCMAP_THROTTLE") {
         Ok(Some(v)) if (1.0..=8.0).contains(&v) => Some(v as u8),
@@ -272,6 +272,45 @@ mod tests {
         let e = got.unwrap_err().0;
         assert!(e.contains("one.param: line 1: RCMAP_ROLL: RCMAP: each input once"), "{e}");
         assert!(sets.is_empty(), "{sets:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn params_push_and_diff_take_qgroundcontrol_and_mavproxy_files_alike() {
+        use crate::mock_board::{serve, MockParam, MockState};
+        let table = |lo: f32, hi: f32| {
+            vec![
+                MockParam { name: "ANGLE_MAX", value: 30.0, min: 5.0, max: 60.0 },
+                MockParam { name: "LO", value: lo, min: 0.0, max: 100.0 },
+                MockParam { name: "HI", value: hi, min: 0.0, max: 100.0 },
+            ]
+        };
+        let dir = std::env::temp_dir().join(format!("fcu-ground-formats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = |port| Target { link: LinkAddress::Tcp { host: "127.0.0.1".into(), port }, timeout: Duration::from_secs(5) };
+        // QGroundControl's `.params` (its header, tabs, the vehicle's ids and the type), with the
+        // byte-order mark a Windows editor adds; MAVProxy's `param save` (names padded to 16).
+        let qgc = "\u{feff}# Onboard parameters for Vehicle 1\n#\n# Vehicle-Id\tComponent-Id\tName\tValue\tType\n\
+                   1\t1\tHI\t40.000000000000000000\t9\n1\t1\tLO\t30\t9\n";
+        let mavproxy = "HI               40.000000\nLO               30.000000\n";
+        for (file, text) in [("board.params", qgc), ("board.parm", mavproxy)] {
+            let path = dir.join(file);
+            std::fs::write(&path, text).unwrap();
+            let (port, _) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+            assert_eq!(diff(&target(port), &path), Ok(ExitCode::from(EXIT_DIFFERENT)), "{file}");
+            let (port, state) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+            assert_eq!(push(&target(port), &path), Ok(ExitCode::SUCCESS), "{file}");
+            let values: Vec<(&str, f32)> = state.lock().unwrap().params.iter().map(|p| (p.name, p.value)).collect();
+            assert_eq!(values, [("ANGLE_MAX", 30.0), ("LO", 30.0), ("HI", 40.0)], "{file}");
+            let (port, _) = serve(MockState { params: table(30.0, 40.0), ..MockState::default() });
+            assert_eq!(diff(&target(port), &path), Ok(ExitCode::SUCCESS), "{file}");
+        }
+        // A QGroundControl line whose ids are not whole numbers is not taken for one.
+        let path = dir.join("bad.params");
+        std::fs::write(&path, "1\t1.5\tHI\t40\t9\n").unwrap();
+        let (port, _) = serve(MockState { params: table(10.0, 20.0), ..MockState::default() });
+        let e = push(&target(port), &path).unwrap_err().0;
+        assert!(e.contains("bad.params: line 1: `HI` after the value"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -6,9 +6,7 @@ use std::io::Write;
 use std::net::{TcpListener, TcpStream};
 use std::sync::{Arc, Mutex};
 
-use mavlink::dialects::common::{
-    MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavSeverity, MavState, MavType, HEARTBEAT_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA,
-};
+use mavlink::dialects::common::{MavMessage, MavParamType, MavSeverity, PARAM_VALUE_DATA, STATUSTEXT_DATA};
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkReader};
 
 use crate::connection::Io;
@@ -95,14 +93,9 @@ fn run(stream: TcpStream, state: &Mutex<MockState>) {
         let Ok(mut st) = state.lock() else { return };
         let mut answers = Vec::new();
         match msg {
-            MavMessage::HEARTBEAT(_) => answers.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: MavType::MAV_TYPE_QUADROTOR,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-                base_mode: MavModeFlag::empty(),
-                system_status: MavState::MAV_STATE_STANDBY,
-                mavlink_version: 3,
-            })),
+            MavMessage::HEARTBEAT(_) => {
+                answers.push(MavMessage::HEARTBEAT(fcu_link::heartbeat::heartbeat(fcu_core::supervisor::FlightState::Disarmed)));
+            }
             MavMessage::PARAM_REQUEST_LIST(_) => {
                 downloads += 1;
                 for i in 0..st.params.len() {

@@ -16,8 +16,8 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-/// MAVLink's `param_id` holds at most 16 characters.
-pub const NAME_LEN: usize = 16;
+/// MAVLink's `param_id` holds at most 16 characters (fcu-core's reader refuses longer names).
+pub use fcu_core::parameters::NAME_LEN;
 
 /// One `NAME VALUE` line.
 #[derive(Clone, Debug, PartialEq)]
@@ -138,7 +138,7 @@ pub fn diff(file: &[Entry], board: &BTreeMap<String, f32>) -> Vec<Difference> {
 
 /// A piece of a line as it may appear in a message: control characters escaped, cut at 40.
 fn echo(text: &str) -> String {
-    fcu_testkit::csv::echo(text)
+    fcu_log::csv::echo(text)
 }
 
 #[cfg(test)]

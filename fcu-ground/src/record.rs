@@ -2,14 +2,14 @@
 //! writes, so a flight on the board and one in the simulator are read the same way.
 //!
 //! One row per ATTITUDE (25 Hz at the board's default rate), carrying the latest of the other
-//! messages. The header is fcu-testkit's [`CSV_HEADER`] and each row goes through fcu-testkit's
-//! own writer ([`LogRow::write_csv`]), then the columns this row has no value for are emptied.
+//! messages. The header is fcu-log's [`CSV_HEADER`] and each row goes through fcu-log's
+//! writer ([`LogRow::write_csv`]), then the columns this row has no value for are emptied.
 //! The columns, and where each comes from:
 //!
 //! | column | from |
 //! |---|---|
 //! | `t_s` | ATTITUDE's `time_boot_ms`, from the first row (a reboot continues the count) |
-//! | `state` | HEARTBEAT: `system_status` with the armed bit (see [`flight_state`]) |
+//! | `state` | HEARTBEAT, read as fcu-link writes it ([`fcu_link::heartbeat`]) |
 //! | `armed` | HEARTBEAT: `MAV_MODE_FLAG_SAFETY_ARMED` |
 //! | `link` | SYS_STATUS: the radio receiver's health bit (the board's own verdict); empty before the first SYS_STATUS |
 //! | `est_roll_deg`, `est_pitch_deg` | ATTITUDE: the board's estimate |
@@ -30,8 +30,8 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use fcu_core::supervisor::FlightState;
-use fcu_testkit::sim::{FlightLog, LogRow, CSV_HEADER};
-use mavlink::dialects::common::{MavMessage, MavModeFlag, MavState, MavSysStatusSensor};
+use fcu_log::{LogRow, CSV_HEADER};
+use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSysStatusSensor};
 
 /// The columns a recording never has: the simulator's truth and the targets.
 pub const ALWAYS_ABSENT: [&str; 8] =
@@ -40,23 +40,6 @@ pub const ALWAYS_ABSENT: [&str; 8] =
 /// Compare counts per step of SERVO_OUTPUT_RAW's 1000–2000 scale: TIM4 counts to 2000 for 100 %
 /// duty in the brushed-motor build, whose compare values the CSV's motor columns carry.
 const COUNTS_PER_SERVO_STEP: u32 = 2;
-
-/// The flight state as HEARTBEAT tells it. HEARTBEAT carries less than the board knows:
-/// arming and armed are both `ACTIVE` (written `armed`); a latched fault and the failsafe's
-/// motors-off stage are both `CRITICAL` and disarmed (written `failsafe2`); booting and
-/// calibrating are both `BOOT` (written `calibrating`).
-pub fn flight_state(status: MavState, armed: bool) -> FlightState {
-    match status {
-        MavState::MAV_STATE_UNINIT | MavState::MAV_STATE_BOOT | MavState::MAV_STATE_CALIBRATING => FlightState::Calibrating,
-        MavState::MAV_STATE_STANDBY if armed => FlightState::Armed,
-        MavState::MAV_STATE_STANDBY => FlightState::Disarmed,
-        MavState::MAV_STATE_ACTIVE if armed => FlightState::Armed,
-        MavState::MAV_STATE_ACTIVE => FlightState::Disarmed,
-        MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY if armed => FlightState::FailsafeLevel,
-        MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY => FlightState::FailsafeOff,
-        MavState::MAV_STATE_POWEROFF | MavState::MAV_STATE_FLIGHT_TERMINATION => FlightState::Fault,
-    }
-}
 
 /// One row of the recording: what the link said up to one ATTITUDE.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,7 +56,7 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// The row as fcu-testkit logs it: absent values are NaN (not drawn on the plot).
+    /// The row as fcu-log logs it: absent values are NaN (not drawn on the plot).
     pub fn log_row(&self) -> LogRow {
         LogRow {
             t_s: self.t_s,
@@ -170,7 +153,7 @@ impl Recorder {
         match msg {
             MavMessage::HEARTBEAT(h) => {
                 let armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-                self.heartbeat = Some((flight_state(h.system_status, armed), armed));
+                self.heartbeat = Some((fcu_link::heartbeat::flight_state(h), armed));
             }
             MavMessage::SYS_STATUS(s) => {
                 let rc = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_RC_RECEIVER;
@@ -274,16 +257,7 @@ impl Recording {
         let text_path = self.dir.join("statustext.txt");
         self.csv.flush().map_err(|e| format!("writing {}: {e}", csv_path.display()))?;
         std::fs::rename(&self.partial, &csv_path).map_err(|e| format!("writing {}: {e}", csv_path.display()))?;
-        let span_s = self.rows.last().map_or(0.0, |r| r.t_s);
-        let log = FlightLog {
-            scenario: "record".into(),
-            profile: fcu_testkit::Profile::Default,
-            seed: 0,
-            tick_hz: if span_s > 0.0 { self.rows.len().saturating_sub(1) as f64 / span_s } else { 0.0 },
-            plant: Default::default(),
-            rows: std::mem::take(&mut self.rows),
-        };
-        fcu_testkit::sim::plot::write_svg(&log, title, &svg_path)?;
+        fcu_log::plot::write_svg(&self.rows, title, &svg_path)?;
         let mut text = self.texts.join("\n");
         if !text.is_empty() {
             text.push('\n');
@@ -302,7 +276,7 @@ impl Recording {
 mod tests {
     use super::*;
     use crate::test_messages::heartbeat;
-    use fcu_testkit::csv::{data_lines, Header, Row};
+    use fcu_log::csv::{data_lines, Header, Row};
     use mavlink::dialects::common::{ATTITUDE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA};
 
     fn attitude(ms: u32, roll_rad: f32, pitch_rad: f32) -> MavMessage {
@@ -346,14 +320,14 @@ mod tests {
     fn no_row_before_the_state_is_known() {
         let mut r = Recorder::new(Some(3));
         assert_eq!(r.on_message(&attitude(100, 0.0, 0.0)), None);
-        r.on_message(&heartbeat(MavState::MAV_STATE_STANDBY, false));
+        r.on_message(&heartbeat(FlightState::Disarmed));
         assert!(r.on_message(&attitude(140, 0.0, 0.0)).is_some());
     }
 
     #[test]
     fn rows_carry_the_latest_of_each_message_in_the_simulators_units() {
         let mut r = Recorder::new(Some(3));
-        r.on_message(&heartbeat(MavState::MAV_STATE_ACTIVE, true));
+        r.on_message(&heartbeat(FlightState::Armed));
         r.on_message(&rc([1500, 1480, 1234, 1510]));
         r.on_message(&servo([1000, 1500, 2000, 1250]));
         r.on_message(&sys_status(3712, true));
@@ -387,7 +361,7 @@ mod tests {
     #[test]
     fn what_has_not_come_yet_is_empty_and_says_so() {
         let mut r = Recorder::new(None);
-        r.on_message(&heartbeat(MavState::MAV_STATE_STANDBY, false));
+        r.on_message(&heartbeat(FlightState::Disarmed));
         r.on_message(&rc([1500, 1500, 1000, 1500]));
         let s = r.on_message(&attitude(5, 0.0, 0.0)).unwrap();
         let line = s.csv_line();
@@ -402,7 +376,7 @@ mod tests {
         assert!(!row.flag(armed).unwrap());
         // A channel the receiver does not deliver is no throttle either.
         let mut r = Recorder::new(Some(3));
-        r.on_message(&heartbeat(MavState::MAV_STATE_STANDBY, false));
+        r.on_message(&heartbeat(FlightState::Disarmed));
         r.on_message(&rc([1500, 1500, u16::MAX, 1500]));
         assert_eq!(r.on_message(&attitude(5, 0.0, 0.0)).unwrap().thr_us, None);
     }
@@ -410,7 +384,7 @@ mod tests {
     #[test]
     fn the_clock_starts_at_zero_and_survives_a_reboot() {
         let mut r = Recorder::new(None);
-        r.on_message(&heartbeat(MavState::MAV_STATE_STANDBY, false));
+        r.on_message(&heartbeat(FlightState::Disarmed));
         let t: Vec<f64> = [5000, 5040, 5080, 20, 60].iter().map(|&ms| r.on_message(&attitude(ms, 0.0, 0.0)).unwrap().t_s).collect();
         let expected = [0.0, 0.04, 0.08, 0.08, 0.12];
         for (got, want) in t.iter().zip(expected) {
@@ -419,21 +393,12 @@ mod tests {
     }
 
     #[test]
-    fn heartbeat_states_map_onto_the_flight_states() {
-        assert_eq!(flight_state(MavState::MAV_STATE_BOOT, false), FlightState::Calibrating);
-        assert_eq!(flight_state(MavState::MAV_STATE_STANDBY, false), FlightState::Disarmed);
-        assert_eq!(flight_state(MavState::MAV_STATE_ACTIVE, true), FlightState::Armed);
-        assert_eq!(flight_state(MavState::MAV_STATE_CRITICAL, true), FlightState::FailsafeLevel);
-        assert_eq!(flight_state(MavState::MAV_STATE_CRITICAL, false), FlightState::FailsafeOff);
-    }
-
-    #[test]
     fn a_recording_writes_the_simulators_files() {
         let dir = std::env::temp_dir().join(format!("fcu-ground-record-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut rec = Recording::create(&dir).unwrap();
         let mut r = Recorder::new(Some(3));
-        r.on_message(&heartbeat(MavState::MAV_STATE_STANDBY, false));
+        r.on_message(&heartbeat(FlightState::Disarmed));
         r.on_message(&servo([1000; 4]));
         for i in 0..50u32 {
             let s = r.on_message(&attitude(1000 + 40 * i, (i as f32 * 0.01).sin(), 0.0)).unwrap();

@@ -5,18 +5,21 @@
 use std::collections::VecDeque;
 use std::fmt::Write as _;
 
-use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavState, MavSysStatusSensor};
+use fcu_core::supervisor::FlightState;
+use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavSysStatusSensor};
 
 /// STATUSTEXT lines kept on screen.
 const TEXTS_SHOWN: usize = 6;
+/// What a line shows before its message came.
+const WAITING: &str = "(nothing received yet)";
 /// A HEARTBEAT older than this is called out: the board (or the link) has gone quiet.
 const STALE_S: f64 = 3.0;
 
 /// What the screen shows, from the board's messages.
 #[derive(Clone, Debug, Default)]
 pub struct View {
-    /// (armed, system status, when) of the latest HEARTBEAT.
-    heartbeat: Option<(bool, MavState, f64)>,
+    /// (armed, flight state, when) of the latest HEARTBEAT.
+    heartbeat: Option<(bool, FlightState, f64)>,
     /// Roll, pitch, yaw, degrees.
     attitude_deg: Option<[f64; 3]>,
     /// Channel widths, µs (None: no pulses on it).
@@ -43,27 +46,13 @@ pub fn severity_name(s: MavSeverity) -> &'static str {
     }
 }
 
-fn status_name(s: MavState) -> &'static str {
-    match s {
-        MavState::MAV_STATE_UNINIT => "uninit",
-        MavState::MAV_STATE_BOOT => "boot (calibrating)",
-        MavState::MAV_STATE_CALIBRATING => "calibrating",
-        MavState::MAV_STATE_STANDBY => "standby",
-        MavState::MAV_STATE_ACTIVE => "active",
-        MavState::MAV_STATE_CRITICAL => "critical (failsafe or fault)",
-        MavState::MAV_STATE_EMERGENCY => "emergency",
-        MavState::MAV_STATE_POWEROFF => "power off",
-        MavState::MAV_STATE_FLIGHT_TERMINATION => "flight termination",
-    }
-}
-
 impl View {
     /// Takes one message received at `now_s` (the watch's clock).
     pub fn on_message(&mut self, msg: &MavMessage, now_s: f64) {
         match msg {
             MavMessage::HEARTBEAT(h) => {
                 let armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-                self.heartbeat = Some((armed, h.system_status, now_s));
+                self.heartbeat = Some((armed, fcu_link::heartbeat::flight_state(h), now_s));
             }
             MavMessage::ATTITUDE(a) => {
                 self.attitude_deg = Some([a.roll, a.pitch, a.yaw].map(|r| f64::from(r).to_degrees()));
@@ -103,11 +92,25 @@ impl View {
     pub fn render(&self, title: &str, now_s: f64) -> String {
         let mut out = String::new();
         let _ = writeln!(out, "{title}");
-        let waiting = "(nothing received yet)";
+        self.write_state(&mut out, now_s);
+        self.write_radio(&mut out);
+        self.write_outputs(&mut out);
+        let _ = writeln!(out, "messages");
+        if self.texts.is_empty() {
+            let _ = writeln!(out, "  (none yet)");
+        }
+        for t in &self.texts {
+            let _ = writeln!(out, "  {t}");
+        }
+        out
+    }
+
+    /// The flight state (and how old it is) and the attitude.
+    fn write_state(&self, out: &mut String, now_s: f64) {
         match self.heartbeat {
-            Some((armed, status, at)) => {
+            Some((armed, state, at)) => {
                 let armed = if armed { "ARMED" } else { "disarmed" };
-                let _ = write!(out, "state      {armed:<9} system status {}", status_name(status));
+                let _ = write!(out, "state      {armed:<9} flight state {}", state.name());
                 let age = now_s - at;
                 if age > STALE_S {
                     let _ = write!(out, "   NO HEARTBEAT FOR {age:.0} s");
@@ -115,7 +118,7 @@ impl View {
                 out.push('\n');
             }
             None => {
-                let _ = writeln!(out, "state      {waiting}");
+                let _ = writeln!(out, "state      {WAITING}");
             }
         }
         match self.attitude_deg {
@@ -123,9 +126,13 @@ impl View {
                 let _ = writeln!(out, "attitude   roll {r:+7.1}°   pitch {p:+7.1}°   yaw {y:+7.1}°");
             }
             None => {
-                let _ = writeln!(out, "attitude   {waiting}");
+                let _ = writeln!(out, "attitude   {WAITING}");
             }
         }
+    }
+
+    /// The radio's channels.
+    fn write_radio(&self, out: &mut String) {
         match &self.radio_us {
             Some(ch) if !ch.is_empty() => {
                 let _ = write!(out, "radio µs  ");
@@ -145,15 +152,19 @@ impl View {
                 let _ = writeln!(out, "radio µs   no channels");
             }
             None => {
-                let _ = writeln!(out, "radio µs   {waiting}");
+                let _ = writeln!(out, "radio µs   {WAITING}");
             }
         }
+    }
+
+    /// The motors, the battery and the sensors' health.
+    fn write_outputs(&self, out: &mut String) {
         match self.motors {
             Some(m) => {
                 let _ = writeln!(out, "motors     m1 {:4}  m2 {:4}  m3 {:4}  m4 {:4}   (1000 off .. 2000 full)", m[0], m[1], m[2], m[3]);
             }
             None => {
-                let _ = writeln!(out, "motors     {waiting}");
+                let _ = writeln!(out, "motors     {WAITING}");
             }
         }
         match self.battery {
@@ -163,7 +174,7 @@ impl View {
                 let _ = writeln!(out, "battery    {v}{pct}");
             }
             None => {
-                let _ = writeln!(out, "battery    {waiting}");
+                let _ = writeln!(out, "battery    {WAITING}");
             }
         }
         match self.health {
@@ -172,17 +183,9 @@ impl View {
                 let _ = writeln!(out, "health     {}", parts.join(", "));
             }
             None => {
-                let _ = writeln!(out, "health     {waiting}");
+                let _ = writeln!(out, "health     {WAITING}");
             }
         }
-        let _ = writeln!(out, "messages");
-        if self.texts.is_empty() {
-            let _ = writeln!(out, "  (none yet)");
-        }
-        for t in &self.texts {
-            let _ = writeln!(out, "  {t}");
-        }
-        out
     }
 }
 
@@ -213,7 +216,7 @@ mod tests {
         let mut v = View::default();
         let empty = v.render("t", 0.0);
         assert!(empty.contains("state      (nothing received yet)"), "{empty}");
-        v.on_message(&heartbeat(MavState::MAV_STATE_ACTIVE, true), 1.0);
+        v.on_message(&heartbeat(FlightState::Armed), 1.0);
         v.on_message(&MavMessage::ATTITUDE(ATTITUDE_DATA { roll: 0.1, pitch: -0.2, yaw: 3.0, ..ATTITUDE_DATA::default() }), 1.0);
         v.on_message(
             &MavMessage::RC_CHANNELS(RC_CHANNELS_DATA {
@@ -247,7 +250,7 @@ mod tests {
         );
         v.on_message(&text("RC1_MIN: below the minimum"), 1.5);
         let s = v.render("t", 2.0);
-        assert!(s.contains("state      ARMED     system status active"), "{s}");
+        assert!(s.contains("state      ARMED     flight state armed"), "{s}");
         assert!(s.contains("roll    +5.7°   pitch   -11.5°   yaw  +171.9°"), "{s}");
         assert!(s.contains(" ch1 1500 ch2 1499 ch3 1100 ch4  ---"), "{s}");
         assert!(s.contains("m1 1200  m2 1300  m3 1400  m4 1500"), "{s}");

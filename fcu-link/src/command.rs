@@ -7,7 +7,7 @@
 //! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time, disarmed only; every parameter 0: [`Request::EndCalibration`] (PX4's cancel); magnetometer, baro and the rest UNSUPPORTED |
 //! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults; disarmed only |
 //! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot, disarmed only; the host reboots when [`crate::Link::reboot_ready`] |
-//! | DO_MOTOR_TEST | one motor, disarmed only, capped and stopped as [`crate::MotorTestState`] says |
+//! | DO_MOTOR_TEST | one motor; the flight controller decides, caps and stops it ([`crate::motor_test`]) |
 //! | REQUEST_MESSAGE | AUTOPILOT_VERSION (param1 = 148) after the ACK; any other message UNSUPPORTED |
 //! | REQUEST_AUTOPILOT_CAPABILITIES | AUTOPILOT_VERSION after the ACK |
 //!
@@ -159,7 +159,7 @@ impl<const TX: usize> Core<TX> {
                 }
                 outcome
             }
-            DO_MOTOR_TEST => self.start_motor_test(command, &state, vehicle),
+            DO_MOTOR_TEST => self.start_motor_test(command, vehicle),
             REQUEST_MESSAGE if command.params[0] == AUTOPILOT_VERSION_ID as f32 => Ok(Then::SendVersion),
             REQUEST_AUTOPILOT_CAPABILITIES if command.params[0] == 1.0 => Ok(Then::SendVersion),
             _ => Err(unsupported()),
@@ -167,7 +167,7 @@ impl<const TX: usize> Core<TX> {
         match outcome {
             Ok(then) => {
                 if command.id != DO_MOTOR_TEST {
-                    self.stop_motor_test(vehicle, "another command");
+                    self.stop_motor_test(&state, vehicle, "another command");
                 }
                 self.ack(command, MavResult::MAV_RESULT_ACCEPTED);
                 if let Then::SendVersion = then {
@@ -206,7 +206,7 @@ fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut
     if action != 0.0 {
         return Err(denied("Arm/disarm", "param1 must be 0 or 1"));
     }
-    if !state.armed {
+    if !state.armed() {
         return Ok(Then::Nothing);
     }
     let forced = force == FORCE_DISARM;
@@ -229,7 +229,7 @@ fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mu
     if mag != 0.0 || baro != 0.0 || p6 != 0.0 || p7 != 0.0 || imu == radio {
         return Err(unsupported());
     }
-    if state.armed {
+    if state.armed() {
         return Err(while_armed("Calibration"));
     }
     let request = if imu { Request::CalibrateImu } else { Request::CalibrateRadio };
@@ -244,7 +244,7 @@ fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V)
     } else {
         return Err(unsupported());
     };
-    if state.armed {
+    if state.armed() {
         return Err(while_armed("Storage"));
     }
     ask(vehicle, request, "Storage refused")
@@ -254,7 +254,7 @@ fn reboot<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) 
     if command.params[0] != 1.0 {
         return Err(unsupported());
     }
-    if state.armed {
+    if state.armed() {
         return Err(while_armed("Reboot"));
     }
     ask(vehicle, Request::Reboot, "Reboot refused")

@@ -2,7 +2,9 @@
 //!
 //! The firmware runs it on USART1 from a low-priority task, fcu-pil runs the same code inside
 //! the emulated board, and the tests drive it on the host. It owns no configuration and no
-//! hardware: the host application implements [`Vehicle`] (a view of the flight state, the
+//! hardware, and of the flight controller it knows only the supervisor's states (which
+//! HEARTBEAT says: [`heartbeat`]). The host application (fcu-gcs's station on the board)
+//! implements [`Vehicle`] (a view of the flight state, the
 //! parameter table and the commands it may take), feeds received bytes to [`Link::receive`],
 //! calls [`Link::tick`] for the telemetry schedule and drains [`Link::poll_tx`] into the UART.
 //! Nothing blocks and nothing allocates; an answer or event that does not fit is dropped and
@@ -29,9 +31,9 @@
 //! # What it costs in flash
 //!
 //! In the firmware's image built with the link, `scripts/size-by-part` counts about 14 KB for
-//! the ground-station link (docs/ground-station.md has the table): this crate with what it inlines of fcu-core's parameter table (the
-//! save plan, a set and its checks), the firmware's link task, its receive ring and its flash
-//! store. What keeps it there: each message is serialized and parsed by its own `*_DATA`
+//! the ground-station link (docs/ground-station.md has the table): this crate, fcu-gcs's
+//! station and link task with what they inline of fcu-core's parameter table (the save plan, a
+//! set and its checks), the firmware's link task, its receive ring and its flash store. What keeps it there: each message is serialized and parsed by its own `*_DATA`
 //! struct, over one non-generic copy of everything that does not depend on the message
 //! (framing, queueing, padding a payload: [`frame`]); the checksum is computed without a
 //! table ([`crc`]); names and texts are bytes, so no UTF-8 check is linked. Parsing and
@@ -65,26 +67,22 @@ pub mod command;
 pub mod crc;
 mod fallbacks;
 pub mod frame;
+pub mod heartbeat;
 mod link;
-mod motor_test;
+pub mod motor_test;
 mod params;
 pub mod rates;
 pub mod reader;
-pub mod service;
-pub mod station;
 mod telemetry;
 pub mod text;
 pub mod tx;
 pub mod vehicle;
 
 pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
-pub use motor_test::{MotorTestState, MOTOR_TEST_MAX_MS, MOTOR_TEST_THROTTLE_CAP_PCT};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
-pub use service::{Observed, Service, ToControl};
-pub use station::Due;
 pub use text::Severity;
-pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
+pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, Vehicle, VehicleState};
 
 /// Our MAVLink system id.
 pub const SYSTEM_ID: u8 = 1;

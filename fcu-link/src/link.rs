@@ -9,7 +9,6 @@ use mavlink::MessageData;
 
 use crate::command::Command;
 use crate::frame::{self, MAX_FRAME};
-use crate::motor_test::{MotorTest, MotorTestState};
 use crate::rates::Rates;
 use crate::reader::{Frame, FrameReader, ReaderStats};
 use crate::text::{Severity, Text, TEXT_LEN};
@@ -165,7 +164,8 @@ pub(crate) struct Core<const TX: usize> {
     pub(crate) params_owed: ParamMask,
     /// The `id` of the last chunked STATUSTEXT (0: none yet).
     text_id: u16,
-    pub(crate) motor_test: Option<MotorTest>,
+    /// The running motor test was asked to stop for the ground station's silence.
+    pub(crate) motor_test_silence_stop: bool,
     pub(crate) last_rx_ms: Option<u32>,
     /// Said when the host asked ([`Link::greet`]) and again to each ground station that
     /// connects afterwards.
@@ -241,7 +241,7 @@ impl<const TX: usize> Link<TX> {
                 param_cursor: None,
                 params_owed: ParamMask::EMPTY,
                 text_id: 0,
-                motor_test: None,
+                motor_test_silence_stop: false,
                 last_rx_ms: None,
                 greeting: None,
                 now_ms: 0,
@@ -270,7 +270,7 @@ impl<const TX: usize> Link<TX> {
         }
     }
 
-    /// Runs the schedule at `now_ms`: the motor test's limits, due telemetry, the PARAM_VALUEs
+    /// Runs the schedule at `now_ms`: a motor test's stop on silence, due telemetry, the PARAM_VALUEs
     /// owed to a PARAM_SET, the next PARAM_VALUE of a download. Call it at 100 Hz or faster
     /// (the parameter download sends at most one PARAM_VALUE per call).
     pub fn tick<V: Vehicle>(&mut self, now_ms: u32, vehicle: &mut V) {
@@ -307,11 +307,6 @@ impl<const TX: usize> Link<TX> {
     /// needs no UTF-8 check, whose code and table are 600 bytes of flash.
     pub fn send_text(&mut self, severity: Severity, text: &[u8]) -> bool {
         self.core.text(severity, Text::new().push_bytes(text), Room::Event)
-    }
-
-    /// The motor test running, if any.
-    pub fn motor_test(&self) -> Option<MotorTestState> {
-        self.core.motor_test.map(|t| t.state(self.core.now_ms))
     }
 
     /// True once a reboot was accepted and its COMMAND_ACK has left the queue: the host
@@ -398,6 +393,7 @@ impl<const TX: usize> Core<TX> {
     fn handle<V: Vehicle>(&mut self, frame: Frame<'_>, vehicle: &mut V) {
         let silent_before = self.last_rx_ms.is_none_or(|last| self.now_ms.wrapping_sub(last) > STATION_GONE_MS);
         self.last_rx_ms = Some(self.now_ms);
+        self.motor_test_silence_stop = false;
         let payload = frame.payload;
         match frame.message_id {
             HEARTBEAT_DATA::ID => {

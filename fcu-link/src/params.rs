@@ -164,100 +164,14 @@ impl<const TX: usize> Core<TX> {
 
 #[cfg(test)]
 mod tests {
-    use fcu_core::parameters;
-    use fcu_core::Config;
     use mavlink::dialects::common::PARAM_REQUEST_READ_DATA;
 
-    use crate::station::Station;
     use crate::test_support::*;
-    use crate::{Link, LinkConfig, Rates, Severity, Vehicle};
-
-    /// Telemetry off but for a heartbeat a minute apart: what goes out is the answers.
-    fn quiet_link() -> Link<512> {
-        let rates = Rates {
-            attitude_ms: 0,
-            sys_status_ms: 0,
-            battery_ms: 0,
-            rc_channels_ms: 0,
-            servo_output_ms: 0,
-            heartbeat_ms: 60_000,
-            param_ms: 10,
-        };
-        Link::new(LinkConfig { rates, ..LinkConfig::DEFAULT })
-    }
-
-    fn station() -> Station {
-        Station::new(Config::default(), &Config::DEFAULT)
-    }
-
-    fn index(name: &str) -> usize {
-        parameters::index_of(name.as_bytes()).unwrap()
-    }
-
-    const RCMAP: [&str; 4] = ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"];
-
-    /// The ground station's copy of the table, from a download, as it shows and saves it.
-    fn downloaded(st: &Station) -> Vec<f32> {
-        (0..st.param_count()).map(|i| st.param(i).unwrap().value).collect()
-    }
-
-    fn apply(copy: &mut [f32], sent: &[Sent]) {
-        for (_, value, index, _) in param_values(sent) {
-            copy[usize::from(index)] = value;
-        }
-    }
-
-    #[test]
-    fn a_param_set_that_changes_other_parameters_reports_them_too() {
-        let mut link = quiet_link();
-        let mut st = station();
-        let mut copy = downloaded(&st);
-        let before: Vec<f32> = RCMAP.iter().map(|n| copy[index(n)]).collect();
-        assert_eq!(before, [1.0, 2.0, 3.0, 4.0]);
-        link.receive(&v2(&param_set("RCMAP_ROLL", 3.0)), 0, &mut st);
-        let sent = drain(&mut link);
-        let echoed: Vec<(String, f32)> = param_values(&sent).into_iter().map(|p| (p.0, p.1)).collect();
-        // The one set first, then the one it swapped with.
-        assert_eq!(echoed, [("RCMAP_ROLL".to_string(), 3.0), ("RCMAP_THROTTLE".to_string(), 1.0)]);
-        apply(&mut copy, &sent);
-        assert_eq!(copy, downloaded(&st), "the ground station's copy is the board's table");
-        let mut map: Vec<f32> = RCMAP.iter().map(|n| copy[index(n)]).collect();
-        map.sort_by(f32::total_cmp);
-        assert_eq!(map, [1.0, 2.0, 3.0, 4.0], "a permutation");
-    }
-
-    #[test]
-    fn param_values_a_set_owes_go_out_on_the_next_tick_when_the_queue_is_full() {
-        // A STATUSTEXT of 50 bytes is a 63-byte frame, of 10 bytes a 23-byte one; answers may
-        // fill the queue up to its size less the telemetry's reserve.
-        let fifty = [b'x'; 50];
-        for (texts, sent_at_once) in [(&[&fifty[..], &fifty, &fifty, &fifty][..], 0), (&[&fifty[..], &fifty, &fifty, b"0123456789"][..], 1)]
-        {
-            let mut link = quiet_link();
-            let mut st = station();
-            link.tick(0, &mut st);
-            for text in texts {
-                assert!(link.send_text(Severity::Info, text));
-            }
-            let mut copy = downloaded(&st);
-            link.receive(&v2(&param_set("RCMAP_ROLL", 3.0)), 1, &mut st);
-            let at_once = drain(&mut link);
-            assert_eq!(param_values(&at_once).len(), sent_at_once);
-            link.tick(2, &mut st);
-            let later = drain(&mut link);
-            let names: Vec<String> = param_values(&at_once).into_iter().chain(param_values(&later)).map(|p| p.0).collect();
-            assert_eq!(names, ["RCMAP_ROLL", "RCMAP_THROTTLE"]);
-            apply(&mut copy, &at_once);
-            apply(&mut copy, &later);
-            assert_eq!(copy, downloaded(&st));
-            let stats = link.stats();
-            assert_eq!((stats.tx_dropped, stats.answers_dropped), (0, 0), "nothing lost");
-        }
-    }
+    use crate::{Link, LinkConfig};
 
     #[test]
     fn a_negative_param_request_read_index_other_than_minus_one_is_not_looked_up_by_name() {
-        let mut link = quiet_link();
+        let mut link: TestLink = Link::new(LinkConfig::DEFAULT);
         let mut mock = Mock::new();
         link.tick(0, &mut mock);
         drain(&mut link);

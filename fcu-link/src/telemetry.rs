@@ -1,12 +1,12 @@
 //! The periodic messages, from one [`VehicleState`] snapshot per tick.
 
 use mavlink::dialects::common::{
-    MavAutopilot, MavBatteryFunction, MavBatteryType, MavModeFlag, MavProtocolCapability, MavState, MavSysStatusSensor, MavType,
-    ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    MavBatteryFunction, MavBatteryType, MavProtocolCapability, MavSysStatusSensor, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
+    BATTERY_STATUS_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 
 use crate::link::{Core, Room};
-use crate::vehicle::{SystemStatus, VehicleState};
+use crate::vehicle::VehicleState;
 
 /// RC_CHANNELS' value for a channel that is not there.
 const NO_CHANNEL: u16 = u16::MAX;
@@ -55,24 +55,7 @@ impl<const TX: usize> Core<TX> {
     }
 
     fn heartbeat(&mut self, state: &VehicleState) -> bool {
-        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED;
-        if state.armed {
-            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-        }
-        let system_status = match state.status {
-            SystemStatus::Boot => MavState::MAV_STATE_BOOT,
-            SystemStatus::Standby => MavState::MAV_STATE_STANDBY,
-            SystemStatus::Active => MavState::MAV_STATE_ACTIVE,
-            SystemStatus::Critical => MavState::MAV_STATE_CRITICAL,
-        };
-        self.send_telemetry(&HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            base_mode,
-            system_status,
-            mavlink_version: 3,
-        })
+        self.send_telemetry(&crate::heartbeat::heartbeat(state.state))
     }
 
     fn attitude(&mut self, state: &VehicleState) -> bool {

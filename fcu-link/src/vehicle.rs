@@ -7,18 +7,7 @@
 //! the vehicle may still refuse, naming the rule (`Err("...")`), and the link reports that
 //! rule to the ground station in a STATUSTEXT.
 
-/// MAVLink's `MAV_STATE` as the link reports it in HEARTBEAT.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SystemStatus {
-    /// Booting or calibrating: not ready to arm (`MAV_STATE_BOOT`).
-    Boot,
-    /// On the ground, disarmed, ready (`MAV_STATE_STANDBY`).
-    Standby,
-    /// Armed (`MAV_STATE_ACTIVE`).
-    Active,
-    /// A failsafe stage or a latched fault (`MAV_STATE_CRITICAL`).
-    Critical,
-}
+use fcu_core::supervisor::FlightState;
 
 /// Attitude in MAVLink's convention (ATTITUDE): roll right side down positive, pitch nose up
 /// positive, yaw clockwise seen from above positive; rates about the same axes.
@@ -68,14 +57,12 @@ pub struct Health {
 /// A snapshot of the vehicle for one telemetry tick or one command decision.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VehicleState {
-    /// Motors armed.
-    pub armed: bool,
+    /// The supervisor's state (HEARTBEAT says it: [`crate::heartbeat`]).
+    pub state: FlightState,
     /// Flying (armed and past take-off); a disarm then needs MAVLink's force value.
     pub in_air: bool,
     /// Throttle stick at its low end.
     pub throttle_low: bool,
-    /// What HEARTBEAT reports.
-    pub status: SystemStatus,
     /// For ATTITUDE.
     pub attitude: Attitude,
     /// Radio pulse widths, µs, in receiver channel order; 0 for a channel without pulses.
@@ -91,6 +78,16 @@ pub struct VehicleState {
     pub health: Health,
     /// Main loop load, per mille (SYS_STATUS' `load`).
     pub load_permille: u16,
+    /// A motor test runs, as the flight controller reports it (it decides when one stops).
+    pub motor_test: bool,
+}
+
+impl VehicleState {
+    /// Changes are restricted (arming, armed, or the failsafe's level stage): a command that
+    /// needs the board disarmed is TEMPORARILY_REJECTED.
+    pub fn armed(&self) -> bool {
+        self.state.armed()
+    }
 }
 
 /// One parameter: name (at most 16 characters, upper case) and value in force.
@@ -111,7 +108,7 @@ pub struct ParamMask {
 
 impl ParamMask {
     /// Indices a mask can hold: a table with more parameters cannot report the changes of the
-    /// ones past it (fcu-core's station checks its table fits at compile time).
+    /// ones past it (fcu-gcs's station checks its table fits at compile time).
     pub const CAPACITY: usize = 128;
 
     /// No index.
@@ -182,20 +179,18 @@ pub enum Request {
     /// Reboot once [`crate::Link::reboot_ready`] says the acknowledgement is out and any
     /// pending save is done. Disarmed (checked).
     Reboot,
-    /// Spin one motor for a motor test. Disarmed (checked); the throttle is already capped to
-    /// [`crate::MOTOR_TEST_THROTTLE_CAP_PCT`] and the duration to [`crate::MOTOR_TEST_MAX_MS`].
-    /// The link sends [`Request::StopMotorTest`] when the test ends; the vehicle refuses to arm
-    /// while a test runs and should stop the motor itself after `duration_ms` as well.
+    /// Spin one motor for a motor test, as the ground station asked: the vehicle decides
+    /// whether it may (disarmed, a motor it has), caps the throttle and the duration, and stops
+    /// it at its deadline, on a stick move and on arming ([`crate::motor_test`]).
     MotorTest {
-        /// Motor index, 0-based.
+        /// Motor index, 0-based (any: the vehicle knows how many it has).
         motor: u8,
-        /// Throttle, percent of full output.
+        /// Throttle, percent of full output, as asked (finite, not negative).
         throttle_pct: f32,
-        /// How long, ms.
-        duration_ms: u16,
+        /// How long, ms, as asked.
+        duration_ms: u32,
     },
-    /// Stop the motor test now (its time is up, another command came, the link fell silent or
-    /// a stick moved).
+    /// Stop the motor test now (another command came, or the link fell silent).
     StopMotorTest,
 }
 

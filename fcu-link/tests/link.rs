@@ -3,8 +3,9 @@
 
 mod support;
 
+use fcu_core::supervisor::FlightState;
 use fcu_link::command::FORCE_DISARM;
-use fcu_link::{Link, LinkConfig, Rates, Request, Severity, SystemStatus};
+use fcu_link::{Link, LinkConfig, Rates, Request, Severity};
 use mavlink::dialects::common::{
     self as common, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
 };
@@ -51,14 +52,13 @@ fn heartbeat_says_who_we_are_and_whether_armed() {
     assert_eq!(hb.2.system_status, MavState::MAV_STATE_STANDBY);
     assert!(!hb.2.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED));
 
-    for (status, armed, expected) in [
-        (SystemStatus::Active, true, MavState::MAV_STATE_ACTIVE),
-        (SystemStatus::Critical, true, MavState::MAV_STATE_CRITICAL),
-        (SystemStatus::Boot, false, MavState::MAV_STATE_BOOT),
+    for (state, armed, expected) in [
+        (FlightState::Armed, true, MavState::MAV_STATE_ACTIVE),
+        (FlightState::FailsafeLevel, true, MavState::MAV_STATE_CRITICAL),
+        (FlightState::Calibrating, false, MavState::MAV_STATE_BOOT),
     ] {
         let mut link = self::link();
-        mock.state.status = status;
-        mock.state.armed = armed;
+        mock.state.state = state;
         link.tick(0, &mut mock);
         let hb = drain(&mut link)
             .into_iter()
@@ -69,6 +69,7 @@ fn heartbeat_says_who_we_are_and_whether_armed() {
             .unwrap();
         assert_eq!(hb.system_status, expected);
         assert_eq!(hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED), armed);
+        assert_eq!(fcu_link::heartbeat::flight_state(&hb), state, "read back exactly");
     }
 }
 
@@ -497,7 +498,7 @@ fn arming_from_the_link_is_refused_with_a_reason() {
 fn disarm_on_the_ground_with_the_throttle_low() {
     let mut link = link();
     let mut mock = Mock::new();
-    mock.state.armed = true;
+    mock.state.state = FlightState::Armed;
     let disarm = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, disarm);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
@@ -515,7 +516,7 @@ fn disarm_on_the_ground_with_the_throttle_low() {
 fn disarm_in_the_air_only_with_the_force_value() {
     let mut link = link();
     let mut mock = Mock::new();
-    mock.state.armed = true;
+    mock.state.state = FlightState::Armed;
     mock.state.in_air = true;
     mock.state.throttle_low = false;
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
@@ -556,7 +557,7 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
         assert_eq!(mock.requests, [request]);
 
         let mut mock = Mock::new();
-        mock.state.armed = true;
+        mock.state.state = FlightState::Armed;
         let sent = command(&mut link, &mut mock, cmd, params);
         assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED, "{request:?}");
         assert_eq!(texts(&sent).len(), 1);
@@ -567,7 +568,7 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
     for armed in [false, true] {
         let mut link = link();
         let mut mock = Mock::new();
-        mock.state.armed = armed;
+        mock.state.state = if armed { FlightState::Armed } else { FlightState::Disarmed };
         let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]);
         assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
         assert_eq!(mock.requests, [Request::EndCalibration]);
@@ -586,12 +587,12 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
 fn reboot_comes_after_the_ack_and_only_disarmed() {
     let mut link = link();
     let mut mock = Mock::new();
-    mock.state.armed = true;
+    mock.state.state = FlightState::Armed;
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert!(!link.reboot_ready());
 
-    mock.state.armed = false;
+    mock.state.state = FlightState::Disarmed;
     let frame = v2(&command_long(MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
     link.receive(&frame, 0, &mut mock);
     assert_eq!(mock.requests, [Request::Reboot]);
@@ -609,34 +610,30 @@ fn motor_test(motor: f32, throttle_pct: f32, seconds: f32) -> [f32; 7] {
 }
 
 #[test]
-fn motor_test_spins_one_motor_capped_and_stops_on_time() {
+fn a_motor_test_is_passed_on_as_asked_and_the_link_never_ends_it_on_time() {
     let mut link = link();
     let mut mock = Mock::new();
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(3.0, 80.0, 10.0));
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(mock.requests, [Request::MotorTest { motor: 2, throttle_pct: fcu_link::MOTOR_TEST_THROTTLE_CAP_PCT, duration_ms: 3000 }]);
-    assert_eq!(fcu_link::MOTOR_TEST_THROTTLE_CAP_PCT, 15.0);
-    let state = link.motor_test().expect("running");
-    assert_eq!((state.motor, state.remaining_ms), (2, 3000));
-    // A ground station's heartbeats keep it going until its time is up.
+    // Uncapped: the cap, the longest duration and the deadline are the flight controller's.
+    assert_eq!(mock.requests, [Request::MotorTest { motor: 2, throttle_pct: 80.0, duration_ms: 10_000 }]);
     let heartbeat = v2(&common::HEARTBEAT_DATA::DEFAULT);
-    for now in (0..3000).step_by(10) {
+    for now in (0..20_000).step_by(10) {
         if now % 1000 == 0 {
             link.receive(&heartbeat, now, &mut mock);
         }
         link.tick(now, &mut mock);
         drain(&mut link);
-        assert!(link.motor_test().is_some(), "stopped early at {now} ms");
     }
-    assert_eq!(mock.requests.len(), 1);
-    link.tick(3000, &mut mock);
-    assert!(link.motor_test().is_none());
-    assert_eq!(mock.requests.last(), Some(&Request::StopMotorTest));
-    assert!(texts(&drain(&mut link)).contains(&"Motor test stopped: time up".to_string()));
+    assert_eq!(mock.requests.len(), 1, "{:?}", mock.requests);
+    // A duration past u32's milliseconds saturates, for the flight controller to cap.
+    let mut mock = Mock::new();
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(1.0, 5.0, 1e30));
+    assert_eq!(mock.requests, [Request::MotorTest { motor: 0, throttle_pct: 5.0, duration_ms: u32::MAX }]);
 }
 
 #[test]
-fn motor_test_stops_on_another_command_silence_and_a_stick_move() {
+fn motor_test_stops_on_another_command_and_once_on_silence() {
     let start = |link: &mut TestLink, mock: &mut Mock| {
         let sent = command(link, mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(1.0, 10.0, 3.0));
         assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
@@ -646,62 +643,59 @@ fn motor_test_stops_on_another_command_silence_and_a_stick_move() {
     let mut link = link();
     let mut mock = Mock::new();
     start(&mut link, &mut mock);
-    command(&mut link, &mut mock, MavCmd::MAV_CMD_REQUEST_MESSAGE, [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_REQUEST_MESSAGE, [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(mock.requests, [Request::StopMotorTest]);
-    assert!(link.motor_test().is_none());
+    assert!(texts(&sent).contains(&"Motor test stopped: another command".to_string()));
+    // None runs (the flight controller ended it): nothing to stop.
+    mock.requests.clear();
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_REQUEST_MESSAGE, [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    assert!(mock.requests.is_empty());
 
     // Silence: nothing heard for 1.5 s.
     let mut link = self::link();
     let mut mock = Mock::new();
     start(&mut link, &mut mock);
     link.tick(1500, &mut mock);
-    assert!(link.motor_test().is_some());
+    assert!(mock.requests.is_empty());
     link.tick(1501, &mut mock);
-    assert!(link.motor_test().is_none());
     assert_eq!(mock.requests, [Request::StopMotorTest]);
-
-    // A stick move of more than 50 µs (49 is not one).
-    let mut link = self::link();
-    let mut mock = Mock::new();
-    start(&mut link, &mut mock);
-    mock.state.rc_widths_us[0] += 50;
-    link.tick(10, &mut mock);
-    assert!(link.motor_test().is_some());
-    mock.state.rc_widths_us[0] += 1;
-    link.tick(20, &mut mock);
-    assert!(link.motor_test().is_none());
+    assert!(texts(&drain(&mut link)).contains(&"Motor test stopped: link silent".to_string()));
+    // The flight controller's report lags the stop: asked once per silence.
+    mock.state.motor_test = true;
+    link.tick(1510, &mut mock);
     assert_eq!(mock.requests, [Request::StopMotorTest]);
-    assert!(texts(&drain(&mut link)).contains(&"Motor test stopped: stick moved".to_string()));
 }
 
 #[test]
-fn motor_test_rules() {
-    let cases: [([f32; 7], MavResult); 6] = [
-        (motor_test(0.0, 10.0, 1.0), MavResult::MAV_RESULT_DENIED),
-        (motor_test(5.0, 10.0, 1.0), MavResult::MAV_RESULT_DENIED),
-        (motor_test(1.5, 10.0, 1.0), MavResult::MAV_RESULT_DENIED),
-        (motor_test(1.0, f32::NAN, 1.0), MavResult::MAV_RESULT_DENIED),
-        (motor_test(1.0, 10.0, 0.0), MavResult::MAV_RESULT_DENIED),
-        ([1.0, 0.0, 10.0, 1.0, 4.0, 0.0, 0.0], MavResult::MAV_RESULT_DENIED),
+fn motor_test_decoding() {
+    let cases: [[f32; 7]; 7] = [
+        motor_test(0.0, 10.0, 1.0),
+        motor_test(1.5, 10.0, 1.0),
+        motor_test(300.0, 10.0, 1.0),
+        motor_test(1.0, f32::NAN, 1.0),
+        motor_test(1.0, -1.0, 1.0),
+        motor_test(1.0, 10.0, 0.0),
+        [1.0, 0.0, 10.0, 1.0, 4.0, 0.0, 0.0],
     ];
-    for (params, result) in cases {
+    for params in cases {
         let mut link = link();
         let mut mock = Mock::new();
         let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, params);
-        assert_eq!(ack_of(&sent).1, result, "{params:?}");
+        assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED, "{params:?}");
         assert_eq!(texts(&sent).len(), 1);
-        assert!(mock.requests.is_empty() && link.motor_test().is_none());
+        assert!(mock.requests.is_empty() && !mock.state.motor_test);
     }
     // PWM throttle type.
     let mut link = link();
     let mut mock = Mock::new();
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, [1.0, 1.0, 1100.0, 1.0, 1.0, 0.0, 0.0]);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
-    // Armed.
-    mock.state.armed = true;
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(1.0, 10.0, 1.0));
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    assert!(mock.requests.is_empty());
+    // Which motors there are, and whether one may spin now, the vehicle says.
+    mock.refuse_requests = Some("motor must be 1 to 4");
+    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(5.0, 10.0, 1.0));
+    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
+    assert_eq!(texts(&sent), ["Motor test: motor must be 1 to 4"]);
+    assert_eq!(mock.requests, [Request::MotorTest { motor: 4, throttle_pct: 10.0, duration_ms: 1000 }]);
 }
 
 #[test]
@@ -743,100 +737,6 @@ fn a_full_queue_drops_whole_frames_and_counts_them() {
     assert!(link.send_text(Severity::Info, b"four"));
     let four = drain(&mut link);
     assert_eq!(four[0].sequence, sent[1].sequence + 2);
-}
-
-/// The link in front of fcu-core's station, as the firmware runs it: each command's answer
-/// and what reaches the control tick.
-mod with_the_station {
-    use super::*;
-    use fcu_core::flight::{FlightController, Status};
-    use fcu_core::ground::{Disarm, MotorTestChange};
-    use fcu_core::rc::Sticks;
-    use fcu_core::supervisor::FlightState;
-    use fcu_core::Config;
-    use fcu_link::station::Station;
-
-    fn station(state: FlightState, sticks: Sticks) -> Station {
-        let mut s: Status = FlightController::new(Config::default()).unwrap().status();
-        s.state = state;
-        s.sticks = sticks;
-        let mut st = Station::new(Config::default(), &Config::DEFAULT);
-        st.observe(&s, 3900, [0; 4], 0);
-        st
-    }
-
-    fn ask(st: &mut Station, cmd: MavCmd, params: [f32; 7]) -> (MavResult, Vec<String>) {
-        let mut link = link();
-        link.receive(&v2(&command_long(cmd, params)), 0, st);
-        let sent = drain(&mut link);
-        (ack_of(&sent).1, texts(&sent))
-    }
-
-    const REST: Sticks = Sticks::new(0, 0, 0, 0);
-    const UP: Sticks = Sticks::new(0, 0, 1500, 0);
-    const DISARM: [f32; 7] = [0.0; 7];
-    const FORCED: [f32; 7] = [0.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0];
-
-    #[test]
-    fn disarm_accepted_on_the_ground_refused_in_the_air_unless_forced() {
-        let mut st = station(FlightState::Armed, REST);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM).0, MavResult::MAV_RESULT_ACCEPTED);
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
-
-        let mut st = station(FlightState::Armed, UP);
-        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
-        assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-        assert_eq!(texts.len(), 1);
-        assert!(texts[0].contains("21196"), "{texts:?}");
-        assert_eq!(st.take_ground(), None);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, FORCED).0, MavResult::MAV_RESULT_ACCEPTED);
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
-
-        // The level stage: the station's own rule, DENIED with it.
-        let mut st = station(FlightState::FailsafeLevel, REST);
-        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
-        assert_eq!(result, MavResult::MAV_RESULT_DENIED);
-        assert_eq!(texts, ["Disarm refused: in failsafe (force 21196)"]);
-    }
-
-    #[test]
-    fn motor_test_accepted_disarmed_refused_armed_and_while_calibrating() {
-        let test = [2.0, 0.0, 50.0, 1.5, 0.0, 0.0, 0.0];
-        let mut st = station(FlightState::Disarmed, REST);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_ACCEPTED);
-        match st.take_ground().and_then(|g| g.motor_test) {
-            Some(MotorTestChange::Start(t)) => {
-                assert_eq!((t.motor, t.duty_pct, t.duration_ms), (1, fcu_core::ground::MOTOR_TEST_MAX_DUTY_PCT, 1500));
-            }
-            other => panic!("{other:?}"),
-        }
-        let mut st = station(FlightState::Armed, REST);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-        assert_eq!(st.take_ground(), None);
-        let mut st = station(FlightState::Calibrating, REST);
-        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
-        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: calibrating".to_string()]));
-    }
-
-    #[test]
-    fn calibrations_accepted_disarmed_refused_otherwise() {
-        let imu = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        let radio = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
-        let mut st = station(FlightState::Disarmed, REST);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu).0, MavResult::MAV_RESULT_ACCEPTED);
-        assert!(st.take_ground().is_some_and(|g| g.calibrate_imu));
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_ACCEPTED);
-        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(true));
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]).0, MavResult::MAV_RESULT_ACCEPTED);
-        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
-
-        let mut st = station(FlightState::Fault, REST);
-        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu);
-        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Calibration refused: fault or failsafe".to_string()]));
-        let mut st = station(FlightState::Armed, REST);
-        assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-        assert_eq!(st.take_ground(), None);
-    }
 }
 
 #[test]

@@ -66,13 +66,14 @@ pub struct Report {
 
 /// What of an image is the ground-station link, as the ELF's function names tell (LTO inlines
 /// the protocol crate into the link's task): the task (`fcu_firmware::ground`) and what it
-/// calls of its own (`fcu_link`, the receive ring, the flash store, fcu-core's parameter
+/// calls of its own (`fcu_link`, `fcu_gcs`, the receive ring, the flash store, fcu-core's parameter
 /// table and the configuration checks a change runs), and the USART1 and DMA2 stream 2
 /// interrupts. Empty for an image without the link.
 pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
-    const PARTS: [&str; 10] = [
+    const PARTS: [&str; 11] = [
         "fcu_firmware::ground::",
         "fcu_link::",
+        "fcu_gcs::",
         "fcu_firmware::uart_rx::",
         "fcu_firmware::param_flash::",
         "fcu_core::parameters::",

@@ -12,11 +12,12 @@
 pub mod bench_board;
 pub mod broad;
 pub mod cli;
-pub mod csv;
 pub mod harness;
 pub mod profile;
 pub mod replay;
 pub mod safety;
 pub mod sim;
 
+/// The CSV reader, fcu-log's (the flight log's crate), under the path the readers here use.
+pub use fcu_log::csv;
 pub use profile::Profile;

@@ -13,7 +13,8 @@
 //!   good CRC (so that the handler, not only the reader, sees arbitrary payloads); 7 ms later.
 #![no_main]
 
-use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_core::supervisor::FlightState;
+use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Request, Vehicle, VehicleState};
 use libfuzzer_sys::fuzz_target;
 use mavlink::dialects::common::{COMMAND_INT_DATA, COMMAND_LONG_DATA, PARAM_SET_DATA};
 use mavlink::MessageData;
@@ -30,10 +31,9 @@ struct Mock {
 impl Vehicle for Mock {
     fn state(&self) -> VehicleState {
         VehicleState {
-            armed: self.flags & 1 != 0,
+            state: if self.flags & 1 != 0 { FlightState::Armed } else { FlightState::Disarmed },
             in_air: self.flags & 2 != 0,
             throttle_low: self.flags & 4 != 0,
-            status: SystemStatus::Standby,
             attitude: Attitude::default(),
             rc_widths_us: [1500; 8],
             rc_channel_count: 8,
@@ -41,6 +41,7 @@ impl Vehicle for Mock {
             battery: Battery { voltage_mv: 3900, current_ca: -1, remaining_pct: -1 },
             health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
             load_permille: 0,
+            motor_test: self.flags & 8 != 0,
         }
     }
     fn param_count(&self) -> u16 {
@@ -186,8 +187,7 @@ fuzz_target!(|data: &[u8]| {
         assert!(
             !mock.requests.iter().any(|r| matches!(
                 r,
-                Request::MotorTest { .. }
-                    | Request::SaveParams
+                Request::SaveParams
                     | Request::ResetParams
                     | Request::Reboot
                     | Request::CalibrateImu

@@ -7,17 +7,14 @@
 //! motors that may not run, where the motor test's one compare value is written.
 
 use super::params::TickParams;
-use crate::ground::{
-    capped_duty_pct, ground_test_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, MOTORS, MOTOR_TEST_MAX_MS,
-    RADIO_CALIBRATION_MAX_MS,
-};
+use crate::ground::{ground_test_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, RADIO_CALIBRATION_MAX_MS};
 use crate::rc::{RcConfig, Sticks};
 use crate::supervisor::FlightState;
 
 /// A motor test running: one motor, its compare value, until a tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct TestOutput {
-    /// Motor index, below [`MOTORS`].
+    /// Motor index, below [`crate::ground::MOTORS`].
     pub(super) motor: u8,
     pub(super) compare: u16,
     /// The first tick the test no longer runs.
@@ -45,7 +42,7 @@ fn ticks_in(ms: u32, p: &TickParams) -> u32 {
 
 impl Ground {
     /// Takes what the station asked, at tick `now` in `state`. A test or calibration that may
-    /// not start in `state` ([`ground_test_rule`]) is dropped: the station answered with an
+    /// not start in `state` ([`ground_test_rule`], [`crate::ground::MotorTest::checked`]) is dropped: the station answered with an
     /// older view of the state. A save stops a motor test and refuses a new one: an erase
     /// stalls the tick, and the motor would keep its duty through it.
     pub(super) fn take(&mut self, input: &GroundInput, now: u32, state: FlightState, p: &TickParams) {
@@ -56,17 +53,21 @@ impl Ground {
         }
         let may_start = ground_test_rule(state).is_ok();
         self.calibrate |= input.calibrate_imu && may_start;
-        match input.motor_test {
-            Some(MotorTestChange::Start(t)) if may_start && !input.saving && t.motor < MOTORS => {
+        let start = match input.motor_test {
+            Some(MotorTestChange::Start(asked)) if !input.saving => asked.checked(state).ok(),
+            _ => None,
+        };
+        match (start, input.motor_test) {
+            (Some(t), _) => {
                 let range = p.compare_range;
                 let span = (range.max_counts - range.min_counts) as f32;
-                let compare = range.to_compare(range.min_counts as f32 + span * capped_duty_pct(t.duty_pct) * 0.01);
-                let until_tick = now.wrapping_add(ticks_in(t.duration_ms.min(MOTOR_TEST_MAX_MS), p));
+                let compare = range.to_compare(range.min_counts as f32 + span * t.duty_pct * 0.01);
+                let until_tick = now.wrapping_add(ticks_in(t.duration_ms, p));
                 self.motor_test = Some(TestOutput { motor: t.motor, compare, until_tick });
             }
-            Some(_) => self.motor_test = None,
-            None if input.saving => self.motor_test = None,
-            None => {}
+            (None, Some(_)) => self.motor_test = None,
+            (None, None) if input.saving => self.motor_test = None,
+            (None, None) => {}
         }
         match input.radio_calibration {
             Some(true) if may_start => self.radio_calibration_until = Some(now.wrapping_add(ticks_in(RADIO_CALIBRATION_MAX_MS, p))),

@@ -3,7 +3,8 @@
 
 #![allow(dead_code)]
 
-use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_core::supervisor::FlightState;
+use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Request, Vehicle, VehicleState};
 use mavlink::dialects::common::{self as common, MavMessage};
 use mavlink::{MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavHeader, Message, MessageData};
 
@@ -29,10 +30,9 @@ impl Mock {
     pub fn new() -> Self {
         Self {
             state: VehicleState {
-                armed: false,
+                state: FlightState::Disarmed,
                 in_air: false,
                 throttle_low: true,
-                status: SystemStatus::Standby,
                 attitude: Attitude {
                     roll_rad: 0.1,
                     pitch_rad: -0.2,
@@ -47,6 +47,7 @@ impl Mock {
                 battery: Battery { voltage_mv: 3900, current_ca: -1, remaining_pct: 70 },
                 health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
                 load_permille: 420,
+                motor_test: false,
             },
             params: vec![
                 MockParam { name: "RCMAP_ROLL", value: 1.0, min: 1.0, max: 8.0 },
@@ -92,10 +93,16 @@ impl Vehicle for Mock {
     }
     fn request(&mut self, request: Request) -> Result<(), &'static str> {
         self.requests.push(request);
-        match self.refuse_requests {
-            Some(rule) => Err(rule),
-            None => Ok(()),
+        if let Some(rule) = self.refuse_requests {
+            return Err(rule);
         }
+        // A test runs from an accepted start until a stop (a vehicle would also end it itself).
+        match request {
+            Request::MotorTest { .. } => self.state.motor_test = true,
+            Request::StopMotorTest => self.state.motor_test = false,
+            _ => {}
+        }
+        Ok(())
     }
 }
 

@@ -222,7 +222,7 @@ class Served(unittest.TestCase):
     def test_watch_prints_the_state(self):
         done = self.ground("watch", "--duration", "2")
         self.assertEqual(done.returncode, 0, done.said)
-        self.assertIn("state      disarmed  system status standby", done.stdout, done.said)
+        self.assertIn("state      disarmed  flight state disarmed", done.stdout, done.said)
         self.assertIn("motors     m1 1000", done.stdout, done.said)
 
     def test_a_serial_port_reaches_the_board(self):

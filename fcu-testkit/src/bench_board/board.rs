@@ -10,8 +10,8 @@ use fcu_core::parameters::snapshot;
 use fcu_core::rc::{CaptureEdge, EdgeDecoder, Sticks};
 use fcu_core::supervisor::{FlightState, SupervisorConfig};
 use fcu_core::Config;
-use fcu_link::service::{Observed, Service, ToControl};
-use fcu_link::station::Due;
+use fcu_gcs::Due;
+use fcu_gcs::{Observed, Service, ToControl};
 use fcu_link::LinkConfig;
 
 use super::check::{BootKind, Checker, Invariant};

@@ -7,7 +7,7 @@
 //! - [`ground`]: the ground station's MAVLink frames (any parameter name and value, any command
 //!   number and parameters) and the board's answers read back;
 //! - [`board`]: [`Bench`], the board at 800 Hz with the firmware's link task
-//!   ([`fcu_link::service::Service`]) every 4 ticks, the UART at
+//!   ([`fcu_gcs::Service`]) every 4 ticks, the UART at
 //!   115200 baud both ways, a level still IMU, the pilot's transmitter;
 //! - [`check`]: the invariants, each a named [`Invariant`], checked as the bench runs.
 //!
@@ -111,8 +111,23 @@ impl Scenario {
     /// | `0xC0..=0xFF` | wait `(k & 63) + 1` ms |
     pub fn from_bytes(data: &[u8]) -> Scenario {
         let mut it = data.iter().copied();
+        let seed = u64::from(it.next().unwrap_or(0));
+        let history = Scenario::history_from(&mut it);
+        let mut ops = Vec::new();
+        let mut ms = 0u32;
+        while let Some(k) = it.next() {
+            if ms >= MAX_FUZZ_MS {
+                break;
+            }
+            ms += Scenario::push_op(k, &mut it, &mut ops);
+        }
+        Scenario { history, seed, ops }
+    }
+
+    /// The flash history a scenario starts from: its header byte and the entries it takes
+    /// (see [`Scenario::from_bytes`]).
+    fn history_from(it: &mut impl Iterator<Item = u8>) -> Vec<Planted> {
         let mut next = || it.next().unwrap_or(0);
-        let seed = u64::from(next());
         let h = next();
         // A history a board could have left: one sequence number after another, no wrap.
         let start = if h & 0x80 != 0 { u32::MAX - u32::from((h >> 2) & 0x1F) } else { 1 };
@@ -136,66 +151,63 @@ impl Scenario {
                 }
             }
         }
-        let mut ops = Vec::new();
-        let mut ms = 0u32;
-        while let Some(k) = it.next() {
-            if ms >= MAX_FUZZ_MS {
-                break;
+        history
+    }
+
+    /// Appends what op byte `k` makes (with the bytes it takes from `it`, see
+    /// [`Scenario::from_bytes`]); the board time it waits, ms.
+    fn push_op(k: u8, it: &mut impl Iterator<Item = u8>, ops: &mut Vec<Op>) -> u32 {
+        let mut byte = || it.next().unwrap_or(0);
+        match k {
+            0x00..=0x3F => {
+                let w = (u32::from(k) + 1) * 20;
+                ops.push(Op::Wait { ms: w });
+                return w;
             }
-            let mut byte = || it.next().unwrap_or(0);
-            match k {
-                0x00..=0x3F => {
-                    let w = (u32::from(k) + 1) * 20;
-                    ms += w;
-                    ops.push(Op::Wait { ms: w });
-                }
-                0x40..=0x44 => {
-                    ops.push(Op::Pilot([Pilot::Neutral, Pilot::Arm, Pilot::Fly, Pilot::Disarm, Pilot::Off][usize::from(k - 0x40)]))
-                }
-                0x45 | 0x46 => {
-                    ms += 1200;
-                    ops.extend(gesture(if k == 0x45 { Pilot::Arm } else { Pilot::Disarm }));
-                }
-                0x47..=0x5F => ops.push(Op::Send(GroundFrame::Heartbeat)),
-                0x60..=0x6F => {
-                    let i = usize::from(byte()) % (COUNT + 1);
-                    let sel = byte();
-                    ops.push(Op::Send(param_set(i, value_for(i, sel))));
-                }
-                0x70..=0x7F => {
-                    let (c, p) = (byte(), byte());
-                    ops.push(Op::Send(command_for(c, p, k & 1 != 0)));
-                }
-                0x80..=0x8F => {
-                    let i = byte();
-                    let frame = if i == 0xFF {
-                        GroundFrame::ParamRead { index: -1, name: name16(parameters::name(0).unwrap_or("")) }
-                    } else {
-                        GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] }
-                    };
-                    ops.push(Op::Send(frame));
-                }
-                0x90..=0x97 => ops.push(Op::Send(GroundFrame::ParamList)),
-                0x98..=0x9F => {
-                    let w = (u32::from(k & 7) + 1) * 200;
-                    ms += w;
-                    ops.push(Op::Flood { ms: w });
-                }
-                0xA0..=0xAF => {
-                    let (lo, hi, partial) = (byte(), byte(), byte());
-                    let at_word = u32::from(k & 15) * snapshot::SECTOR_WORDS as u32 / 4 + u32::from(u16::from_le_bytes([lo, hi]) % 2048);
-                    ops.push(Op::CutAtWord(PowerCut { at_word, partial_bits: u32::from(partial).wrapping_mul(0x0101_0101) }));
-                }
-                0xB0..=0xB7 => ops.push(Op::CutNow),
-                0xB8..=0xBF => ops.push(Op::EraseMs(250 + u32::from(k & 7) * 35)),
-                0xC0..=0xFF => {
-                    let w = u32::from(k & 63) + 1;
-                    ms += w;
-                    ops.push(Op::Wait { ms: w });
-                }
+            0x40..=0x44 => ops.push(Op::Pilot([Pilot::Neutral, Pilot::Arm, Pilot::Fly, Pilot::Disarm, Pilot::Off][usize::from(k - 0x40)])),
+            0x45 | 0x46 => {
+                ops.extend(gesture(if k == 0x45 { Pilot::Arm } else { Pilot::Disarm }));
+                return 1200;
+            }
+            0x47..=0x5F => ops.push(Op::Send(GroundFrame::Heartbeat)),
+            0x60..=0x6F => {
+                let i = usize::from(byte()) % (COUNT + 1);
+                let sel = byte();
+                ops.push(Op::Send(param_set(i, value_for(i, sel))));
+            }
+            0x70..=0x7F => {
+                let (c, p) = (byte(), byte());
+                ops.push(Op::Send(command_for(c, p, k & 1 != 0)));
+            }
+            0x80..=0x8F => {
+                let i = byte();
+                let frame = if i == 0xFF {
+                    GroundFrame::ParamRead { index: -1, name: name16(parameters::name(0).unwrap_or("")) }
+                } else {
+                    GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] }
+                };
+                ops.push(Op::Send(frame));
+            }
+            0x90..=0x97 => ops.push(Op::Send(GroundFrame::ParamList)),
+            0x98..=0x9F => {
+                let w = (u32::from(k & 7) + 1) * 200;
+                ops.push(Op::Flood { ms: w });
+                return w;
+            }
+            0xA0..=0xAF => {
+                let (lo, hi, partial) = (byte(), byte(), byte());
+                let at_word = u32::from(k & 15) * snapshot::SECTOR_WORDS as u32 / 4 + u32::from(u16::from_le_bytes([lo, hi]) % 2048);
+                ops.push(Op::CutAtWord(PowerCut { at_word, partial_bits: u32::from(partial).wrapping_mul(0x0101_0101) }));
+            }
+            0xB0..=0xB7 => ops.push(Op::CutNow),
+            0xB8..=0xBF => ops.push(Op::EraseMs(250 + u32::from(k & 7) * 35)),
+            0xC0..=0xFF => {
+                let w = u32::from(k & 63) + 1;
+                ops.push(Op::Wait { ms: w });
+                return w;
             }
         }
-        Scenario { history, seed, ops }
+        0
     }
 }
 

@@ -128,7 +128,7 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
         Some(path) => config_with_params(profile, path)?,
         None => profile.config(),
     };
-    let out = OutputDir::prepare(&a.out)?;
+    let out = OutputDir::prepare(&a.out).map_err(CliError)?;
     let mut csv = FlightCsv::create(&a.out).map_err(|e| out.abandon(e))?;
 
     let opts = RunOptions { seed: a.seed, plant_spread: spread, duration_s: a.duration, progress: true, ..RunOptions::default() };
@@ -192,34 +192,7 @@ impl FlightCsv {
     }
 }
 
-/// The `--out` directory of a flight: checked writable before the flight starts (not after
-/// it), and removed again if this run created it and then failed.
-pub struct OutputDir {
-    path: PathBuf,
-    created: bool,
-}
-
-impl OutputDir {
-    pub fn prepare(path: &Path) -> Result<OutputDir, CliError> {
-        let created = !path.exists();
-        std::fs::create_dir_all(path).map_err(|e| CliError(format!("--out {}: {e}", path.display())))?;
-        let probe = path.join(".fcu-write-check");
-        let writable = std::fs::write(&probe, b"").and_then(|()| std::fs::remove_file(&probe));
-        let dir = OutputDir { path: path.to_path_buf(), created };
-        match writable {
-            Ok(()) => Ok(dir),
-            Err(e) => Err(dir.abandon(CliError(format!("--out {}: cannot write there: {e}", path.display())))),
-        }
-    }
-
-    /// The run failed: remove the directory if this run made it, and hand the error on.
-    pub fn abandon(&self, e: CliError) -> CliError {
-        if self.created {
-            let _ = std::fs::remove_dir_all(&self.path);
-        }
-        e
-    }
-}
+pub use fcu_log::OutputDir;
 
 /// Completes `flight.csv` (streamed into `csv` as the flight ran) and writes `flight.svg` into
 /// `out`, prints the metrics and the criteria, and returns exit status 0 if every criterion
@@ -231,7 +204,7 @@ pub fn report(out: &Path, title: &str, sc: &Scenario, log: &FlightLog, csv: Flig
     // The plot under a temporary name first, both renamed once both are complete: never a CSV
     // without its plot.
     let svg_tmp = out.join(".flight.svg.partial");
-    if let Err(e) = sim::plot::write_svg(log, title, &svg_tmp) {
+    if let Err(e) = sim::plot::write_svg(&log.rows, title, &svg_tmp) {
         let _ = std::fs::remove_file(&svg_tmp);
         return Err(csv.abandon(CliError(e)));
     }

@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::fly::{check_spread, OutputDir};
@@ -65,7 +66,7 @@ pub fn run(a: &MarginsArgs) -> Result<ExitCode, CliError> {
     if a.extra_delay_ticks > MAX_EXTRA_DELAY_TICKS {
         return Err(CliError(format!("--extra-delay-ticks: {} is more than {MAX_EXTRA_DELAY_TICKS}", a.extra_delay_ticks)));
     }
-    let out = a.out.as_deref().map(OutputDir::prepare).transpose()?;
+    let out = a.out.as_deref().map(OutputDir::prepare).transpose().map_err(CliError)?;
     let opts = RunOptions { seed: a.seed, plant_spread: spread, extra_delay_ticks: a.extra_delay_ticks, ..RunOptions::default() };
     let abandon = |e: CliError| match &out {
         Some(o) => o.abandon(e),
@@ -162,65 +163,101 @@ fn write_outputs(dir: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), CliE
     })
 }
 
+/// A plotting error as text (the caller names the file).
+fn text(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+/// A frequency axis's label: log10 Hz shown as Hz.
+fn hz_label(x: &f64) -> String {
+    let f = 10f64.powf(*x);
+    if f < 10.0 {
+        format!("{f:.1}")
+    } else {
+        format!("{f:.0}")
+    }
+}
+
+/// One panel of the Bode plot.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A panel over log frequency `x` (log10 Hz) and `y`, its mesh drawn (with plotters' own
+/// number of y labels unless `y_labels` says).
+fn bode_panel<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    caption: (&str, u32),
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    y_labels: Option<usize>,
+) -> Result<Chart<'a, 'b>, String> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption.0, ("sans-serif", caption.1))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x, y)
+        .map_err(text)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc("Hz").x_label_formatter(&hz_label);
+    if let Some(n) = y_labels {
+        mesh.y_labels(n);
+    }
+    mesh.draw().map_err(text)?;
+    Ok(chart)
+}
+
+/// The three panels and the gain's and phase's ranges, dB and °.
+struct Bode<'a, 'b> {
+    gain: Chart<'a, 'b>,
+    phase: Chart<'a, 'b>,
+    coherence: Chart<'a, 'b>,
+    g: (f64, f64),
+    p: (f64, f64),
+}
+
 /// Gain, phase and coherence against log frequency, one curve per axis; 0 dB and −180°
 /// drawn; at each axis's crossover the phase margin is a bar from −180° up to the phase, at
 /// its phase crossover the gain margin a bar from the gain up to 0 dB (both with faint
 /// vertical guides through every panel).
 fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> {
-    let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    bode_page(path, title, loops).map_err(|e| format!("plotting {}: {e}", path.display()))
+}
+
+fn bode_page(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> {
     let root = SVGBackend::new(path, (1000, 1050)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
+    root.fill(&WHITE).map_err(text)?;
     let (top, body) = root.split_vertically(40);
-    top.titled(title, ("sans-serif", 20)).map_err(|e| err(&e))?;
+    top.titled(title, ("sans-serif", 20)).map_err(text)?;
     let (gain_area, rest) = body.split_vertically(430);
     let (phase_area, coherence_area) = rest.split_vertically(400);
     let colors = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44)];
     let (lo, hi) = (Plan::DEFAULT.from_hz.log10(), Plan::DEFAULT.to_hz.log10());
-    let hz_label = |x: &f64| {
-        let f = 10f64.powf(*x);
-        if f < 10.0 {
-            format!("{f:.1}")
-        } else {
-            format!("{f:.0}")
-        }
-    };
     let finite = |v: f64| v.is_finite();
     let gains: Vec<f64> = loops.iter().flat_map(|l| l.response.iter().map(|p| p.gain_db)).filter(|v| finite(*v)).collect();
     let (g_lo, g_hi) = (gains.iter().copied().fold(-20.0f64, f64::min).max(-60.0), gains.iter().copied().fold(20.0f64, f64::max).min(60.0));
     let phases: Vec<f64> = loops.iter().flat_map(|l| l.response.iter().map(|p| p.phase_deg)).filter(|v| finite(*v)).collect();
     let (p_lo, p_hi) =
         (phases.iter().copied().fold(-200.0f64, f64::min).max(-540.0), phases.iter().copied().fold(-90.0f64, f64::max).min(180.0));
-    // Values outside a panel's range are drawn at its edge rather than off the picture.
-    let clip = |v: f64, lo: f64, hi: f64| v.clamp(lo, hi);
 
-    let mut gain = ChartBuilder::on(&gain_area)
-        .caption("|L| (dB)", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(50)
-        .build_cartesian_2d(lo..hi, g_lo..g_hi)
-        .map_err(|e| err(&e))?;
-    gain.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).draw().map_err(|e| err(&e))?;
-    gain.draw_series(LineSeries::new([(lo, 0.0), (hi, 0.0)], BLACK.stroke_width(1))).map_err(|e| err(&e))?;
-    let mut phase = ChartBuilder::on(&phase_area)
-        .caption("arg L (°)", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(50)
-        .build_cartesian_2d(lo..hi, p_lo..p_hi)
-        .map_err(|e| err(&e))?;
-    phase.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).draw().map_err(|e| err(&e))?;
-    phase.draw_series(LineSeries::new([(lo, -180.0), (hi, -180.0)], BLACK.stroke_width(1))).map_err(|e| err(&e))?;
-    let mut coherence = ChartBuilder::on(&coherence_area)
-        .caption("coherence of u and e over the periods", ("sans-serif", 14))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(50)
-        .build_cartesian_2d(lo..hi, 0.0..1.05)
-        .map_err(|e| err(&e))?;
-    coherence.configure_mesh().x_desc("Hz").x_label_formatter(&hz_label).y_labels(3).draw().map_err(|e| err(&e))?;
-
+    let mut gain = bode_panel(&gain_area, ("|L| (dB)", 16), lo..hi, g_lo..g_hi, None)?;
+    gain.draw_series(LineSeries::new([(lo, 0.0), (hi, 0.0)], BLACK.stroke_width(1))).map_err(text)?;
+    let mut phase = bode_panel(&phase_area, ("arg L (°)", 16), lo..hi, p_lo..p_hi, None)?;
+    phase.draw_series(LineSeries::new([(lo, -180.0), (hi, -180.0)], BLACK.stroke_width(1))).map_err(text)?;
+    let coherence = bode_panel(&coherence_area, ("coherence of u and e over the periods", 14), lo..hi, 0.0..1.05, Some(3))?;
+    let mut bode = Bode { gain, phase, coherence, g: (g_lo, g_hi), p: (p_lo, p_hi) };
     for (l, color) in loops.iter().zip(colors) {
+        bode.draw_loop(l, color)?;
+    }
+    bode.gain.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(text)?;
+    root.present().map_err(text)
+}
+
+impl Bode<'_, '_> {
+    /// One axis's curves, its guides and its margins.
+    fn draw_loop(&mut self, l: &AxisLoop, color: RGBColor) -> Result<(), String> {
+        let ((g_lo, g_hi), (p_lo, p_hi)) = (self.g, self.p);
+        // Values outside a panel's range are drawn at its edge rather than off the picture.
+        let clip = |v: f64, lo: f64, hi: f64| v.clamp(lo, hi);
         let pts = |pick: fn(&loop_id::ResponsePoint) -> f64| -> Vec<(f64, f64)> {
             l.response.iter().filter(|p| pick(p).is_finite() && p.freq_hz > 0.0).map(|p| (p.freq_hz.log10(), pick(p))).collect()
         };
@@ -232,34 +269,33 @@ fn bode_svg(path: &Path, title: &str, loops: &[AxisLoop]) -> Result<(), String> 
             m.phase_margin_deg.map_or("—".into(), |v| format!("{v:.0}°")),
             m.gain_margin_db.map_or("—".into(), |v| format!("{v:.1} dB"))
         );
+        let (gain, phase, coherence) = (&mut self.gain, &mut self.phase, &mut self.coherence);
         gain.draw_series(LineSeries::new(pts(|p| p.gain_db), color.stroke_width(2)))
-            .map_err(|e| err(&e))?
+            .map_err(text)?
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-        phase.draw_series(LineSeries::new(pts(|p| p.phase_deg), color.stroke_width(2))).map_err(|e| err(&e))?;
-        coherence.draw_series(LineSeries::new(pts(|p| p.coherence), color.stroke_width(2))).map_err(|e| err(&e))?;
+        phase.draw_series(LineSeries::new(pts(|p| p.phase_deg), color.stroke_width(2))).map_err(text)?;
+        coherence.draw_series(LineSeries::new(pts(|p| p.coherence), color.stroke_width(2))).map_err(text)?;
         for f in [m.crossover_hz, m.phase_crossover_hz].into_iter().flatten().filter(|f| *f > 0.0) {
             let x = f.log10();
-            gain.draw_series(LineSeries::new([(x, g_lo), (x, g_hi)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
-            phase.draw_series(LineSeries::new([(x, p_lo), (x, p_hi)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
-            coherence.draw_series(LineSeries::new([(x, 0.0), (x, 1.05)], color.mix(0.3).stroke_width(1))).map_err(|e| err(&e))?;
+            gain.draw_series(LineSeries::new([(x, g_lo), (x, g_hi)], color.mix(0.3).stroke_width(1))).map_err(text)?;
+            phase.draw_series(LineSeries::new([(x, p_lo), (x, p_hi)], color.mix(0.3).stroke_width(1))).map_err(text)?;
+            coherence.draw_series(LineSeries::new([(x, 0.0), (x, 1.05)], color.mix(0.3).stroke_width(1))).map_err(text)?;
         }
         // The margins themselves: the phase margin is the distance from −180° at the
         // crossover, the gain margin the distance below 0 dB at the phase crossover.
         if let (Some(fc), Some(pm)) = (m.crossover_hz.filter(|f| *f > 0.0), m.phase_margin_deg) {
             let (x, ph) = (fc.log10(), clip(pm - 180.0, p_lo, p_hi));
-            phase.draw_series(LineSeries::new([(x, clip(-180.0, p_lo, p_hi)), (x, ph)], color.stroke_width(4))).map_err(|e| err(&e))?;
-            phase.draw_series(std::iter::once(Circle::new((x, ph), 5, color.filled()))).map_err(|e| err(&e))?;
-            gain.draw_series(std::iter::once(Circle::new((x, clip(0.0, g_lo, g_hi)), 5, color.filled()))).map_err(|e| err(&e))?;
+            phase.draw_series(LineSeries::new([(x, clip(-180.0, p_lo, p_hi)), (x, ph)], color.stroke_width(4))).map_err(text)?;
+            phase.draw_series(std::iter::once(Circle::new((x, ph), 5, color.filled()))).map_err(text)?;
+            gain.draw_series(std::iter::once(Circle::new((x, clip(0.0, g_lo, g_hi)), 5, color.filled()))).map_err(text)?;
         }
         if let (Some(f180), Some(gm)) = (m.phase_crossover_hz.filter(|f| *f > 0.0), m.gain_margin_db) {
             let (x, g) = (f180.log10(), clip(-gm, g_lo, g_hi));
-            gain.draw_series(LineSeries::new([(x, clip(0.0, g_lo, g_hi)), (x, g)], color.stroke_width(4))).map_err(|e| err(&e))?;
-            gain.draw_series(std::iter::once(Circle::new((x, g), 5, color.filled()))).map_err(|e| err(&e))?;
-            phase.draw_series(std::iter::once(Circle::new((x, clip(-180.0, p_lo, p_hi)), 5, color.filled()))).map_err(|e| err(&e))?;
+            gain.draw_series(LineSeries::new([(x, clip(0.0, g_lo, g_hi)), (x, g)], color.stroke_width(4))).map_err(text)?;
+            gain.draw_series(std::iter::once(Circle::new((x, g), 5, color.filled()))).map_err(text)?;
+            phase.draw_series(std::iter::once(Circle::new((x, clip(-180.0, p_lo, p_hi)), 5, color.filled()))).map_err(text)?;
         }
+        Ok(())
     }
-    gain.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))?;
-    Ok(())
 }

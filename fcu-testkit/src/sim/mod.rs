@@ -15,7 +15,6 @@ pub mod loop_id;
 pub mod metrics;
 mod pilot;
 pub mod plant;
-pub mod plot;
 pub mod radio_model;
 pub mod rng;
 pub mod scenario;
@@ -62,37 +61,7 @@ impl Default for RunOptions {
     }
 }
 
-/// One logged control tick.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LogRow {
-    pub t_s: f64,
-    pub state: FlightState,
-    pub armed: bool,
-    /// The transmitter's link flag from the timeline (what the receiver is sending).
-    pub link_tx: bool,
-    /// The core's own link verdict.
-    pub link_core: bool,
-    /// True attitude (reference convention: roll about body Y, pitch about body X).
-    pub roll_deg: f64,
-    pub pitch_deg: f64,
-    pub yaw_deg: f64,
-    pub yaw_rate_dps: f64,
-    pub est_roll_deg: f64,
-    pub est_pitch_deg: f64,
-    pub roll_target_deg: f64,
-    pub pitch_target_deg: f64,
-    pub yaw_target_deg: f64,
-    /// The yaw rate the pilot's stick asks for on this tick, °/s ([`StickRate`](stick_rate::StickRate); not written
-    /// to the CSV): what the yaw metric compares the airframe's rate with.
-    pub yaw_rate_cmd_dps: f64,
-    pub motors: [u16; 4],
-    pub alt_m: f64,
-    pub battery_v: f64,
-    pub thr_us: f64,
-    pub calibrated: bool,
-    pub calibrating: bool,
-    pub calibration_restarts: u16,
-}
+pub use fcu_log::{plot, LogRow, CSV_HEADER};
 
 /// Everything one flight produced.
 #[derive(Clone, Debug)]
@@ -280,7 +249,7 @@ pub fn run_streaming(
         let compare = computer.step(t1, &edges, world.imu.read(), world.plant.state.battery_v)?;
         motors.deliver(compare, t1, &mut world.plant);
         let sent = Sent { link: scenario.timeline.at(t1).link, thr_us: tx.last_thr_us, yaw_rate_cmd_dps };
-        let logged = LogRow::of(t1, &computer.view(), &world.plant, compare, sent);
+        let logged = log_row(t1, &computer.view(), &world.plant, compare, sent);
         on_row(&logged).map_err(SimError::Output)?;
         rows.push(logged);
         progress.tick(t1, k + 1 == n_ticks);
@@ -327,35 +296,33 @@ struct Sent {
     yaw_rate_cmd_dps: f64,
 }
 
-impl LogRow {
-    /// The row of the tick ending at `t_s`: the plant's truth, what the computer says of itself
-    /// and the compare values it wrote.
-    fn of(t_s: f64, v: &ComputerView, plant: &Plant, compare: [u16; 4], sent: Sent) -> LogRow {
-        let (pitch, roll, yaw) = plant.euler_rad();
-        LogRow {
-            t_s,
-            state: v.state,
-            armed: v.armed,
-            link_tx: sent.link,
-            link_core: v.link,
-            roll_deg: roll.to_degrees(),
-            pitch_deg: pitch.to_degrees(),
-            yaw_deg: yaw.to_degrees(),
-            yaw_rate_dps: plant.state.rate_body_rad_s[2].to_degrees(),
-            est_roll_deg: v.est_roll_deg,
-            est_pitch_deg: v.est_pitch_deg,
-            roll_target_deg: v.roll_target_deg,
-            pitch_target_deg: v.pitch_target_deg,
-            yaw_target_deg: v.yaw_target_deg,
-            yaw_rate_cmd_dps: sent.yaw_rate_cmd_dps,
-            motors: compare,
-            alt_m: plant.state.pos_earth_m[2],
-            battery_v: plant.state.battery_v,
-            thr_us: sent.thr_us,
-            calibrated: v.calibrated,
-            calibrating: v.calibrating,
-            calibration_restarts: v.calibration_restarts,
-        }
+/// The row of the tick ending at `t_s`: the plant's truth, what the computer says of itself and
+/// the compare values it wrote.
+fn log_row(t_s: f64, v: &ComputerView, plant: &Plant, compare: [u16; 4], sent: Sent) -> LogRow {
+    let (pitch, roll, yaw) = plant.euler_rad();
+    LogRow {
+        t_s,
+        state: v.state,
+        armed: v.armed,
+        link_tx: sent.link,
+        link_core: v.link,
+        roll_deg: roll.to_degrees(),
+        pitch_deg: pitch.to_degrees(),
+        yaw_deg: yaw.to_degrees(),
+        yaw_rate_dps: plant.state.rate_body_rad_s[2].to_degrees(),
+        est_roll_deg: v.est_roll_deg,
+        est_pitch_deg: v.est_pitch_deg,
+        roll_target_deg: v.roll_target_deg,
+        pitch_target_deg: v.pitch_target_deg,
+        yaw_target_deg: v.yaw_target_deg,
+        yaw_rate_cmd_dps: sent.yaw_rate_cmd_dps,
+        motors: compare,
+        alt_m: plant.state.pos_earth_m[2],
+        battery_v: plant.state.battery_v,
+        thr_us: sent.thr_us,
+        calibrated: v.calibrated,
+        calibrating: v.calibrating,
+        calibration_restarts: v.calibration_restarts,
     }
 }
 
@@ -391,49 +358,9 @@ impl Progress {
     }
 }
 
-/// The header of a flight's CSV, one row per control tick ([`LogRow::write_csv`]).
-pub const CSV_HEADER: &str = "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,roll_target_deg,\
-                              pitch_target_deg,yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us\n";
-
-impl LogRow {
-    /// This row as one line of the flight's CSV (under [`CSV_HEADER`]).
-    pub fn write_csv(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
-        let r = self;
-        writeln!(
-            w,
-            "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
-            r.t_s,
-            r.state.name(),
-            u8::from(r.armed),
-            u8::from(r.link_tx),
-            r.roll_deg,
-            r.pitch_deg,
-            r.yaw_deg,
-            r.est_roll_deg,
-            r.est_pitch_deg,
-            r.roll_target_deg,
-            r.pitch_target_deg,
-            r.yaw_target_deg,
-            r.yaw_rate_dps,
-            r.motors[0],
-            r.motors[1],
-            r.motors[2],
-            r.motors[3],
-            r.alt_m,
-            r.battery_v,
-            r.thr_us
-        )
-    }
-}
-
 impl FlightLog {
     /// The whole flight as CSV text (what `fcu-sim fly` streams to `flight.csv`).
     pub fn to_csv(&self) -> String {
-        let mut bytes = CSV_HEADER.as_bytes().to_vec();
-        for r in &self.rows {
-            // Writing to a Vec cannot fail.
-            let _ = r.write_csv(&mut bytes);
-        }
-        String::from_utf8_lossy(&bytes).into_owned()
+        fcu_log::to_csv(&self.rows)
     }
 }

@@ -23,9 +23,8 @@ use fcu_core::parameters::snapshot;
 use fcu_core::telemetry::LineBuf;
 use fcu_core::Config;
 
-use crate::link::{Link, LinkConfig};
 use crate::station::{Due, Station};
-use crate::text::Severity;
+use fcu_link::{Link, LinkConfig, Severity};
 
 /// How long the UART must have been idle, with the link quiet, before a reset: its shift
 /// register still holds the last byte when its queue empties.

@@ -33,8 +33,7 @@ use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 
-use crate::rates::Rates;
-use crate::vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, SystemStatus, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
@@ -350,10 +349,9 @@ impl Vehicle for Station {
     fn state(&self) -> VehicleState {
         let Some(s) = self.status else {
             return VehicleState {
-                armed: false,
+                state: FlightState::Calibrating,
                 in_air: false,
                 throttle_low: true,
-                status: SystemStatus::Boot,
                 attitude: Attitude::default(),
                 rc_widths_us: [0; 8],
                 rc_channel_count: 0,
@@ -361,15 +359,10 @@ impl Vehicle for Station {
                 battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
                 health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
                 load_permille: 0,
+                motor_test: false,
             };
         };
         let armed = self.armed();
-        let status = match s.state {
-            FlightState::Calibrating => SystemStatus::Boot,
-            FlightState::Disarmed => SystemStatus::Standby,
-            FlightState::Arming | FlightState::Armed => SystemStatus::Active,
-            FlightState::FailsafeLevel | FlightState::FailsafeOff | FlightState::Fault => SystemStatus::Critical,
-        };
         let mut rc_widths_us = [0u16; 8];
         for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
             *out = (u32::from(w) / COUNTS_PER_US) as u16;
@@ -378,10 +371,9 @@ impl Vehicle for Station {
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;
         let motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
         VehicleState {
-            armed,
+            state: s.state,
             in_air: armed && !throttle_low,
             throttle_low,
-            status,
             attitude: Attitude {
                 roll_rad: s.tilt.roll_rad,
                 pitch_rad: s.tilt.pitch_rad,
@@ -403,6 +395,7 @@ impl Vehicle for Station {
                 prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
             },
             load_permille: 0,
+            motor_test: self.motor_test_running(),
         }
     }
 
@@ -494,12 +487,8 @@ impl Vehicle for Station {
                 Ok(())
             }
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
-                ground::ground_test_rule(self.flight_state())?;
+                let test = MotorTest { motor, duty_pct: throttle_pct, duration_ms }.checked(self.flight_state())?;
                 self.pending_rule()?;
-                if motor >= ground::MOTORS {
-                    return Err(ground::RULE_NO_SUCH_MOTOR);
-                }
-                let test = MotorTest { motor, duty_pct: ground::capped_duty_pct(throttle_pct), duration_ms: u32::from(duration_ms) };
                 self.for_tick()?.motor_test = Some(MotorTestChange::Start(test));
                 Ok(())
             }
@@ -806,7 +795,7 @@ mod tests {
     /// The link in front of the station: what a ground station hears back of a set.
     fn echo(st: &mut Station, name: &str, value: f32) -> Vec<f32> {
         use crate::test_support::{drain, param_set, param_values, v2};
-        let mut link: crate::Link<512> = crate::Link::default();
+        let mut link: fcu_link::Link<512> = fcu_link::Link::default();
         link.receive(&v2(&param_set(name, value)), 0, st);
         param_values(&drain(&mut link)).into_iter().map(|p| p.1).collect()
     }

@@ -1,6 +1,7 @@
-//! The link task ([`fcu_link::Service`]) in front of the real control loop: a reboot or a save
+//! The link task ([`fcu_gcs::Service`]) in front of the real control loop: a reboot or a save
 //! asked for under a flood of requests, while the pilot makes the arm gesture.
 
+#[path = "../../fcu-link/tests/support/mod.rs"]
 mod support;
 
 use fcu_core::flight::FlightController;
@@ -8,7 +9,8 @@ use fcu_core::imu::RawImu;
 use fcu_core::rc::PulseBatch;
 use fcu_core::supervisor::{Blocker, FlightState};
 use fcu_core::Config;
-use fcu_link::{Due, LinkConfig, Observed, Service};
+use fcu_gcs::{Due, Observed, Service};
+use fcu_link::LinkConfig;
 use mavlink::dialects::common::{self, MavCmd, MavResult};
 use support::*;
 
@@ -209,4 +211,29 @@ fn a_save_asked_under_a_flood_is_written_disarmed_after_its_ack() {
     }
     assert!(texts(&b.sent()).iter().any(|t| t == "parameters saved"));
     assert!(b.fc.status().blockers.is_empty(), "{:?}", b.fc.status().blockers);
+}
+
+#[test]
+fn the_link_alone_cannot_keep_a_motor_spinning_past_the_ticks_deadline() {
+    let mut b = booted();
+    // A minute asked, the ground station's heartbeat every second: nothing on the link's side
+    // ends the test, so only the tick's deadline can.
+    let start = v2(&command_long(MavCmd::MAV_CMD_DO_MOTOR_TEST, [2.0, 0.0, 10.0, 60.0, 0.0, 0.0, 0.0]));
+    b.period(REST, &start);
+    let started_ms = b.now_ms;
+    let heartbeat = v2(&common::HEARTBEAT_DATA::DEFAULT);
+    let mut last_spinning_ms = None;
+    while b.now_ms < started_ms + 10_000 {
+        let rx = if b.now_ms.is_multiple_of(1000) { heartbeat.clone() } else { Vec::new() };
+        b.period(REST, &rx);
+        let compare = b.fc.status().compare;
+        assert_eq!((compare[0], compare[2], compare[3]), (0, 0, 0), "only motor 2");
+        if compare[1] > 0 {
+            last_spinning_ms = Some(b.now_ms);
+        }
+    }
+    assert!(texts(&b.sent()).iter().all(|t| !t.starts_with("Motor test stopped")), "the link asked no stop");
+    let ran_ms = last_spinning_ms.expect("the motor spun") - started_ms;
+    let deadline_ms = fcu_core::ground::MOTOR_TEST_MAX_MS;
+    assert!((deadline_ms - 2 * PERIOD_MS..=deadline_ms + PERIOD_MS).contains(&ran_ms), "spun for {ran_ms} ms");
 }
