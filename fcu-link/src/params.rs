@@ -164,8 +164,8 @@ impl<const TX: usize> Core<TX> {
 
 #[cfg(test)]
 mod tests {
-    use fcu_core::parameters;
     use fcu_core::Config;
+    use fcu_params as parameters;
     use mavlink::dialects::common::PARAM_REQUEST_READ_DATA;
 
     use crate::station::Station;
