@@ -39,7 +39,7 @@ pub use derived::TickParams;
 pub use supervision::ForcedRadio;
 
 use self::block::Block;
-use self::derived::{Derived, OuterParams};
+use self::derived::{Derived, OuterParams, Unscaled};
 use self::heading::{HeadingEstimate, HeadingTarget};
 use self::output::{MotorsAllowed, Output};
 use self::sensors::{AfterCalibration, Sensors};
@@ -165,6 +165,8 @@ pub struct ControlTick {
     outer: OuterResult,
     /// Rate loop, mixer, compare values.
     output: Output,
+    /// What the gains scale, for when they move.
+    unscaled: Unscaled,
 }
 
 /// The outer-step half.
@@ -303,6 +305,7 @@ impl ControlTick {
                 gains: Gains::UNITY,
             },
             output: Output::new(),
+            unscaled: Unscaled::new(cfg),
         }
     }
 
@@ -326,6 +329,7 @@ impl ControlTick {
             return Err(TakeError::OtherSupervisor);
         }
         self.params = TickParams::new(cfg, self.outer.gains);
+        self.unscaled = Unscaled::new(cfg);
         self.sensors.set_gyro_filter(cfg.gyro_filter);
         Ok(())
     }
@@ -379,7 +383,7 @@ impl ControlTick {
     /// attitude, targets, rate demands and gains are in force from now on.
     pub fn apply_outer(&mut self, r: &OuterResult) {
         if r.gains != self.outer.gains {
-            self.params.set_gains(r.gains);
+            self.params.set_gains(&self.unscaled, r.gains);
         }
         self.outer = *r;
         self.heading.result_applied();

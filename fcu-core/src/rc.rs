@@ -427,7 +427,7 @@ impl RcConfig {
 
     /// Store a width into the sticks (one input, the function the map gives it), as
     /// `update_rc_data`.
-    #[inline(never)] // Once per pulse, on a few ticks in sixteen: kept out of the tick's body.
+    #[inline(never)] // docs/performance.md, «channels written out».
     pub fn apply_width(&self, sticks: &mut Sticks, input: usize, width_counts: u16) {
         let v = self.stick_from_width(input, width_counts);
         match self.map.function(input) {
@@ -767,7 +767,7 @@ impl Receiver {
     /// channel heard from longest ago; with the reference's rules, the last edge (`u32::MAX`
     /// if there never was one). The link is good while this is below the timeout; the
     /// supervisor counts lost time from it.
-    #[inline(never)] // Needed only without a good link: kept off the 800 Hz path.
+    #[inline(never)] // docs/performance.md, «silence off the path».
     pub fn silence_ticks(&self, cfg: &RcConfig) -> u32 {
         // `link_until` is at most `now` + timeout (an anchor is never in the future), and `now`
         // never comes near `u64::MAX`: no wrap.

@@ -514,7 +514,6 @@ impl Supervisor {
     }
 
     /// One tick of the safety layer: conditions, the state table, the transition's actions.
-    #[inline(never)]
     pub fn decide(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
         let c = self.conditions(cfg, i);
         let next = next_state(self.state, c);

@@ -152,7 +152,9 @@ pub struct Param {
     pub step: Step,
     pub applies: Applies,
     field: Field,
-    /// One line for the parameter list.
+    /// One line for the parameter list. Only with the `descriptions` feature, which the
+    /// firmware leaves off (docs/performance.md, «descriptions on the host»).
+    #[cfg(feature = "descriptions")]
     pub description: &'static str,
 }
 
@@ -215,6 +217,7 @@ pub fn param(index: usize) -> Option<&'static Param> {
 }
 
 /// One line on what the parameter at `index` does (for the parameter list).
+#[cfg(feature = "descriptions")]
 pub fn description(index: usize) -> Option<&'static str> {
     param(index).map(|p| p.description)
 }
@@ -484,6 +487,7 @@ pub fn apply(fc: &mut FlightController, cfg: &Config) -> Result<(), ApplyError> 
 
 /// The parameter list as Markdown, with `cfg`'s values as the defaults: what
 /// `docs/parameters.md` holds (a test regenerates it and compares).
+#[cfg(feature = "descriptions")]
 pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
     writeln!(out, "| Name | Default | Unit | Range | Step | Change | Meaning |")?;
     writeln!(out, "|---|---|---|---|---|---|---|")?;
@@ -583,13 +587,14 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
 }
 
 /// Whole milliseconds (checked, within the parameters' bounds) to ticks, refused unless exact.
+/// In u32: ms·hz = (ms / 1000)·hz·1000 + (ms % 1000)·hz, the second under 10^9 for hz < 10^6.
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
-    let (ms, hz) = (u64::from(ms as u32), u64::from(whole_integration_hz(cfg)));
-    let ticks_x1000 = ms * hz;
-    if ms == 0 || hz == 0 || ticks_x1000 % 1000 != 0 {
+    let (ms, hz) = (ms as u32, whole_integration_hz(cfg));
+    let rest = (ms % 1000) * hz;
+    if ms == 0 || hz == 0 || rest % 1000 != 0 {
         return Err(RULE_NOT_TICKS);
     }
-    u32::try_from(ticks_x1000 / 1000).map_err(|_| RULE_NOT_TICKS)
+    (ms / 1000).checked_mul(hz).and_then(|t| t.checked_add(rest / 1000)).ok_or(RULE_NOT_TICKS)
 }
 
 fn safety(cfg: &Config) -> SafetyConfig {
@@ -693,6 +698,7 @@ macro_rules! rc_map {
             step: Step::Integer,
             applies: Applies::Disarmed,
             field: Field::RcMap($f),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
         }
     };
@@ -708,6 +714,7 @@ macro_rules! rc_endpoint {
             step: Step::QuarterUs,
             applies: Applies::Disarmed,
             field: Field::RcEndpoint($input - 1, Endpoint::$which),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input ", $input, ": ", $what),
         }
     };
@@ -723,6 +730,7 @@ macro_rules! rc_rev {
             step: Step::Integer,
             applies: Applies::Disarmed,
             field: Field::RcReversed($input - 1),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
         }
     };
@@ -757,6 +765,7 @@ macro_rules! gain {
             step: Step::Any,
             applies: Applies::Anytime,
             field: Field::Gain(Axis::$axis, Gain::$gain),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
@@ -772,6 +781,7 @@ macro_rules! safety_ms {
             step: Step::Integer,
             applies: Applies::Disarmed,
             field: Field::Safety(SafetyTime::$which),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
@@ -787,6 +797,7 @@ macro_rules! stick_us {
             step: Step::QuarterUs,
             applies: Applies::Disarmed,
             field: Field::Stick(Stick::$which),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
@@ -826,6 +837,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Integer,
         applies: Applies::Disarmed,
         field: Field::RcTimeoutMs,
+        #[cfg(feature = "descriptions")]
         description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
     },
     stick_us!(
@@ -850,6 +862,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Any,
         applies: Applies::Anytime,
         field: Field::AngleMaxDeg,
+        #[cfg(feature = "descriptions")]
         description: "roll and pitch at full stick",
     },
     Param {
@@ -860,6 +873,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Any,
         applies: Applies::Anytime,
         field: Field::YawRateMaxDegS,
+        #[cfg(feature = "descriptions")]
         description: "yaw rate at full stick",
     },
     gain!("ANG_RLL_P", Roll, OuterP, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
@@ -882,6 +896,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Any,
         applies: Applies::Anytime,
         field: Field::YawFeedforward,
+        #[cfg(feature = "descriptions")]
         description: "share of the yaw stick's rate fed straight to the yaw rate loop",
     },
     Param {
@@ -892,6 +907,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Integer,
         applies: Applies::Disarmed,
         field: Field::GyroCutoffHz,
+        #[cfg(feature = "descriptions")]
         description: "gyro low-pass cut-off, 40..300 Hz in steps of 10 (second-order Butterworth at the 800 Hz tick)",
     },
     Param {
@@ -902,6 +918,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Any,
         applies: Applies::Disarmed,
         field: Field::RateDFilterK,
+        #[cfg(feature = "descriptions")]
         description: "rate loop D low-pass: share of each new sample, 1 = unfiltered (0.4: ~65 Hz at 800 Hz)",
     },
     Param {
@@ -912,6 +929,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Any,
         applies: Applies::Disarmed,
         field: Field::BatteryVoltMult,
+        #[cfg(feature = "descriptions")]
         description: "battery volts per volt at the ADC pin (the board's divider: 1.5)",
     },
     Param {
@@ -922,6 +940,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Integer,
         applies: Applies::Reboot,
         field: Field::LinkProtocol,
+        #[cfg(feature = "descriptions")]
         description: "USART1: 0 text lines (serial plotter), 1 MAVLink",
     },
     Param {
@@ -932,6 +951,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Integer,
         applies: Applies::Anytime,
         field: Field::LinkAttitudeHz,
+        #[cfg(feature = "descriptions")]
         description: "attitude messages per second",
     },
     Param {
@@ -942,6 +962,7 @@ pub static TABLE: [Param; COUNT] = [
         step: Step::Integer,
         applies: Applies::Anytime,
         field: Field::LinkRcHz,
+        #[cfg(feature = "descriptions")]
         description: "radio input and motor output messages per second",
     },
 ];

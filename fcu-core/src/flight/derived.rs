@@ -52,9 +52,21 @@ pub struct TickParams {
     pub(crate) compare_range: CompareRange,
     /// The compare value with the motors off.
     pub(crate) off_compare: u16,
-    /// The configuration's control gains and mixer, unscaled: what the gains scale.
-    control_cfg: ControlConfig,
-    mixer_cfg: MixerConfig,
+}
+
+/// The configuration's control gains and mixer, unscaled: what [`TickParams::set_gains`]
+/// scales. Kept beside the tick's values, not among them: the tick reads these only when the
+/// gains move (docs/performance.md, «unscaled apart»).
+#[derive(Clone, Debug)]
+pub(crate) struct Unscaled {
+    control: ControlConfig,
+    mixer: MixerConfig,
+}
+
+impl Unscaled {
+    pub(crate) fn new(cfg: &Config) -> Unscaled {
+        Unscaled { control: cfg.control, mixer: cfg.mixer }
+    }
 }
 
 impl TickParams {
@@ -73,16 +85,14 @@ impl TickParams {
             mixer: cfg.mixer.scaled_throttle(gains.thrust),
             compare_range: cfg.mixer.compare_range(),
             off_compare: cfg.mixer.off_compare(),
-            control_cfg: cfg.control,
-            mixer_cfg: cfg.mixer,
         }
     }
 
     /// The gains in force are now `gains`: the rate loop and the throttle map are the
-    /// configuration's scaled by them, as [`new`](Self::new) makes them.
-    pub(crate) fn set_gains(&mut self, gains: Gains) {
-        self.rate_loop = self.control_cfg.scaled_rate_loop(gains.rate);
-        self.mixer = self.mixer_cfg.scaled_throttle(gains.thrust);
+    /// configuration's (`unscaled`) scaled by them, as [`new`](Self::new) makes them.
+    pub(crate) fn set_gains(&mut self, unscaled: &Unscaled, gains: Gains) {
+        self.rate_loop = unscaled.control.scaled_rate_loop(gains.rate);
+        self.mixer = unscaled.mixer.scaled_throttle(gains.thrust);
     }
 
     /// Evaluate the reference's double-precision expressions in `f64`. A constant `false`
