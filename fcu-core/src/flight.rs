@@ -547,6 +547,28 @@ mod tests {
         assert_eq!((derived.rate_loop(), derived.mixer()), (&cfg.control, &cfg.mixer));
     }
 
+    #[test]
+    fn the_tick_values_are_the_configuration_scaled_by_the_gains_in_force_whatever_came_before() {
+        let cfg = Config::default();
+        let mut fc = FlightController::new(cfg).unwrap();
+        let mut r = fc.control_tick.outer;
+        for (thrust, rate) in [(1.1, 1.3), (1.27, 0.93), (0.81, 1.117), (1.05, 1.01), (1.173, 0.997)] {
+            r.gains = Gains { thrust, rate };
+            fc.control_tick.apply_outer(&r);
+        }
+        let fresh = TickParams::new(&cfg, r.gains);
+        let bits = |c: &crate::control::ControlConfig| {
+            [c.pitch, c.roll, c.yaw].map(|a| [a.inner_kp, a.inner_ki, a.inner_kd, a.output_limit].map(f32::to_bits))
+        };
+        assert_eq!(bits(fc.control_tick.params().rate_loop()), bits(fresh.rate_loop()));
+        let m = |m: &crate::mixer::MixerConfig| [m.throttle_slope, m.throttle_offset].map(f32::to_bits);
+        assert_eq!(m(fc.control_tick.params().mixer()), m(fresh.mixer()));
+        // Back at unity: the configuration's own values.
+        r.gains = Gains::UNITY;
+        fc.control_tick.apply_outer(&r);
+        assert_eq!((fc.control_tick.params().rate_loop(), fc.control_tick.params().mixer()), (&cfg.control, &cfg.mixer));
+    }
+
     /// The default with the reference's supervisor (armed by the replay's flag) and no gain
     /// schedule (the gains stay at one): a controller that can be flown by `ForcedRadio`.
     fn flown() -> Config {
