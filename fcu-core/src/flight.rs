@@ -201,7 +201,7 @@ impl FlightController {
     }
 
     /// The configuration in force: the one given to [`new`](Self::new), or the last one
-    /// [`apply_config`](Self::apply_config) took.
+    /// [`take_change`](Self::take_change) took.
     pub fn config(&self) -> &Config {
         &self.cfg
     }
