@@ -804,6 +804,22 @@ mod tests {
         assert_eq!(st.set_param(index("RC_TIMEOUT_MS"), 100.0), Ok(ParamMask::EMPTY));
     }
 
+    #[test]
+    fn the_control_loop_gets_the_widest_kind_of_the_changes_since_it_last_took_one() {
+        use fcu_core::flight::ChangeKind;
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.take_change(), None);
+        st.set_param(index("ANGLE_MAX"), 25.0).unwrap();
+        assert_eq!(st.take_change().map(|c| c.kind), Some(ChangeKind::InFlight));
+        // A ground-only change, then an in-flight one, before the control loop takes them:
+        // together they may change only on the ground (the tick refuses them once armed).
+        st.set_param(index("RC1_TRIM"), 1470.0).unwrap();
+        st.set_param(index("ANGLE_MAX"), 30.0).unwrap();
+        let change = st.take_change().unwrap();
+        assert_eq!((change.kind, change.cfg), (ChangeKind::GroundOnly, *st.config()));
+        assert_eq!(st.take_change(), None);
+    }
+
     /// The link in front of the station: what a ground station hears back of a set.
     fn echo(st: &mut Station, name: &str, value: f32) -> Vec<f32> {
         use crate::test_support::{drain, param_set, param_values, v2};
