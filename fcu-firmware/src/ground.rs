@@ -1,10 +1,11 @@
 //! The ground station's link: MAVLink 2 on USART1, with the `mavlink` feature.
 //!
-//! Every decision is fcu-link's and fcu-core's (`fcu_link::station`: the parameter table's
-//! rules, what a command may do); this module moves bytes and words. Received bytes come from
-//! the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to both halves of the
-//! control loop, accepted commands (and whether a save runs) to the control tick
-//! ([`to_control`]); saves go to flash ([`crate::param_flash`]) once the changes settle, disarmed.
+//! Every decision is fcu-link's, fcu-params' and fcu-core's (`fcu_link::station`: the parameter
+//! table's rules, what a command may do); this module moves bytes and words. Received bytes come
+//! from the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to the control tick,
+//! which passes on to the outer step what it takes ([`config_to_tick`]); accepted commands (and
+//! whether a save runs) go to the control tick ([`to_control`]); saves go to flash
+//! ([`crate::param_flash`]) once the changes settle, disarmed.
 //! On a board set to text lines it listens, and the first valid MAVLink frame turns the UART to
 //! MAVLink.
 
