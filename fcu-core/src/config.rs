@@ -11,26 +11,14 @@
 //! A `Config` is checked by [`Config::validate`] (and by `FlightController::new`): a negative
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
-use crate::ahrs::{EstimatorConfig, MahonyConfig, VqfConfig};
-use crate::control::{AxisGains, BatteryCompensation, ControlConfig, Derivative, ThrustCurve, YawShaping};
+use crate::ahrs::{EstimatorConfig, EstimatorError, MahonyConfig, VqfConfig};
+use crate::control::{AxisGains, BatteryCompensation, BatterySense, ControlConfig, Derivative, ThrustCurve, YawShaping};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
+use crate::math::above;
 use crate::mixer::{MixerConfig, Saturate};
 use crate::rc::{GestureThrottle, PulseRules, RcConfig, StickCounts, YawStick, CAPTURE_WRAP, COUNTS_PER_US};
 use crate::supervisor::{SafetyConfig, SupervisorConfig};
-use crate::telemetry::BatterySense;
-
-/// `x` in `[lo, hi]` (finite bounds), so finite: a NaN fails both comparisons, an infinity
-/// the bound it passes. The checks use it instead of `x.is_finite() && lo <= x`, which
-/// fcu-core's opt-level 3 turns into a bit-pattern classification of some 70 bytes a field.
-pub(crate) fn within(x: f32, lo: f32, hi: f32) -> bool {
-    lo <= x && x <= hi
-}
-
-/// `x` in `(lo, hi]` (finite bounds), so finite: as [`within`].
-pub(crate) fn above(x: f32, lo: f32, hi: f32) -> bool {
-    lo < x && x <= hi
-}
 
 /// The control tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -221,6 +209,14 @@ impl ConfigError {
     }
 }
 
+impl From<EstimatorError> for ConfigError {
+    fn from(e: EstimatorError) -> Self {
+        match e {
+            EstimatorError::NotCompiledIn => ConfigError::ReferenceEstimator,
+        }
+    }
+}
+
 impl core::fmt::Display for ConfigError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(f, "invalid configuration: {}", self.field())
@@ -228,14 +224,6 @@ impl core::fmt::Display for ConfigError {
 }
 
 impl Config {
-    /// `self == other`, compiled once here: the derived comparison is `#[inline]`, so each
-    /// crate that compares two configurations would otherwise build its own copy of the whole
-    /// field-by-field compare (about 1.6 KB in the firmware).
-    #[inline(never)]
-    pub fn is_same_as(&self, other: &Config) -> bool {
-        self == other
-    }
-
     /// The ST reference firmware, R release (221117), DC motors, Devo 7E radio.
     pub const fn reference() -> Config {
         Config {
@@ -538,7 +526,7 @@ mod tests {
         let estimator = Config { estimator: Config::reference().estimator, ..Config::default() };
         assert_eq!(estimator.validate(), Err(ConfigError::ReferenceEstimator));
         assert!(ConfigError::ReferenceEstimator.field().contains("`reference` feature"));
-        assert!(matches!(crate::FlightController::new(estimator), Err(ConfigError::ReferenceEstimator)));
+        assert!(matches!(crate::ahrs::Estimator::new(estimator.estimator), Err(crate::ahrs::EstimatorError::NotCompiledIn)));
         let reference_loop =
             Config { control: ControlConfig { derivative: Derivative::OnError, ..Config::default().control }, ..Config::default() };
         assert_eq!(reference_loop.validate(), Err(ConfigError::ReferenceRateLoop));

@@ -4,10 +4,11 @@
 //! Axis order everywhere is `[x, y, z]` = `[pitch, roll, yaw]` (the reference's naming:
 //! pitch is the rotation about body X).
 
-use crate::config::{above, within};
+use crate::math::{above, within};
+use crate::mixer::Saturation;
 
 /// Gains and limits of one axis of the cascade.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AxisGains {
     /// Outer (angle) loop: rate demand = kp·e + ki·∫e, rad/s per rad.
     pub outer_kp: f32,
@@ -23,25 +24,6 @@ pub struct AxisGains {
     /// Low-pass the derivative (the reference does on pitch and roll, not on yaw; the default
     /// profile on every axis).
     pub d_lowpass: bool,
-}
-
-/// The derived comparison, field by field, out of line: derived, it is inlined into
-/// `ControlConfig`'s for two of the three axes (some 170 bytes each at opt-level 3).
-impl PartialEq for AxisGains {
-    #[inline(never)]
-    fn eq(&self, other: &AxisGains) -> bool {
-        // Destructured: a field added to the struct must be added here.
-        let AxisGains { outer_kp, outer_ki, outer_i_limit, inner_kp, inner_ki, inner_kd, inner_i_limit, output_limit, d_lowpass } = *self;
-        outer_kp == other.outer_kp
-            && outer_ki == other.outer_ki
-            && outer_i_limit == other.outer_i_limit
-            && inner_kp == other.inner_kp
-            && inner_ki == other.inner_ki
-            && inner_kd == other.inner_kd
-            && inner_i_limit == other.inner_i_limit
-            && output_limit == other.output_limit
-            && d_lowpass == other.d_lowpass
-    }
 }
 
 impl AxisGains {
@@ -465,46 +447,6 @@ impl AngleLoop {
     }
 }
 
-/// Which directions of which axes the mixer could not deliver on the last tick: one byte
-/// for the three axes (bit `2·axis` positive, `2·axis + 1` negative), so the tick reads and
-/// writes it once rather than six flags one by one.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Saturation(u8);
-
-impl Saturation {
-    /// Nothing saturated.
-    pub const NONE: Saturation = Saturation(0);
-
-    /// Every axis whose command is non-zero, in the direction of its sign (what the mixer
-    /// reports when it has to scale all corrections down).
-    pub fn of_commands(s: [f32; 3]) -> Saturation {
-        let mut set = Saturation::NONE;
-        for (axis, v) in s.into_iter().enumerate() {
-            set = set.with(axis, v > 0.0, v < 0.0);
-        }
-        set
-    }
-
-    /// This set with `axis` saturated in the given directions as well.
-    pub fn with(self, axis: usize, positive: bool, negative: bool) -> Saturation {
-        let bits = u8::from(positive) | u8::from(negative) << 1;
-        Saturation(self.0 | bits.checked_shl(2 * axis as u32).unwrap_or(0))
-    }
-
-    pub fn positive(self, axis: usize) -> bool {
-        self.axis_bits(axis) & 1 != 0
-    }
-
-    pub fn negative(self, axis: usize) -> bool {
-        self.axis_bits(axis) & 2 != 0
-    }
-
-    /// The two bits of one axis.
-    fn axis_bits(self, axis: usize) -> u8 {
-        self.0.checked_shr(2 * axis as u32).unwrap_or(0) & 3
-    }
-}
-
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct RateAxis {
     integ: f32,
@@ -663,6 +605,39 @@ fn clamp_symmetric(v: f32, lim: f32) -> f32 {
         v
     }
 }
+
+/// The battery voltage from the ADC with a divider ratio that can be set (the parameter
+/// `BATT_VOLT_MULT`): a board whose resistors differ from the schematic's reads true.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatterySense {
+    /// Battery volts per volt at the ADC pin (1.5 with the board's 10 k / 20 k divider).
+    pub volt_mult: f32,
+}
+
+impl BatterySense {
+    /// The board's divider.
+    pub const BOARD: BatterySense = BatterySense { volt_mult: BATTERY_DIVIDER_NUM as f32 / BATTERY_DIVIDER_DEN as f32 };
+
+    pub fn is_valid(&self) -> bool {
+        self.volt_mult.is_finite() && self.volt_mult >= 1.0 && self.volt_mult <= 10.0
+    }
+
+    /// Battery millivolts from a 12-bit reading, rounded (the board's divider gives what
+    /// [`battery_mv`](crate::telemetry::battery_mv) gives).
+    pub fn mv(&self, adc_counts: u16) -> u32 {
+        let counts = u32::from(adc_counts).min(BATTERY_ADC_FULL_SCALE);
+        let pin_mv = (counts * BATTERY_ADC_REF_MV) as f32 / BATTERY_ADC_FULL_SCALE as f32;
+        // Non-negative and at most 3300 × 10: the cast neither wraps nor saturates.
+        (pin_mv * self.volt_mult + 0.5) as u32
+    }
+}
+
+/// Battery sense: ADC1 channel 9 on PB1, 12-bit, 3.3 V reference, 10 k / 20 k divider (×1.5).
+pub const BATTERY_ADC_FULL_SCALE: u32 = 4095;
+pub const BATTERY_ADC_REF_MV: u32 = 3300;
+/// (R_top + R_bottom) / R_bottom = (10 + 20) / 20, as a fraction 3/2.
+pub const BATTERY_DIVIDER_NUM: u32 = 3;
+pub const BATTERY_DIVIDER_DEN: u32 = 2;
 
 #[cfg(test)]
 mod tests {

@@ -62,7 +62,7 @@ impl BiquadCoeffs {
     /// True when every coefficient is finite and the poles are inside the unit circle
     /// (the stability triangle of `1 − a1 z⁻¹ − a2 z⁻²`).
     pub fn is_stable(&self) -> bool {
-        let finite = |c: f32| crate::config::within(c, f32::MIN, f32::MAX);
+        let finite = |c: f32| crate::math::within(c, f32::MIN, f32::MAX);
         // The poles' bounds hold only for finite `a1` and `a2`.
         finite(self.b0) && finite(self.b1) && finite(self.b2) && self.a2.abs() < 1.0 && self.a1.abs() < 1.0 - self.a2
     }

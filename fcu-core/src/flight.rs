@@ -25,20 +25,23 @@
 //! [`FlightController::run_outer`], right after the tick that made the job.
 
 mod block;
+mod derived;
 mod ground;
+#[cfg(test)]
+mod ground_tests;
 mod heading;
 mod output;
-mod params;
 mod sensors;
 mod supervision;
 
-pub use block::AccelWords;
-pub use params::TickParams;
+pub use block::{AccelWords, OuterJob};
+pub use derived::TickParams;
+pub use supervision::ForcedRadio;
 
-use self::block::{accumulate_accel_mg, Block};
+use self::block::Block;
+use self::derived::{Derived, OuterParams, Unscaled};
 use self::heading::{HeadingEstimate, HeadingTarget};
 use self::output::{MotorsAllowed, Output};
-use self::params::{Derived, OuterParams};
 use self::sensors::{AfterCalibration, Sensors};
 use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
@@ -46,9 +49,9 @@ use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
 use crate::ground::GroundInput;
-use crate::imu::{CalibrationPhase, Decoder, Offsets, RawImu, SensorFault};
+use crate::imu::{CalibrationPhase, RawImu, SensorFault};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
-use crate::rc::{EdgeDecoder, PulseBatch, Sticks, CHANNELS};
+use crate::rc::{EdgeDecoder, PulseBatch, Sticks};
 use crate::supervisor::{Blockers, FlightState};
 
 /// What one control tick produces.
@@ -58,44 +61,6 @@ pub struct TickOutput {
     pub compare: [u16; 4],
     /// Set every fifth tick: run the outer step on it.
     pub outer_job: Option<OuterJob>,
-}
-
-/// What the outer step needs of the last five ticks: the accelerometer words and the summed
-/// gyro, and what the sticks said.
-///
-/// The tick stores the accelerometer's raw words and the outer step converts them (mount,
-/// sensitivity, offsets: the tick's integer arithmetic, done at 160 Hz); the gyro arrives as
-/// the sum its block mean is made of, accumulated in slot order (bit for bit the reference's
-/// sum of five stored slots). Why: docs/performance.md, «accel words, not values».
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OuterJob {
-    /// Accelerometer words, sensor axes, of the slots `first_raw_slot..`.
-    pub accel_words: AccelWords,
-    /// The offsets in force for those words.
-    pub accel_offsets: Offsets,
-    /// The slots before `first_raw_slot`, converted and corrected with the offsets they were
-    /// taken under and summed (only a block that spans the end of a calibration has any).
-    pub accel_sum_before_mg: [f32; 3],
-    pub first_raw_slot: u8,
-    /// Low-passed gyro summed over the block, mdps, body axes.
-    pub gyro_sum_mdps: [f32; 3],
-    /// The sticks in force (the failsafe's level sticks while it holds).
-    pub sticks: Sticks,
-    pub throttle_low: bool,
-    /// The yaw estimate at the end of the tick, rad.
-    pub yaw_est_rad: f32,
-    /// The throttle was low on some tick since the last job: the yaw target restarts at 0.
-    pub yaw_target_reset: bool,
-}
-
-impl OuterJob {
-    /// The block's summed accelerometer, corrected mg, body axes.
-    pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
-        let mut sum = self.accel_sum_before_mg;
-        let raw = self.accel_words.0.get(usize::from(self.first_raw_slot)..).unwrap_or(&[]);
-        accumulate_accel_mg(&mut sum, raw, decoder, &self.accel_offsets);
-        sum
-    }
 }
 
 /// The outer step's result, applied by the inner half.
@@ -112,16 +77,6 @@ pub struct OuterResult {
     pub rate_demand_rad_s: [f32; 3],
     /// The gains the tick's rate loop and throttle map are to be scaled by.
     pub gains: Gains,
-}
-
-/// The radio state given directly (golden replay): the reference's `rc_connection_flag`,
-/// `rc_enable_motor` and `rc_cal_flag` instead of capture edges.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ForcedRadio {
-    pub width_counts: [u16; CHANNELS],
-    pub link: bool,
-    pub armed: bool,
-    pub cal_request: bool,
 }
 
 /// What telemetry, LEDs and logs need to know.
@@ -153,45 +108,43 @@ pub struct Status {
     pub yaw_rate_target_rad_s: f32,
 }
 
-/// Why [`FlightController::apply_config`] left the configuration as it was.
+/// What a configuration change reaches, as the parameter table classifies it
+/// (`fcu_params::check_change`, which compares every parameter the table marks as not
+/// changeable in flight).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum ChangeKind {
+    /// Only what may change in flight: gains, angle and yaw-rate limits, telemetry rates.
+    InFlight,
+    /// Something that may change only on the ground: the radio, gestures, failsafe times,
+    /// filters, the battery divider, the link's protocol.
+    GroundOnly,
+}
+
+impl ChangeKind {
+    /// The rule, owned here and nowhere else: while changes are restricted
+    /// ([`FlightState::changes_restricted`]: arming, armed, or the failsafe's level stage) only
+    /// an in-flight change is taken. Changing how the sticks read or when the failsafe acts
+    /// mid-flight could move the motors in ways the pilot did not command.
+    pub fn allowed(self, changes_restricted: bool) -> bool {
+        self == ChangeKind::InFlight || !changes_restricted
+    }
+}
+
+/// A new configuration with what it reaches: what the tick takes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConfigChange {
+    pub cfg: Config,
+    pub kind: ChangeKind,
+}
+
+/// Why the tick did not take a change (it changed nothing).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ApplyError {
-    /// The new configuration cannot fly.
-    Invalid(ConfigError),
-    /// Armed (arming, flying or in the failsafe's level stage), and more than the gains, the
-    /// angle and yaw-rate limits and the telemetry rates would change.
-    Armed,
-    /// A setting no parameter reaches changed (timing, sensors, estimator, mixer, pulse
-    /// rules, the kind of supervisor...): it needs a new controller.
-    NeedsRestart,
-}
-
-impl ApplyError {
-    /// The rule, short enough for a ground station's status line (at most 32 characters).
-    pub fn rule(self) -> &'static str {
-        match self {
-            ApplyError::Invalid(e) => e.rule(),
-            ApplyError::Armed => crate::parameters::RULE_ARMED,
-            ApplyError::NeedsRestart => "needs a restart",
-        }
-    }
-}
-
-/// Whether `new` may replace `old` at run time, with the motors `armed` or not
-/// ([`FlightController::armed`]): valid, differing only in what parameters set, and while
-/// armed only in the in-flight ones. What [`FlightController::apply_config`] checks; a
-/// firmware that runs the two halves in different tasks checks it where it keeps the
-/// configuration, then hands the new one to [`ControlTick::take_config`] and
-/// [`OuterStep::take_config`].
-pub fn check_change(old: &Config, new: &Config, armed: bool) -> Result<(), ApplyError> {
-    new.validate().map_err(ApplyError::Invalid)?;
-    if crate::parameters::with_parameter_fields_of(new, old) != *old {
-        return Err(ApplyError::NeedsRestart);
-    }
-    if armed && crate::parameters::with_in_flight_fields_of(old, new) != *new {
-        return Err(ApplyError::Armed);
-    }
-    Ok(())
+pub enum TakeError {
+    /// A ground-only change while changes are restricted (asked for disarmed, carried out
+    /// after arming).
+    Restricted,
+    /// Another kind of supervisor: that needs a new controller.
+    OtherSupervisor,
 }
 
 /// The per-tick half: the stages, in the order its `run` calls them.
@@ -212,6 +165,8 @@ pub struct ControlTick {
     outer: OuterResult,
     /// Rate loop, mixer, compare values.
     output: Output,
+    /// What the gains scale, for when they move.
+    unscaled: Unscaled,
 }
 
 /// The outer-step half.
@@ -246,30 +201,28 @@ impl FlightController {
     }
 
     /// The configuration in force: the one given to [`new`](Self::new), or the last one
-    /// [`apply_config`](Self::apply_config) took.
+    /// [`take_change`](Self::take_change) took.
     pub fn config(&self) -> &Config {
         &self.cfg
     }
 
-    /// Whether the motors may be running or about to: arming, armed, or the failsafe's level
-    /// stage. Only gains and rates change then ([`apply_config`](Self::apply_config)).
-    pub fn armed(&self) -> bool {
-        self.control_tick.armed()
+    /// Whether changes are restricted ([`FlightState::changes_restricted`]): the motors may be
+    /// running or about to. Only in-flight changes are taken then ([`ChangeKind::allowed`]).
+    pub fn changes_restricted(&self) -> bool {
+        self.control_tick.changes_restricted()
     }
 
     /// Take a changed configuration at run time, as a real autopilot takes a parameter change:
-    /// what the tick and the outer step work with is made again by `Derived::new` (the tick's
-    /// rate loop and throttle map scaled by the gains in force), the gyro low-pass gets its new
-    /// coefficients and the supervisor its new numbers, and every stage keeps its state
-    /// (integrators, filters, estimate, heading, supervisor). Refused, with nothing changed,
-    /// when the configuration is invalid, when armed and more than the in-flight parameters
-    /// would change ([`crate::parameters::Applies::Anytime`]), or when a setting that no
-    /// parameter reaches would change.
-    pub fn apply_config(&mut self, cfg: Config) -> Result<(), ApplyError> {
-        check_change(&self.cfg, &cfg, self.armed())?;
-        self.control_tick.take_config(&cfg)?;
-        self.outer_step.take_config(&cfg);
-        self.cfg = cfg;
+    /// what the tick and the outer step work with is made again from it and the gains in force,
+    /// the gyro low-pass gets its new coefficients and the supervisor its new numbers, and every
+    /// stage keeps its state (integrators, filters, estimate, heading, supervisor). Refused,
+    /// with nothing changed, as [`ControlTick::take_config`] refuses. Whether `change.cfg` may
+    /// replace the configuration at all (valid, differing only in parameters) and what it
+    /// reaches is the parameter table's to say (`fcu_params::check_change`).
+    pub fn take_change(&mut self, change: &ConfigChange) -> Result<(), TakeError> {
+        self.control_tick.take_config(change)?;
+        self.outer_step.take_config(&change.cfg);
+        self.cfg = change.cfg;
         Ok(())
     }
 
@@ -352,24 +305,31 @@ impl ControlTick {
                 gains: Gains::UNITY,
             },
             output: Output::new(),
+            unscaled: Unscaled::new(cfg),
         }
     }
 
-    /// See [`FlightController::armed`].
-    pub fn armed(&self) -> bool {
-        self.supervision.in_force().decision.state.armed()
+    /// See [`FlightController::changes_restricted`].
+    pub fn changes_restricted(&self) -> bool {
+        self.supervision.in_force().decision.state.changes_restricted()
     }
 
-    /// The tick's half of a change [`check_change`] allowed: its values made again by
-    /// `Derived::new`, the rate loop and throttle map scaled by the gains in force, the gyro
-    /// low-pass's coefficients and the supervisor's numbers replaced, every state kept. Refused
-    /// (nothing changed) for another kind of supervisor, which `check_change` refuses too.
-    pub fn take_config(&mut self, cfg: &Config) -> Result<(), ApplyError> {
+    /// The tick's half of a change: its values made again from the configuration and the gains
+    /// in force, the gyro low-pass's coefficients and the supervisor's numbers replaced, every
+    /// state kept. Refused (nothing changed) for a ground-only change while changes are
+    /// restricted ([`ChangeKind::allowed`]: checked here, between ticks, because a change asked
+    /// for disarmed may arrive after arming), and for another kind of supervisor. A firmware
+    /// that runs the outer step in its own task hands it a change only after this took it.
+    pub fn take_config(&mut self, change: &ConfigChange) -> Result<(), TakeError> {
+        if !change.kind.allowed(self.changes_restricted()) {
+            return Err(TakeError::Restricted);
+        }
+        let cfg = &change.cfg;
         if !self.supervision.set_config(cfg.supervisor) {
-            return Err(ApplyError::NeedsRestart);
+            return Err(TakeError::OtherSupervisor);
         }
-        self.params = Derived::new(cfg).tick;
-        self.params.rescale(Gains::UNITY, self.outer.gains);
+        self.params = TickParams::new(cfg, self.outer.gains);
+        self.unscaled = Unscaled::new(cfg);
         self.sensors.set_gyro_filter(cfg.gyro_filter);
         Ok(())
     }
@@ -422,7 +382,9 @@ impl ControlTick {
     /// Take in an outer step's result (at the start of the next tick in the firmware): its
     /// attitude, targets, rate demands and gains are in force from now on.
     pub fn apply_outer(&mut self, r: &OuterResult) {
-        self.params.rescale(self.outer.gains, r.gains);
+        if r.gains != self.outer.gains {
+            self.params.set_gains(&self.unscaled, r.gains);
+        }
         self.outer = *r;
         self.heading.result_applied();
     }
@@ -540,8 +502,9 @@ impl OuterStep {
         self.gains.set_battery_mv(battery_mv);
     }
 
-    /// The outer step's half of a change [`check_change`] allowed: its values made again by
-    /// `Derived::new` (the angle loop's gains, the stick limits), its state kept.
+    /// The outer step's half of a change the tick took ([`ControlTick::take_config`]): its
+    /// values made again from the configuration (the angle loop's gains, the stick limits), its
+    /// state kept.
     pub fn take_config(&mut self, cfg: &Config) {
         self.params = Derived::new(cfg).outer;
     }
@@ -584,6 +547,28 @@ mod tests {
         assert_eq!((derived.rate_loop(), derived.mixer()), (&cfg.control, &cfg.mixer));
     }
 
+    #[test]
+    fn the_tick_values_are_the_configuration_scaled_by_the_gains_in_force_whatever_came_before() {
+        let cfg = Config::default();
+        let mut fc = FlightController::new(cfg).unwrap();
+        let mut r = fc.control_tick.outer;
+        for (thrust, rate) in [(1.1, 1.3), (1.27, 0.93), (0.81, 1.117), (1.05, 1.01), (1.173, 0.997)] {
+            r.gains = Gains { thrust, rate };
+            fc.control_tick.apply_outer(&r);
+        }
+        let fresh = TickParams::new(&cfg, r.gains);
+        let bits = |c: &crate::control::ControlConfig| {
+            [c.pitch, c.roll, c.yaw].map(|a| [a.inner_kp, a.inner_ki, a.inner_kd, a.output_limit].map(f32::to_bits))
+        };
+        assert_eq!(bits(fc.control_tick.params().rate_loop()), bits(fresh.rate_loop()));
+        let m = |m: &crate::mixer::MixerConfig| [m.throttle_slope, m.throttle_offset].map(f32::to_bits);
+        assert_eq!(m(fc.control_tick.params().mixer()), m(fresh.mixer()));
+        // Back at unity: the configuration's own values.
+        r.gains = Gains::UNITY;
+        fc.control_tick.apply_outer(&r);
+        assert_eq!((fc.control_tick.params().rate_loop(), fc.control_tick.params().mixer()), (&cfg.control, &cfg.mixer));
+    }
+
     /// The default with the reference's supervisor (armed by the replay's flag) and no gain
     /// schedule (the gains stay at one): a controller that can be flown by `ForcedRadio`.
     fn flown() -> Config {
@@ -620,6 +605,14 @@ mod tests {
             .collect()
     }
 
+    fn in_flight(cfg: Config) -> ConfigChange {
+        ConfigChange { cfg, kind: ChangeKind::InFlight }
+    }
+
+    fn ground_only(cfg: Config) -> ConfigChange {
+        ConfigChange { cfg, kind: ChangeKind::GroundOnly }
+    }
+
     #[test]
     fn the_same_configuration_applied_in_flight_changes_nothing() {
         // Every stage keeps its state: a controller given its own configuration again flies on
@@ -627,7 +620,7 @@ mod tests {
         let mut a = FlightController::new(flown()).unwrap();
         let mut b = a.clone();
         assert!(fly(&mut a, 0, 3000, &FLYING) == fly(&mut b, 0, 3000, &FLYING));
-        assert!(a.armed(), "{:?}", a.status().state);
+        assert!(a.changes_restricted(), "{:?}", a.status().state);
         assert!(a.control_tick.output.rate_integrators().iter().any(|&i| i != 0.0));
         let st = a.status();
         assert!(
@@ -639,7 +632,7 @@ mod tests {
             st.calibration,
             st.fault
         );
-        assert_eq!(a.apply_config(flown()), Ok(()));
+        assert_eq!(a.take_change(&in_flight(flown())), Ok(()));
         assert!(fly(&mut a, 3000, 4000, &FLYING) == fly(&mut b, 3000, 4000, &FLYING), "applying the same configuration changed the flight");
     }
 
@@ -649,10 +642,9 @@ mod tests {
         fly(&mut a, 0, 3000, &FLYING);
         let mut b = a.clone();
         let mut cfg = flown();
-        let i = crate::parameters::index_of(b"RATE_RLL_P").unwrap();
-        crate::parameters::set(&mut cfg, i, 260.0, true).unwrap();
+        cfg.control.roll.inner_kp = 260.0;
         let integrators = a.control_tick.output.rate_integrators();
-        assert_eq!(a.apply_config(cfg), Ok(()));
+        assert_eq!(a.take_change(&in_flight(cfg)), Ok(()));
         assert_eq!(a.config(), &cfg);
         assert_eq!(a.control_tick.params().rate_loop().roll.inner_kp, 260.0);
         assert_eq!(a.outer_step.params.control.roll.inner_kp, 260.0);
@@ -661,43 +653,48 @@ mod tests {
     }
 
     #[test]
-    fn while_armed_only_in_flight_parameters_change_and_a_refusal_changes_nothing() {
+    fn a_ground_only_change_asked_for_disarmed_and_carried_out_armed_is_refused() {
         let mut fc = FlightController::new(flown()).unwrap();
-        fly(&mut fc, 0, 3000, &FLYING);
-        assert!(fc.armed());
-        let before = fc.clone();
+        fly(&mut fc, 0, 1990, &ForcedRadio { armed: false, ..FLYING });
+        assert!(!fc.changes_restricted(), "{:?}", fc.status().state);
+        // Asked for while disarmed (the parameters crate classified it then), carried out by
+        // the tick after arming.
         let mut radio = flown();
-        let i = crate::parameters::index_of(b"RC1_TRIM").unwrap();
-        crate::parameters::set(&mut radio, i, 1470.0, false).unwrap();
-        assert_eq!(fc.apply_config(radio), Err(ApplyError::Armed));
-        let mut filter = flown();
-        let i = crate::parameters::index_of(b"GYRO_LPF_HZ").unwrap();
-        crate::parameters::set(&mut filter, i, 80.0, false).unwrap();
-        assert_eq!(fc.apply_config(filter), Err(ApplyError::Armed));
-        // Not a parameter at all, or not valid: refused armed or not.
-        let mut mixer = flown();
-        mixer.mixer.max_compare -= 1.0;
-        assert_eq!(fc.apply_config(mixer), Err(ApplyError::NeedsRestart));
-        let mut invalid = flown();
-        invalid.control.roll.inner_kp = -1.0;
-        assert_eq!(fc.apply_config(invalid), Err(ApplyError::Invalid(ConfigError::Control)));
-        assert_eq!(fc.apply_config(Config::default()), Err(ApplyError::NeedsRestart));
+        radio.rc.inputs[0].trim_counts = 5880;
+        let change = ground_only(radio);
+        fly(&mut fc, 1990, 3000, &FLYING);
+        assert!(fc.changes_restricted(), "{:?}", fc.status().state);
+        let before = fc.clone();
+        assert_eq!(fc.take_change(&change), Err(TakeError::Restricted));
         assert_eq!(fc.config(), before.config());
         let (mut fc2, mut before2) = (fc.clone(), before.clone());
         assert!(fly(&mut fc2, 3000, 3200, &FLYING) == fly(&mut before2, 3000, 3200, &FLYING), "a refusal changed the flight");
+        // An in-flight change is taken armed.
+        let mut gains = flown();
+        gains.control.pitch.outer_kp = 8.0;
+        assert_eq!(fc.take_change(&in_flight(gains)), Ok(()));
 
-        // Disarmed, the same changes apply, and reach the tick.
+        // Disarmed again, the ground-only change applies, and reaches the tick.
         let landed = ForcedRadio { armed: false, ..FLYING };
         fly(&mut fc, 3000, 3010, &landed);
-        assert!(!fc.armed(), "{:?}", fc.status().state);
+        assert!(!fc.changes_restricted(), "{:?}", fc.status().state);
+        let mut filter = radio;
+        filter.gyro_filter = crate::filter::BiquadCoeffs::butterworth_lowpass(80.0, 800.0).unwrap();
         let mut twin = fc.clone();
-        assert_eq!(fc.apply_config(radio), Ok(()));
+        assert_eq!(fc.take_change(&change), Ok(()));
         assert_eq!(fc.control_tick.params().rc.inputs[0].trim_counts, 5880);
-        assert_eq!(fc.apply_config(filter), Ok(()));
+        assert_eq!(fc.take_change(&ground_only(filter)), Ok(()));
         assert_eq!(fc.config(), &filter);
         // The gyro low-pass moved: armed again, the two fly differently.
         assert!(fly(&mut fc, 3010, 3400, &FLYING) != fly(&mut twin, 3010, 3400, &FLYING), "the new filter flies");
-        assert_eq!(ApplyError::Armed.rule(), crate::parameters::RULE_ARMED);
+    }
+
+    #[test]
+    fn only_an_in_flight_change_is_allowed_while_changes_are_restricted() {
+        assert!(ChangeKind::InFlight.allowed(true));
+        assert!(ChangeKind::InFlight.allowed(false));
+        assert!(!ChangeKind::GroundOnly.allowed(true));
+        assert!(ChangeKind::GroundOnly.allowed(false));
     }
 
     #[test]
@@ -706,19 +703,13 @@ mod tests {
         fly(&mut whole, 0, 3000, &FLYING);
         let (mut tick, mut outer) = whole.clone().into_parts();
         let mut cfg = flown();
-        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"ANG_PIT_P").unwrap(), 8.0, true).unwrap();
-        crate::parameters::set(&mut cfg, crate::parameters::index_of(b"RATE_YAW_D").unwrap(), 40.0, true).unwrap();
-        assert_eq!(check_change(&flown(), &cfg, tick.armed()), Ok(()));
-        tick.take_config(&cfg).unwrap();
+        cfg.control.pitch.outer_kp = 8.0;
+        cfg.control.yaw.inner_kd = 40.0;
+        tick.take_config(&in_flight(cfg)).unwrap();
         outer.take_config(&cfg);
-        whole.apply_config(cfg).unwrap();
+        whole.take_change(&in_flight(cfg)).unwrap();
         let mut split = FlightController { control_tick: tick, outer_step: outer, cfg };
         assert!(fly(&mut whole, 3000, 3500, &FLYING) == fly(&mut split, 3000, 3500, &FLYING));
-        // What check_change refuses armed, it refuses on its own too.
-        let mut radio = flown();
-        crate::parameters::set(&mut radio, crate::parameters::index_of(b"RCMAP_ROLL").unwrap(), 2.0, false).unwrap();
-        assert_eq!(check_change(&flown(), &radio, true), Err(ApplyError::Armed));
-        assert_eq!(check_change(&flown(), &radio, false), Ok(()));
     }
 
     #[test]
@@ -726,13 +717,14 @@ mod tests {
         let mut fc = FlightController::new(Config::default()).unwrap();
         fly(&mut fc, 0, 100, &ForcedRadio { armed: false, ..FLYING });
         let mut cfg = Config::default();
-        let i = crate::parameters::index_of(b"FS_OFF_MS").unwrap();
-        crate::parameters::set(&mut cfg, i, 2000.0, false).unwrap();
-        assert_eq!(fc.apply_config(cfg), Ok(()));
+        if let crate::supervisor::SupervisorConfig::Safe(s) = &mut cfg.supervisor {
+            s.failsafe_off_ticks = 1600;
+        }
+        assert_eq!(fc.take_change(&ground_only(cfg)), Ok(()));
         assert_eq!(fc.control_tick.supervision.safety().map(|s| s.failsafe_off_ticks), Some(1600));
         // Another kind of supervisor is no parameter: a new controller.
         let reference = Config { supervisor: crate::supervisor::SupervisorConfig::Reference, ..cfg };
-        assert_eq!(fc.apply_config(reference), Err(ApplyError::NeedsRestart));
+        assert_eq!(fc.take_change(&ground_only(reference)), Err(TakeError::OtherSupervisor));
         assert_eq!(fc.config(), &cfg);
     }
 
@@ -740,7 +732,7 @@ mod tests {
     #[cfg(feature = "reference")]
     fn a_block_spanning_new_offsets_keeps_each_sample_under_its_own_offsets() {
         use crate::filter::{accumulate, BLOCK};
-        use crate::imu::ImuConfig;
+        use crate::imu::{Decoder, ImuConfig, Offsets};
         // What the reference does tick by tick: convert, correct with the offsets in force,
         // store, and average the five slots. The job's sum must be that, bit for bit, wherever
         // in the block the offsets change.

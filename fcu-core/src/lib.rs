@@ -13,13 +13,13 @@
 //! | to change… | look at |
 //! |---|---|
 //! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (one call per stage; the stages are `flight`'s submodules) and [`flight::OuterStep::run`] |
-//! | what a configuration comes to for the tick, the gains that scale it in flight | [`flight::TickParams`] (worked out in one place, `flight/params.rs`), [`control::Gains`], [`control::GainSchedule`] |
+//! | what a configuration comes to for the tick, the gains that scale it in flight | [`flight::TickParams`] (worked out in one place, `flight/derived.rs`, a function of the configuration and the gains), [`control::Gains`], [`control::GainSchedule`] |
 //! | arming, disarming, failsafe stages, blockers | [`supervisor`]: the conditions and the transition's actions in [`supervisor::Supervisor::decide`], the state table in [`supervisor::transitions`] (every rule has tests named after it, the table its own), the numbers in [`supervisor::SafetyConfig`] |
 //! | what a ground station may ask (disarm, motor test, calibrations, a save) and its rules | [`ground`], the tick's side in `flight/ground.rs` |
 //! | when the last decision may simply stand | [`supervisor::Supervisor::steady`] (the rule) and the tick's command stage (`flight/supervision.rs`, the cache) |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
 //! | which input is which stick, endpoints, reversing | [`rc::RcMap`], [`rc::RcInput`] (`stick_from_width`) |
-//! | the parameters: names, bounds, when a change applies, the refusal rules, the flash format | [`parameters`] (the table), [`parameters::snapshot`], [`FlightController::apply_config`] |
+//! | the parameters: names, bounds, when a change applies, the refusal rules, the flash format | the `fcu-params` crate (the table, its snapshot and file formats, the change check), [`FlightController::take_change`], [`flight::ChangeKind::allowed`] (the rule while changes are restricted) |
 //! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
 //! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |
 //! | the attitude estimate | [`ahrs`] (the reference's Mahony, the default's VQF-style estimator) |
@@ -60,7 +60,6 @@ pub mod ground;
 pub mod imu;
 pub mod math;
 pub mod mixer;
-pub mod parameters;
 pub mod rc;
 pub mod supervisor;
 pub mod telemetry;

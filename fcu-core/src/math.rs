@@ -305,6 +305,17 @@ pub fn tan_small(x: f32) -> f32 {
     t
 }
 
+/// `x` in `[lo, hi]` (finite bounds), so finite: a NaN fails both comparisons, an infinity
+/// the bound it passes. What the configuration checks ask of a value.
+pub fn within(x: f32, lo: f32, hi: f32) -> bool {
+    lo <= x && x <= hi
+}
+
+/// `x` in `(lo, hi]` (finite bounds), so finite: as [`within`].
+pub fn above(x: f32, lo: f32, hi: f32) -> bool {
+    lo < x && x <= hi
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

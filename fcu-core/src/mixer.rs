@@ -13,7 +13,6 @@
 //! Positive pitch (nose up) raises the front motors, positive roll (right side down)
 //! raises the left ones, positive yaw (counter-clockwise) raises the CW-spinning pair.
 
-use crate::control::Saturation;
 use crate::rc::StickCounts;
 
 /// A motor command in TIM4 compare counts, before the compare clamp: the reference's `int16`
@@ -83,7 +82,7 @@ impl MixerConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        use crate::config::within;
+        use crate::math::within;
         within(self.throttle_slope, 0.0, f32::MAX)
             && within(self.throttle_offset, f32::MIN, f32::MAX)
             // Both compares finite: the minimum at least 0, the maximum above it and at most
@@ -189,6 +188,46 @@ impl CompareRange {
     /// integer compares instead of two float compares per motor.
     pub fn to_compare(self, cmd: f32) -> u16 {
         crate::math::limit(cmd as i32, self.min_counts, self.max_counts) as u16
+    }
+}
+
+/// Which directions of which axes the mixer could not deliver on the last tick: one byte
+/// for the three axes (bit `2·axis` positive, `2·axis + 1` negative), so the tick reads and
+/// writes it once rather than six flags one by one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Saturation(u8);
+
+impl Saturation {
+    /// Nothing saturated.
+    pub const NONE: Saturation = Saturation(0);
+
+    /// Every axis whose command is non-zero, in the direction of its sign (what the mixer
+    /// reports when it has to scale all corrections down).
+    pub fn of_commands(s: [f32; 3]) -> Saturation {
+        let mut set = Saturation::NONE;
+        for (axis, v) in s.into_iter().enumerate() {
+            set = set.with(axis, v > 0.0, v < 0.0);
+        }
+        set
+    }
+
+    /// This set with `axis` saturated in the given directions as well.
+    pub fn with(self, axis: usize, positive: bool, negative: bool) -> Saturation {
+        let bits = u8::from(positive) | u8::from(negative) << 1;
+        Saturation(self.0 | bits.checked_shl(2 * axis as u32).unwrap_or(0))
+    }
+
+    pub fn positive(self, axis: usize) -> bool {
+        self.axis_bits(axis) & 1 != 0
+    }
+
+    pub fn negative(self, axis: usize) -> bool {
+        self.axis_bits(axis) & 2 != 0
+    }
+
+    /// The two bits of one axis.
+    pub(crate) fn axis_bits(self, axis: usize) -> u8 {
+        self.0.checked_shr(2 * axis as u32).unwrap_or(0) & 3
     }
 }
 

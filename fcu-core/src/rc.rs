@@ -109,6 +109,9 @@ pub enum Function {
     Yaw,
 }
 
+/// The radio map's rule: each function on its own input ([`RcConfig::problem`]).
+pub const RULE_RCMAP: &str = "RCMAP: each input once";
+
 /// Which captured input (0-based: 0 = PA0 .. 3 = PA3) carries each function. The parameters
 /// `RCMAP_*` are these plus one. A valid map is a permutation of the inputs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -163,8 +166,6 @@ impl RcMap {
     /// Give `f` to `input`; the function that had `input` takes `f`'s old input, so the map
     /// stays a permutation. Returns the function moved that way, if any. An input out of range
     /// is ignored (`None`, nothing moves).
-    // Out of line: the parameter table's four RCMAP setters share one copy.
-    #[inline(never)]
     pub fn assign(&mut self, f: Function, input: u8) -> Option<Function> {
         if usize::from(input) >= CHANNELS {
             return None;
@@ -308,10 +309,8 @@ impl RcConfig {
                 min_counts < max_counts && u32::from(max_counts) < CAPTURE_WRAP && max_pulse_ticks > 0
             }
         };
-        // Each rule in turn, returning at the first broken: an array of every rule's verdict,
-        // searched after, evaluates them all (a kilobyte at fcu-core's opt-level 3).
         let broken = |ok: bool, rule: &'static str| (!ok).then_some(rule);
-        broken(self.map.is_permutation(), crate::parameters::RULE_RCMAP)
+        broken(self.map.is_permutation(), RULE_RCMAP)
             .or_else(|| broken(self.full_scale > StickCounts::ZERO && self.full_scale <= MAX_FULL_SCALE, "stick full scale out of range"))
             .or_else(|| self.endpoints_problem())
             // A gesture is a stick beyond the threshold while the others are centred: it must
@@ -327,7 +326,7 @@ impl RcConfig {
             .or_else(|| {
                 broken(self.yaw_deadband >= StickCounts::ZERO && self.yaw_deadband < self.full_scale, "yaw dead band past full scale")
             })
-            .or_else(|| broken(crate::config::within(self.yaw_rate_max_deg_s, 0.0, f32::MAX), "yaw rate out of range"))
+            .or_else(|| broken(crate::math::within(self.yaw_rate_max_deg_s, 0.0, f32::MAX), "yaw rate out of range"))
             .or_else(|| broken(self.link_timeout_ticks > 0, "radio timeout is zero"))
             .or_else(|| broken(pulses_ok, "pulse limits invalid"))
     }
@@ -428,7 +427,7 @@ impl RcConfig {
 
     /// Store a width into the sticks (one input, the function the map gives it), as
     /// `update_rc_data`.
-    #[inline(never)] // Once per pulse, on a few ticks in sixteen: kept out of the tick's body.
+    #[inline(never)] // docs/performance.md, «channels written out».
     pub fn apply_width(&self, sticks: &mut Sticks, input: usize, width_counts: u16) {
         let v = self.stick_from_width(input, width_counts);
         match self.map.function(input) {
@@ -768,7 +767,7 @@ impl Receiver {
     /// channel heard from longest ago; with the reference's rules, the last edge (`u32::MAX`
     /// if there never was one). The link is good while this is below the timeout; the
     /// supervisor counts lost time from it.
-    #[inline(never)] // Needed only without a good link: kept off the 800 Hz path.
+    #[inline(never)] // docs/performance.md, «silence off the path».
     pub fn silence_ticks(&self, cfg: &RcConfig) -> u32 {
         // `link_until` is at most `now` + timeout (an anchor is never in the future), and `now`
         // never comes near `u64::MAX`: no wrap.

@@ -69,7 +69,7 @@ impl SafetyConfig {
             && self.failsafe_off_ticks > 0
             && self.recovery_ticks > 0
             && self.loss_forget_ticks > 0
-            && crate::config::above(self.max_arm_tilt_rad, 0.0, f32::MAX)
+            && crate::math::above(self.max_arm_tilt_rad, 0.0, f32::MAX)
     }
 }
 
@@ -134,9 +134,11 @@ impl FlightState {
         matches!(self, FlightState::Armed | FlightState::FailsafeLevel)
     }
 
-    /// The motors may be running or about to: arming, armed, or the failsafe's level stage.
-    /// Only gains and rates change then, and nothing is written to flash.
-    pub fn armed(self) -> bool {
+    /// Changes are restricted: the motors may be running or about to (arming, armed, or the
+    /// failsafe's level stage). Only in-flight parameters change then
+    /// ([`ChangeKind::allowed`](crate::flight::ChangeKind::allowed)), and nothing is written to
+    /// flash.
+    pub fn changes_restricted(self) -> bool {
         matches!(self, FlightState::Arming | FlightState::Armed | FlightState::FailsafeLevel)
     }
 }
@@ -512,7 +514,6 @@ impl Supervisor {
     }
 
     /// One tick of the safety layer: conditions, the state table, the transition's actions.
-    #[inline(never)]
     pub fn decide(&mut self, cfg: &SafetyConfig, i: &Inputs) -> Decision {
         let c = self.conditions(cfg, i);
         let next = next_state(self.state, c);

@@ -241,38 +241,7 @@ fn push_hex_u8<const N: usize>(out: &mut LineBuf<N>, v: u8) {
 /// The reference's boot banner, then the sensor lines.
 pub const BOOT_BANNER: &str = "STEVAL-FCU001V1 fcu (Rust) - reference rev.1.0 behaviour\n\n";
 
-/// The battery voltage from the ADC with a divider ratio that can be set (the parameter
-/// `BATT_VOLT_MULT`): a board whose resistors differ from the schematic's reads true.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BatterySense {
-    /// Battery volts per volt at the ADC pin (1.5 with the board's 10 k / 20 k divider).
-    pub volt_mult: f32,
-}
-
-impl BatterySense {
-    /// The board's divider.
-    pub const BOARD: BatterySense = BatterySense { volt_mult: BATTERY_DIVIDER_NUM as f32 / BATTERY_DIVIDER_DEN as f32 };
-
-    pub fn is_valid(&self) -> bool {
-        self.volt_mult.is_finite() && self.volt_mult >= 1.0 && self.volt_mult <= 10.0
-    }
-
-    /// Battery millivolts from a 12-bit reading, rounded (the board's divider gives what
-    /// [`battery_mv`] gives).
-    pub fn mv(&self, adc_counts: u16) -> u32 {
-        let counts = u32::from(adc_counts).min(BATTERY_ADC_FULL_SCALE);
-        let pin_mv = (counts * BATTERY_ADC_REF_MV) as f32 / BATTERY_ADC_FULL_SCALE as f32;
-        // Non-negative and at most 3300 × 10: the cast neither wraps nor saturates.
-        (pin_mv * self.volt_mult + 0.5) as u32
-    }
-}
-
-/// Battery sense: ADC1 channel 9 on PB1, 12-bit, 3.3 V reference, 10 k / 20 k divider (×1.5).
-pub const BATTERY_ADC_FULL_SCALE: u32 = 4095;
-pub const BATTERY_ADC_REF_MV: u32 = 3300;
-/// (R_top + R_bottom) / R_bottom = (10 + 20) / 20, as a fraction 3/2.
-pub const BATTERY_DIVIDER_NUM: u32 = 3;
-pub const BATTERY_DIVIDER_DEN: u32 = 2;
+pub use crate::control::{BATTERY_ADC_FULL_SCALE, BATTERY_ADC_REF_MV, BATTERY_DIVIDER_DEN, BATTERY_DIVIDER_NUM};
 
 /// Battery voltage in millivolts from a raw 12-bit conversion (rounded to nearest).
 pub fn battery_mv(adc_counts: u16) -> u32 {

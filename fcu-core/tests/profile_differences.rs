@@ -7,11 +7,12 @@
 #![cfg(feature = "reference")]
 
 use fcu_core::ahrs::Estimator;
-use fcu_core::control::{AngleLoop, RateLoop, Saturation};
+use fcu_core::control::{AngleLoop, RateLoop};
 use fcu_core::flight::{AccelWords, ForcedRadio, OuterJob};
 use fcu_core::imu::{Offsets, RawImu};
 use fcu_core::math::tilt_angle_rad;
 use fcu_core::mixer::CompareCounts;
+use fcu_core::mixer::Saturation;
 use fcu_core::rc::{StickCounts, Sticks};
 use fcu_core::supervisor::FlightState;
 use fcu_core::telemetry::Reporter;

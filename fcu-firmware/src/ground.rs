@@ -1,28 +1,28 @@
 //! The ground station's link: MAVLink 2 on USART1, with the `mavlink` feature.
 //!
-//! Every decision is fcu-link's and fcu-core's (`fcu_link::station`: the parameter table's
-//! rules, what a command may do); this module moves bytes and words. Received bytes come from
-//! the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to both halves of the
-//! control loop, accepted commands (and whether a save runs) to the control tick
-//! ([`to_control`]); saves go to flash ([`crate::param_flash`]) once the changes settle, disarmed.
+//! Every decision is fcu-link's, fcu-params' and fcu-core's (`fcu_link::station`: the parameter
+//! table's rules, what a command may do); this module moves bytes and words. Received bytes come
+//! from the DMA ring ([`crate::uart_rx`]); accepted parameter changes go to the control tick,
+//! which passes on to the outer step what it takes ([`config_to_tick`]); accepted commands (and
+//! whether a save runs) go to the control tick ([`to_control`]); saves go to flash
+//! ([`crate::param_flash`]) once the changes settle, disarmed.
 //! On a board set to text lines it listens, and the first valid MAVLink frame turns the UART to
 //! MAVLink.
 
 use crate::app::{Snapshot, UartOut};
 use crate::watchdog::Watchdog;
 use fcu_core::boot::BootVerdict;
-use fcu_core::flight::{ControlTick, OuterStep};
+use fcu_core::flight::{ConfigChange, ControlTick, OuterStep};
 use fcu_core::ground::GroundInput;
 use fcu_core::Config;
 
 /// The link task's view of the shared resources it uses.
 #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
-pub struct Shared<U, L, B, T, O, G, W, M> {
+pub struct Shared<U, L, B, T, G, W, M> {
     pub uart: U,
     pub latest: L,
     pub battery_mv: B,
     pub tick_config: T,
-    pub outer_config: O,
     pub ground_input: G,
     pub watchdog: W,
     pub mavlink_on: M,
@@ -69,24 +69,37 @@ pub fn to_control(_slot: &mut impl rtic::Mutex<T = Option<GroundInput>>, _tick: 
 /// Without the ground link nothing changes the configuration: the slot is never locked, and
 /// the image holds no code to take a change.
 #[cfg(not(feature = "mavlink"))]
-pub fn config_to_tick(_slot: &mut impl rtic::Mutex<T = Option<Config>>, _tick: &mut ControlTick) {}
+pub fn config_to_tick(
+    _slot: &mut impl rtic::Mutex<T = Option<ConfigChange>>,
+    _outer_slot: &mut impl rtic::Mutex<T = Option<Config>>,
+    _tick: &mut ControlTick,
+) {
+}
 
 /// A parameter change for the outer step's half (from the outer-step task); none without the
 /// ground link.
 #[cfg(not(feature = "mavlink"))]
 pub fn config_to_outer(_slot: &mut impl rtic::Mutex<T = Option<Config>>, _outer: &mut OuterStep) {}
 
-/// A parameter change the ground link accepted (the core checked it against the armed state),
-/// for the control tick's half: taken between ticks, every stage keeping its state. Read in
-/// place: moving the `Option<Config>` out would copy its 456 bytes every tick, change or not.
+/// A parameter change the ground link accepted, for the control tick's half: taken between
+/// ticks, every stage keeping its state, and then passed on to the outer step's half. The tick
+/// refuses a ground-only change once changes are restricted (armed since it was asked for):
+/// then neither half takes it. Read in place: moving the `Option` out would copy it every tick,
+/// change or not.
 #[cfg(feature = "mavlink")]
-pub fn config_to_tick(slot: &mut impl rtic::Mutex<T = Option<Config>>, tick: &mut ControlTick) {
-    slot.lock(|slot| {
-        if let Some(cfg) = slot.as_ref() {
-            let _refused = tick.take_config(cfg);
-            *slot = None;
-        }
+pub fn config_to_tick(
+    slot: &mut impl rtic::Mutex<T = Option<ConfigChange>>,
+    outer_slot: &mut impl rtic::Mutex<T = Option<Config>>,
+    tick: &mut ControlTick,
+) {
+    let taken = slot.lock(|slot| {
+        let taken = slot.as_ref().and_then(|change| tick.take_config(change).is_ok().then_some(change.cfg));
+        *slot = None;
+        taken
     });
+    if let Some(cfg) = taken {
+        outer_slot.lock(|slot| *slot = Some(cfg));
+    }
 }
 
 /// The same change for the outer step's half, before its next step.
@@ -112,13 +125,12 @@ pub fn to_control(slot: &mut impl rtic::Mutex<T = Option<GroundInput>>, tick: &m
 }
 
 #[cfg(not(feature = "mavlink"))]
-pub async fn run<U, L, B, T, O, G, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, O, G, W, M>, _boot: BootVerdict)
+pub async fn run<U, L, B, T, G, W, M>(_ground: &mut GroundLink, _shared: Shared<U, L, B, T, G, W, M>, _boot: BootVerdict)
 where
     U: rtic::Mutex<T = UartOut>,
     L: rtic::Mutex<T = Option<Snapshot>>,
     B: rtic::Mutex<T = u32>,
-    T: rtic::Mutex<T = Option<Config>>,
-    O: rtic::Mutex<T = Option<Config>>,
+    T: rtic::Mutex<T = Option<ConfigChange>>,
     G: rtic::Mutex<T = Option<GroundInput>>,
     W: rtic::Mutex<T = Option<Watchdog>>,
     M: rtic::Mutex<T = bool>,
@@ -134,10 +146,10 @@ mod with_link {
     use crate::param_flash::{FlashError, ParamFlash, SECTORS};
     use crate::uart_rx::UartRx;
     use crate::Mono;
-    use fcu_core::parameters::snapshot;
     use fcu_core::telemetry::LineBuf;
     use fcu_gcs::{Due, Observed, Service};
     use fcu_link::{LinkConfig, Severity};
+    use fcu_params::snapshot;
     use rtic::Mutex;
     use rtic_monotonics::systick::prelude::*;
 
@@ -188,13 +200,12 @@ mod with_link {
         UartRx::start(dma, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() })
     }
 
-    pub async fn run<U, L, B, T, O, G, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, O, G, W, M>, boot: BootVerdict)
+    pub async fn run<U, L, B, T, G, W, M>(g: &mut GroundLink, mut s: Shared<U, L, B, T, G, W, M>, boot: BootVerdict)
     where
         U: Mutex<T = UartOut>,
         L: Mutex<T = Option<Snapshot>>,
         B: Mutex<T = u32>,
-        T: Mutex<T = Option<Config>>,
-        O: Mutex<T = Option<Config>>,
+        T: Mutex<T = Option<ConfigChange>>,
         G: Mutex<T = Option<GroundInput>>,
         W: Mutex<T = Option<Watchdog>>,
         M: Mutex<T = bool>,
@@ -211,9 +222,9 @@ mod with_link {
     /// words). A plain function, out of line: the task's future then holds only what lives
     /// across an await, not every local of the link's work.
     #[inline(never)]
-    fn step<U, L, B, T, O, G, W, M>(
+    fn step<U, L, B, T, G, W, M>(
         g: &mut GroundLink,
-        s: &mut Shared<U, L, B, T, O, G, W, M>,
+        s: &mut Shared<U, L, B, T, G, W, M>,
         boot: &BootVerdict,
         next_fatal_ms: &mut u32,
         now_ms: u32,
@@ -221,8 +232,7 @@ mod with_link {
         U: Mutex<T = UartOut>,
         L: Mutex<T = Option<Snapshot>>,
         B: Mutex<T = u32>,
-        T: Mutex<T = Option<Config>>,
-        O: Mutex<T = Option<Config>>,
+        T: Mutex<T = Option<ConfigChange>>,
         G: Mutex<T = Option<GroundInput>>,
         W: Mutex<T = Option<Watchdog>>,
         M: Mutex<T = bool>,
@@ -253,9 +263,8 @@ mod with_link {
             let _queued = g.service.link_mut().send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
         }
         let to = g.service.period(now_ms);
-        if let Some(cfg) = to.config {
-            s.tick_config.lock(|slot| *slot = Some(cfg));
-            s.outer_config.lock(|slot| *slot = Some(cfg));
+        if let Some(change) = to.config {
+            s.tick_config.lock(|slot| *slot = Some(change));
         }
         // Commands, and the levels of a pending save or reboot (the tick then refuses to arm).
         // One the tick has not taken yet is merged with, not overwritten.

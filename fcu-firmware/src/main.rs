@@ -116,7 +116,7 @@ mod app {
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
-    use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
+    use fcu_core::flight::{ConfigChange, ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::ground::GroundInput;
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::CaptureEdge;
@@ -245,7 +245,7 @@ mod app {
         /// The latest status for the ground link (MAVLink), from `report`.
         latest: Option<Snapshot>,
         /// A configuration the ground link changed, for each half of the control loop.
-        tick_config: Option<Config>,
+        tick_config: Option<ConfigChange>,
         /// The ground station's commands for the control tick (disarm, motor test,
         /// calibrations, a save running), from the ground link.
         ground_input: Option<GroundInput>,
@@ -657,7 +657,7 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [outer_result, outer_job, bus, tick_config, ground_input, watchdog],
+        shared = [outer_result, outer_job, bus, tick_config, outer_config, ground_input, watchdog],
         local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
     )]
     fn control(mut cx: control::Context) {
@@ -672,9 +672,9 @@ mod app {
             if let Some(result) = cx.shared.outer_result.lock(Option::take) {
                 inner.apply_outer(&result);
             }
-            // A parameter change the ground link accepted (the core checked it against the
-            // armed state); taken between ticks, every stage keeping its state.
-            crate::ground::config_to_tick(&mut cx.shared.tick_config, inner);
+            // A parameter change the ground link accepted; the tick takes it between ticks
+            // (refusing a ground-only one once armed) and passes it on to the outer step.
+            crate::ground::config_to_tick(&mut cx.shared.tick_config, &mut cx.shared.outer_config, inner);
             // The ground station's commands, taken between ticks as a change is (the core
             // decides again with its own state).
             crate::ground::to_control(&mut cx.shared.ground_input, inner);
@@ -801,7 +801,7 @@ mod app {
 
     /// The ground station's link (`crate::ground`): MAVLink on USART1, with the `mavlink`
     /// feature; without it, never spawned.
-    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, outer_config, ground_input, watchdog, mavlink_on], local = [ground])]
+    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, ground_input, watchdog, mavlink_on], local = [ground])]
     async fn ground_link(cx: ground_link::Context, boot: BootVerdict) {
         let s = cx.shared;
         let links = crate::ground::Shared {
@@ -809,7 +809,6 @@ mod app {
             latest: s.latest,
             battery_mv: s.battery_mv,
             tick_config: s.tick_config,
-            outer_config: s.outer_config,
             ground_input: s.ground_input,
             watchdog: s.watchdog,
             mavlink_on: s.mavlink_on,

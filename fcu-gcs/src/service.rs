@@ -17,11 +17,11 @@
 //! UART's last byte, and the station is asked again at the instant the board resets.
 
 use fcu_core::config::LinkProtocol;
-use fcu_core::flight::Status;
+use fcu_core::flight::{ConfigChange, Status};
 use fcu_core::ground::GroundInput;
-use fcu_core::parameters::snapshot;
 use fcu_core::telemetry::LineBuf;
 use fcu_core::Config;
+use fcu_params::snapshot;
 
 use crate::station::{Due, Station};
 use fcu_link::{Link, LinkConfig, Severity};
@@ -43,7 +43,7 @@ pub struct Observed {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ToControl {
     /// A changed configuration, for both halves of the control loop.
-    pub config: Option<Config>,
+    pub config: Option<ConfigChange>,
     /// Commands and levels for the control tick ([`fcu_core::flight::ControlTick::take_ground`]).
     pub ground: Option<GroundInput>,
 }

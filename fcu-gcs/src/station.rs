@@ -26,12 +26,12 @@
 //! A save is refused while a motor test runs (the motor would keep its duty through the erase)
 //! and a motor test or a calibration while a save or a reboot is pending.
 
-use fcu_core::flight::Status;
+use fcu_core::flight::{ChangeKind, ConfigChange, Status};
 use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange};
-use fcu_core::parameters::{self, snapshot, RULE_ARMED};
 use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
+use fcu_params::{self as parameters, snapshot, RULE_ARMED};
 
 use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
 
@@ -76,8 +76,9 @@ pub struct Station {
     /// Radio pulse widths, capture counts, by input (0: none yet).
     rc_widths_counts: [u16; 4],
     now_ms: u32,
-    /// A configuration the control loop has not taken yet.
-    change_pending: bool,
+    /// A configuration the control loop has not taken yet: what all the changes since the last
+    /// one it took reach, together.
+    change_pending: Option<ChangeKind>,
     /// When the parameters in RAM differ from flash: the time of the last change.
     unsaved_since_ms: Option<u32>,
     /// A save asked for by the ground station (at once, not after the debounce): when.
@@ -105,7 +106,7 @@ impl Station {
             battery_mv: 0,
             rc_widths_counts: [0; 4],
             now_ms: 0,
-            change_pending: false,
+            change_pending: None,
             unsaved_since_ms: None,
             save_asked_ms: None,
             reboot_asked_ms: None,
@@ -124,8 +125,9 @@ impl Station {
         self.now_ms = now_ms;
         let held = self.ground.saving || self.ground.rebooting;
         let shows = |level: bool, blocker: Blocker| !level || status.blockers.contains(blocker);
-        let refusing =
-            !status.state.armed() && shows(self.ground.saving, Blocker::Saving) && shows(self.ground.rebooting, Blocker::RebootPending);
+        let refusing = !status.state.changes_restricted()
+            && shows(self.ground.saving, Blocker::Saving)
+            && shows(self.ground.rebooting, Blocker::RebootPending);
         self.hold_confirmed = if held && !self.ground_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
         if matches!(status.state, FlightState::Armed | FlightState::FailsafeLevel) {
             // Armed before the refusal reached the tick: what was asked cannot be done now,
@@ -161,8 +163,8 @@ impl Station {
     }
 
     /// A changed configuration for the control loop, once: both halves must take it.
-    pub fn take_change(&mut self) -> Option<Config> {
-        core::mem::take(&mut self.change_pending).then_some(self.cfg)
+    pub fn take_change(&mut self) -> Option<ConfigChange> {
+        self.change_pending.take().map(|kind| ConfigChange { cfg: self.cfg, kind })
     }
 
     /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_ground`]): the
@@ -318,10 +320,9 @@ impl Station {
         }
     }
 
-    /// Out of line: most rules ask it.
-    #[inline(never)]
+    /// Changes are restricted ([`FlightState::changes_restricted`]), as the last status shows.
     fn armed(&self) -> bool {
-        self.status.is_some_and(|s| s.state.armed())
+        self.status.is_some_and(|s| s.state.changes_restricted())
     }
 
     /// The supervisor's state as last seen (calibrating until the first status).
@@ -339,8 +340,8 @@ impl Station {
         Ok(&mut self.ground)
     }
 
-    fn changed(&mut self) {
-        self.change_pending = true;
+    fn changed(&mut self, kind: ChangeKind) {
+        self.change_pending = self.change_pending.max(Some(kind));
         self.unsaved_since_ms = Some(self.now_ms);
     }
 }
@@ -435,9 +436,9 @@ impl Vehicle for Station {
             }
         }
         if any {
-            fcu_core::flight::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
+            let change = parameters::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
             self.cfg = next;
-            self.changed();
+            self.changed(change.kind);
         }
         Ok(others)
     }
@@ -452,10 +453,10 @@ impl Vehicle for Station {
             }
             Request::ResetParams if self.armed() => Err(RULE_ARMED),
             Request::ResetParams => {
-                fcu_core::flight::check_change(&self.cfg, self.defaults, false).map_err(|e| e.rule())?;
-                if !self.cfg.is_same_as(self.defaults) {
+                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| e.rule())?;
+                if self.cfg != *self.defaults {
                     self.cfg = *self.defaults;
-                    self.changed();
+                    self.changed(change.kind);
                 }
                 Ok(())
             }
@@ -790,6 +791,22 @@ mod tests {
         assert_eq!(st.param(index("RCMAP_THROTTLE")).map(|p| p.value), Some(1.0));
         // A set that moves nothing else reports nothing else.
         assert_eq!(st.set_param(index("RC_TIMEOUT_MS"), 100.0), Ok(ParamMask::EMPTY));
+    }
+
+    #[test]
+    fn the_control_loop_gets_the_widest_kind_of_the_changes_since_it_last_took_one() {
+        use fcu_core::flight::ChangeKind;
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.take_change(), None);
+        st.set_param(index("ANGLE_MAX"), 25.0).unwrap();
+        assert_eq!(st.take_change().map(|c| c.kind), Some(ChangeKind::InFlight));
+        // A ground-only change, then an in-flight one, before the control loop takes them:
+        // together they may change only on the ground (the tick refuses them once armed).
+        st.set_param(index("RC1_TRIM"), 1470.0).unwrap();
+        st.set_param(index("ANGLE_MAX"), 30.0).unwrap();
+        let change = st.take_change().unwrap();
+        assert_eq!((change.kind, change.cfg), (ChangeKind::GroundOnly, *st.config()));
+        assert_eq!(st.take_change(), None);
     }
 
     /// The link in front of the station: what a ground station hears back of a set.

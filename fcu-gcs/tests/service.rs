@@ -41,7 +41,7 @@ impl Board {
         let cfg = Config::default();
         Board {
             fc: FlightController::new(cfg).unwrap(),
-            service: Service::new(cfg, &Config::DEFAULT, fcu_core::parameters::snapshot::Source::NoSnapshot, LinkConfig::DEFAULT),
+            service: Service::new(cfg, &Config::DEFAULT, fcu_params::snapshot::Source::NoSnapshot, LinkConfig::DEFAULT),
             now_ms: 0,
             ticks: 0,
             uart_queue: 0,
@@ -64,8 +64,8 @@ impl Board {
         self.service.observe(self.now_ms, &observed);
         self.service.receive(self.now_ms, rx);
         let to = self.service.period(self.now_ms);
-        if let Some(cfg) = to.config {
-            self.fc.apply_config(cfg).unwrap();
+        if let Some(change) = to.config {
+            self.fc.take_change(&change).unwrap();
         }
         if let Some(input) = to.ground {
             self.fc.take_ground(&input);

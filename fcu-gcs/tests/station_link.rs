@@ -6,13 +6,13 @@ mod support;
 
 use fcu_core::flight::{FlightController, Status};
 use fcu_core::ground::{Disarm, MotorTestChange};
-use fcu_core::parameters;
 use fcu_core::rc::Sticks;
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
 use fcu_gcs::Station;
 use fcu_link::command::FORCE_DISARM;
 use fcu_link::{Link, LinkConfig, Rates, Severity, Vehicle};
+use fcu_params as parameters;
 use mavlink::dialects::common::{MavCmd, MavResult};
 use support::*;
 

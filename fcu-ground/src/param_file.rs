@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 /// MAVLink's `param_id` holds at most 16 characters (fcu-core's reader refuses longer names).
-pub use fcu_core::parameters::NAME_LEN;
+pub use fcu_params::NAME_LEN;
 
 /// One `NAME VALUE` line.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,7 +43,7 @@ impl fmt::Display for FileError {
 
 /// Reads a parameter file, in file order.
 pub fn parse(text: &str) -> Result<Vec<Entry>, FileError> {
-    use fcu_core::parameters::file::{self, Problem};
+    use fcu_params::file::{self, Problem};
     let mut entries: Vec<Entry> = Vec::new();
     let mut seen: BTreeMap<String, usize> = BTreeMap::new();
     for read in file::lines(text) {
@@ -73,7 +73,7 @@ pub fn parse(text: &str) -> Result<Vec<Entry>, FileError> {
 /// would swap with the function holding its input, and the map come out otherwise than the
 /// file says, silently.
 pub fn map_problem(entries: &[Entry], board: Option<&BTreeMap<String, f32>>) -> Option<FileError> {
-    use fcu_core::parameters;
+    use fcu_params as parameters;
     // Not on the board, or not asked: NaN, which equals nothing.
     let mut values = [f32::NAN; parameters::COUNT];
     let mut lines = [0usize; parameters::COUNT];
@@ -217,7 +217,7 @@ mod tests {
 
     #[test]
     fn the_format_agrees_with_fcu_core() {
-        use fcu_core::parameters;
+        use fcu_params as parameters;
         // What fcu-core writes (and `cargo pil serve --params` reads) parses here, value for value.
         let mut cfg = fcu_core::Config::default();
         parameters::set_by_name(&mut cfg, b"RC1_MIN", 1050.0, false).unwrap();

@@ -206,7 +206,7 @@ fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut
     if action != 0.0 {
         return Err(denied("Arm/disarm", "param1 must be 0 or 1"));
     }
-    if !state.armed() {
+    if !state.changes_restricted() {
         return Ok(Then::Nothing);
     }
     let forced = force == FORCE_DISARM;
@@ -229,7 +229,7 @@ fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mu
     if mag != 0.0 || baro != 0.0 || p6 != 0.0 || p7 != 0.0 || imu == radio {
         return Err(unsupported());
     }
-    if state.armed() {
+    if state.changes_restricted() {
         return Err(while_armed("Calibration"));
     }
     let request = if imu { Request::CalibrateImu } else { Request::CalibrateRadio };
@@ -244,7 +244,7 @@ fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V)
     } else {
         return Err(unsupported());
     };
-    if state.armed() {
+    if state.changes_restricted() {
         return Err(while_armed("Storage"));
     }
     ask(vehicle, request, "Storage refused")
@@ -254,7 +254,7 @@ fn reboot<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) 
     if command.params[0] != 1.0 {
         return Err(unsupported());
     }
-    if state.armed() {
+    if state.changes_restricted() {
         return Err(while_armed("Reboot"));
     }
     ask(vehicle, Request::Reboot, "Reboot refused")

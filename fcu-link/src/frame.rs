@@ -63,9 +63,8 @@ impl Header {
     }
 }
 
-/// Frames a serialized payload (see [`encode_patched`]). Out of line and not generic, so
-/// the patching, truncation, header and CRC exist once however many messages are sent.
-#[inline(never)]
+/// Frames a serialized payload (see [`encode_patched`]). Not generic, so the patching,
+/// truncation, header and CRC exist once however many messages are sent.
 pub fn encode_payload(
     sequence: u8,
     header: Header,
@@ -118,9 +117,8 @@ pub fn decode_with_raw<D: MessageData, const F: usize>(payload: &[u8], fields: [
     Some((message, raw))
 }
 
-/// The part of [`decode_with_raw`] that does not depend on the message: out of line and not
-/// generic, one copy for every message decoded so. Returns the length to decode.
-#[inline(never)]
+/// The part of [`decode_with_raw`] that does not depend on the message: not generic, one
+/// copy for every message decoded so. Returns the length to decode.
 fn pad_with_raw(
     payload: &[u8],
     encoded_len: usize,

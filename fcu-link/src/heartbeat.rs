@@ -139,7 +139,7 @@ mod tests {
     fn the_armed_bit_is_set_whenever_changes_are_restricted() {
         for state in FlightState::ALL {
             let armed = heartbeat(state).base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-            assert_eq!(armed, state.armed(), "{state:?}");
+            assert_eq!(armed, state.changes_restricted(), "{state:?}");
         }
     }
 }

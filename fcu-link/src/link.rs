@@ -328,14 +328,12 @@ impl<const TX: usize> Link<TX> {
     }
 }
 
-/// Counts one more, saturating. Out of line: some twenty counters are bumped, each then a call.
-#[inline(never)]
+/// Counts one more, saturating.
 pub(crate) fn bump(counter: &mut u32) {
     *counter = counter.saturating_add(1);
 }
 
 /// True for a message addressed to us or to everyone.
-#[inline(never)]
 pub(crate) fn for_us(target_system: u8, target_component: u8) -> bool {
     (target_system == 0 || target_system == SYSTEM_ID) && (target_component == 0 || target_component == COMPONENT_ID)
 }
@@ -365,9 +363,8 @@ impl<const TX: usize> Core<TX> {
         self.queue(frame::Header::of::<D>(), &mut payload, patches, room)
     }
 
-    /// Frames a serialized payload and queues it. Out of line and not generic over the
-    /// message: one copy of the framing and queueing for every message sent.
-    #[inline(never)]
+    /// Frames a serialized payload and queues it. Not generic over the message: one copy of
+    /// the framing and queueing for every message sent.
     fn queue(&mut self, header: frame::Header, payload: &mut [u8; frame::MAX_PAYLOAD], patches: &[frame::Patch], room: Room) -> bool {
         let mut out = [0u8; MAX_FRAME];
         let len = frame::encode_payload(self.sequence, header, payload, patches, &mut out);

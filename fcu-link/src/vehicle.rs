@@ -85,8 +85,8 @@ pub struct VehicleState {
 impl VehicleState {
     /// Changes are restricted (arming, armed, or the failsafe's level stage): a command that
     /// needs the board disarmed is TEMPORARILY_REJECTED.
-    pub fn armed(&self) -> bool {
-        self.state.armed()
+    pub fn changes_restricted(&self) -> bool {
+        self.state.changes_restricted()
     }
 }
 

@@ -76,8 +76,8 @@ pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
         "fcu_gcs::",
         "fcu_firmware::uart_rx::",
         "fcu_firmware::param_flash::",
-        "fcu_core::parameters::",
-        "fcu_core::flight::check_change",
+        "fcu_params::",
+        "fcu_core::flight::ControlTick::take_config",
         "Config::validate",
         "::is_valid",
         "USART1",
@@ -395,7 +395,7 @@ mod tests {
         let with = image_with(&[
             (0x0800_c001, 0x100, "TIM1_BRK_TIM9"),
             (0x0800_d000, 0x2000, "fcu_firmware::ground::with_link::run::{{closure}}"),
-            (0x0800_f001, 0x40, "fcu_core::parameters::snapshot::crc32"),
+            (0x0800_f001, 0x40, "fcu_params::snapshot::crc32"),
             (0x0800_f100, 0x80, "fcu_core::flight::ControlTick::tick_with"),
             (0x0800_f200, 0x20, "USART1"),
         ]);

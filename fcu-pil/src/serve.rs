@@ -62,7 +62,7 @@ const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
 /// it (fcu-core's snapshot, sequence 1, at the start of sector 1; sector 2 erased). A line that
 /// names no parameter or a value the set refuses is an error naming the line.
 pub fn flash_with_parameters(flash: Vec<u8>, text: &str) -> Result<Vec<u8>, String> {
-    let cfg = fcu_core::parameters::apply_file(&fcu_core::Config::default(), text).map_err(fcu_testkit::cli::fly::describe_file_error)?;
+    let cfg = fcu_params::apply_file(&fcu_core::Config::default(), text).map_err(fcu_testkit::cli::fly::describe_file_error)?;
     flash_with_config(flash, &cfg)
 }
 
@@ -80,7 +80,7 @@ pub enum FlightFlashError {
 /// text lines, which are what the harness reads the board's state from. Saved as the only set,
 /// as [`flash_with_parameters`] does.
 pub fn flash_for_flight(flash: Vec<u8>, text: Option<&str>) -> Result<Vec<u8>, FlightFlashError> {
-    use fcu_core::parameters::{self, snapshot};
+    use fcu_params::{self as parameters, snapshot};
     use fcu_testkit::cli::fly::describe_file_error;
     let (a, b) = (param_sector_words(&flash, 0), param_sector_words(&flash, 1));
     let (saved, source) = snapshot::load_config([&a, &b], &fcu_core::Config::default());
@@ -105,7 +105,7 @@ fn param_sector_words(flash: &[u8], sector: usize) -> Vec<u32> {
 }
 
 fn flash_with_config(mut flash: Vec<u8>, cfg: &fcu_core::Config) -> Result<Vec<u8>, String> {
-    use fcu_core::parameters::{self, snapshot};
+    use fcu_params::{self as parameters, snapshot};
     flash.resize(256 * 1024, 0xFF);
     let sectors = flash.get_mut(PARAM_SECTORS).ok_or("flash image too short")?;
     sectors.fill(0xFF);
@@ -436,7 +436,7 @@ mod tests {
 
     #[test]
     fn a_parameter_file_becomes_the_only_saved_set() {
-        use fcu_core::parameters::{self, snapshot};
+        use fcu_params::{self as parameters, snapshot};
         // Whatever the sectors held before is gone.
         let old = vec![0u8; 256 * 1024];
         let flash = flash_with_parameters(old, "ANGLE_MAX 30\n# a comment\nRC1_TRIM 1500\n").unwrap();
@@ -453,7 +453,7 @@ mod tests {
 
     #[test]
     fn a_flight_keeps_the_flash_set_takes_the_file_over_it_and_talks_text() {
-        use fcu_core::parameters::{self, snapshot};
+        use fcu_params::{self as parameters, snapshot};
         let saved = flash_with_parameters(Vec::new(), "ANGLE_MAX 30\nRC1_TRIM 1500\n").unwrap();
         let flash = flash_for_flight(saved, Some("RC1_TRIM 1400\n")).unwrap();
         let (cfg, source) =

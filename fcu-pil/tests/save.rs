@@ -241,13 +241,13 @@ fn time_boot_ms_keeps_pace_with_the_clock_across_an_erase() {
 }
 
 /// What the flash model's parameter sectors hold: the set fcu-core loads from them at boot.
-fn saved_set(b: &EmulatedBoard) -> (fcu_core::Config, fcu_core::parameters::snapshot::Source) {
+fn saved_set(b: &EmulatedBoard) -> (fcu_core::Config, fcu_params::snapshot::Source) {
     let memory = b.machine.board().flash.memory();
     let words = |range: std::ops::Range<usize>| -> Vec<u32> {
         memory[range].chunks(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
     };
     let (a, b) = (words(0x4000..0x8000), words(0x8000..0xC000));
-    fcu_core::parameters::snapshot::load_config([&a, &b], &fcu_core::Config::default())
+    fcu_params::snapshot::load_config([&a, &b], &fcu_core::Config::default())
 }
 
 /// Finding: the flash's data cache keeps the words it read before a program or erase; the
@@ -262,9 +262,9 @@ fn two_saves_in_a_row_leave_the_second_set_in_flash() {
     save(&mut b, 61.0);
     save(&mut b, 62.0);
     let (cfg, source) = saved_set(&b);
-    assert!(matches!(source, fcu_core::parameters::snapshot::Source::Snapshot { .. }), "{source:?}");
-    let index = fcu_core::parameters::index_of(b"RATE_PIT_P").unwrap();
-    assert_eq!(fcu_core::parameters::value(&cfg, index), Some(62.0));
+    assert!(matches!(source, fcu_params::snapshot::Source::Snapshot { .. }), "{source:?}");
+    let index = fcu_params::index_of(b"RATE_PIT_P").unwrap();
+    assert_eq!(fcu_params::value(&cfg, index), Some(62.0));
     assert!(b.machine.board().flash.stale_ranges().is_empty(), "the data cache was left holding old words");
 }
 
@@ -320,7 +320,7 @@ fn a_save_over_the_link_at_an_lsi_of_17_and_47_khz_resets_nothing() {
         assert!(resets.is_empty(), "LSI {hz} Hz: the board was reset: {resets:?}");
         assert!(b.machine.board().flash.erases().len() == 1, "LSI {hz} Hz: the first save did not erase");
         let (cfg, _) = saved_set(&b);
-        let index = fcu_core::parameters::index_of(b"RATE_PIT_P").unwrap();
-        assert_eq!(fcu_core::parameters::value(&cfg, index), Some(64.0), "LSI {hz} Hz");
+        let index = fcu_params::index_of(b"RATE_PIT_P").unwrap();
+        assert_eq!(fcu_params::value(&cfg, index), Some(64.0), "LSI {hz} Hz");
     }
 }

@@ -6,9 +6,9 @@
 //! the operations that break it), and each finding that broke one has a plain test with its
 //! scenario written out.
 
-use fcu_core::parameters::{self, snapshot, COUNT};
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
+use fcu_params::{self as parameters, snapshot, COUNT};
 use fcu_testkit::bench_board::{
     cmd, command_for, gesture, param_set, value_for, Bench, GroundFrame, Invariant, Op, Pilot, Planted, PowerCut, Scenario,
 };

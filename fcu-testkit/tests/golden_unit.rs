@@ -2,10 +2,11 @@
 //! each algorithm of `Config::reference()` against them, bit for bit.
 
 use fcu_core::ahrs::{Mahony, MahonyConfig};
-use fcu_core::control::{AngleLoop, ControlConfig, RateLoop, Saturation};
+use fcu_core::control::{AngleLoop, ControlConfig, RateLoop};
 use fcu_core::filter::{Biquad, BiquadCoeffs};
 use fcu_core::math::{inv_sqrt_fast, quat_to_tilt, Quat};
 use fcu_core::mixer::MixerConfig;
+use fcu_core::mixer::Saturation;
 use fcu_core::rc::{RcConfig, StickCounts, Sticks};
 
 fn rows(name: &str) -> Vec<Vec<String>> {

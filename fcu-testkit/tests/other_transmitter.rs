@@ -5,8 +5,8 @@
 //! the one the `other-transmitter` scenario names) the drone arms by gesture and flies the
 //! scenario's criteria; without it, it does not.
 
-use fcu_core::parameters;
 use fcu_core::Config;
+use fcu_params as parameters;
 use fcu_testkit::sim::radio_model::Transmitter;
 use fcu_testkit::sim::{self, metrics, scenario, InProcess, Profile, RunOptions};
 

@@ -11,7 +11,6 @@ pub use mahony::Mahony;
 pub use mahony::{MahonyConfig, MDPS_TO_RAD_S};
 pub use vqf::{Vqf, VqfConfig};
 
-use crate::config::ConfigError;
 use crate::math::Quat;
 
 /// Which estimator runs, with its parameters.
@@ -35,6 +34,13 @@ impl EstimatorConfig {
     }
 }
 
+/// Why [`Estimator::new`] cannot run the estimator asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EstimatorError {
+    /// The Mahony filter, in a build without the crate's `reference` feature.
+    NotCompiledIn,
+}
+
 /// A running estimator.
 #[derive(Clone, Debug)]
 pub struct Estimator(Running);
@@ -50,14 +56,14 @@ enum Running {
 }
 
 impl Estimator {
-    /// The estimator `cfg` asks for; [`ConfigError::ReferenceEstimator`] for the Mahony filter
+    /// The estimator `cfg` asks for; [`EstimatorError::NotCompiledIn`] for the Mahony filter
     /// when the crate is built without its `reference` feature.
-    pub fn new(cfg: EstimatorConfig) -> Result<Self, ConfigError> {
+    pub fn new(cfg: EstimatorConfig) -> Result<Self, EstimatorError> {
         match cfg {
             #[cfg(feature = "reference")]
             EstimatorConfig::Mahony(c) => Ok(Estimator(Running::Mahony(Mahony::new(c)))),
             #[cfg(not(feature = "reference"))]
-            EstimatorConfig::Mahony(_) => Err(ConfigError::ReferenceEstimator),
+            EstimatorConfig::Mahony(_) => Err(EstimatorError::NotCompiledIn),
             EstimatorConfig::Vqf(c) => Ok(Estimator(Running::Vqf(Vqf::new(c)))),
         }
     }

@@ -101,7 +101,7 @@ impl VqfConfig {
     }
 
     pub fn is_valid(&self) -> bool {
-        use crate::config::{above, within};
+        use crate::math::{above, within};
         let positive = |x: f32| above(x, 0.0, f32::MAX);
         positive(self.dt_s)
             && positive(self.tau_acc_s)

@@ -1,7 +1,6 @@
 //! The block of five ticks the outer step runs on: each tick's accelerometer words and the
 //! running sum of the low-passed gyro, handed out as an [`OuterJob`] when the block is full.
 
-use super::OuterJob;
 use crate::filter::{accumulate, BLOCK};
 use crate::imu::{Decoder, Offsets};
 use crate::rc::Sticks;
@@ -82,5 +81,43 @@ impl Block {
         self.first_raw_slot = 0;
         self.gyro_sum_mdps = [0.0; 3];
         job
+    }
+}
+
+/// What the outer step needs of the last five ticks: the accelerometer words and the summed
+/// gyro, and what the sticks said.
+///
+/// The tick stores the accelerometer's raw words and the outer step converts them (mount,
+/// sensitivity, offsets: the tick's integer arithmetic, done at 160 Hz); the gyro arrives as
+/// the sum its block mean is made of, accumulated in slot order (bit for bit the reference's
+/// sum of five stored slots). Why: docs/performance.md, «accel words, not values».
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OuterJob {
+    /// Accelerometer words, sensor axes, of the slots `first_raw_slot..`.
+    pub accel_words: AccelWords,
+    /// The offsets in force for those words.
+    pub accel_offsets: Offsets,
+    /// The slots before `first_raw_slot`, converted and corrected with the offsets they were
+    /// taken under and summed (only a block that spans the end of a calibration has any).
+    pub accel_sum_before_mg: [f32; 3],
+    pub first_raw_slot: u8,
+    /// Low-passed gyro summed over the block, mdps, body axes.
+    pub gyro_sum_mdps: [f32; 3],
+    /// The sticks in force (the failsafe's level sticks while it holds).
+    pub sticks: Sticks,
+    pub throttle_low: bool,
+    /// The yaw estimate at the end of the tick, rad.
+    pub yaw_est_rad: f32,
+    /// The throttle was low on some tick since the last job: the yaw target restarts at 0.
+    pub yaw_target_reset: bool,
+}
+
+impl OuterJob {
+    /// The block's summed accelerometer, corrected mg, body axes.
+    pub fn accel_sum_mg(&self, decoder: &Decoder) -> [f32; 3] {
+        let mut sum = self.accel_sum_before_mg;
+        let raw = self.accel_words.0.get(usize::from(self.first_raw_slot)..).unwrap_or(&[]);
+        accumulate_accel_mg(&mut sum, raw, decoder, &self.accel_offsets);
+        sum
     }
 }

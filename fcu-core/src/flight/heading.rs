@@ -1,8 +1,8 @@
 //! The heading (yaw): its estimate, integrated from the gyro every tick, and its target, which
 //! the outer step moves with the yaw stick. Both restart at 0 whenever the throttle is low.
 
-use super::params::{OuterParams, TickParams};
-use super::OuterJob;
+use super::block::OuterJob;
+use super::derived::{OuterParams, TickParams};
 use crate::control::YawRateShaper;
 
 /// The tick's half: the gyro-integrated heading, and what the outer step must hear of the

@@ -1,8 +1,9 @@
 //! The end of the tick: the rate loop, the mixer and the guard that writes the compare values.
 
+use super::derived::TickParams;
 use super::ground::TestOutput;
-use super::params::TickParams;
-use crate::control::{RateLoop, Saturation};
+use crate::control::RateLoop;
+use crate::mixer::Saturation;
 use crate::rc::StickCounts;
 
 /// What the supervisor lets through to the motors this tick.

@@ -1,13 +1,22 @@
 //! The tick's command stage: the radio, the supervisor and the decision in force, with the
 //! sticks the pipeline flies that follow from it.
 
+use super::derived::TickParams;
 use super::ground::{Ground, TestOutput};
-use super::params::TickParams;
 use super::sensors::Sensors;
-use super::ForcedRadio;
 use crate::ground::GroundInput;
-use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks};
+use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
+
+/// The radio state given directly (golden replay): the reference's `rc_connection_flag`,
+/// `rc_enable_motor` and `rc_cal_flag` instead of capture edges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ForcedRadio {
+    pub width_counts: [u16; CHANNELS],
+    pub link: bool,
+    pub armed: bool,
+    pub cal_request: bool,
+}
 
 /// The supervisor's last decision and what follows from it and the sticks, kept until the
 /// supervisor decides again.

@@ -143,8 +143,6 @@ enum GyroScale {
 }
 
 impl Decoder {
-    // Out of line: built at boot and by each half of the loop on a configuration change.
-    #[inline(never)]
     pub fn new(cfg: &ImuConfig) -> Self {
         let k = cfg.gyro_mdps_per_lsb;
         // |raw| ≤ 32768 = 2^15, so k ≤ 2^9 keeps |raw · k| ≤ 2^24.
@@ -391,8 +389,7 @@ impl Calibrator {
 /// `sum = 800·q + r` (0 ≤ r < 800, |q| < 2^31 for i32 samples) the product is at least
 /// `q` and exceeds `q + r/800` by under 2e-7 with its rounding, far short of `q + 1`;
 /// both truncate toward zero, so negative sums mirror. For any other count the quotient is
-/// the exact truncated mean. Out of line: one copy for the six axes.
-#[inline(never)]
+/// the exact truncated mean.
 fn truncated_mean(sum: i64, n: u32) -> i32 {
     let magnitude = quotient_u64_u32(sum.unsigned_abs(), n.max(1));
     // The mean of i32 samples is an i32: the clamp only keeps the cast honest.

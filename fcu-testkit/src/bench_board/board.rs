@@ -6,13 +6,13 @@ use std::collections::VecDeque;
 
 use fcu_core::flight::{ControlTick, FlightController, OuterStep, Status};
 use fcu_core::imu::CalibrationPhase;
-use fcu_core::parameters::snapshot;
 use fcu_core::rc::{CaptureEdge, EdgeDecoder, Sticks};
 use fcu_core::supervisor::{FlightState, SupervisorConfig};
 use fcu_core::Config;
 use fcu_gcs::Due;
 use fcu_gcs::{Observed, Service, ToControl};
 use fcu_link::LinkConfig;
+use fcu_params::snapshot;
 
 use super::check::{BootKind, Checker, Invariant};
 use super::flash::{Flash, PowerCut};
@@ -308,10 +308,13 @@ impl Bench {
         let frame = self.radio_frame();
         let b = &mut self.boot;
         // The control task takes what the link task left before it ticks.
-        if let Some(cfg) = b.to_control.config.take() {
-            let _refused = b.tick.take_config(&cfg);
-            b.outer.take_config(&cfg);
-            b.cfg = cfg;
+        // The outer step takes only what the tick took (a ground-only change is refused once
+        // armed).
+        if let Some(change) = b.to_control.config.take() {
+            if b.tick.take_config(&change).is_ok() {
+                b.outer.take_config(&change.cfg);
+                b.cfg = change.cfg;
+            }
         }
         if let Some(g) = b.to_control.ground.take() {
             b.tick.take_ground(&g);
@@ -379,17 +382,17 @@ impl Bench {
             }
         }
         let idle = |c: CalibrationPhase| matches!(c, CalibrationPhase::Idle { .. });
-        if was.state.armed() && idle(was.calibration) && !idle(now.calibration) {
+        if was.state.changes_restricted() && idle(was.calibration) && !idle(now.calibration) {
             self.checker.violate(Invariant::NothingStartsArmed, t, format!("an IMU calibration started in {:?}", was.state));
         }
         // A motor test drives one motor on the ground: disarmed, the compare values differ.
         let testing = now.state == FlightState::Disarmed && now.compare.iter().any(|&c| c != now.compare[0]);
-        if testing && !b.testing && was.state.armed() {
+        if testing && !b.testing && was.state.changes_restricted() {
             self.checker.violate(Invariant::NothingStartsArmed, t, format!("a motor test started in {:?}: {:?}", was.state, now.compare));
         }
         b.testing = testing;
         let radio_calibration = b.tick.radio_calibration();
-        if radio_calibration && !b.radio_calibration && was.state.armed() {
+        if radio_calibration && !b.radio_calibration && was.state.changes_restricted() {
             self.checker.violate(Invariant::NothingStartsArmed, t, format!("a radio calibration started in {:?}", was.state));
         }
         b.radio_calibration = radio_calibration;
@@ -405,7 +408,7 @@ impl Bench {
             self.flood_ticks -= 1;
             if self.uplink.len() < 64 {
                 let index = self.flood_index as i16;
-                self.flood_index = (self.flood_index + 1) % fcu_core::parameters::count() as u16;
+                self.flood_index = (self.flood_index + 1) % fcu_params::count() as u16;
                 self.apply(&Op::Send(GroundFrame::ParamRead { index, name: [0; 16] }));
             }
         }
@@ -479,7 +482,7 @@ impl Bench {
     /// (the CPU stalled meanwhile), the words one at a time.
     fn save(&mut self) {
         let t = self.time_ticks;
-        let armed = self.boot.status.state.armed() || self.boot.tick.armed();
+        let armed = self.boot.status.state.changes_restricted() || self.boot.tick.changes_restricted();
         let plan = self.boot.task.plan_save(self.flash.sectors());
         if armed {
             self.checker.violate(
@@ -525,7 +528,7 @@ impl Bench {
     /// A reset decided by the firmware.
     fn reset(&mut self) {
         let t = self.time_ticks;
-        if self.boot.tick.armed() || self.boot.status.state.armed() {
+        if self.boot.tick.changes_restricted() || self.boot.status.state.changes_restricted() {
             self.checker.violate(Invariant::NothingStartsArmed, t, format!("a reset in {:?}", self.boot.status.state));
         }
         self.counts.reboots += 1;

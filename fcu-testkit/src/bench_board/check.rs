@@ -10,9 +10,9 @@
 
 use std::collections::VecDeque;
 
-use fcu_core::parameters::snapshot::{self, SavePlan, RECORD_WORDS};
-use fcu_core::parameters::{self, COUNT};
 use fcu_core::Config;
+use fcu_params::snapshot::{self, SavePlan, RECORD_WORDS};
+use fcu_params::{self as parameters, COUNT};
 
 use super::board::TICK_US;
 use super::flash::Flash;

@@ -2,7 +2,7 @@
 //! to `0xFFFF_FFFF`, programmed a word at a time by clearing bits, and cut off by a power cut at
 //! any word.
 
-use fcu_core::parameters::snapshot::{ERASED, SECTOR_WORDS};
+use fcu_params::snapshot::{ERASED, SECTOR_WORDS};
 
 /// Where a power cut falls: at the `at_word`-th word operation from the moment it was armed (a
 /// word programmed counts one, an erase counts one per word of its sector), leaving that word

@@ -25,8 +25,8 @@ pub use check::{Invariant, Violation};
 pub use flash::{Flash, PowerCut};
 pub use ground::{cmd, name16, GroundFrame};
 
-use fcu_core::parameters::{self, snapshot, COUNT};
 use fcu_core::Config;
+use fcu_params::{self as parameters, snapshot, COUNT};
 
 /// How long the board needs after power-on to calibrate and settle before it may arm, ms
 /// (with a margin); every scenario starts with it.

@@ -76,12 +76,12 @@ pub fn config_with_params(profile: Profile, path: &Path) -> Result<fcu_core::Con
         ));
     }
     let text = crate::csv::read_text(path).map_err(|e| named(e.to_string()))?;
-    fcu_core::parameters::apply_file(&profile.config(), &text).map_err(|e| named(describe_file_error(e)))
+    fcu_params::apply_file(&profile.config(), &text).map_err(|e| named(describe_file_error(e)))
 }
 
 /// A refused parameter file in words: its line and the rule, or the rule the set as a whole
 /// breaks (line 0).
-pub fn describe_file_error(e: fcu_core::parameters::FileError) -> String {
+pub fn describe_file_error(e: fcu_params::FileError) -> String {
     match e.line {
         0 => format!("the set is refused: {}", e.rule),
         line => format!("line {line}: {}", e.rule),

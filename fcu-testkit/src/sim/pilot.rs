@@ -29,7 +29,7 @@ impl<'s> Transmitter<'s> {
             // The sticks as a core set up for the scenario's transmitter reads them: what the
             // pilot asks for, whatever the flight computer makes of it.
             stick: StickRate::new(
-                &scenario.radio.transmitter.map_or(cfg, |t| fcu_core::parameters::apply_file(&cfg, &t.parameters()).unwrap_or(cfg)),
+                &scenario.radio.transmitter.map_or(cfg, |t| fcu_params::apply_file(&cfg, &t.parameters()).unwrap_or(cfg)),
             ),
             last_thr_us: scenario::THR_LOW_US,
         }

@@ -346,11 +346,11 @@ mod tests {
 
     #[test]
     fn the_other_transmitters_parameters_are_its_file() {
-        let file = fcu_core::parameters::apply_file(
+        let file = fcu_params::apply_file(
             &fcu_core::Config::default(),
             include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/data/other-transmitter.parm")),
         );
-        let made = fcu_core::parameters::apply_file(&fcu_core::Config::default(), &Transmitter::OTHER.parameters());
+        let made = fcu_params::apply_file(&fcu_core::Config::default(), &Transmitter::OTHER.parameters());
         assert_eq!(file.map(|c| c.rc), made.map(|c| c.rc));
         assert_ne!(made.map(|c| c.rc), Ok(fcu_core::Config::default().rc));
     }

@@ -98,8 +98,7 @@ fn read_line(line: usize, raw: &str) -> Result<Option<Line<'_>>, LineError<'_>> 
         return Err(err(Problem::NameTooLong { name }));
     }
     let value: f32 = value.parse().map_err(|_| err(Problem::NotANumber { name, value }))?;
-    // Two comparisons, where `is_finite` is a bit-pattern test.
-    if !crate::config::within(value, f32::MIN, f32::MAX) {
+    if !value.is_finite() {
         return Err(err(Problem::NotFinite { name }));
     }
     Ok(Some(Line { line, name, value }))

@@ -1,7 +1,8 @@
 //! What a configuration comes to for the two halves of the pipeline, worked out in one place:
 //! [`Derived::new`], at boot (and again when a run-time parameter changes). The configuration
 //! itself is never changed; the scaling that moves in flight is a separate [`Gains`] value,
-//! which only the tick's rate loop and throttle map follow ([`TickParams::rescale`]).
+//! which only the tick's rate loop and throttle map follow: the tick's values are a function of
+//! the configuration and the gains ([`TickParams::new`]), whatever gains came before.
 
 use crate::config::Config;
 use crate::control::{ControlConfig, Gains};
@@ -21,31 +22,7 @@ impl Derived {
     /// The one place where a configuration becomes the values the pipeline works with, at
     /// unity gains.
     pub(crate) fn new(cfg: &Config) -> Derived {
-        let decoder = Decoder::new(&cfg.imu);
-        let outer_hz = cfg.timing.outer_hz();
-        Derived {
-            tick: TickParams {
-                rc: cfg.rc,
-                decoder,
-                reference_arithmetic: cfg.reference_arithmetic,
-                #[cfg(feature = "reference")]
-                tick_dt_s_f64: cfg.timing.tick_dt_s_f64(),
-                tick_dt_s: cfg.timing.tick_dt_s(),
-                outer_hz,
-                rate_loop: cfg.control,
-                mixer: cfg.mixer,
-                compare_range: cfg.mixer.compare_range(),
-                off_compare: cfg.mixer.off_compare(),
-            },
-            outer: OuterParams {
-                decoder,
-                rc: cfg.rc,
-                control: cfg.control,
-                reference_arithmetic: cfg.reference_arithmetic,
-                outer_hz,
-                arming_tilt: matches!(cfg.supervisor, SupervisorConfig::Safe(_)),
-            },
-        }
+        Derived { tick: TickParams::new(cfg, Gains::UNITY), outer: OuterParams::new(cfg) }
     }
 }
 
@@ -77,20 +54,45 @@ pub struct TickParams {
     pub(crate) off_compare: u16,
 }
 
+/// The configuration's control gains and mixer, unscaled: what [`TickParams::set_gains`]
+/// scales. Kept beside the tick's values, not among them: the tick reads these only when the
+/// gains move (docs/performance.md, «unscaled apart»).
+#[derive(Clone, Debug)]
+pub(crate) struct Unscaled {
+    control: ControlConfig,
+    mixer: MixerConfig,
+}
+
+impl Unscaled {
+    pub(crate) fn new(cfg: &Config) -> Unscaled {
+        Unscaled { control: cfg.control, mixer: cfg.mixer }
+    }
+}
+
 impl TickParams {
-    /// The gains in force go from `from` to `to`: the rate loop and the throttle map are
-    /// rescaled by the ratio, in place, and only the one whose gain moved (docs/performance.md,
-    /// «scaled in place»). Exact enough: the gains move in steps of 1/512 (battery,
-    /// `BatteryFilter`) and 1/256 (thrust curve, `ThrustCurve::gain_at`), only when the battery
-    /// or the throttle moves that far, and each rescale rounds by 2^-24 (a thousand of them move
-    /// a gain by less than 1e-4). From [`Gains::UNITY`] the ratio is the gain itself, exactly.
-    pub(crate) fn rescale(&mut self, from: Gains, to: Gains) {
-        if to.rate != from.rate {
-            self.rate_loop = self.rate_loop.scaled_rate_loop(to.rate / from.rate);
+    /// What `cfg` comes to for the tick with `gains` in force: its rate loop and throttle map
+    /// scaled by them (at unity, `x · 1.0` is `x` bit for bit: the configuration's).
+    pub(crate) fn new(cfg: &Config, gains: Gains) -> TickParams {
+        TickParams {
+            rc: cfg.rc,
+            decoder: Decoder::new(&cfg.imu),
+            reference_arithmetic: cfg.reference_arithmetic,
+            #[cfg(feature = "reference")]
+            tick_dt_s_f64: cfg.timing.tick_dt_s_f64(),
+            tick_dt_s: cfg.timing.tick_dt_s(),
+            outer_hz: cfg.timing.outer_hz(),
+            rate_loop: cfg.control.scaled_rate_loop(gains.rate),
+            mixer: cfg.mixer.scaled_throttle(gains.thrust),
+            compare_range: cfg.mixer.compare_range(),
+            off_compare: cfg.mixer.off_compare(),
         }
-        if to.thrust != from.thrust {
-            self.mixer = self.mixer.scaled_throttle(to.thrust / from.thrust);
-        }
+    }
+
+    /// The gains in force are now `gains`: the rate loop and the throttle map are the
+    /// configuration's (`unscaled`) scaled by them, as [`new`](Self::new) makes them.
+    pub(crate) fn set_gains(&mut self, unscaled: &Unscaled, gains: Gains) {
+        self.rate_loop = unscaled.control.scaled_rate_loop(gains.rate);
+        self.mixer = unscaled.mixer.scaled_throttle(gains.thrust);
     }
 
     /// Evaluate the reference's double-precision expressions in `f64`. A constant `false`
@@ -141,6 +143,17 @@ pub(crate) struct OuterParams {
 }
 
 impl OuterParams {
+    pub(crate) fn new(cfg: &Config) -> OuterParams {
+        OuterParams {
+            decoder: Decoder::new(&cfg.imu),
+            rc: cfg.rc,
+            control: cfg.control,
+            reference_arithmetic: cfg.reference_arithmetic,
+            outer_hz: cfg.timing.outer_hz(),
+            arming_tilt: matches!(cfg.supervisor, SupervisorConfig::Safe(_)),
+        }
+    }
+
     /// As [`TickParams::reference_arithmetic`]: a constant `false` without the `reference`
     /// feature.
     #[inline(always)]

@@ -1,16 +1,14 @@
 //! What each parameter reads and writes in a [`Config`]: a [`Field`] per table entry, and one
-//! getter and one setter matching on it. One function each for the whole table rather than a
-//! getter and a setter per parameter: at fcu-core's opt-level 3, a hundred small functions
-//! (each with its own entry, exit and copy of the conversion) cost some three times the flash.
+//! getter and one setter matching on it.
 
 use super::{
     gyro_cutoff_hz, ms_from_ticks, safety_ms, set_endpoint_us, set_gyro_cutoff, set_safety_ms, stick_from_us, stick_us, ticks_from_ms,
     us_from_counts, SetResult, RULE_REV,
 };
-use crate::config::{Config, LinkProtocol};
-use crate::control::AxisGains;
-use crate::rc::{Function, RcInput};
-use crate::supervisor::SafetyConfig;
+use fcu_core::config::{Config, LinkProtocol};
+use fcu_core::control::AxisGains;
+use fcu_core::rc::{Function, RcInput};
+use fcu_core::supervisor::SafetyConfig;
 
 /// The setting a parameter is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -149,8 +147,6 @@ fn gain_mut(cfg: &mut Config, axis: Axis, which: Gain) -> &mut f32 {
 
 impl Field {
     /// The value in `cfg`.
-    // Out of line: one copy for every reader of the table.
-    #[inline(never)]
     pub(super) fn get(self, cfg: &Config) -> f32 {
         match self {
             Field::RcMap(f) => f32::from(cfg.rc.map.input(f)) + 1.0,
@@ -180,7 +176,6 @@ impl Field {
     }
 
     /// Set to `v` (within bounds and on the step) in `cfg`, or the setting's own refusal.
-    #[inline(never)]
     pub(super) fn set(self, cfg: &mut Config, v: f32) -> SetResult {
         match self {
             Field::RcMap(f) => {

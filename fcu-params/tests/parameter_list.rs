@@ -1,11 +1,11 @@
 //! docs/parameters.md is generated from the parameter table. After changing the table:
 //!
 //! ```text
-//! FCU_UPDATE_DOCS=1 cargo test -p fcu-core --test parameter_list
+//! FCU_UPDATE_DOCS=1 cargo test -p fcu-params --test parameter_list
 //! ```
 
-use fcu_core::parameters;
 use fcu_core::Config;
+use fcu_params as parameters;
 
 const PATH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/parameters.md");
 
@@ -14,8 +14,8 @@ fn generated() -> String {
     parameters::write_markdown(&mut table, &Config::default()).expect("writing to a String");
     format!(
         "# Parameters\n\n\
-         <!-- Generated from fcu-core's parameter table (fcu-core/src/parameters.rs); do not edit.\n     \
-         Update: FCU_UPDATE_DOCS=1 cargo test -p fcu-core --test parameter_list -->\n\n\
+         <!-- Generated from fcu-params's parameter table (fcu-params/src/lib.rs); do not edit.\n     \
+         Update: FCU_UPDATE_DOCS=1 cargo test -p fcu-params --test parameter_list -->\n\n\
          {count} parameters, every one a `REAL32` as MAVLink carries it; whole-number ones are exact.\n\
          The defaults are `Config::default()`'s. *Change*: `any time` applies at once, armed too (in RAM,\n\
          saved after disarming); `disarmed` is refused while armed and applies at once; `after reboot` is\n\
@@ -44,6 +44,6 @@ fn docs_parameters_md_is_the_table() {
     let have = std::fs::read_to_string(PATH).unwrap_or_default();
     assert!(
         have == want,
-        "docs/parameters.md differs from the parameter table; update it with:\n  FCU_UPDATE_DOCS=1 cargo test -p fcu-core --test parameter_list"
+        "docs/parameters.md differs from the parameter table; update it with:\n  FCU_UPDATE_DOCS=1 cargo test -p fcu-params --test parameter_list"
     );
 }

@@ -10,10 +10,14 @@
 //! value read back, saved and loaded, bit for bit (a proptest checks every parameter).
 //!
 //! A change goes through [`set`]: a value that is not finite, out of bounds, off its step, not
-//! allowed while armed, or that makes [`Config::validate`] fail is refused with the rule it
-//! breaks (a short text for a `STATUSTEXT`), and the configuration is left as it was. The
-//! configuration is only the source of the values: the flight controller takes a changed one
-//! through [`FlightController::apply_config`](crate::FlightController::apply_config).
+//! allowed while changes are restricted, or that makes [`Config::validate`] fail is refused
+//! with the rule it breaks (a short text for a `STATUSTEXT`), and the configuration is left as
+//! it was. The configuration is only the source of the values: the flight controller takes a
+//! changed one through [`apply`] ([`check_change`], then
+//! [`FlightController::take_change`]).
+//!
+//! This crate is cold code, run on a ground station's request and at boot, never in the control
+//! tick: the firmware builds it for size (opt-level "z") while fcu-core keeps opt-level 3.
 //!
 //! [`Config::default()`] is the default set. The reference profile keeps no parameters: its
 //! values are the C code's, some of them (the 31.25 ms radio timeout, the Mahony filter's
@@ -25,25 +29,43 @@
 //!
 //! - `PARAM_REQUEST_LIST` / `PARAM_REQUEST_READ`: [`count`], [`name`], [`value`] by index,
 //!   [`index_of`] for a `param_id` (16 bytes, NUL-terminated when shorter).
-//! - `PARAM_SET`: copy the configuration in force, [`set`] it with the motors' armed flag
-//!   ([`FlightController::armed`](crate::FlightController::armed)); taken, give the copy to
-//!   [`FlightController::apply_config`](crate::FlightController::apply_config) (or, with the
-//!   halves in two tasks, [`check_change`](crate::flight::check_change) and each half's
-//!   `take_config`), echo [`Applied::value`] and, if [`Applied::also_changed`] names one, that
+//! - `PARAM_SET`: copy the configuration in force, [`set`] it with changes restricted or not
+//!   ([`FlightController::changes_restricted`]); taken, give the copy to [`apply`] (or, with
+//!   the halves in two tasks, [`check_change`] and the change to each half's `take_config`),
+//!   echo [`Applied::value`] and, if [`Applied::also_changed`] names one, that
 //!   parameter too; refused, echo [`Refusal::value_in_force`] and send the name and
 //!   [`Refusal::rule`] as a `STATUSTEXT`. An unknown name has no value to echo.
 //! - Saving: [`values`] into [`snapshot::plan_save`]; at boot [`snapshot::load_config`].
 //! - Files in MAVProxy's format: [`write_file`]; MAVProxy's and QGroundControl's: [`apply_file`],
 //!   every reader's lines through [`file::lines`].
 
+#![no_std]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
+
+#[cfg(test)]
+extern crate std;
+
 mod field;
 pub mod file;
 pub mod snapshot;
 
-use crate::config::Config;
-use crate::filter::BiquadCoeffs;
-use crate::rc::{Function, StickCounts, COUNTS_PER_US};
-use crate::supervisor::{SafetyConfig, SupervisorConfig};
+use fcu_core::config::{Config, ConfigError};
+use fcu_core::filter::BiquadCoeffs;
+use fcu_core::flight::{ChangeKind, ConfigChange, TakeError};
+use fcu_core::rc::{Function, StickCounts, COUNTS_PER_US};
+use fcu_core::supervisor::{SafetyConfig, SupervisorConfig};
+use fcu_core::FlightController;
 use field::{Axis, Endpoint, Field, Gain, SafetyTime, Stick};
 
 /// The longest name: MAVLink's `param_id` is 16 bytes, NUL-terminated only when shorter.
@@ -64,6 +86,15 @@ pub enum Applies {
 }
 
 impl Applies {
+    /// What a change of a parameter that applies so reaches: only [`Applies::Anytime`] is an
+    /// in-flight change.
+    pub fn kind(self) -> ChangeKind {
+        match self {
+            Applies::Anytime => ChangeKind::InFlight,
+            Applies::Disarmed | Applies::Reboot => ChangeKind::GroundOnly,
+        }
+    }
+
     /// As the parameter list says it.
     pub fn describe(self) -> &'static str {
         match self {
@@ -111,8 +142,7 @@ impl Unit {
 /// A setter's own refusal (bounds and steps are checked before it runs).
 type SetResult = Result<(), &'static str>;
 
-/// One parameter: what the firmware keeps of it (its description stays in the definition,
-/// for the parameter list: [`description`]).
+/// One parameter.
 #[derive(Clone, Copy)]
 pub struct Param {
     pub name: &'static str,
@@ -122,13 +152,10 @@ pub struct Param {
     pub step: Step,
     pub applies: Applies,
     field: Field,
-}
-
-/// A parameter as the table defines it: itself and one line for the parameter list.
-#[derive(Clone, Copy)]
-struct Definition {
-    param: Param,
-    description: &'static str,
+    /// One line for the parameter list. Only with the `descriptions` feature, which the
+    /// firmware leaves off (docs/performance.md, «descriptions on the host»).
+    #[cfg(feature = "descriptions")]
+    pub description: &'static str,
 }
 
 impl core::fmt::Debug for Param {
@@ -190,8 +217,9 @@ pub fn param(index: usize) -> Option<&'static Param> {
 }
 
 /// One line on what the parameter at `index` does (for the parameter list).
+#[cfg(feature = "descriptions")]
 pub fn description(index: usize) -> Option<&'static str> {
-    DESCRIPTIONS.get(index).copied()
+    param(index).map(|p| p.description)
 }
 
 /// The name of the parameter at `index`.
@@ -216,10 +244,11 @@ pub fn index_of(id: &[u8]) -> Option<usize> {
     TABLE.iter().position(|p| p.name.as_bytes() == name)
 }
 
-/// Set the parameter at `index` to `value` in `cfg`, with the motors `armed` or not: the value
-/// in force afterwards, or the rule that refused it (and `cfg` as it was). The value a
-/// parameter already reads is taken at any time, and changes nothing.
-pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Applied, Refusal> {
+/// Set the parameter at `index` to `value` in `cfg`, with changes restricted or not
+/// ([`FlightController::changes_restricted`]): the value in force afterwards, or the rule that
+/// refused it (and `cfg` as it was). The value a parameter already reads is taken at any time,
+/// and changes nothing.
+pub fn set(cfg: &mut Config, index: usize, value: f32, changes_restricted: bool) -> Result<Applied, Refusal> {
     let Some(p) = param(index) else {
         return Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None });
     };
@@ -229,14 +258,14 @@ pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Ap
         // Nothing moves (a file pushed whole while armed sets every value it already has).
         return Ok(Applied { value, also_changed: None });
     }
-    if armed && p.applies != Applies::Anytime {
+    if !p.applies.kind().allowed(changes_restricted) {
         return Err(refuse(RULE_ARMED));
     }
     let mut next = *cfg;
     p.field.set(&mut next, value).map_err(refuse)?;
     if let Err(e) = next.validate() {
         let rule = match e {
-            crate::ConfigError::Rc => next.rc.problem().unwrap_or(e.rule()),
+            fcu_core::ConfigError::Rc => next.rc.problem().unwrap_or(e.rule()),
             _ => e.rule(),
         };
         return Err(refuse(rule));
@@ -247,19 +276,16 @@ pub fn set(cfg: &mut Config, index: usize, value: f32, armed: bool) -> Result<Ap
 }
 
 /// [`set`] by name (see [`index_of`]).
-pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, armed: bool) -> Result<Applied, Refusal> {
+pub fn set_by_name(cfg: &mut Config, id: &[u8], value: f32, changes_restricted: bool) -> Result<Applied, Refusal> {
     match index_of(id) {
-        Some(i) => set(cfg, i, value, armed),
+        Some(i) => set(cfg, i, value, changes_restricted),
         None => Err(Refusal { rule: RULE_UNKNOWN, value_in_force: None }),
     }
 }
 
 /// Finite, within bounds, on the step.
-// Out of line: one copy for a set and a whole set.
-#[inline(never)]
 fn check_value(p: &Param, v: f32) -> Result<(), &'static str> {
-    // Two comparisons, where `is_finite` is a bit-pattern test.
-    if !crate::config::within(v, f32::MIN, f32::MAX) {
+    if !v.is_finite() {
         return Err(RULE_NOT_FINITE);
     }
     if v < p.min {
@@ -310,7 +336,7 @@ pub fn with_values_at(base: &Config, values: &[f32; COUNT]) -> Result<Config, (O
     }
     cfg.validate().map_err(|e| {
         let rule = match e {
-            crate::ConfigError::Rc => cfg.rc.problem().unwrap_or(e.rule()),
+            fcu_core::ConfigError::Rc => cfg.rc.problem().unwrap_or(e.rule()),
             _ => e.rule(),
         };
         (None, rule)
@@ -318,13 +344,13 @@ pub fn with_values_at(base: &Config, values: &[f32; COUNT]) -> Result<Config, (O
     Ok(cfg)
 }
 
-/// The radio map's rule, as [`RcConfig::problem`](crate::rc::RcConfig::problem) words it.
-pub const RULE_RCMAP: &str = "RCMAP: each input once";
+/// The radio map's rule, as [`RcConfig::problem`](fcu_core::rc::RcConfig::problem) words it.
+pub use fcu_core::rc::RULE_RCMAP;
 
 /// The first radio map entry (`RCMAP_*`, in table order) that names an input an earlier one
 /// already names, if any.
 fn repeated_map_entry(values: &[f32; COUNT]) -> Option<usize> {
-    let mut seen = [false; crate::rc::CHANNELS + 1];
+    let mut seen = [false; fcu_core::rc::CHANNELS + 1];
     for (i, (p, &v)) in TABLE.iter().zip(values).enumerate() {
         if let Field::RcMap(_) = p.field {
             // Checked whole, 1..4.
@@ -385,61 +411,87 @@ pub fn apply_file(base: &Config, text: &str) -> Result<Config, FileError> {
     with_values(base, &v).map_err(|rule| FileError { line: 0, rule })
 }
 
-/// `base` with every field a parameter sets taken from `src`. A configuration `new` differs
-/// from `old` only in parameters when `with_parameter_fields_of(&new, &old) == old`.
-// Out of line, as `with_in_flight_fields_of`: inlined at fcu-core's opt-level 3, each copy
-// and the comparison after it become a kilobyte of field moves in `flight::check_change`.
-#[inline(never)]
-pub fn with_parameter_fields_of(base: &Config, src: &Config) -> Config {
-    let mut c = with_in_flight_fields_of(base, src);
-    let (r, s) = (&mut c.rc, &src.rc);
-    r.map = s.map;
-    r.inputs = s.inputs;
-    r.link_timeout_ticks = s.link_timeout_ticks;
-    r.gesture_threshold = s.gesture_threshold;
-    r.min_throttle = s.min_throttle;
-    r.yaw_deadband = s.yaw_deadband;
-    if let (SupervisorConfig::Safe(b), SupervisorConfig::Safe(s)) = (&mut c.supervisor, src.supervisor) {
-        b.arm_hold_ticks = s.arm_hold_ticks;
-        b.disarm_hold_ticks = s.disarm_hold_ticks;
-        b.auto_disarm_ticks = s.auto_disarm_ticks;
-        b.failsafe_off_ticks = s.failsafe_off_ticks;
-        b.recovery_ticks = s.recovery_ticks;
-    }
-    c.gyro_filter = src.gyro_filter;
-    c.control.d_filter_k = src.control.d_filter_k;
-    c.battery_sense = src.battery_sense;
-    c.link.protocol = src.link.protocol;
-    c
+/// Why a new configuration may not replace the one in force.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ApplyError {
+    /// The new configuration cannot fly.
+    Invalid(ConfigError),
+    /// Changes are restricted (arming, flying or in the failsafe's level stage), and a
+    /// parameter that may change only on the ground would change.
+    Armed,
+    /// A setting no parameter reaches changed (timing, sensors, estimator, mixer, pulse
+    /// rules, the kind of supervisor...): it needs a new controller.
+    NeedsRestart,
 }
 
-/// `base` with the fields of the parameters that may change while armed
-/// ([`Applies::Anytime`]) taken from `src`.
-#[inline(never)]
-pub fn with_in_flight_fields_of(base: &Config, src: &Config) -> Config {
-    let mut c = *base;
-    c.rc.max_tilt_deg = src.rc.max_tilt_deg;
-    c.rc.yaw_rate_max_deg_s = src.rc.yaw_rate_max_deg_s;
-    for (b, s) in
-        [(&mut c.control.roll, src.control.roll), (&mut c.control.pitch, src.control.pitch), (&mut c.control.yaw, src.control.yaw)]
-    {
-        b.outer_kp = s.outer_kp;
-        b.inner_kp = s.inner_kp;
-        b.inner_ki = s.inner_ki;
-        b.inner_kd = s.inner_kd;
+impl ApplyError {
+    /// The rule, short enough for a ground station's status line (at most [`RULE_LEN`]).
+    pub fn rule(self) -> &'static str {
+        match self {
+            ApplyError::Invalid(e) => e.rule(),
+            ApplyError::Armed => RULE_ARMED,
+            ApplyError::NeedsRestart => "needs a restart",
+        }
     }
-    c.control.yaw_rate_feedforward = src.control.yaw_rate_feedforward;
-    c.link.attitude_hz = src.link.attitude_hz;
-    c.link.rc_hz = src.link.rc_hz;
-    c
+}
+
+impl From<TakeError> for ApplyError {
+    fn from(e: TakeError) -> Self {
+        match e {
+            TakeError::Restricted => ApplyError::Armed,
+            TakeError::OtherSupervisor => ApplyError::NeedsRestart,
+        }
+    }
+}
+
+/// Whether `new` may replace `old` at run time, with changes restricted or not
+/// ([`FlightController::changes_restricted`]), and what it reaches: the change to hand to the
+/// flight controller ([`FlightController::take_change`], or each half's `take_config`).
+///
+/// Derived from the table alone. `new` must be valid and reachable from `old` through the
+/// parameters: `old` with every parameter whose value differs set to `new`'s must be `new`,
+/// field for field (anything else, or a value no setter takes, is [`ApplyError::NeedsRestart`]).
+/// The change is [`ChangeKind::GroundOnly`] when a parameter the table marks as not
+/// changeable in flight differs, and refused as [`ApplyError::Armed`] by the rule the tick
+/// owns ([`ChangeKind::allowed`]), which the tick applies again when it takes the change.
+pub fn check_change(old: &Config, new: &Config, changes_restricted: bool) -> Result<ConfigChange, ApplyError> {
+    new.validate().map_err(ApplyError::Invalid)?;
+    let mut reached = *old;
+    let mut kind = ChangeKind::InFlight;
+    for p in TABLE.iter() {
+        let v = p.get(new);
+        if v.to_bits() != p.get(old).to_bits() {
+            kind = kind.max(p.applies.kind());
+        }
+        // Against what the sets so far made: a radio map entry moves the one it swaps with.
+        if v.to_bits() != p.get(&reached).to_bits() {
+            p.field.set(&mut reached, v).map_err(|_| ApplyError::NeedsRestart)?;
+        }
+    }
+    if reached != *new {
+        return Err(ApplyError::NeedsRestart);
+    }
+    if !kind.allowed(changes_restricted) {
+        return Err(ApplyError::Armed);
+    }
+    Ok(ConfigChange { cfg: *new, kind })
+}
+
+/// Give `fc` the configuration `cfg` at run time: [`check_change`] against the one in force,
+/// then [`FlightController::take_change`]. Refused with nothing changed.
+pub fn apply(fc: &mut FlightController, cfg: &Config) -> Result<(), ApplyError> {
+    let change = check_change(fc.config(), cfg, fc.changes_restricted())?;
+    fc.take_change(&change)?;
+    Ok(())
 }
 
 /// The parameter list as Markdown, with `cfg`'s values as the defaults: what
 /// `docs/parameters.md` holds (a test regenerates it and compares).
+#[cfg(feature = "descriptions")]
 pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fmt::Result {
     writeln!(out, "| Name | Default | Unit | Range | Step | Change | Meaning |")?;
     writeln!(out, "|---|---|---|---|---|---|---|")?;
-    for (p, description) in TABLE.iter().zip(DESCRIPTIONS) {
+    for p in TABLE.iter() {
         let step = match p.step {
             Step::Any => "any",
             Step::Integer => "1",
@@ -455,7 +507,7 @@ pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fm
             p.max,
             step,
             p.applies.describe(),
-            description
+            p.description
         )?;
     }
     Ok(())
@@ -464,16 +516,16 @@ pub fn write_markdown(out: &mut impl core::fmt::Write, cfg: &Config) -> core::fm
 /// A hash of the table's names in order (FNV-1a, 32 bits, each name followed by a NUL): a
 /// snapshot saved by a firmware with another table is refused, never read into the wrong
 /// parameters.
-pub const LAYOUT_HASH: u32 = layout_hash(&DEFINITION);
+pub const LAYOUT_HASH: u32 = layout_hash(&TABLE);
 
 /// FNV-1a over the names of `table`, each followed by a NUL.
 // Evaluated by the compiler for the table: an index out of bounds would fail the build.
 #[allow(clippy::indexing_slicing)]
-const fn layout_hash(table: &[Definition]) -> u32 {
+const fn layout_hash(table: &[Param]) -> u32 {
     let mut h: u32 = 0x811c_9dc5;
     let mut i = 0;
     while i < table.len() {
-        let name = table[i].param.name.as_bytes();
+        let name = table[i].name.as_bytes();
         let mut j = 0;
         while j <= name.len() {
             let b = if j < name.len() { name[j] } else { 0 };
@@ -512,9 +564,11 @@ fn stick_from_us(us: f32) -> StickCounts {
     StickCounts((us * COUNTS_PER_US as f32) as i16)
 }
 
-/// The tick rate as a whole number, for exact conversions (validated configurations tick at
-/// a whole rate; 0 otherwise, which no conversion accepts).
-fn tick_hz(cfg: &Config) -> u32 {
+/// The whole integration rate (`Timing::integration_hz`, the rate every per-tick integration
+/// assumes, not the timer's real [`tick_hz`](fcu_core::config::Timing::tick_hz)) as a whole
+/// number, for exact conversions (validated configurations integrate at a whole rate; 0
+/// otherwise, which no conversion accepts).
+fn whole_integration_hz(cfg: &Config) -> u32 {
     let hz = cfg.timing.integration_hz;
     // Between 0 and 10^6, so finite, and whole if it converts to u32 and back unchanged.
     if hz > 0.0 && hz < 1.0e6 && (hz as u32) as f32 == hz {
@@ -525,7 +579,7 @@ fn tick_hz(cfg: &Config) -> u32 {
 }
 
 fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
-    let hz = tick_hz(cfg);
+    let hz = whole_integration_hz(cfg);
     if hz == 0 {
         return 0.0;
     }
@@ -533,11 +587,9 @@ fn ms_from_ticks(cfg: &Config, ticks: u32) -> f32 {
 }
 
 /// Whole milliseconds (checked, within the parameters' bounds) to ticks, refused unless exact.
-/// In u32, without a 64-bit product and its division by 1000 (a few hundred bytes at opt-level
-/// 3): ms·hz = (ms / 1000)·hz·1000 + (ms % 1000)·hz, the second under 10^9 for hz < 10^6.
-#[inline(never)]
+/// In u32: ms·hz = (ms / 1000)·hz·1000 + (ms % 1000)·hz, the second under 10^9 for hz < 10^6.
 fn ticks_from_ms(cfg: &Config, ms: f32) -> Result<u32, &'static str> {
-    let (ms, hz) = (ms as u32, tick_hz(cfg));
+    let (ms, hz) = (ms as u32, whole_integration_hz(cfg));
     let rest = (ms % 1000) * hz;
     if ms == 0 || hz == 0 || rest % 1000 != 0 {
         return Err(RULE_NOT_TICKS);
@@ -574,12 +626,12 @@ fn set_safety_ms(cfg: &mut Config, ms: f32, which: SafetyTime) -> SetResult {
 /// `(1 − a1 − a2) / (1 + a1 − a2) = k²`, the stored `a` being pre-negated).
 fn gyro_cutoff_hz(cfg: &Config) -> f32 {
     let c = &cfg.gyro_filter;
-    let listed = gyro_designs().iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
+    let listed = GYRO_DESIGNS_800_HZ.iter().find(|d| d.1 == c.a1.to_bits() && d.2 == c.a2.to_bits());
     if let (Some(d), true) = (listed, cfg.timing.integration_hz == 800.0) {
         return f32::from(d.0);
     }
     let k2 = (1.0 - c.a1 - c.a2) / (1.0 + c.a1 - c.a2);
-    if !crate::config::above(k2, 0.0, f32::MAX) {
+    if !(k2 > 0.0 && k2.is_finite()) {
         return 0.0;
     }
     libm::roundf(libm::atanf(libm::sqrtf(k2)) * cfg.timing.integration_hz / core::f32::consts::PI)
@@ -595,16 +647,9 @@ fn set_gyro_cutoff(cfg: &mut Config, hz: f32) -> SetResult {
 
 /// The gyro low-pass a cut-off of `hz` gives at an 800 Hz tick, from [`GYRO_DESIGNS_800_HZ`].
 fn gyro_design_800_hz(hz: f32) -> Option<BiquadCoeffs> {
-    let &(_, a1, a2, b0) = gyro_designs().iter().find(|d| f32::from(d.0) == hz)?;
+    let &(_, a1, a2, b0) = GYRO_DESIGNS_800_HZ.iter().find(|d| f32::from(d.0) == hz)?;
     let b0 = f32::from_bits(b0);
     Some(BiquadCoeffs { a1: f32::from_bits(a1), a2: f32::from_bits(a2), b0, b1: 2.0 * b0, b2: b0 })
-}
-
-/// [`GYRO_DESIGNS_800_HZ`] behind an optimisation barrier: fcu-core is built at opt-level 3
-/// for the control tick, which would unroll each search of the 27 designs into a kilobyte of
-/// compares; a search here runs once per parameter read or set.
-fn gyro_designs() -> &'static [(u16, u32, u32, u32)] {
-    core::hint::black_box(&GYRO_DESIGNS_800_HZ)
 }
 
 /// The cut-offs `GYRO_LPF_HZ` offers at the 800 Hz tick, with the bits of what
@@ -645,16 +690,15 @@ const GYRO_DESIGNS_800_HZ: [(u16, u32, u32, u32); 27] = [
 
 macro_rules! rc_map {
     ($name:literal, $f:expr, $what:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::None,
-                min: 1.0,
-                max: 4.0,
-                step: Step::Integer,
-                applies: Applies::Disarmed,
-                field: Field::RcMap($f),
-            },
+        Param {
+            name: $name,
+            unit: Unit::None,
+            min: 1.0,
+            max: 4.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            field: Field::RcMap($f),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input (1-4) carrying ", $what, "; the function that had it takes the old one"),
         }
     };
@@ -662,16 +706,15 @@ macro_rules! rc_map {
 
 macro_rules! rc_endpoint {
     ($name:literal, $input:literal, $which:ident, $what:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::Microseconds,
-                min: 500.0,
-                max: 2500.0,
-                step: Step::QuarterUs,
-                applies: Applies::Disarmed,
-                field: Field::RcEndpoint($input - 1, Endpoint::$which),
-            },
+        Param {
+            name: $name,
+            unit: Unit::Microseconds,
+            min: 500.0,
+            max: 2500.0,
+            step: Step::QuarterUs,
+            applies: Applies::Disarmed,
+            field: Field::RcEndpoint($input - 1, Endpoint::$which),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input ", $input, ": ", $what),
         }
     };
@@ -679,44 +722,50 @@ macro_rules! rc_endpoint {
 
 macro_rules! rc_rev {
     ($name:literal, $input:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::None,
-                min: -1.0,
-                max: 1.0,
-                step: Step::Integer,
-                applies: Applies::Disarmed,
-                field: Field::RcReversed($input - 1),
-            },
+        Param {
+            name: $name,
+            unit: Unit::None,
+            min: -1.0,
+            max: 1.0,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            field: Field::RcReversed($input - 1),
+            #[cfg(feature = "descriptions")]
             description: concat!("radio input ", $input, ": 1 normal, -1 reversed"),
         }
     };
 }
 
-macro_rules! rc_input {
-    ($min:literal, $trim:literal, $max:literal, $rev:literal, $input:literal) => {
-        [
-            rc_endpoint!($min, $input, Min, "shortest pulse (a full deflection, or the throttle's bottom)"),
-            rc_endpoint!($trim, $input, Trim, "centre pulse (unused on the throttle)"),
-            rc_endpoint!($max, $input, Max, "longest pulse (a full deflection, or full throttle)"),
-            rc_rev!($rev, $input),
-        ]
+/// The three endpoints of radio input `$input`, in table order.
+macro_rules! rc_min {
+    ($name:literal, $input:literal) => {
+        rc_endpoint!($name, $input, Min, "shortest pulse (a full deflection, or the throttle's bottom)")
+    };
+}
+
+macro_rules! rc_trim {
+    ($name:literal, $input:literal) => {
+        rc_endpoint!($name, $input, Trim, "centre pulse (unused on the throttle)")
+    };
+}
+
+macro_rules! rc_max {
+    ($name:literal, $input:literal) => {
+        rc_endpoint!($name, $input, Max, "longest pulse (a full deflection, or full throttle)")
     };
 }
 
 macro_rules! gain {
     ($name:literal, $axis:ident, $gain:ident, $max:literal, $what:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::None,
-                min: 0.0,
-                max: $max,
-                step: Step::Any,
-                applies: Applies::Anytime,
-                field: Field::Gain(Axis::$axis, Gain::$gain),
-            },
+        Param {
+            name: $name,
+            unit: Unit::None,
+            min: 0.0,
+            max: $max,
+            step: Step::Any,
+            applies: Applies::Anytime,
+            field: Field::Gain(Axis::$axis, Gain::$gain),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
@@ -724,16 +773,15 @@ macro_rules! gain {
 
 macro_rules! safety_ms {
     ($name:literal, $which:ident, $min:literal, $max:literal, $what:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::Milliseconds,
-                min: $min,
-                max: $max,
-                step: Step::Integer,
-                applies: Applies::Disarmed,
-                field: Field::Safety(SafetyTime::$which),
-            },
+        Param {
+            name: $name,
+            unit: Unit::Milliseconds,
+            min: $min,
+            max: $max,
+            step: Step::Integer,
+            applies: Applies::Disarmed,
+            field: Field::Safety(SafetyTime::$which),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
@@ -741,94 +789,55 @@ macro_rules! safety_ms {
 
 macro_rules! stick_us {
     ($name:literal, $which:ident, $min:literal, $max:literal, $what:literal) => {
-        Definition {
-            param: Param {
-                name: $name,
-                unit: Unit::Microseconds,
-                min: $min,
-                max: $max,
-                step: Step::QuarterUs,
-                applies: Applies::Disarmed,
-                field: Field::Stick(Stick::$which),
-            },
+        Param {
+            name: $name,
+            unit: Unit::Microseconds,
+            min: $min,
+            max: $max,
+            step: Step::QuarterUs,
+            applies: Applies::Disarmed,
+            field: Field::Stick(Stick::$which),
+            #[cfg(feature = "descriptions")]
             description: $what,
         }
     };
 }
-
-const RC: [[Definition; 4]; 4] = [
-    rc_input!("RC1_MIN", "RC1_TRIM", "RC1_MAX", "RC1_REV", 1),
-    rc_input!("RC2_MIN", "RC2_TRIM", "RC2_MAX", "RC2_REV", 2),
-    rc_input!("RC3_MIN", "RC3_TRIM", "RC3_MAX", "RC3_REV", 3),
-    rc_input!("RC4_MIN", "RC4_TRIM", "RC4_MAX", "RC4_REV", 4),
-];
 
 /// The number of parameters.
 pub const COUNT: usize = 50;
 
 /// The table, in the order of indices, of `PARAM_VALUE`'s `param_index` and of a snapshot.
 /// Appending keeps every index; any change of names or order changes [`LAYOUT_HASH`].
-pub static TABLE: [Param; COUNT] = params_of(&DEFINITION);
-
-/// The descriptions, in table order: only the parameter list reads them, so an image that
-/// never writes one leaves them out.
-const DESCRIPTIONS: [&str; COUNT] = descriptions_of(&DEFINITION);
-
-// Evaluated by the compiler: an index out of bounds would fail the build.
-#[allow(clippy::indexing_slicing)]
-const fn params_of(d: &[Definition; COUNT]) -> [Param; COUNT] {
-    let mut out = [d[0].param; COUNT];
-    let mut i = 0;
-    while i < COUNT {
-        out[i] = d[i].param;
-        i += 1;
-    }
-    out
-}
-
-#[allow(clippy::indexing_slicing)]
-const fn descriptions_of(d: &[Definition; COUNT]) -> [&'static str; COUNT] {
-    let mut out = [""; COUNT];
-    let mut i = 0;
-    while i < COUNT {
-        out[i] = d[i].description;
-        i += 1;
-    }
-    out
-}
-
-/// The table with its descriptions, as defined; [`LAYOUT_HASH`] reads it.
-const DEFINITION: [Definition; COUNT] = [
+pub static TABLE: [Param; COUNT] = [
     rc_map!("RCMAP_ROLL", Function::Roll, "roll (aileron)"),
     rc_map!("RCMAP_PITCH", Function::Pitch, "pitch (elevator)"),
     rc_map!("RCMAP_THROTTLE", Function::Throttle, "throttle"),
     rc_map!("RCMAP_YAW", Function::Yaw, "yaw (rudder)"),
-    RC[0][0],
-    RC[0][1],
-    RC[0][2],
-    RC[0][3],
-    RC[1][0],
-    RC[1][1],
-    RC[1][2],
-    RC[1][3],
-    RC[2][0],
-    RC[2][1],
-    RC[2][2],
-    RC[2][3],
-    RC[3][0],
-    RC[3][1],
-    RC[3][2],
-    RC[3][3],
-    Definition {
-        param: Param {
-            name: "RC_TIMEOUT_MS",
-            unit: Unit::Milliseconds,
-            min: 25.0,
-            max: 500.0,
-            step: Step::Integer,
-            applies: Applies::Disarmed,
-            field: Field::RcTimeoutMs,
-        },
+    rc_min!("RC1_MIN", 1),
+    rc_trim!("RC1_TRIM", 1),
+    rc_max!("RC1_MAX", 1),
+    rc_rev!("RC1_REV", 1),
+    rc_min!("RC2_MIN", 2),
+    rc_trim!("RC2_TRIM", 2),
+    rc_max!("RC2_MAX", 2),
+    rc_rev!("RC2_REV", 2),
+    rc_min!("RC3_MIN", 3),
+    rc_trim!("RC3_TRIM", 3),
+    rc_max!("RC3_MAX", 3),
+    rc_rev!("RC3_REV", 3),
+    rc_min!("RC4_MIN", 4),
+    rc_trim!("RC4_TRIM", 4),
+    rc_max!("RC4_MAX", 4),
+    rc_rev!("RC4_REV", 4),
+    Param {
+        name: "RC_TIMEOUT_MS",
+        unit: Unit::Milliseconds,
+        min: 25.0,
+        max: 500.0,
+        step: Step::Integer,
+        applies: Applies::Disarmed,
+        field: Field::RcTimeoutMs,
+        #[cfg(feature = "descriptions")]
         description: "a channel without a valid pulse this long loses the link (failsafe stage 1)",
     },
     stick_us!(
@@ -845,28 +854,26 @@ const DEFINITION: [Definition; COUNT] = [
     safety_ms!("DISARM_DELAY_MS", AutoDisarm, 1000.0, 60000.0, "armed with the throttle low this long disarms"),
     safety_ms!("FS_OFF_MS", FailsafeOff, 200.0, 10000.0, "lost radio time over a flight that stops the motors (failsafe stage 2)"),
     safety_ms!("FS_RECOVER_MS", Recovery, 200.0, 10000.0, "a good link must last this long to hand control back"),
-    Definition {
-        param: Param {
-            name: "ANGLE_MAX",
-            unit: Unit::Degrees,
-            min: 5.0,
-            max: 60.0,
-            step: Step::Any,
-            applies: Applies::Anytime,
-            field: Field::AngleMaxDeg,
-        },
+    Param {
+        name: "ANGLE_MAX",
+        unit: Unit::Degrees,
+        min: 5.0,
+        max: 60.0,
+        step: Step::Any,
+        applies: Applies::Anytime,
+        field: Field::AngleMaxDeg,
+        #[cfg(feature = "descriptions")]
         description: "roll and pitch at full stick",
     },
-    Definition {
-        param: Param {
-            name: "YAW_RATE_MAX",
-            unit: Unit::DegreesPerSecond,
-            min: 10.0,
-            max: 720.0,
-            step: Step::Any,
-            applies: Applies::Anytime,
-            field: Field::YawRateMaxDegS,
-        },
+    Param {
+        name: "YAW_RATE_MAX",
+        unit: Unit::DegreesPerSecond,
+        min: 10.0,
+        max: 720.0,
+        step: Step::Any,
+        applies: Applies::Anytime,
+        field: Field::YawRateMaxDegS,
+        #[cfg(feature = "descriptions")]
         description: "yaw rate at full stick",
     },
     gain!("ANG_RLL_P", Roll, OuterP, 20.0, "roll angle loop: rate demand per angle error, 1/s"),
@@ -881,88 +888,81 @@ const DEFINITION: [Definition; COUNT] = [
     gain!("RATE_YAW_P", Yaw, InnerP, 5000.0, "yaw rate loop P, compare counts per rad/s"),
     gain!("RATE_YAW_I", Yaw, InnerI, 5000.0, "yaw rate loop I, counts per rad"),
     gain!("RATE_YAW_D", Yaw, InnerD, 500.0, "yaw rate loop D, counts per rad/s^2"),
-    Definition {
-        param: Param {
-            name: "YAW_FF",
-            unit: Unit::None,
-            min: 0.0,
-            max: 1.5,
-            step: Step::Any,
-            applies: Applies::Anytime,
-            field: Field::YawFeedforward,
-        },
+    Param {
+        name: "YAW_FF",
+        unit: Unit::None,
+        min: 0.0,
+        max: 1.5,
+        step: Step::Any,
+        applies: Applies::Anytime,
+        field: Field::YawFeedforward,
+        #[cfg(feature = "descriptions")]
         description: "share of the yaw stick's rate fed straight to the yaw rate loop",
     },
-    Definition {
-        param: Param {
-            name: "GYRO_LPF_HZ",
-            unit: Unit::Hertz,
-            min: 40.0,
-            max: 300.0,
-            step: Step::Integer,
-            applies: Applies::Disarmed,
-            field: Field::GyroCutoffHz,
-        },
+    Param {
+        name: "GYRO_LPF_HZ",
+        unit: Unit::Hertz,
+        min: 40.0,
+        max: 300.0,
+        step: Step::Integer,
+        applies: Applies::Disarmed,
+        field: Field::GyroCutoffHz,
+        #[cfg(feature = "descriptions")]
         description: "gyro low-pass cut-off, 40..300 Hz in steps of 10 (second-order Butterworth at the 800 Hz tick)",
     },
-    Definition {
-        param: Param {
-            name: "RATE_D_LPF_K",
-            unit: Unit::None,
-            min: 0.01,
-            max: 1.0,
-            step: Step::Any,
-            applies: Applies::Disarmed,
-            field: Field::RateDFilterK,
-        },
+    Param {
+        name: "RATE_D_LPF_K",
+        unit: Unit::None,
+        min: 0.01,
+        max: 1.0,
+        step: Step::Any,
+        applies: Applies::Disarmed,
+        field: Field::RateDFilterK,
+        #[cfg(feature = "descriptions")]
         description: "rate loop D low-pass: share of each new sample, 1 = unfiltered (0.4: ~65 Hz at 800 Hz)",
     },
-    Definition {
-        param: Param {
-            name: "BATT_VOLT_MULT",
-            unit: Unit::None,
-            min: 1.0,
-            max: 10.0,
-            step: Step::Any,
-            applies: Applies::Disarmed,
-            field: Field::BatteryVoltMult,
-        },
+    Param {
+        name: "BATT_VOLT_MULT",
+        unit: Unit::None,
+        min: 1.0,
+        max: 10.0,
+        step: Step::Any,
+        applies: Applies::Disarmed,
+        field: Field::BatteryVoltMult,
+        #[cfg(feature = "descriptions")]
         description: "battery volts per volt at the ADC pin (the board's divider: 1.5)",
     },
-    Definition {
-        param: Param {
-            name: "LINK_PROTOCOL",
-            unit: Unit::None,
-            min: 0.0,
-            max: 1.0,
-            step: Step::Integer,
-            applies: Applies::Reboot,
-            field: Field::LinkProtocol,
-        },
+    Param {
+        name: "LINK_PROTOCOL",
+        unit: Unit::None,
+        min: 0.0,
+        max: 1.0,
+        step: Step::Integer,
+        applies: Applies::Reboot,
+        field: Field::LinkProtocol,
+        #[cfg(feature = "descriptions")]
         description: "USART1: 0 text lines (serial plotter), 1 MAVLink",
     },
-    Definition {
-        param: Param {
-            name: "LINK_ATT_HZ",
-            unit: Unit::Hertz,
-            min: 1.0,
-            max: 50.0,
-            step: Step::Integer,
-            applies: Applies::Anytime,
-            field: Field::LinkAttitudeHz,
-        },
+    Param {
+        name: "LINK_ATT_HZ",
+        unit: Unit::Hertz,
+        min: 1.0,
+        max: 50.0,
+        step: Step::Integer,
+        applies: Applies::Anytime,
+        field: Field::LinkAttitudeHz,
+        #[cfg(feature = "descriptions")]
         description: "attitude messages per second",
     },
-    Definition {
-        param: Param {
-            name: "LINK_RC_HZ",
-            unit: Unit::Hertz,
-            min: 1.0,
-            max: 50.0,
-            step: Step::Integer,
-            applies: Applies::Anytime,
-            field: Field::LinkRcHz,
-        },
+    Param {
+        name: "LINK_RC_HZ",
+        unit: Unit::Hertz,
+        min: 1.0,
+        max: 50.0,
+        step: Step::Integer,
+        applies: Applies::Anytime,
+        field: Field::LinkRcHz,
+        #[cfg(feature = "descriptions")]
         description: "radio input and motor output messages per second",
     },
 ];

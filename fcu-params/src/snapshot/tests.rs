@@ -239,18 +239,18 @@ fn a_snapshot_of_another_table_is_not_loaded() {
 
 #[test]
 fn boot_takes_the_newest_set_or_the_defaults_and_says_which() {
-    let defaults = crate::Config::default();
+    let defaults = fcu_core::Config::default();
     let mut f = Flash::erased();
     assert_eq!(load_config(f.view(), &defaults), (defaults, Source::NoSnapshot));
     // A tune saved: it comes back whole.
     let mut tuned = defaults;
-    let i = crate::parameters::index_of(b"RATE_RLL_P").unwrap();
-    crate::parameters::set(&mut tuned, i, 250.0, false).unwrap();
-    f.save(&crate::parameters::values(&tuned));
+    let i = crate::index_of(b"RATE_RLL_P").unwrap();
+    crate::set(&mut tuned, i, 250.0, false).unwrap();
+    f.save(&crate::values(&tuned));
     assert_eq!(load_config(f.view(), &defaults), (tuned, Source::Snapshot { sequence: 1, passed_over: None }));
     // A set whose values are this table's but do not validate: the defaults, and the rule.
-    let mut bad = crate::parameters::values(&defaults);
-    bad[crate::parameters::index_of(b"RC1_TRIM").unwrap()] = 2400.0;
+    let mut bad = crate::values(&defaults);
+    bad[crate::index_of(b"RC1_TRIM").unwrap()] = 2400.0;
     f.save(&bad);
     let (cfg, source) = load_config(f.view(), &defaults);
     // The newer set is refused: the older one loads, and the refusal is named in full.
@@ -264,13 +264,13 @@ fn boot_takes_the_newest_set_or_the_defaults_and_says_which() {
 
 /// `defaults`' values with `name` set to `v`, unchecked.
 fn values_with(name: &str, v: f32) -> [f32; COUNT] {
-    let mut values = crate::parameters::values(&crate::Config::default());
-    values[crate::parameters::index_of(name.as_bytes()).unwrap()] = v;
+    let mut values = crate::values(&fcu_core::Config::default());
+    values[crate::index_of(name.as_bytes()).unwrap()] = v;
     values
 }
 
 fn describe(source: &Source) -> std::string::String {
-    let mut line = crate::telemetry::LineBuf::<{ DESCRIBE_LEN }>::new();
+    let mut line = fcu_core::telemetry::LineBuf::<{ DESCRIBE_LEN }>::new();
     source.describe(&mut line);
     assert!(!line.is_truncated());
     line.as_str().into()
@@ -278,9 +278,9 @@ fn describe(source: &Source) -> std::string::String {
 
 #[test]
 fn a_newest_snapshot_refused_falls_back_to_the_older_one_and_says_why() {
-    let defaults = crate::Config::default();
+    let defaults = fcu_core::Config::default();
     let tuned = values_with("RATE_RLL_P", 250.0);
-    let tuned_cfg = crate::parameters::with_values(&defaults, &tuned).unwrap();
+    let tuned_cfg = crate::with_values(&defaults, &tuned).unwrap();
     // A value above its maximum (as ANGLE_MAX 60 read back as 60.000004 was saved).
     let mut f = Flash::erased();
     f.save(&tuned);
@@ -323,7 +323,7 @@ fn a_newest_snapshot_refused_falls_back_to_the_older_one_and_says_why() {
 fn every_description_fits_its_length() {
     let mut longest = 0;
     for i in 0..COUNT {
-        let name = crate::parameters::name(i).unwrap();
+        let name = crate::name(i).unwrap();
         let source = Source::Snapshot {
             sequence: u32::MAX,
             passed_over: Some(PassedOver { sequence: u32::MAX, why: Why::Rule { parameter: Some(name), rule: "x".repeat(32).leak() } }),

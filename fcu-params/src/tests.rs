@@ -1,6 +1,7 @@
 use super::*;
-use crate::config::ConfigError;
-use crate::rc::{RcMap, CHANNELS};
+use fcu_core::config::ConfigError;
+use fcu_core::rc::{RcMap, CHANNELS};
+use fcu_core::supervisor::SupervisorConfig as Supervisor;
 
 fn idx(name: &str) -> usize {
     index_of(name.as_bytes()).unwrap_or_else(|| panic!("no parameter {name}"))
@@ -17,7 +18,9 @@ fn names_are_unique_upper_case_and_fit_a_param_id() {
         assert!(!p.name.is_empty() && p.name.len() <= NAME_LEN, "{}", p.name);
         assert!(p.name.bytes().all(|b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_'), "{}", p.name);
         assert_eq!(index_of(p.name.as_bytes()), Some(i), "{} is not unique", p.name);
-        assert!(p.min < p.max && description(i).is_some_and(|d| !d.is_empty()), "{}", p.name);
+        assert!(p.min < p.max, "{}", p.name);
+        #[cfg(feature = "descriptions")]
+        assert!(description(i).is_some_and(|d| !d.is_empty()), "{}", p.name);
         // Whole-number parameters are exact as f32.
         assert!(p.min.abs() < 16_777_216.0 && p.max.abs() < 16_777_216.0);
     }
@@ -59,7 +62,7 @@ fn every_rule_fits_a_statustext_with_the_name() {
     let mut rc_rules = std::vec::Vec::new();
     let d = Config::default().rc;
     for f in [
-        &(|c: &mut crate::rc::RcConfig| c.map.roll = 1) as &dyn Fn(&mut crate::rc::RcConfig),
+        &(|c: &mut fcu_core::rc::RcConfig| c.map.roll = 1) as &dyn Fn(&mut fcu_core::rc::RcConfig),
         &|c| c.full_scale = StickCounts(0),
         &|c| c.inputs[0].trim_counts = 9000,
         &|c| c.inputs[0].max_counts = c.inputs[0].trim_counts + 1,
@@ -69,7 +72,7 @@ fn every_rule_fits_a_statustext_with_the_name() {
         &|c| c.yaw_deadband = StickCounts(-1),
         &|c| c.yaw_rate_max_deg_s = -1.0,
         &|c| c.link_timeout_ticks = 0,
-        &|c| c.pulses = crate::rc::PulseRules::Validated { min_counts: 1, max_counts: 0, max_pulse_ticks: 1 },
+        &|c| c.pulses = fcu_core::rc::PulseRules::Validated { min_counts: 1, max_counts: 0, max_pulse_ticks: 1 },
     ] {
         let mut c = d;
         f(&mut c);
@@ -312,11 +315,11 @@ fn another_transmitter_is_set_up_through_parameters_alone() {
         assert!(r.is_ok(), "{name} = {v}: {r:?}");
     }
     assert_eq!(c.rc.map, RcMap { roll: 1, pitch: 3, throttle: 0, yaw: 2 });
-    let mut s = crate::rc::Sticks::default();
+    let mut s = fcu_core::rc::Sticks::default();
     for (input, w_us) in [(0, 1500u16), (1, 2000), (2, 1250), (3, 1250)] {
         c.rc.apply_width(&mut s, input, w_us * 4);
     }
-    assert_eq!(s, crate::rc::Sticks::new(1800, 900, 1800, -900));
+    assert_eq!(s, fcu_core::rc::Sticks::new(1800, 900, 1800, -900));
     assert_eq!(c.validate(), Ok(()));
     let _ = CHANNELS;
 }
@@ -329,7 +332,7 @@ fn times_are_whole_ticks_and_the_reference_supervisor_has_none_to_set() {
     assert_eq!(set(&mut c, idx("FS_OFF_MS"), 2000.0, false).map(|a| a.value), Ok(2000.0));
     assert_eq!(safety(&c).failsafe_off_ticks, 1600);
     assert_eq!(set(&mut c, idx("ARM_HOLD_MS"), 1001.0, false).map_err(|r| r.rule), Err(RULE_NOT_TICKS));
-    let mut r = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
+    let mut r = Config { supervisor: Supervisor::Reference, ..Config::default() };
     let before = r;
     assert_eq!(set(&mut r, idx("ARM_HOLD_MS"), 2000.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
     assert_eq!(r, before);
@@ -366,14 +369,14 @@ fn the_gyro_cut_off_is_designed_as_the_profile_designs_it() {
 
 #[test]
 fn the_layout_hash_follows_names_and_order() {
-    let mut swapped = DEFINITION;
+    let mut swapped = TABLE;
     swapped.swap(0, 1);
     assert_ne!(layout_hash(&swapped), LAYOUT_HASH);
-    let mut renamed = DEFINITION;
-    renamed[5].param.name = "RC1_TRIX";
+    let mut renamed = TABLE;
+    renamed[5].name = "RC1_TRIX";
     assert_ne!(layout_hash(&renamed), LAYOUT_HASH);
-    assert_ne!(layout_hash(&DEFINITION[..COUNT - 1]), LAYOUT_HASH);
-    assert_eq!(layout_hash(&DEFINITION), LAYOUT_HASH);
+    assert_ne!(layout_hash(&TABLE[..COUNT - 1]), LAYOUT_HASH);
+    assert_eq!(layout_hash(&TABLE), LAYOUT_HASH);
 }
 
 #[test]
@@ -390,29 +393,6 @@ fn a_whole_set_is_checked_as_a_whole() {
     assert_eq!(with_values(&base, &v), Err("RCn: need MIN <= TRIM <= MAX"));
     v[idx("RC1_TRIM")] = f32::NAN;
     assert_eq!(with_values(&base, &v), Err(RULE_NOT_FINITE));
-}
-
-#[test]
-fn the_field_lists_cover_exactly_the_table_and_its_in_flight_part() {
-    // Each parameter moved on its own: the whole change is in the parameter fields, and in
-    // the in-flight fields exactly when the parameter may change armed.
-    let old = Config::default();
-    for (i, p) in TABLE.iter().enumerate() {
-        let v = p.get(&old);
-        let moved = [p.max, p.min, v + 1.0, v - 1.0, v * 1.1].into_iter().find_map(|x| {
-            let mut c = old;
-            set(&mut c, i, x, false).ok().map(|_| c).filter(|c| *c != old)
-        });
-        let new = moved.unwrap_or_else(|| panic!("{} could not be moved", p.name));
-        assert_eq!(with_parameter_fields_of(&new, &old), old, "{}: a field outside the parameter fields moved", p.name);
-        assert_eq!(with_parameter_fields_of(&old, &new), new, "{}", p.name);
-        let in_flight = with_in_flight_fields_of(&old, &new) == new;
-        assert_eq!(in_flight, p.applies == Applies::Anytime, "{}", p.name);
-    }
-    // A field no parameter sets is outside both.
-    let mut other = old;
-    other.mixer.max_compare += 1.0;
-    assert_ne!(with_parameter_fields_of(&other, &old), old);
 }
 
 #[test]
@@ -582,4 +562,70 @@ fn a_qgroundcontrol_params_file_reads_as_the_same_set() {
     assert_eq!(apply_file(&base, "1 1 ANG_RLL_P 5 x\n"), Err(FileError { line: 1, rule: file::RULE_LINE }));
     assert_eq!(apply_file(&base, "1 1 ANG_RLL_P 5\n"), Err(FileError { line: 1, rule: file::RULE_LINE }));
     assert_eq!(apply_file(&base, "1\t1\tANG_RLL_P\tfive\t9\n"), Err(FileError { line: 1, rule: file::RULE_NOT_A_NUMBER }));
+}
+
+/// The default with the reference's supervisor: a configuration a test can classify changes of.
+fn flown() -> Config {
+    Config { supervisor: Supervisor::Reference, ..Config::default() }
+}
+
+fn with(name: &str, value: f32) -> Config {
+    let mut cfg = Config::default();
+    set_by_name(&mut cfg, name.as_bytes(), value, false).unwrap();
+    cfg
+}
+
+#[test]
+fn every_parameter_changes_as_the_table_says_it_applies() {
+    // One parameter at a time, each to another value on its step: the change check derives
+    // its kind from the table, with no list of fields of its own.
+    for (i, p) in TABLE.iter().enumerate() {
+        let old = Config::default();
+        let v = p.get(&old);
+        let candidates = [p.min, p.max, v + 1.0, v - 1.0, v + 10.0, v - 10.0];
+        let mut new = old;
+        let Some(changed) = candidates.iter().find(|&&c| c != v && set(&mut new, i, c, false).is_ok()) else {
+            panic!("no other value for {}", p.name);
+        };
+        let expected = p.applies.kind();
+        assert_eq!(check_change(&old, &new, false).map(|c| c.kind), Ok(expected), "{} to {changed}", p.name);
+        let restricted = if expected == ChangeKind::InFlight { Ok(()) } else { Err(ApplyError::Armed) };
+        assert_eq!(check_change(&old, &new, true).map(|_| ()), restricted, "{} to {changed}", p.name);
+    }
+}
+
+#[test]
+fn while_restricted_only_in_flight_parameters_change_and_a_setting_no_parameter_reaches_never_does() {
+    let old = Config::default();
+    assert_eq!(check_change(&old, &with("RC1_TRIM", 1470.0), true), Err(ApplyError::Armed));
+    assert_eq!(check_change(&old, &with("GYRO_LPF_HZ", 80.0), true), Err(ApplyError::Armed));
+    assert_eq!(check_change(&old, &with("RCMAP_ROLL", 2.0), true), Err(ApplyError::Armed));
+    let swapped = check_change(&old, &with("RCMAP_ROLL", 2.0), false).unwrap();
+    assert_eq!((swapped.kind, swapped.cfg), (ChangeKind::GroundOnly, with("RCMAP_ROLL", 2.0)));
+    assert_eq!(check_change(&old, &with("RATE_RLL_P", 260.0), true).map(|c| c.kind), Ok(ChangeKind::InFlight));
+    assert_eq!(check_change(&old, &old, true).map(|c| c.kind), Ok(ChangeKind::InFlight));
+    // Not a parameter at all, or not valid: refused restricted or not.
+    let mut mixer = old;
+    mixer.mixer.max_compare -= 1.0;
+    assert_eq!(check_change(&old, &mixer, false), Err(ApplyError::NeedsRestart));
+    let mut invalid = old;
+    invalid.control.roll.inner_kp = -1.0;
+    assert_eq!(check_change(&old, &invalid, false), Err(ApplyError::Invalid(ConfigError::Control)));
+    assert_eq!(check_change(&flown(), &old, false), Err(ApplyError::NeedsRestart));
+    // A setting a parameter reaches, at a value no parameter sets: not a parameter change.
+    let mut between = old;
+    between.gyro_filter = BiquadCoeffs::butterworth_lowpass(123.0, 800.0).unwrap();
+    assert_eq!(check_change(&old, &between, false), Err(ApplyError::NeedsRestart));
+    assert_eq!(ApplyError::Armed.rule(), RULE_ARMED);
+}
+
+#[test]
+fn a_refused_apply_changes_nothing_and_a_taken_one_reaches_the_controller() {
+    let mut fc = FlightController::new(Config::default()).unwrap();
+    assert_eq!(apply(&mut fc, &with("RC1_TRIM", 1470.0)), Ok(()));
+    assert_eq!(fc.config(), &with("RC1_TRIM", 1470.0));
+    let mut mixer = *fc.config();
+    mixer.mixer.max_compare -= 1.0;
+    assert_eq!(apply(&mut fc, &mixer), Err(ApplyError::NeedsRestart));
+    assert_eq!(fc.config(), &with("RC1_TRIM", 1470.0));
 }

@@ -95,10 +95,7 @@ pub struct SavePlan {
 /// CRC-32 (IEEE 802.3, reflected, as zlib's) of `words`' little-endian bytes. A word at a
 /// time, four bits a step from a 16-entry table: the reflected CRC takes a word's
 /// little-endian bytes as its 32 bits from the lowest, so XORing the whole word in and
-/// stepping 32 bits is the bytewise CRC. A bit a step, fcu-core's opt-level 3 unrolled the 32
-/// steps (some 400 bytes); this is a fraction of that, with the 64-byte table. Out of line:
-/// one copy for loading and saving.
-#[inline(never)]
+/// stepping 32 bits is the bytewise CRC.
 pub fn crc32(words: &[u32]) -> u32 {
     let mut crc = !0u32;
     for w in words {
@@ -290,7 +287,7 @@ impl Source {
     /// bytes: longer than one message's 50, the link sends it in chunks), e.g. `parameters
     /// loaded from flash (snapshot 12); newer snapshot 13 refused: RC1_TRIM: above the
     /// maximum`.
-    pub fn describe<const N: usize>(&self, out: &mut crate::telemetry::LineBuf<N>) {
+    pub fn describe<const N: usize>(&self, out: &mut fcu_core::telemetry::LineBuf<N>) {
         match self {
             Source::Snapshot { sequence, passed_over } => {
                 out.push_str("parameters loaded from flash (snapshot ");
@@ -326,10 +323,7 @@ impl Source {
 /// make a valid configuration, or `defaults` alone (and why), never a mix. A newer snapshot
 /// refused (its values break a rule, or another firmware's table) falls back to the older
 /// one, and [`Source`] names the refused one.
-// Out of line: inlined into a firmware's `init` with constant defaults, opt-level 3 builds the
-// defaults field by field once per way out (a kilobyte each) instead of copying them.
-#[inline(never)]
-pub fn load_config(sectors: [&[u32]; 2], defaults: &crate::Config) -> (crate::Config, Source) {
+pub fn load_config(sectors: [&[u32]; 2], defaults: &fcu_core::Config) -> (fcu_core::Config, Source) {
     let mut before = None;
     let mut passed_over: Option<PassedOver> = None;
     let mut newest_rule = None;
@@ -383,9 +377,7 @@ pub fn plan_save(sectors: [&[u32]; 2], values: &[f32; COUNT]) -> SavePlan {
     SavePlan { erase: (!fresh).then_some(other), sector: other, first_word: 0, words }
 }
 
-/// Words that are all erased flash (and at least one). Out of line: the save asks it of every
-/// slot and of a whole sector, and at fcu-core's opt-level each copy would be unrolled.
-#[inline(never)]
+/// Words that are all erased flash (and at least one).
 fn erased(words: &[u32]) -> bool {
     !words.is_empty() && words.iter().all(|&w| w == ERASED)
 }
