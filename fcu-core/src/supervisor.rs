@@ -15,7 +15,7 @@
 //! 3. the transition's actions (what starts or ends with a state) are applied, and the
 //!    [`Decision`] follows from the new state.
 
-use crate::ground::{disarm_rule, GroundCommands};
+use crate::ground::GroundCommands;
 use crate::imu::SensorFault;
 use crate::rc::{Gesture, StickCounts, Sticks};
 
@@ -303,7 +303,7 @@ pub enum Condition {
     LossBudgetSpent = 1 << 23,
     /// The link has been good for [`SafetyConfig::recovery_ticks`].
     Recovered = 1 << 24,
-    /// The ground station asked for a disarm, and [`crate::ground::disarm_rule`] lets it act.
+    /// The ground station asked for a disarm, and [`crate::ground::Disarm::checked`] lets it act.
     GroundDisarm = 1 << 25,
     /// The ground station asked for an IMU calibration.
     GroundCalibrate = 1 << 26,
@@ -425,7 +425,7 @@ const FROM_ARMING: [Transition; 6] = [
 ];
 
 const FROM_ARMED: [Transition; 6] = [
-    // Only with the throttle low or forced (`ground::disarm_rule`): the motors stop now.
+    // Only with the throttle low or forced (`ground::Disarm::checked`): the motors stop now.
     way(FlightState::Disarmed, GROUND_DISARM, NONE),
     way(FlightState::FailsafeOff, NO_LINK.and(LOSS_BUDGET_SPENT), NONE),
     way(FlightState::FailsafeLevel, NO_LINK, NONE),
@@ -632,7 +632,7 @@ impl Supervisor {
         c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
         c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
         c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
-        c.set(Condition::GroundDisarm, i.ground.disarm.is_some_and(|d| disarm_rule(self.state, i.throttle_low, d.forced).is_ok()));
+        c.set(Condition::GroundDisarm, i.ground.disarm.is_some_and(|d| d.checked(self.state, i.throttle_low).is_ok()));
         c.set(Condition::GroundCalibrate, i.ground.calibrate);
         c
     }

@@ -6,9 +6,11 @@
 //! (the firmware's link task) feeds it the status, hands the configuration changes it accepts
 //! to the control loop ([`Station::take_change`]), hands the commands it accepts to the control
 //! tick ([`Station::take_ground`]) and does the flash work it asks for ([`Station::save_due`],
-//! [`Station::saved`]). It decides what a ground station may do, with the rules of fcu-core's
-//! parameter table and of [`fcu_core::ground`] (which the control tick applies again with the
-//! state it is in); the owner only moves bytes and words.
+//! [`Station::saved`]). It answers a ground station with the verdicts of fcu-core's parameter
+//! table and of [`fcu_core::ground`] (which the control tick applies again with the state it is
+//! in), adding only the rules of its own work (a save or reboot pending, the reference
+//! supervisor); the link maps the verdict to MAVLink's answer, and the owner only moves bytes
+//! and words.
 //!
 //! # Deferred actions
 //!
@@ -23,15 +25,14 @@
 //! tick), is dropped with a text saying so ([`Station::take_notice`]). An erase stalls every
 //! instruction fetch, the control tick's included; a reset stops the motors.
 //!
-//! A save is refused while a motor test runs (the motor would keep its duty through the erase)
-//! and a motor test or a calibration while a save or a reboot is pending.
+//! A motor test or a calibration is refused while a save or a reboot is pending.
 
 use fcu_core::flight::{ChangeKind, ConfigChange, Status};
-use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange};
+use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange, Refused};
 use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
-use fcu_params::{self as parameters, snapshot, RULE_ARMED};
+use fcu_params::{self as parameters, snapshot};
 
 use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
 
@@ -51,8 +52,6 @@ const HOLD_CONFIRMATIONS: u8 = 2;
 /// control loop that has stopped reporting, or a flood that keeps the link from going quiet.
 pub const ACTION_TIMEOUT_MS: u32 = 5000;
 
-/// Rule: a save is refused while a motor test runs.
-pub const RULE_MOTOR_TEST_RUNNING: &str = "motor test running";
 /// Rule: nothing new starts while a save is pending.
 pub const RULE_SAVING: &str = "save pending";
 /// Rule: nothing new starts while a reboot is pending.
@@ -310,11 +309,11 @@ impl Station {
     }
 
     /// Why a new motor test or calibration may not start now: a save or a reboot is pending.
-    fn pending_rule(&self) -> Result<(), &'static str> {
+    fn pending_rule(&self) -> Result<(), Refused> {
         if self.reboot_asked_ms.is_some() {
-            Err(RULE_REBOOTING)
+            Err(Refused::denied(RULE_REBOOTING))
         } else if self.save_wanted() || self.ground.saving {
-            Err(RULE_SAVING)
+            Err(Refused::denied(RULE_SAVING))
         } else {
             Ok(())
         }
@@ -332,9 +331,9 @@ impl Station {
 
     /// The commands for the control tick, to add one to; the safe supervisor's only. Not
     /// generic over what is added (a closure each): one copy for every command.
-    fn for_tick(&mut self) -> Result<&mut GroundInput, &'static str> {
+    fn for_tick(&mut self) -> Result<&mut GroundInput, Refused> {
         if !self.safe_supervisor() {
-            return Err(ground::RULE_REFERENCE);
+            return Err(Refused::denied(ground::RULE_REFERENCE));
         }
         self.ground_pending = true;
         Ok(&mut self.ground)
@@ -351,8 +350,6 @@ impl Vehicle for Station {
         let Some(s) = self.status else {
             return VehicleState {
                 state: FlightState::Calibrating,
-                in_air: false,
-                throttle_low: true,
                 attitude: Attitude::default(),
                 rc_widths_us: [0; 8],
                 rc_channel_count: 0,
@@ -368,13 +365,10 @@ impl Vehicle for Station {
         for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
             *out = (u32::from(w) / COUNTS_PER_US) as u16;
         }
-        let throttle_low = self.cfg.rc.throttle_low(&s.sticks);
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;
         let motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
         VehicleState {
             state: s.state,
-            in_air: armed && !throttle_low,
-            throttle_low,
             attitude: Attitude {
                 roll_rad: s.tilt.roll_rad,
                 pitch_rad: s.tilt.pitch_rad,
@@ -443,42 +437,43 @@ impl Vehicle for Station {
         Ok(others)
     }
 
-    fn request(&mut self, request: Request) -> Result<(), &'static str> {
+    fn request(&mut self, request: Request) -> Result<(), Refused> {
+        let state = self.flight_state();
         match request {
-            Request::SaveParams if self.armed() => Err(RULE_ARMED),
-            Request::SaveParams if self.motor_test_running() => Err(RULE_MOTOR_TEST_RUNNING),
+            Request::Arm => ground::arm_rule(),
             Request::SaveParams => {
+                ground::save_rule(state, self.motor_test_running())?;
                 self.save_asked_ms = Some(self.now_ms);
                 Ok(())
             }
-            Request::ResetParams if self.armed() => Err(RULE_ARMED),
             Request::ResetParams => {
-                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| e.rule())?;
+                ground::disarmed_rule(state)?;
+                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
                 if self.cfg != *self.defaults {
                     self.cfg = *self.defaults;
                     self.changed(change.kind);
                 }
                 Ok(())
             }
-            Request::Reboot if self.armed() => Err(RULE_ARMED),
             Request::Reboot => {
+                ground::disarmed_rule(state)?;
                 self.reboot_asked_ms = Some(self.now_ms);
                 Ok(())
             }
             Request::Disarm { forced } => {
                 let throttle_low = self.status.is_none_or(|s| self.cfg.rc.throttle_low(&s.sticks));
-                ground::disarm_rule(self.flight_state(), throttle_low, forced)?;
+                Disarm { forced }.checked(state, throttle_low)?;
                 self.for_tick()?.disarm = Some(Disarm { forced });
                 Ok(())
             }
             Request::CalibrateImu => {
-                ground::ground_test_rule(self.flight_state())?;
+                ground::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.calibrate_imu = true;
                 Ok(())
             }
             Request::CalibrateRadio => {
-                ground::ground_test_rule(self.flight_state())?;
+                ground::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.radio_calibration = Some(true);
                 Ok(())
@@ -488,7 +483,7 @@ impl Vehicle for Station {
                 Ok(())
             }
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
-                let test = MotorTest { motor, duty_pct: throttle_pct, duration_ms }.checked(self.flight_state())?;
+                let test = MotorTest { motor, duty_pct: throttle_pct, duration_ms }.checked(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.motor_test = Some(MotorTestChange::Start(test));
                 Ok(())
@@ -516,6 +511,18 @@ mod tests {
         s
     }
 
+    /// The rule of a request's verdict (whether it is refused for now, the rules' own tests
+    /// in fcu-core show).
+    trait Asked {
+        fn asked(&mut self, request: Request) -> Result<(), &'static str>;
+    }
+
+    impl Asked for Station {
+        fn asked(&mut self, request: Request) -> Result<(), &'static str> {
+            self.request(request).map_err(|refused| refused.rule)
+        }
+    }
+
     const REST: Sticks = Sticks::new(0, 0, 0, 0);
     const UP: Sticks = Sticks::new(0, 0, 1500, 0);
 
@@ -532,55 +539,55 @@ mod tests {
     #[test]
     fn a_disarm_goes_to_the_tick_on_the_ground_and_in_the_air_only_forced() {
         let mut st = station_in(FlightState::Armed, REST);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Ok(()));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Ok(()));
         assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
         assert_eq!(st.take_ground(), None, "taken once");
 
         let mut st = station_in(FlightState::Armed, UP);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_THROTTLE_NOT_LOW));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(ground::RULE_THROTTLE_NOT_LOW));
         assert_eq!(st.take_ground(), None, "a refusal sends nothing");
-        assert_eq!(st.request(Request::Disarm { forced: true }), Ok(()));
+        assert_eq!(st.asked(Request::Disarm { forced: true }), Ok(()));
         assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
 
         let mut st = station_in(FlightState::FailsafeLevel, REST);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_FAILSAFE_LEVEL));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(ground::RULE_FAILSAFE_LEVEL));
     }
 
     #[test]
     fn a_motor_test_goes_to_the_tick_disarmed_only_capped() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(motor_test(3, 90.0)), Ok(()));
+        assert_eq!(st.asked(motor_test(3, 90.0)), Ok(()));
         let test = MotorTest { motor: 3, duty_pct: ground::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
         assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
-        assert_eq!(st.request(Request::StopMotorTest), Ok(()));
+        assert_eq!(st.asked(Request::StopMotorTest), Ok(()));
         assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
-        assert_eq!(st.request(motor_test(4, 5.0)), Err(ground::RULE_NO_SUCH_MOTOR));
+        assert_eq!(st.asked(motor_test(4, 5.0)), Err(ground::RULE_NO_SUCH_MOTOR));
 
         for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
             let mut st = station_in(state, REST);
-            assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_DISARMED_ONLY), "{state:?}");
+            assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_DISARMED_ONLY), "{state:?}");
             assert_eq!(st.take_ground(), None);
         }
-        assert_eq!(station_in(FlightState::Calibrating, REST).request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(station_in(FlightState::Calibrating, REST).asked(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
         // No status yet: the board is still booting.
         let mut st = Station::new(Config::default(), &Config::DEFAULT);
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
     }
 
     #[test]
     fn calibrations_go_to_the_tick_disarmed_only_and_an_end_always() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::CalibrateImu), Ok(()));
-        assert_eq!(st.request(Request::CalibrateRadio), Ok(()));
+        assert_eq!(st.asked(Request::CalibrateImu), Ok(()));
+        assert_eq!(st.asked(Request::CalibrateRadio), Ok(()));
         let g = st.take_ground().unwrap();
         assert!(g.calibrate_imu);
         assert_eq!(g.radio_calibration, Some(true));
 
         let mut st = station_in(FlightState::Armed, REST);
-        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_DISARMED_ONLY));
-        assert_eq!(st.request(Request::CalibrateRadio), Err(ground::RULE_DISARMED_ONLY));
+        assert_eq!(st.asked(Request::CalibrateImu), Err(ground::RULE_DISARMED_ONLY));
+        assert_eq!(st.asked(Request::CalibrateRadio), Err(ground::RULE_DISARMED_ONLY));
         assert_eq!(st.take_ground(), None);
-        assert_eq!(st.request(Request::EndCalibration), Ok(()));
+        assert_eq!(st.asked(Request::EndCalibration), Ok(()));
         assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
     }
 
@@ -589,11 +596,11 @@ mod tests {
         const CFG: Config = Config { supervisor: SupervisorConfig::Reference, ..Config::DEFAULT };
         let mut st = Station::new(CFG, &CFG);
         st.observe(&status(FlightState::Disarmed, REST, Blockers::default()), 3900, [0; 4], 0);
-        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
+        assert_eq!(st.asked(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
         assert_eq!(st.take_ground(), None);
         // A save has no arming refusal to wait for there.
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(st.save_due());
     }
 
@@ -619,7 +626,7 @@ mod tests {
         let idle = status(FlightState::Disarmed, REST, Blockers::default());
         let mut busy = idle;
         busy.blockers.insert(Blocker::Saving);
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(!st.save_due(), "the tick does not know yet");
         assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
         // A snapshot that does not show the refusal, then one that may predate the tick's take.
@@ -642,7 +649,7 @@ mod tests {
         st.observe(&busy, 3900, [0; 4], 1030);
         st.observe(&busy, 3900, [0; 4], 1035);
         assert!(!st.save_due(), "nothing was changed: nothing left to save");
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         st.observe(&busy, 3900, [0; 4], 1040);
         assert!(st.save_due());
         st.saved(true);
@@ -663,7 +670,7 @@ mod tests {
     #[test]
     fn a_reboot_is_due_only_once_the_tick_refuses_to_arm_for_it() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
         assert_eq!(st.due(), Due::Nothing, "the tick does not know yet");
         assert_eq!(st.take_ground().map(|g| g.rebooting), Some(true));
         feed(&mut st, FlightState::Disarmed, &[], 1005);
@@ -676,7 +683,7 @@ mod tests {
     #[test]
     fn a_reboot_accepted_disarmed_is_dropped_when_the_board_arms_never_carried_out_in_flight() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
         let _ = st.take_ground();
         // A gesture under way (motors off) is ended by the refusal: the reboot waits for it.
         feed(&mut st, FlightState::Arming, &[Blocker::RebootPending], 1002);
@@ -702,7 +709,7 @@ mod tests {
     #[test]
     fn a_reboot_never_confirmed_times_out_with_a_text() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
         let _ = st.take_ground();
         // The tick never shows the refusal (its status stopped, say).
         feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS - 5);
@@ -722,7 +729,7 @@ mod tests {
     fn an_asked_save_that_finds_the_board_armed_is_dropped_and_waits_for_the_disarm() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         let _ = st.take_ground();
         feed(&mut st, FlightState::Armed, &[], 1005);
         assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (the changes are saved after the disarm)"[..]));
@@ -743,7 +750,7 @@ mod tests {
     fn a_reboot_saves_what_is_unsaved_first() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
-        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
         let g = st.take_ground().unwrap();
         assert!(g.saving && g.rebooting, "{g:?}");
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1005);
@@ -760,7 +767,7 @@ mod tests {
     fn a_save_is_refused_during_a_motor_test_and_a_test_while_a_save_or_reboot_is_pending() {
         let mut st = station_in(FlightState::Disarmed, REST);
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000);
-        assert_eq!(st.request(Request::SaveParams), Err(RULE_MOTOR_TEST_RUNNING));
+        assert_eq!(st.asked(Request::SaveParams), Err(ground::RULE_MOTOR_TEST_RUNNING));
         // A change made meanwhile waits for the test to end.
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000 + SAVE_DEBOUNCE_MS + 100);
@@ -768,13 +775,13 @@ mod tests {
         assert_eq!(st.due(), Due::Nothing);
 
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_SAVING));
-        assert_eq!(st.request(Request::CalibrateImu), Err(RULE_SAVING));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(RULE_SAVING));
+        assert_eq!(st.asked(Request::CalibrateImu), Err(RULE_SAVING));
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_REBOOTING));
-        assert_eq!(st.request(Request::CalibrateRadio), Err(RULE_REBOOTING));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(RULE_REBOOTING));
+        assert_eq!(st.asked(Request::CalibrateRadio), Err(RULE_REBOOTING));
     }
 
     fn index(name: &str) -> u16 {
@@ -842,7 +849,7 @@ mod tests {
     fn a_save_with_the_supply_too_low_is_not_attempted_said_and_tried_again_after_the_debounce() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         let _ = st.take_ground();
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1010);

@@ -62,10 +62,11 @@ fn disarm_accepted_on_the_ground_refused_in_the_air_unless_forced() {
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, FORCED).0, MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
 
-    // The level stage: the station's own rule, DENIED with it.
+    // The level stage: refused for now as armed with the throttle up (the stage flies the held
+    // throttle), with its rule.
     let mut st = station(FlightState::FailsafeLevel, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
-    assert_eq!(result, MavResult::MAV_RESULT_DENIED);
+    assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert_eq!(texts, ["Disarm refused: in failsafe (force 21196)"]);
 }
 
@@ -82,7 +83,8 @@ fn motor_test_accepted_disarmed_refused_armed_and_while_calibrating() {
     }
     let mut st = station(FlightState::Armed, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
-    assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: disarmed only".to_string()]));
+    // Refused for now, as a calibration, a save and a reboot are while armed.
+    assert_eq!((result, texts), (MavResult::MAV_RESULT_TEMPORARILY_REJECTED, vec!["Motor test: disarmed only".to_string()]));
     assert_eq!(st.take_ground(), None);
     // Which motors there are is the flight controller's rule too.
     let mut st = station(FlightState::Disarmed, REST);
@@ -112,6 +114,86 @@ fn calibrations_accepted_disarmed_refused_otherwise() {
     let mut st = station(FlightState::Armed, REST);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert_eq!(st.take_ground(), None);
+}
+
+#[test]
+fn arming_from_the_link_is_refused_with_the_flight_controllers_rule() {
+    for state in [FlightState::Disarmed, FlightState::Armed] {
+        let mut st = station(state, REST);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Arm refused: arm with the stick gesture".to_string()]));
+        assert_eq!(st.take_ground(), None);
+    }
+}
+
+#[test]
+fn storage_and_reboot_accepted_disarmed_refused_for_now_armed() {
+    let save = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let reset = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let reboot = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut st = station(FlightState::Disarmed, REST);
+    assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save).0, MavResult::MAV_RESULT_ACCEPTED);
+    assert!(st.unsaved());
+    let mut st = station(FlightState::Disarmed, REST);
+    assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, reboot).0, MavResult::MAV_RESULT_ACCEPTED);
+    assert!(st.reboot_asked());
+    for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
+        let mut st = station(state, REST);
+        for (cmd, params, what) in [
+            (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save, "Storage"),
+            (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, reset, "Storage"),
+            (MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, reboot, "Reboot"),
+        ] {
+            let (result, texts) = ask(&mut st, cmd, params);
+            assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED, "{state:?} {cmd:?}");
+            assert_eq!(texts, [format!("{what} refused: disarmed only")]);
+        }
+        assert!(!st.unsaved() && !st.reboot_asked(), "{state:?}");
+        assert_eq!(st.take_change(), None, "{state:?}: a reset refused changes nothing");
+    }
+}
+
+#[test]
+fn whatever_the_flight_controller_refuses_the_link_cannot_carry_out() {
+    // Every command the link decodes, in every state: refused by the station (fcu-core's rules),
+    // the link sends it nowhere: no input for the tick, no configuration change, no save, no
+    // reboot (the link decides nothing, so it has nothing to let through on its own).
+    let commands: [(MavCmd, [f32; 7]); 9] = [
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM),
+        (MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_DO_MOTOR_TEST, [1.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_DO_MOTOR_TEST, [5.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]),
+    ];
+    let mut refused = 0;
+    for state in FlightState::ALL {
+        for sticks in [REST, UP] {
+            for (cmd, params) in commands {
+                let mut st = station(state, sticks);
+                // Differs from the defaults, for a reset to change.
+                let i = parameters::index_of(b"ANGLE_MAX").unwrap() as u16;
+                let _ = st.set_param(i, 25.0);
+                let _ = st.take_change();
+                let mut link = link();
+                link.receive(&v2(&command_long(cmd, params)), 0, &mut st);
+                let sent = drain(&mut link);
+                if ack_of(&sent).1 == MavResult::MAV_RESULT_ACCEPTED {
+                    continue;
+                }
+                refused += 1;
+                let what = format!("{state:?} {sticks:?} {cmd:?} {params:?}");
+                assert_eq!(st.take_ground(), None, "{what}");
+                assert_eq!(st.take_change(), None, "{what}");
+                assert!(!st.reboot_asked() && !link.reboot_ready(), "{what}");
+                assert_eq!(texts(&sent).len(), 1, "{what}: the rule named");
+            }
+        }
+    }
+    assert!(refused > 40, "{refused} refusals: the states must refuse most of these");
 }
 
 /// Telemetry off but for a heartbeat a minute apart: what goes out is the answers.

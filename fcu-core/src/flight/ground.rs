@@ -7,7 +7,7 @@
 //! motors that may not run, where the motor test's one compare value is written.
 
 use super::derived::TickParams;
-use crate::ground::{ground_test_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, RADIO_CALIBRATION_MAX_MS};
+use crate::ground::{test_or_calibration_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, RADIO_CALIBRATION_MAX_MS};
 use crate::rc::{RcConfig, Sticks};
 use crate::supervisor::FlightState;
 
@@ -42,7 +42,7 @@ fn ticks_in(ms: u32, p: &TickParams) -> u32 {
 
 impl Ground {
     /// Takes what the station asked, at tick `now` in `state`. A test or calibration that may
-    /// not start in `state` ([`ground_test_rule`], [`crate::ground::MotorTest::checked`]) is dropped: the station answered with an
+    /// not start in `state` ([`test_or_calibration_rule`], [`crate::ground::MotorTest::checked`]) is dropped: the station answered with an
     /// older view of the state. A save stops a motor test and refuses a new one: an erase
     /// stalls the tick, and the motor would keep its duty through it.
     pub(super) fn take(&mut self, input: &GroundInput, now: u32, state: FlightState, p: &TickParams) {
@@ -51,7 +51,7 @@ impl Ground {
         if input.disarm.is_some() {
             self.disarm = input.disarm;
         }
-        let may_start = ground_test_rule(state).is_ok();
+        let may_start = test_or_calibration_rule(state).is_ok();
         self.calibrate |= input.calibrate_imu && may_start;
         let start = match input.motor_test {
             Some(MotorTestChange::Start(asked)) if !input.saving => asked.checked(state).ok(),
