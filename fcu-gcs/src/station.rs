@@ -5,9 +5,9 @@
 //! The station holds the configuration in force and a copy of the latest status; its owner
 //! (the firmware's link task) feeds it the status, hands the configuration changes it accepts
 //! to the control loop ([`Station::take_change`]), hands the commands it accepts to the control
-//! tick ([`Station::take_ground`]) and does the flash work it asks for ([`Station::save_due`],
+//! tick ([`Station::take_gcs`]) and does the flash work it asks for ([`Station::save_due`],
 //! [`Station::saved`]). It answers a ground station with the verdicts of fcu-core's parameter
-//! table and of [`fcu_core::ground`] (which the control tick applies again with the state it is
+//! table and of [`fcu_core::gcs`] (which the control tick applies again with the state it is
 //! in), adding only the rules of its own work (a save or reboot pending, the reference
 //! supervisor); the link maps the verdict to MAVLink's answer, and the owner only moves bytes
 //! and words.
@@ -16,7 +16,7 @@
 //!
 //! A save and a reboot are not carried out when they are asked for: a save waits for the
 //! changes to settle, both wait for the acknowledgement to leave. Each first tells the control
-//! tick ([`GroundInput::saving`], [`GroundInput::rebooting`]), which refuses to arm from then on
+//! tick ([`GcsInput::saving`], [`GcsInput::rebooting`]), which refuses to arm from then on
 //! with a blocker of its own ([`Blocker::Saving`], [`Blocker::RebootPending`]), and is due only
 //! once two status snapshots taken after that show the refusal with the board disarmed (the
 //! first may predate the tick taking the input). [`Station::due`] asks again at the instant the
@@ -28,7 +28,7 @@
 //! A motor test or a calibration is refused while a save or a reboot is pending.
 
 use fcu_core::flight::{ChangeKind, ConfigChange, Status};
-use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange, Refused};
+use fcu_core::gcs::{self, Disarm, GcsInput, MotorTest, MotorTestChange, Refused};
 use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
@@ -86,9 +86,9 @@ pub struct Station {
     reboot_asked_ms: Option<u32>,
     /// The commands for the control tick not taken yet, and the levels of the save and the
     /// reboot.
-    ground: GroundInput,
-    /// `ground` differs from what the control tick last took.
-    ground_pending: bool,
+    gcs: GcsInput,
+    /// `gcs` differs from what the control tick last took.
+    gcs_pending: bool,
     /// Snapshots since the levels went out that show them in force (see the module docs).
     hold_confirmed: u8,
     /// A dropped action's text, for the ground station.
@@ -109,8 +109,8 @@ impl Station {
             unsaved_since_ms: None,
             save_asked_ms: None,
             reboot_asked_ms: None,
-            ground: GroundInput::default(),
-            ground_pending: false,
+            gcs: GcsInput::default(),
+            gcs_pending: false,
             hold_confirmed: 0,
             notice: None,
         }
@@ -122,12 +122,12 @@ impl Station {
         self.battery_mv = battery_mv.min(u32::from(u16::MAX)) as u16;
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
-        let held = self.ground.saving || self.ground.rebooting;
+        let held = self.gcs.saving || self.gcs.rebooting;
         let shows = |level: bool, blocker: Blocker| !level || status.blockers.contains(blocker);
         let refusing = !status.state.changes_restricted()
-            && shows(self.ground.saving, Blocker::Saving)
-            && shows(self.ground.rebooting, Blocker::RebootPending);
-        self.hold_confirmed = if held && !self.ground_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
+            && shows(self.gcs.saving, Blocker::Saving)
+            && shows(self.gcs.rebooting, Blocker::RebootPending);
+        self.hold_confirmed = if held && !self.gcs_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
         if matches!(status.state, FlightState::Armed | FlightState::FailsafeLevel) {
             // Armed before the refusal reached the tick: what was asked cannot be done now,
             // and is not to be done by surprise later. (An arming gesture under way is ended
@@ -166,22 +166,22 @@ impl Station {
         self.change_pending.take().map(|kind| ConfigChange { cfg: self.cfg, kind })
     }
 
-    /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_ground`]): the
+    /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_gcs`]): the
     /// commands accepted since the last call, and whether a save is wanted; `None` when nothing
     /// changed.
-    pub fn take_ground(&mut self) -> Option<GroundInput> {
+    pub fn take_gcs(&mut self) -> Option<GcsInput> {
         let saving = self.save_wanted();
         let rebooting = self.reboot_asked_ms.is_some();
-        if (saving, rebooting) != (self.ground.saving, self.ground.rebooting) {
-            self.ground.saving = saving;
-            self.ground.rebooting = rebooting;
-            self.ground_pending = true;
+        if (saving, rebooting) != (self.gcs.saving, self.gcs.rebooting) {
+            self.gcs.saving = saving;
+            self.gcs.rebooting = rebooting;
+            self.gcs_pending = true;
         }
-        if !core::mem::take(&mut self.ground_pending) {
+        if !core::mem::take(&mut self.gcs_pending) {
             return None;
         }
-        let input = self.ground;
-        self.ground = GroundInput { saving, rebooting, ..GroundInput::default() };
+        let input = self.gcs;
+        self.gcs = GcsInput { saving, rebooting, ..GcsInput::default() };
         Some(input)
     }
 
@@ -226,19 +226,19 @@ impl Station {
     /// refuses to arm for it (see the module docs). The reference's supervisor has no such
     /// refusal: only the armed state counts there.
     pub fn save_due(&self) -> bool {
-        self.save_wanted() && self.held(self.ground.saving)
+        self.save_wanted() && self.held(self.gcs.saving)
     }
 
     /// Whether the board should reset now: asked for, nothing left to save, and the control
     /// tick refuses to arm for it.
     fn reboot_due(&self) -> bool {
-        self.reboot_asked_ms.is_some() && !self.unsaved() && self.held(self.ground.rebooting)
+        self.reboot_asked_ms.is_some() && !self.unsaved() && self.held(self.gcs.rebooting)
     }
 
     /// The control tick shows the refusal `level` asks for (always, for the reference's
     /// supervisor, which has none).
     fn held(&self, level: bool) -> bool {
-        let confirmed = level && !self.ground_pending && self.hold_confirmed >= HOLD_CONFIRMATIONS;
+        let confirmed = level && !self.gcs_pending && self.hold_confirmed >= HOLD_CONFIRMATIONS;
         !self.armed() && (confirmed || !self.safe_supervisor())
     }
 
@@ -312,7 +312,7 @@ impl Station {
     fn pending_rule(&self) -> Result<(), Refused> {
         if self.reboot_asked_ms.is_some() {
             Err(Refused::denied(RULE_REBOOTING))
-        } else if self.save_wanted() || self.ground.saving {
+        } else if self.save_wanted() || self.gcs.saving {
             Err(Refused::denied(RULE_SAVING))
         } else {
             Ok(())
@@ -331,12 +331,12 @@ impl Station {
 
     /// The commands for the control tick, to add one to; the safe supervisor's only. Not
     /// generic over what is added (a closure each): one copy for every command.
-    fn for_tick(&mut self) -> Result<&mut GroundInput, Refused> {
+    fn for_tick(&mut self) -> Result<&mut GcsInput, Refused> {
         if !self.safe_supervisor() {
-            return Err(Refused::denied(ground::RULE_REFERENCE));
+            return Err(Refused::denied(gcs::RULE_REFERENCE));
         }
-        self.ground_pending = true;
-        Ok(&mut self.ground)
+        self.gcs_pending = true;
+        Ok(&mut self.gcs)
     }
 
     fn changed(&mut self, kind: ChangeKind) {
@@ -440,14 +440,14 @@ impl Vehicle for Station {
     fn request(&mut self, request: Request) -> Result<(), Refused> {
         let state = self.flight_state();
         match request {
-            Request::Arm => ground::arm_rule(),
+            Request::Arm => gcs::arm_rule(),
             Request::SaveParams => {
-                ground::save_rule(state, self.motor_test_running())?;
+                gcs::save_rule(state, self.motor_test_running())?;
                 self.save_asked_ms = Some(self.now_ms);
                 Ok(())
             }
             Request::ResetParams => {
-                ground::disarmed_rule(state)?;
+                gcs::disarmed_rule(state)?;
                 let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
                 if self.cfg != *self.defaults {
                     self.cfg = *self.defaults;
@@ -456,7 +456,7 @@ impl Vehicle for Station {
                 Ok(())
             }
             Request::Reboot => {
-                ground::disarmed_rule(state)?;
+                gcs::disarmed_rule(state)?;
                 self.reboot_asked_ms = Some(self.now_ms);
                 Ok(())
             }
@@ -467,13 +467,13 @@ impl Vehicle for Station {
                 Ok(())
             }
             Request::CalibrateImu => {
-                ground::test_or_calibration_rule(state)?;
+                gcs::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.calibrate_imu = true;
                 Ok(())
             }
             Request::CalibrateRadio => {
-                ground::test_or_calibration_rule(state)?;
+                gcs::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.radio_calibration = Some(true);
                 Ok(())
@@ -540,38 +540,38 @@ mod tests {
     fn a_disarm_goes_to_the_tick_on_the_ground_and_in_the_air_only_forced() {
         let mut st = station_in(FlightState::Armed, REST);
         assert_eq!(st.asked(Request::Disarm { forced: false }), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
-        assert_eq!(st.take_ground(), None, "taken once");
+        assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: false }));
+        assert_eq!(st.take_gcs(), None, "taken once");
 
         let mut st = station_in(FlightState::Armed, UP);
-        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(ground::RULE_THROTTLE_NOT_LOW));
-        assert_eq!(st.take_ground(), None, "a refusal sends nothing");
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(gcs::RULE_THROTTLE_NOT_LOW));
+        assert_eq!(st.take_gcs(), None, "a refusal sends nothing");
         assert_eq!(st.asked(Request::Disarm { forced: true }), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
+        assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: true }));
 
         let mut st = station_in(FlightState::FailsafeLevel, REST);
-        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(ground::RULE_FAILSAFE_LEVEL));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(gcs::RULE_FAILSAFE_LEVEL));
     }
 
     #[test]
     fn a_motor_test_goes_to_the_tick_disarmed_only_capped() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.asked(motor_test(3, 90.0)), Ok(()));
-        let test = MotorTest { motor: 3, duty_pct: ground::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
-        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
+        let test = MotorTest { motor: 3, duty_pct: gcs::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
+        assert_eq!(st.take_gcs().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
         assert_eq!(st.asked(Request::StopMotorTest), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
-        assert_eq!(st.asked(motor_test(4, 5.0)), Err(ground::RULE_NO_SUCH_MOTOR));
+        assert_eq!(st.take_gcs().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
+        assert_eq!(st.asked(motor_test(4, 5.0)), Err(gcs::RULE_NO_SUCH_MOTOR));
 
         for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
             let mut st = station_in(state, REST);
-            assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_DISARMED_ONLY), "{state:?}");
-            assert_eq!(st.take_ground(), None);
+            assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_DISARMED_ONLY), "{state:?}");
+            assert_eq!(st.take_gcs(), None);
         }
-        assert_eq!(station_in(FlightState::Calibrating, REST).asked(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(station_in(FlightState::Calibrating, REST).asked(motor_test(0, 5.0)), Err(gcs::RULE_CALIBRATING));
         // No status yet: the board is still booting.
         let mut st = Station::new(Config::default(), &Config::DEFAULT);
-        assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_CALIBRATING));
     }
 
     #[test]
@@ -579,16 +579,16 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.asked(Request::CalibrateImu), Ok(()));
         assert_eq!(st.asked(Request::CalibrateRadio), Ok(()));
-        let g = st.take_ground().unwrap();
+        let g = st.take_gcs().unwrap();
         assert!(g.calibrate_imu);
         assert_eq!(g.radio_calibration, Some(true));
 
         let mut st = station_in(FlightState::Armed, REST);
-        assert_eq!(st.asked(Request::CalibrateImu), Err(ground::RULE_DISARMED_ONLY));
-        assert_eq!(st.asked(Request::CalibrateRadio), Err(ground::RULE_DISARMED_ONLY));
-        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.asked(Request::CalibrateImu), Err(gcs::RULE_DISARMED_ONLY));
+        assert_eq!(st.asked(Request::CalibrateRadio), Err(gcs::RULE_DISARMED_ONLY));
+        assert_eq!(st.take_gcs(), None);
         assert_eq!(st.asked(Request::EndCalibration), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
+        assert_eq!(st.take_gcs().and_then(|g| g.radio_calibration), Some(false));
     }
 
     #[test]
@@ -596,9 +596,9 @@ mod tests {
         const CFG: Config = Config { supervisor: SupervisorConfig::Reference, ..Config::DEFAULT };
         let mut st = Station::new(CFG, &CFG);
         st.observe(&status(FlightState::Disarmed, REST, Blockers::default()), 3900, [0; 4], 0);
-        assert_eq!(st.asked(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
-        assert_eq!(st.asked(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
-        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.asked(Request::CalibrateImu), Err(gcs::RULE_REFERENCE));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_REFERENCE));
+        assert_eq!(st.take_gcs(), None);
         // A save has no arming refusal to wait for there.
         assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(st.save_due());
@@ -628,7 +628,7 @@ mod tests {
         busy.blockers.insert(Blocker::Saving);
         assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(!st.save_due(), "the tick does not know yet");
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
         // A snapshot that does not show the refusal, then one that may predate the tick's take.
         st.observe(&idle, 3900, [0; 4], 1005);
         st.observe(&busy, 3900, [0; 4], 1010);
@@ -654,8 +654,8 @@ mod tests {
         assert!(st.save_due());
         st.saved(true);
         assert!(!st.save_due());
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed again");
-        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs(), None);
     }
 
     /// A status in `state` showing `blockers`, fed at `now_ms`.
@@ -672,7 +672,7 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.asked(Request::Reboot), Ok(()));
         assert_eq!(st.due(), Due::Nothing, "the tick does not know yet");
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(true));
         feed(&mut st, FlightState::Disarmed, &[], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1010);
         assert_eq!(st.due(), Due::Nothing, "one snapshot may predate the tick's take");
@@ -684,7 +684,7 @@ mod tests {
     fn a_reboot_accepted_disarmed_is_dropped_when_the_board_arms_never_carried_out_in_flight() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.asked(Request::Reboot), Ok(()));
-        let _ = st.take_ground();
+        let _ = st.take_gcs();
         // A gesture under way (motors off) is ended by the refusal: the reboot waits for it.
         feed(&mut st, FlightState::Arming, &[Blocker::RebootPending], 1002);
         assert_eq!(st.due(), Due::Nothing);
@@ -694,7 +694,7 @@ mod tests {
         assert_eq!(st.due(), Due::Nothing);
         assert_eq!(st.take_notice(), Some(&b"reboot dropped: the board armed"[..]));
         assert!(!st.reboot_asked());
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(false), "arming allowed again");
         for t in (1010..20_000).step_by(5) {
             feed(&mut st, FlightState::Armed, &[], t);
             assert_eq!(st.due(), Due::Nothing, "at {t} ms");
@@ -710,7 +710,7 @@ mod tests {
     fn a_reboot_never_confirmed_times_out_with_a_text() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.asked(Request::Reboot), Ok(()));
-        let _ = st.take_ground();
+        let _ = st.take_gcs();
         // The tick never shows the refusal (its status stopped, say).
         feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS - 5);
         assert_eq!(st.due(), Due::Nothing);
@@ -718,7 +718,7 @@ mod tests {
         feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS);
         assert_eq!(st.due(), Due::Nothing);
         assert_eq!(st.take_notice(), Some(&b"reboot dropped: arming refusal not confirmed in 5 s"[..]));
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(false), "arming allowed again");
         // A late confirmation does not revive it.
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 5);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 10);
@@ -730,17 +730,17 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
         assert_eq!(st.asked(Request::SaveParams), Ok(()));
-        let _ = st.take_ground();
+        let _ = st.take_gcs();
         feed(&mut st, FlightState::Armed, &[], 1005);
         assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (the changes are saved after the disarm)"[..]));
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "no save while armed");
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "no save while armed");
         for t in (1010..10_000).step_by(5) {
             feed(&mut st, FlightState::Armed, &[], t);
             assert_eq!(st.due(), Due::Nothing, "never while armed, at {t} ms");
         }
         // Disarmed: the change is still unsaved, and saved once the refusal shows.
         feed(&mut st, FlightState::Disarmed, &[], 10_000);
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_010);
         assert_eq!(st.due(), Due::Save);
@@ -751,13 +751,13 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
         assert_eq!(st.asked(Request::Reboot), Ok(()));
-        let g = st.take_ground().unwrap();
+        let g = st.take_gcs().unwrap();
         assert!(g.saving && g.rebooting, "{g:?}");
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1010);
         assert_eq!(st.due(), Due::Save, "not the reboot: the change would be lost");
         st.saved(true);
-        assert_eq!(st.take_ground().map(|g| (g.saving, g.rebooting)), Some((false, true)));
+        assert_eq!(st.take_gcs().map(|g| (g.saving, g.rebooting)), Some((false, true)));
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1015);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1020);
         assert_eq!(st.due(), Due::Reboot);
@@ -767,11 +767,11 @@ mod tests {
     fn a_save_is_refused_during_a_motor_test_and_a_test_while_a_save_or_reboot_is_pending() {
         let mut st = station_in(FlightState::Disarmed, REST);
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000);
-        assert_eq!(st.asked(Request::SaveParams), Err(ground::RULE_MOTOR_TEST_RUNNING));
+        assert_eq!(st.asked(Request::SaveParams), Err(gcs::RULE_MOTOR_TEST_RUNNING));
         // A change made meanwhile waits for the test to end.
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000 + SAVE_DEBOUNCE_MS + 100);
-        assert_eq!(st.take_ground().map(|g| g.saving), None);
+        assert_eq!(st.take_gcs().map(|g| g.saving), None);
         assert_eq!(st.due(), Due::Nothing);
 
         let mut st = station_in(FlightState::Disarmed, REST);
@@ -850,17 +850,17 @@ mod tests {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
         assert_eq!(st.asked(Request::SaveParams), Ok(()));
-        let _ = st.take_ground();
+        let _ = st.take_gcs();
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1010);
         assert_eq!(st.due(), Due::Save);
         st.supply_low();
         assert_eq!(st.take_notice(), Some(&b"parameters NOT saved: supply below 2.7 V"[..]));
         assert!(st.unsaved(), "the change is still to be saved");
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed meanwhile");
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "arming allowed meanwhile");
         feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS - 20);
-        assert_eq!(st.take_ground(), None, "not every period: after a debounce");
+        assert_eq!(st.take_gcs(), None, "not every period: after a debounce");
         feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS);
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
     }
 }

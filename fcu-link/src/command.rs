@@ -1,6 +1,6 @@
 //! COMMAND_LONG and COMMAND_INT: every command gets a COMMAND_ACK, UNSUPPORTED unless it is
 //! one of these. The link decodes a command into a [`Request`] and the vehicle decides it with
-//! fcu-core's rules ([`fcu_core::ground`]: arming is the stick gesture's, a disarm with the
+//! fcu-core's rules ([`fcu_core::gcs`]: arming is the stick gesture's, a disarm with the
 //! throttle up needs MAVLink's force value, calibrations, saves and reboots wait for the
 //! disarm...):
 //!

@@ -5,10 +5,10 @@
 //! the state for telemetry, the parameter table, and the requests the link passes on. The link
 //! refuses only what it cannot decode (UNSUPPORTED, or DENIED for a malformed parameter); every
 //! request it decodes goes to the vehicle, whose verdict is fcu-core's ([`Refused`], the rules
-//! of [`fcu_core::ground`]): the link answers it TEMPORARILY_REJECTED when the flight state of
+//! of [`fcu_core::gcs`]): the link answers it TEMPORARILY_REJECTED when the flight state of
 //! the moment refuses it, DENIED otherwise, and names the rule in a STATUSTEXT.
 
-pub use fcu_core::ground::Refused;
+pub use fcu_core::gcs::Refused;
 use fcu_core::supervisor::FlightState;
 
 /// Attitude in MAVLink's convention (ATTITUDE): roll right side down positive, pitch nose up
@@ -145,7 +145,7 @@ impl ParamMask {
 }
 
 /// What the link asks the vehicle to do, as decoded; the vehicle decides whether it may
-/// ([`fcu_core::ground`] names each rule).
+/// ([`fcu_core::gcs`] names each rule).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Request {
     /// Arm (the vehicle refuses: arming is the stick gesture's).

@@ -7,8 +7,8 @@
 //! [`test_or_calibration_rule`], [`MotorTest::checked`], [`save_rule`] and [`disarmed_rule`]
 //! (a reset to defaults and a reboot). The ground station's side (fcu-gcs's station) answers a
 //! request with that verdict, and the link only maps it to MAVLink's result and a text; then
-//! the station hands a [`GroundInput`] to the control tick
-//! ([`crate::flight::ControlTick::take_ground`], between ticks), which decides again with the
+//! the station hands a [`GcsInput`] to the control tick
+//! ([`crate::flight::ControlTick::take_gcs`], between ticks), which decides again with the
 //! state it is in when the input arrives: the station's view may be a few milliseconds old.
 //!
 //! - **Arm**: never from a ground station: arming stays the stick gesture's.
@@ -135,7 +135,7 @@ pub enum MotorTestChange {
 /// What the ground station asked since the control tick last took its input, and whether a
 /// flash save runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct GroundInput {
+pub struct GcsInput {
     pub disarm: Option<Disarm>,
     pub calibrate_imu: bool,
     pub motor_test: Option<MotorTestChange>,
@@ -147,16 +147,16 @@ pub struct GroundInput {
     pub rebooting: bool,
 }
 
-impl GroundInput {
+impl GcsInput {
     /// This input followed by `newer`, for a carrier that got a second one before the tick took
     /// the first: the newer wins where both ask, a forced disarm stays forced, and nothing
     /// asked is lost.
-    pub fn then(self, newer: GroundInput) -> GroundInput {
+    pub fn then(self, newer: GcsInput) -> GcsInput {
         let disarm = match (self.disarm, newer.disarm) {
             (Some(a), Some(b)) => Some(Disarm { forced: a.forced || b.forced }),
             (a, b) => b.or(a),
         };
-        GroundInput {
+        GcsInput {
             disarm,
             calibrate_imu: self.calibrate_imu || newer.calibrate_imu,
             motor_test: newer.motor_test.or(self.motor_test),
@@ -169,7 +169,7 @@ impl GroundInput {
 
 /// What the supervisor reads of the ground station on one tick ([`crate::supervisor::Inputs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct GroundCommands {
+pub struct GcsCommands {
     /// What holds arming back, each an arming blocker of its own.
     pub holds: Holds,
     /// A disarm, taken once.
@@ -178,8 +178,8 @@ pub struct GroundCommands {
     pub calibrate: bool,
 }
 
-impl GroundCommands {
-    pub const NONE: GroundCommands = GroundCommands { holds: Holds::NONE, disarm: None, calibrate: false };
+impl GcsCommands {
+    pub const NONE: GcsCommands = GcsCommands { holds: Holds::NONE, disarm: None, calibrate: false };
 }
 
 /// The ground station's work that holds arming back while it runs or is pending.
@@ -324,7 +324,7 @@ mod tests {
 
     #[test]
     fn a_second_input_before_the_first_is_taken_loses_nothing() {
-        let first = GroundInput {
+        let first = GcsInput {
             disarm: Some(Disarm { forced: true }),
             calibrate_imu: true,
             motor_test: Some(MotorTestChange::Stop),
@@ -332,7 +332,7 @@ mod tests {
             saving: true,
             rebooting: true,
         };
-        let second = GroundInput { disarm: Some(Disarm { forced: false }), ..GroundInput::default() };
+        let second = GcsInput { disarm: Some(Disarm { forced: false }), ..GcsInput::default() };
         let both = first.then(second);
         assert_eq!(both.disarm, Some(Disarm { forced: true }));
         assert!(both.calibrate_imu);
@@ -340,7 +340,7 @@ mod tests {
         assert_eq!(both.radio_calibration, Some(true));
         assert!(!both.saving && !both.rebooting, "the levels are the newer one's");
         let start = MotorTestChange::Start(MotorTest { motor: 1, duty_pct: 5.0, duration_ms: 1000 });
-        let newer = GroundInput { motor_test: Some(start), radio_calibration: Some(false), ..GroundInput::default() };
+        let newer = GcsInput { motor_test: Some(start), radio_calibration: Some(false), ..GcsInput::default() };
         assert_eq!(first.then(newer).motor_test, Some(start));
         assert_eq!(first.then(newer).radio_calibration, Some(false));
     }
