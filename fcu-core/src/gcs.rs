@@ -1,6 +1,6 @@
 //! What a ground station may ask of the flight controller besides parameters, and the rules for
-//! it: a disarm, a motor test, an IMU calibration, a radio calibration, and that arming waits
-//! while a flash save runs.
+//! it: an arm (refused), a disarm, a motor test, an IMU calibration, a radio calibration, a save,
+//! a reset to defaults and a reboot, and that arming waits while a save or a reboot is pending.
 //!
 //! Every rule for these requests is written here, once, as a function of the flight state that
 //! returns the rule that refuses ([`Refused`]): [`arm_rule`], [`Disarm::checked`],
@@ -12,7 +12,6 @@
 //! state it is in when the input arrives: the station's view may be a few milliseconds old.
 //!
 //! - **Arm**: never from a ground station: arming stays the stick gesture's.
-//!
 //! - **Disarm**: through the supervisor's state table (a condition of its own). Arming is
 //!   always abandoned; armed, only with the throttle low (the motors are stopped then) or
 //!   forced (MAVLink's force value); in the failsafe's level stage only forced, since it flies
