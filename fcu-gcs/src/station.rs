@@ -68,6 +68,7 @@ pub enum Due {
     Reboot,
 }
 
+#[derive(Clone)]
 pub struct Station {
     cfg: Config,
     defaults: &'static Config,

@@ -90,6 +90,7 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
 /// Keeps at most this many violations of each invariant.
 const KEEP: usize = 4;
 
+#[derive(Clone)]
 pub struct Checker {
     defaults: &'static Config,
     model: Config,
