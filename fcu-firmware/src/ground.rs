@@ -71,9 +71,13 @@ impl Mailbox {
     }
 
     /// The change for the outer step, before its next step: a copy, so that the outer step
-    /// takes it after the lock, which holds off the control tick.
+    /// takes it after the lock, which holds off the control tick; made only when there is one.
     pub fn config_for_outer(&mut self) -> Option<Config> {
-        core::mem::take(&mut self.outer_takes_config).then_some(self.config)
+        if core::mem::take(&mut self.outer_takes_config) {
+            Some(self.config)
+        } else {
+            None
+        }
     }
 }
 
