@@ -36,7 +36,6 @@ fn watch_vdd(pwr: PWR, rcc: &mut stm32f4xx_hal::rcc::Rcc) {
 
 /// VDD is above the PVD's level-6 threshold (PVDO = 0): high enough for the flash's x32
 /// program and erase. What the ground link hands to `fcu-link`, which decides.
-#[cfg_attr(not(feature = "mavlink"), expect(dead_code, reason = "without the ground link nothing saves"))]
 pub fn vdd_ok_for_flash() -> bool {
     // SAFETY: a read of PWR_CSR, a status register no code writes after `watch_vdd`.
     let pwr = unsafe { &*PWR::ptr() };

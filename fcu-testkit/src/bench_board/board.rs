@@ -443,7 +443,7 @@ impl Bench {
         self.uart_credit -= sent as f64;
     }
 
-    /// One period of the link task, as the firmware's `with_link::step` runs it: the status,
+    /// One period of the link task, as the firmware's `ground::step` runs it: the status,
     /// the bytes received, the period, the UART, and the flash or reset work due, done at once.
     fn period(&mut self) {
         let observed = Observed { status: self.boot.status, battery_mv: BATTERY_MV, rc_widths_counts: self.radio_frame_widths() };
