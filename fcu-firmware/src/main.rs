@@ -16,7 +16,7 @@
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
-//! | ground_link  | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
+//! | gcs_link     | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
 //! |              |                         |      | parameter changes and commands → the control |
 //! |              |                         |      | loop, saves to flash, frames → the UART      |
 //! |              |                         |      | queue (200 Hz)                               |
@@ -25,13 +25,11 @@
 
 mod clock;
 mod cycles;
-mod ground;
-#[cfg(feature = "mavlink")]
+mod link_task;
 mod param_flash;
 mod sensor_bus;
 mod supply;
 mod timers;
-#[cfg(feature = "mavlink")]
 mod uart_rx;
 mod watchdog;
 
@@ -43,7 +41,7 @@ use fcu_core::mixer::MixerConfig;
 pub use clock::Mono;
 
 /// The flight profile this build flies: the product (`Config::DEFAULT`), or its ESC variant
-/// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the ground link keeps
+/// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the link task keeps
 /// a reference to it for a reset to defaults, not a copy built in RAM.
 static FLIGHT_CONFIG: fcu_core::Config = if cfg!(feature = "esc") { fcu_core::Config::esc() } else { fcu_core::Config::DEFAULT };
 
@@ -116,8 +114,7 @@ mod app {
     use crate::watchdog::Watchdog;
     use crate::Mono;
     use fcu_core::boot::BootVerdict;
-    use fcu_core::flight::{ConfigChange, ControlTick, OuterJob, OuterResult, OuterStep, Status};
-    use fcu_core::ground::GroundInput;
+    use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
     use fcu_core::rc::CaptureEdge;
     use fcu_core::rc::EdgeDecoder;
@@ -161,7 +158,6 @@ mod app {
         /// Control ticks completed since boot.
         tick: u32,
         /// Each radio input's latest pulse width, capture counts (0: none yet).
-        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
         pub(crate) rc_widths_counts: [u16; 4],
     }
 
@@ -175,13 +171,11 @@ mod app {
 
     impl UartOut {
         /// Bytes the queue can still take.
-        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
         pub(crate) fn room(&self) -> usize {
             UART_QUEUE_BYTES.saturating_sub(self.queue.len())
         }
 
         /// Nothing waits in the queue.
-        #[cfg_attr(not(feature = "mavlink"), allow(dead_code))]
         pub(crate) fn is_idle(&self) -> bool {
             self.queue.is_empty()
         }
@@ -242,15 +236,13 @@ mod app {
         radio_mutes: u32,
         /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
         bus: SensorBus,
-        /// The latest status for the ground link (MAVLink), from `report`.
+        /// The latest status for the link task (MAVLink), from `report`.
         latest: Option<Snapshot>,
-        /// A configuration the ground link changed, for each half of the control loop.
-        tick_config: Option<ConfigChange>,
-        /// The ground station's commands for the control tick (disarm, motor test,
-        /// calibrations, a save running), from the ground link.
-        ground_input: Option<GroundInput>,
-        outer_config: Option<Config>,
-        /// Fed by the control tick; stretched by the ground link around a flash erase.
+        /// What the link task hands the control loop: accepted configuration changes for
+        /// both halves, the station's commands (disarm, motor test, calibrations, a save
+        /// running) for the control tick.
+        mailbox: crate::link_task::Mailbox,
+        /// Fed by the control tick; stretched by the link task around a flash erase.
         watchdog: Option<Watchdog>,
         /// The UART speaks MAVLink: from boot (the link's protocol parameter), or from the first
         /// valid MAVLink frame a ground station sent to a board set to text lines.
@@ -272,8 +264,8 @@ mod app {
         adc: Adc<ADC1>,
         battery_pin: PB1<Analog>,
         reporter: Reporter,
-        /// The ground link's own state (`crate::ground`).
-        ground: crate::ground::GroundLink,
+        /// The link task's own state (`crate::link_task`).
+        link: crate::link_task::LinkTask,
     }
 
     /// Edges the capture may queue between two control ticks: its budget allows 4 × 16 per
@@ -289,129 +281,148 @@ mod app {
         let mut core = cx.core;
         let (mut rcc, clocks) = start_clocks(dp.RCC, &mut core.DCB, &mut core.DWT);
         crate::supply::start(dp.PWR, &mut rcc, clocks.crystal_ready);
-        // The LED codes and the fault line keep their pace at either clock. After
-        // `start_clocks`, which starts the cycle counter the clock counts.
-        Mono::start(core.SYST, rcc.clocks.sysclk().raw());
-        // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
-        // so no resource ceiling counts on its priority. At its reset priority, 0, the highest,
-        // its handler would delay the end-of-read interrupt and the radio capture; at the
-        // lowest it delays only the LEDs and the fault line, which await it.
-        unsafe { core.SCB.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, 0xF0) };
+        start_task_clock(core.SYST, &mut core.SCB, &rcc);
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
 
         let defaults = &crate::FLIGHT_CONFIG;
-        let (cfg, stored) = crate::ground::load_parameters(dp.FLASH, defaults);
-
-        // Motors first: PB6..PB9 driven by TIM4 at compare 0 (off) from the very start.
-        let _motor_pins = (
-            gpiob.pb6.into_alternate::<2>(),
-            gpiob.pb7.into_alternate::<2>(),
-            gpiob.pb8.into_alternate::<2>(),
-            gpiob.pb9.into_alternate::<2>(),
-        );
-        let motors = Motors::new(dp.TIM4, cfg.mixer.timer_psc, cfg.mixer.timer_arr, cfg.mixer.off_compare(), &mut rcc);
-
+        let (cfg, stored) = crate::link_task::load_parameters(dp.FLASH, defaults);
+        // Motors first: off from the very start.
+        let motors = start_motors(dp.TIM4, (gpiob.pb6, gpiob.pb7, gpiob.pb8, gpiob.pb9), &cfg, &mut rcc);
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
-
         let mut uart = start_uart(dp.USART1, gpioa.pa9, gpioa.pa10, &mut rcc, &mut leds);
-        let receiver = crate::ground::start_receiver(dp.DMA2, &mut rcc);
+        let receiver = crate::link_task::start_receiver(dp.DMA2, &mut rcc);
         uart.send(tlm::BOOT_BANNER.as_bytes());
         if cfg.mixer.off_compare() != crate::MOTORS_OFF_COMPARE {
             halt(&mut leds, Some(&mut uart.tx), "the build's motor-off compare disagrees with its flight configuration");
         }
 
-        let cs = [
-            gpioa.pa8.into_push_pull_output_in_state(true.into()).erase(),
-            gpiob.pb12.into_push_pull_output_in_state(true.into()).erase(),
-            gpioc.pc13.into_push_pull_output_in_state(true.into()).erase(),
-        ];
+        let cs = chip_selects(gpioa.pa8, gpiob.pb12, gpioc.pc13);
         let mut bus = start_sensor_bus(dp.SPI2, dp.DMA1, cs, gpiob.pb13, gpiob.pb15, &mut rcc);
-        let mut boot = init_sensors(&mut bus, &mut uart).with_crystal(clocks.crystal_ready).with_pll(clocks.pll_locked);
-
-        let capture_pins = (
-            gpioa.pa0.into_pull_down_input().into_alternate::<1>(),
-            gpioa.pa1.into_pull_down_input().into_alternate::<1>(),
-            gpioa.pa2.into_pull_down_input().into_alternate::<1>(),
-            gpioa.pa3.into_pull_down_input().into_alternate::<1>(),
-        );
-        let capture = RcCapture::new(dp.TIM2, capture_pins, &mut rcc);
+        let boot = init_sensors(&mut bus, &mut uart).with_crystal(clocks.crystal_ready).with_pll(clocks.pll_locked);
+        let capture = start_radio(dp.TIM2, (gpioa.pa0, gpioa.pa1, gpioa.pa2, gpioa.pa3), &mut rcc);
         let (tick_timer, tick_start) = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
+        let (adc, battery_pin) = start_battery(dp.ADC1, gpiob.pb1, &mut rcc);
 
-        // PCLK2 / 4 = 21 MHz: the F401's ADC clock must stay at or under 36 MHz (datasheet),
-        // and ST's code uses the same divider.
-        let adc = Adc::new(dp.ADC1, true, AdcConfig::default().clock(stm32f4xx_hal::adc::config::Clock::Pclk2_div_4), &mut rcc);
-        let battery_pin = gpiob.pb1.into_analog();
-
-        let fc = match fcu_core::FlightController::new(cfg) {
-            Ok(fc) => fc,
-            Err(e) => halt(&mut leds, Some(&mut uart.tx), e.field()),
-        };
+        let fc = fcu_core::FlightController::new(cfg).unwrap_or_else(|e| halt(&mut leds, Some(&mut uart.tx), e.field()));
         let decoder = fc.edge_decoder();
         let (edges_out, edges_in) = cx.local.edge_queue.split();
         let (inner, outer) = fc.into_parts();
 
-        // Armed only once the sensors answered: from here a control tick that does not
-        // complete within the timeout resets the board (motors off at reset).
-        let watchdog = if boot.may_fly() { Watchdog::start(dp.IWDG, &dp.DBGMCU).ok() } else { None };
-        boot = boot.with_watchdog(watchdog.is_some());
+        let (boot, watchdog) = arm_watchdog(boot, dp.IWDG, &dp.DBGMCU);
+        start_tasks(boot, tick_start);
+        let link = crate::link_task::LinkTask::new(cfg, defaults, stored, receiver);
+        let shared = Shared {
+            outer_result: None,
+            outer_job: None,
+            uart,
+            led_pattern: boot.led_pattern(),
+            battery_mv: 0,
+            radio_mutes: 0,
+            bus,
+            latest: None,
+            mailbox: crate::link_task::Mailbox::new(cfg),
+            watchdog,
+            mavlink_on: link.speaks_mavlink_from_boot(),
+        };
+        let reporter = Reporter::firmware();
+        let local =
+            Local { capture, edges_out, edges_in, decoder, tick_timer, inner, outer, motors, leds, adc, battery_pin, reporter, link };
+        (shared, local)
+    }
+
+    /// The tasks' clock, at either system clock (the LED codes and the fault line keep their
+    /// pace): after `start_clocks`, which starts the cycle counter it counts.
+    fn start_task_clock(syst: cortex_m::peripheral::SYST, scb: &mut cortex_m::peripheral::SCB, rcc: &stm32f4xx_hal::rcc::Rcc) {
+        Mono::start(syst, rcc.clocks.sysclk().raw());
+        // SAFETY: SysTick only drives the monotonic's timer queue: no RTIC task is bound to it,
+        // so no resource ceiling counts on its priority. At its reset priority, 0, the highest,
+        // its handler would delay the end-of-read interrupt and the radio capture; at the
+        // lowest it delays only the LEDs and the fault line, which await it.
+        unsafe { scb.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, 0xF0) };
+    }
+
+    /// TIM4 driving PB6..PB9 (AF2) at the configuration's off compare from its first period.
+    fn start_motors(
+        tim4: stm32f4xx_hal::pac::TIM4,
+        pins: (stm32f4xx_hal::gpio::PB6, stm32f4xx_hal::gpio::PB7, stm32f4xx_hal::gpio::PB8, stm32f4xx_hal::gpio::PB9),
+        cfg: &Config,
+        rcc: &mut stm32f4xx_hal::rcc::Rcc,
+    ) -> Motors {
+        let _motor_pins =
+            (pins.0.into_alternate::<2>(), pins.1.into_alternate::<2>(), pins.2.into_alternate::<2>(), pins.3.into_alternate::<2>());
+        Motors::new(tim4, cfg.mixer.timer_psc, cfg.mixer.timer_arr, cfg.mixer.off_compare(), rcc)
+    }
+
+    /// The three sensors' chip selects (LSM6DSL, LIS2MDL, LPS22HB), high (deselected) before
+    /// the bus is clocked.
+    fn chip_selects(
+        imu: stm32f4xx_hal::gpio::PA8,
+        magnetometer: stm32f4xx_hal::gpio::PB12,
+        barometer: stm32f4xx_hal::gpio::PC13,
+    ) -> [stm32f4xx_hal::gpio::AnyPin<Output>; 3] {
+        [
+            imu.into_push_pull_output_in_state(true.into()).erase(),
+            magnetometer.into_push_pull_output_in_state(true.into()).erase(),
+            barometer.into_push_pull_output_in_state(true.into()).erase(),
+        ]
+    }
+
+    /// TIM2 capturing the radio's four inputs on PA0..PA3 (AF1), pulled down: a receiver that
+    /// is not plugged in reads low, not noise.
+    fn start_radio(
+        tim2: stm32f4xx_hal::pac::TIM2,
+        pins: (stm32f4xx_hal::gpio::PA0, stm32f4xx_hal::gpio::PA1, stm32f4xx_hal::gpio::PA2, stm32f4xx_hal::gpio::PA3),
+        rcc: &mut stm32f4xx_hal::rcc::Rcc,
+    ) -> RcCapture {
+        let capture_pins = (
+            pins.0.into_pull_down_input().into_alternate::<1>(),
+            pins.1.into_pull_down_input().into_alternate::<1>(),
+            pins.2.into_pull_down_input().into_alternate::<1>(),
+            pins.3.into_pull_down_input().into_alternate::<1>(),
+        );
+        RcCapture::new(tim2, capture_pins, rcc)
+    }
+
+    /// ADC1 on the battery's divider (PB1). PCLK2 / 4 = 21 MHz: the F401's ADC clock must stay
+    /// at or under 36 MHz (datasheet), and ST's code uses the same divider.
+    fn start_battery(adc1: ADC1, pin: stm32f4xx_hal::gpio::PB1, rcc: &mut stm32f4xx_hal::rcc::Rcc) -> (Adc<ADC1>, PB1<Analog>) {
+        let adc = Adc::new(adc1, true, AdcConfig::default().clock(stm32f4xx_hal::adc::config::Clock::Pclk2_div_4), rcc);
+        (adc, pin.into_analog())
+    }
+
+    /// Arms the watchdog only once the sensors answered: from here a control tick that does
+    /// not complete within the timeout resets the board (motors off at reset). Not armed on a
+    /// board that may not fly, so the LED code and the UART message stay visible instead of a
+    /// silent reset loop.
+    fn arm_watchdog(
+        boot: BootVerdict,
+        iwdg: stm32f4xx_hal::pac::IWDG,
+        dbgmcu: &stm32f4xx_hal::pac::DBGMCU,
+    ) -> (BootVerdict, Option<Watchdog>) {
+        let watchdog = if boot.may_fly() { Watchdog::start(iwdg, dbgmcu).ok() } else { None };
+        (boot.with_watchdog(watchdog.is_some()), watchdog)
+    }
+
+    /// The tasks that run from the end of `init`: the control tick, or, on a board that may
+    /// not fly (the core's verdict), the fault report instead (TIM9 stays stopped, so
+    /// `control` never runs and the motors stay off); the LEDs and battery; the link task.
+    fn start_tasks(boot: BootVerdict, tick_start: TickStart) {
         if boot.may_fly() {
             if start_ticking::spawn(tick_start).is_err() {
                 defmt::error!("tick start already spawned");
             }
-        } else {
-            // No flight (the core's verdict): TIM9 stays stopped, so `control` never runs and
-            // the motors stay off. The watchdog is not armed, so the LED code and the UART
-            // message stay visible instead of a silent reset loop.
-            if fault_report::spawn(boot).is_err() {
-                defmt::error!("fault report already running");
-            }
+        } else if fault_report::spawn(boot).is_err() {
+            defmt::error!("fault report already running");
         }
-        let led_pattern = boot.led_pattern();
-
         if housekeeping::spawn().is_err() {
             defmt::error!("housekeeping already running");
         }
-        if ground_link::spawn(boot).is_err() {
-            defmt::error!("ground link already running");
+        if gcs_link::spawn(boot).is_err() {
+            defmt::error!("link task already running");
         }
-        let ground = crate::ground::GroundLink::new(cfg, defaults, stored, receiver);
-        let mavlink_on = ground.speaks_mavlink_from_boot();
-
-        (
-            Shared {
-                outer_result: None,
-                outer_job: None,
-                uart,
-                led_pattern,
-                battery_mv: 0,
-                radio_mutes: 0,
-                bus,
-                latest: None,
-                tick_config: None,
-                ground_input: None,
-                outer_config: None,
-                watchdog,
-                mavlink_on,
-            },
-            Local {
-                capture,
-                edges_out,
-                edges_in,
-                decoder,
-                tick_timer,
-                inner,
-                outer,
-                motors,
-                leds,
-                adc,
-                battery_pin,
-                reporter: Reporter::firmware(),
-                ground,
-            },
-        )
     }
 
     /// A boot step that cannot be flown past (a build defect, not a field condition): motors
@@ -461,9 +472,8 @@ mod app {
         (rcc, ClockCheck { crystal_ready, pll_locked })
     }
 
-    /// USART1 at 115200 8N1: the transmit side for telemetry, and with the ground link the
-    /// receiver on PA10 (AF7), whose bytes DMA2 takes (`ground::start_receiver`); without it
-    /// PA10 stays an input.
+    /// USART1 at 115200 8N1: the transmit side for telemetry and the link, and the receiver
+    /// on PA10 (AF7), whose bytes DMA2 takes (`link_task::start_receiver`).
     fn start_uart(
         usart: USART1,
         tx_pin: stm32f4xx_hal::gpio::PA9,
@@ -474,14 +484,9 @@ mod app {
         use stm32f4xx_hal::prelude::*;
         use stm32f4xx_hal::serial;
         let config = serial::Config::default().baudrate(UART_BAUD.bps());
-        #[cfg(feature = "mavlink")]
-        let tx = serial::Serial::new(usart, (tx_pin, rx_pin), config, rcc).map(|serial| serial.split().0);
-        #[cfg(not(feature = "mavlink"))]
-        let tx = {
-            let _unused = rx_pin;
-            serial::Serial::tx(usart, tx_pin, config, rcc)
-        };
-        let tx = tx.unwrap_or_else(|_| halt(leds, None, "USART1 rejected 115200 8N1"));
+        let tx = serial::Serial::new(usart, (tx_pin, rx_pin), config, rcc)
+            .map(|serial| serial.split().0)
+            .unwrap_or_else(|_| halt(leds, None, "USART1 rejected 115200 8N1"));
         UartOut { tx, queue: Deque::new(), dropped_bytes: 0 }
     }
 
@@ -657,7 +662,7 @@ mod app {
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
-        shared = [outer_result, outer_job, bus, tick_config, outer_config, ground_input, watchdog],
+        shared = [outer_result, outer_job, bus, mailbox, watchdog],
         local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
     )]
     fn control(mut cx: control::Context) {
@@ -672,12 +677,10 @@ mod app {
             if let Some(result) = cx.shared.outer_result.lock(Option::take) {
                 inner.apply_outer(&result);
             }
-            // A parameter change the ground link accepted; the tick takes it between ticks
-            // (refusing a ground-only one once armed) and passes it on to the outer step.
-            crate::ground::config_to_tick(&mut cx.shared.tick_config, &mut cx.shared.outer_config, inner);
-            // The ground station's commands, taken between ticks as a change is (the core
+            // A parameter change the link task accepted (the core checked it against the
+            // armed state) and the ground station's commands, taken between ticks (the core
             // decides again with its own state).
-            crate::ground::to_control(&mut cx.shared.ground_input, inner);
+            cx.shared.mailbox.lock(|mailbox| mailbox.deliver_to_tick(inner));
             while let Some(edge) = cx.local.edges_in.dequeue() {
                 decoder.on_edge(edge);
             }
@@ -742,10 +745,10 @@ mod app {
     }
 
     /// The outer step (estimator + angle loop) on each job's snapshot, as long as one waits.
-    #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, outer_config], local = [outer])]
+    #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, mailbox], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
         while let Some(job) = cx.shared.outer_job.lock(Option::take) {
-            crate::ground::config_to_outer(&mut cx.shared.outer_config, cx.local.outer);
+            crate::link_task::config_to_outer(&mut cx.shared.mailbox, cx.local.outer);
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);
@@ -799,21 +802,10 @@ mod app {
         tick_start.start();
     }
 
-    /// The ground station's link (`crate::ground`): MAVLink on USART1, with the `mavlink`
-    /// feature; without it, never spawned.
-    #[task(priority = 1, shared = [uart, latest, battery_mv, tick_config, ground_input, watchdog, mavlink_on], local = [ground])]
-    async fn ground_link(cx: ground_link::Context, boot: BootVerdict) {
-        let s = cx.shared;
-        let links = crate::ground::Shared {
-            uart: s.uart,
-            latest: s.latest,
-            battery_mv: s.battery_mv,
-            tick_config: s.tick_config,
-            ground_input: s.ground_input,
-            watchdog: s.watchdog,
-            mavlink_on: s.mavlink_on,
-        };
-        crate::ground::run(cx.local.ground, links, boot).await;
+    /// The ground station's link (`crate::link_task`): MAVLink on USART1.
+    #[task(priority = 1, shared = [uart, latest, battery_mv, mailbox, watchdog, mavlink_on], local = [link])]
+    async fn gcs_link(cx: gcs_link::Context, boot: BootVerdict) {
+        crate::link_task::run(cx.local.link, cx.shared, boot).await;
     }
 
     /// USART1 transmit-empty: one queued byte out per interrupt.
@@ -851,7 +843,7 @@ mod app {
             // Bytes shown as ASCII: a `str` would need UTF-8 validation code in flash for an
             // ASCII line.
             defmt::error!("{=[u8]:a}", line.as_bytes());
-            // With MAVLink on the UART, the ground link sends it as a STATUSTEXT instead.
+            // With MAVLink on the UART, the link task sends it as a STATUSTEXT instead.
             if !cx.shared.mavlink_on.lock(|on| *on) {
                 cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
             }

@@ -11,10 +11,8 @@ use stm32f4xx_hal::pac::{DBGMCU, IWDG};
 /// Prescaler /8 (PR = 1) of the 32 kHz LSI: 4 kHz, 0.25 ms per count (RM0368 §15.3).
 const PRESCALER_DIV8: u8 = 1;
 /// Prescaler /64 (PR = 4): 500 Hz, 2 ms per count.
-#[cfg(feature = "mavlink")]
 const PRESCALER_DIV64: u8 = 4;
 /// 1000 counts of 2 ms: the timeout over a flash erase.
-#[cfg(feature = "mavlink")]
 const FLASH_RELOAD: u16 = 999;
 /// 200 counts of 0.25 ms: 50 ms at the LSI's nominal 32 kHz. The LSI varies from 17 to 47 kHz
 /// over parts and temperature (datasheet), so the real timeout lies between about 34 and
@@ -50,7 +48,6 @@ impl Watchdog {
         Ok(Watchdog { iwdg })
     }
 
-    #[cfg(feature = "mavlink")]
     /// Stretches the timeout over a flash erase: prescaler /64 and 1000 counts, 2 s at the
     /// LSI's nominal 32 kHz, 1.36 s at its fastest 47 kHz, against an erase of 500 ms at most.
     /// The control tick, which feeds the watchdog, stalls with every other fetch from flash
@@ -59,13 +56,11 @@ impl Watchdog {
         self.set(PRESCALER_DIV64, FLASH_RELOAD)
     }
 
-    #[cfg(feature = "mavlink")]
     /// Back to the flight timeout (50 ms) after [`Watchdog::stretch_for_flash`].
     pub fn restore(&mut self) -> Result<(), LsiNotRunning> {
         self.set(PRESCALER_DIV8, RELOAD)
     }
 
-    #[cfg(feature = "mavlink")]
     /// New values while running: a bounded wait for any earlier update to have landed (RM0368
     /// IWDG_SR: PR can be changed only with PVU clear, RLR only with RVU clear; a write while
     /// one is under way is not taken), a reload (the count starts full under the old values),

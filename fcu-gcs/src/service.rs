@@ -49,6 +49,8 @@ pub struct ToControl {
 }
 
 /// The link, the station behind it, and the link task's pacing (see the module docs).
+/// `Clone`: a host harness copies a booted board instead of booting it again.
+#[derive(Clone)]
 pub struct Service<const TX: usize> {
     link: Link<TX>,
     station: Station,

@@ -67,6 +67,7 @@ pub enum Due {
     Reboot,
 }
 
+#[derive(Clone)]
 pub struct Station {
     cfg: Config,
     defaults: &'static Config,

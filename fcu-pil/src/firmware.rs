@@ -25,38 +25,6 @@ pub fn build_esc_elf() -> Result<PathBuf, String> {
     build(&["--features", "esc"], Some(repo_root().join("fcu-firmware/target/esc")))
 }
 
-/// Builds the release firmware with `--features mavlink` (the ground-station link,
-/// parameters kept in flash) into its own target directory, as CI does, and returns the
-/// ELF's path.
-pub fn build_link_elf() -> Result<PathBuf, String> {
-    build(&["--features", "mavlink"], Some(repo_root().join("fcu-firmware/target/mavlink")))
-}
-
-/// The ELF for a job that needs the ground-station link or saved parameters: `explicit` if
-/// given, else `FCU_PIL_ELF`, else the `mavlink` build (built now). An image without the
-/// link is refused by name: it would boot with its built-in values and ignore the flash.
-pub fn resolve_link_elf(explicit: Option<&Path>) -> Result<PathBuf, String> {
-    let elf = match (explicit, std::env::var_os("FCU_PIL_ELF")) {
-        (None, None) => build_link_elf()?,
-        (explicit, _) => resolve_elf(explicit)?,
-    };
-    let image = crate::elf::Image::load(&elf)?;
-    if has_ground_link(&image) {
-        Ok(elf)
-    } else {
-        Err(format!(
-            "{}: this image has no ground-station link and keeps no parameters (build it with `--features mavlink`, or leave --elf and FCU_PIL_ELF unset to have it built)",
-            elf.display()
-        ))
-    }
-}
-
-/// Whether an image was built with the ground-station link (`--features mavlink`): its link
-/// task is in it. Only such an image loads a saved parameter set at boot.
-pub fn has_ground_link(image: &crate::elf::Image) -> bool {
-    image.functions.iter().any(|(_, _, name)| crate::elf::demangle(name).starts_with("fcu_firmware::ground::with_link"))
-}
-
 fn build(extra: &[&str], target_dir: Option<PathBuf>) -> Result<PathBuf, String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let manifest = repo_root().join("fcu-firmware/Cargo.toml");

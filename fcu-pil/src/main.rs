@@ -61,8 +61,8 @@ struct ServeArgs {
     #[arg(long, value_name = "17000..=47000", value_parser = fcu_pil::serve::parse_lsi_hz)]
     lsi_hz: Option<u64>,
     #[arg(long)]
-    /// The firmware ELF (default: FCU_PIL_ELF, else the `mavlink` build, built now; an image
-    /// without the link is refused).
+    /// The firmware ELF (default: FCU_PIL_ELF, else the release firmware, built now, as
+    /// `cargo fw` does).
     elf: Option<PathBuf>,
     #[command(flatten)]
     timing: TimingArg,
@@ -92,13 +92,12 @@ struct FlyArgs {
     out: PathBuf,
     /// Boot with these parameters (MAVProxy's `param save` format: NAME VALUE lines, as
     /// `fcu-sim fly --params` takes) saved in flash, over the defaults (or over --flash's set).
-    /// Flies the `mavlink` image (built if --elf and FCU_PIL_ELF are not given), its UART set
-    /// to text lines, which the harness reads the board's state from.
+    /// Its UART is set to text lines, which the harness reads the board's state from.
     #[arg(long)]
     params: Option<PathBuf>,
     /// Boot from this flash image (as `cargo pil serve --flash` saves it: the parameters a
-    /// ground station set and saved). Flies the `mavlink` image, as --params; the file is
-    /// only read.
+    /// ground station set and saved), its UART set to text lines as with --params; the file
+    /// is only read.
     #[arg(long)]
     flash: Option<PathBuf>,
     #[command(flatten)]
@@ -164,7 +163,7 @@ fn fly(a: &FlyArgs) -> Result<ExitCode, String> {
     let sc = host::prepare_scenario(&a.scenario, a.sticks.as_deref(), a.duration).map_err(|e| e.0)?;
     let mut setup = a.timing.setup()?;
     let saved = a.params.is_some() || a.flash.is_some();
-    let elf = if saved { firmware::resolve_link_elf(a.elf.as_deref())? } else { firmware::resolve_elf(a.elf.as_deref())? };
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
     if saved {
         let flash = match &a.flash {
             Some(path) => std::fs::read(path).map_err(|e| format!("--flash {}: {e}", path.display()))?,
@@ -241,7 +240,7 @@ fn serve_cmd(a: &ServeArgs) -> Result<ExitCode, String> {
     if let Some(name) = &a.scenario {
         fcu_testkit::cli::fly::prepare_scenario(name, None, None).map_err(|e| e.0)?;
     }
-    let elf = firmware::resolve_link_elf(a.elf.as_deref())?;
+    let elf = firmware::resolve_elf(a.elf.as_deref())?;
     let listener = fcu_pil::serve::listen(&a.link)?;
     println!("fcu-pil serve: listening on {}, booting {}", a.link, elf.display());
     let power_cut = a.power_cut.as_deref().map(fcu_pil::serve::parse_power_cut).transpose()?;

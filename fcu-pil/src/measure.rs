@@ -65,13 +65,13 @@ pub struct Report {
 }
 
 /// What of an image is the ground-station link, as the ELF's function names tell (LTO inlines
-/// the protocol crate into the link's task): the task (`fcu_firmware::ground`) and what it
+/// the protocol crate into the link's task): the task (`fcu_firmware::link_task`) and what it
 /// calls of its own (`fcu_link`, `fcu_gcs`, the receive ring, the flash store, fcu-core's parameter
 /// table and the configuration checks a change runs), and the USART1 and DMA2 stream 2
-/// interrupts. Empty for an image without the link.
+/// interrupts.
 pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
     const PARTS: [&str; 11] = [
-        "fcu_firmware::ground::",
+        "fcu_firmware::link_task::",
         "fcu_link::",
         "fcu_gcs::",
         "fcu_firmware::uart_rx::",
@@ -83,9 +83,6 @@ pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
         "USART1",
         "DMA2_STREAM2",
     ];
-    if !crate::firmware::has_ground_link(image) {
-        return Vec::new();
-    }
     image
         .functions
         .iter()
@@ -144,6 +141,8 @@ pub fn measure(
             timing: Some(timing),
             measure_masking_against: Some(CAPTURE_EXCEPTION),
             measure_time_in: (!link.is_empty()).then_some(link),
+            // What the image costs as shipped: MAVLink from boot, not the harness's text lines.
+            mavlink_from_boot: true,
             ..setup.clone()
         },
     )?;
@@ -391,18 +390,15 @@ mod tests {
     }
 
     #[test]
-    fn the_link_is_its_task_and_what_it_calls_of_its_own_and_nothing_without_it() {
+    fn the_link_is_its_task_and_what_it_calls_of_its_own() {
         let with = image_with(&[
             (0x0800_c001, 0x100, "TIM1_BRK_TIM9"),
-            (0x0800_d000, 0x2000, "fcu_firmware::ground::with_link::run::{{closure}}"),
+            (0x0800_d000, 0x2000, "fcu_firmware::link_task::run::{{closure}}"),
             (0x0800_f001, 0x40, "fcu_params::snapshot::crc32"),
             (0x0800_f100, 0x80, "fcu_core::flight::ControlTick::tick_with"),
             (0x0800_f200, 0x20, "USART1"),
         ]);
         assert_eq!(link_ranges(&with), vec![(0x0800_d000, 0x0800_f000), (0x0800_f000, 0x0800_f040), (0x0800_f200, 0x0800_f220)]);
-        // The default image: parameters' names may be there, but no link task.
-        let without = image_with(&[(0x0800_c001, 0x100, "TIM1_BRK_TIM9"), (0x0800_f200, 0x20, "USART1")]);
-        assert!(link_ranges(&without).is_empty());
     }
 
     fn within_targets() -> Report {

@@ -51,7 +51,14 @@ pub struct BoardSetup {
     /// line to its entry, from the end of boot ([`Machine::measure_masking_against`]).
     pub measure_masking_against: Option<usize>,
     /// The flash memory's contents at power-on (a saved image); the ELF's sectors replace theirs.
+    /// `None`: no saved image, and what the parameter sectors hold is [`BoardSetup::mavlink_from_boot`]'s.
     pub flash_contents: Option<Vec<u8>>,
+    /// With no `flash_contents`: the board as shipped, its parameter sectors erased, so its UART
+    /// speaks MAVLink from boot (`LINK_PROTOCOL`'s default) and the harness leaves it
+    /// unparsed. `false`, the default: the product's defaults saved with `LINK_PROTOCOL` 0, as
+    /// `cargo pil fly --params` saves them, so the UART carries the text lines the harness reads
+    /// the board's state from.
+    pub mavlink_from_boot: bool,
     /// Add up the time spent in these code ranges from the end of boot
     /// ([`Machine::measure_time_in`]).
     pub measure_time_in: Option<Vec<(u32, u32)>>,
@@ -111,12 +118,21 @@ impl EmulatedBoard {
         if let Some(volts) = setup.vdd_volts {
             board.pwr.set_vdd_volts(volts);
         }
-        if let Some(contents) = &setup.flash_contents {
+        let text_lines;
+        let contents = match (&setup.flash_contents, setup.mavlink_from_boot) {
+            (Some(contents), _) => Some(contents),
+            (None, true) => None,
+            (None, false) => {
+                text_lines = crate::serve::flash_for_flight(Vec::new(), None).map_err(|e| Fault::Setup(format!("{e:?}")))?;
+                Some(&text_lines)
+            }
+        };
+        if let Some(contents) = contents {
             board.flash.load_memory(contents);
         }
-        // An image with the ground link and no saved parameters speaks MAVLink from boot: its
-        // UART is binary, not lines (a frame's bytes may happen to look like a debug line).
-        let speaks_mavlink = crate::firmware::has_ground_link(&image) && setup.flash_contents.is_none();
+        // With no saved parameters the image speaks MAVLink from boot: its UART is binary, not
+        // lines (a frame's bytes may happen to look like a debug line).
+        let speaks_mavlink = contents.is_none();
         let machine = Machine::new(image, board, setup.timing_profile().map_err(Fault::Setup)?)?;
         let mut b = EmulatedBoard {
             machine,

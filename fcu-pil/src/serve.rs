@@ -366,7 +366,8 @@ pub fn serve_until(listener: TcpListener, opts: &ServeOptions, stop: Arc<AtomicB
         Some(name) => fcu_testkit::cli::fly::prepare_scenario(name, None, Some(duration_s)).map_err(|e| e.0)?,
         None => scenario::from_timeline("bench", Timeline { rows: vec![StickRow::idle(0.0)] }, duration_s),
     };
-    let mut setup = opts.setup.clone();
+    // The board as shipped: with no saved parameters its UART speaks MAVLink from boot.
+    let mut setup = rig::BoardSetup { mavlink_from_boot: true, ..opts.setup.clone() };
     if let Some(path) = &opts.flash {
         if path.exists() {
             setup.flash_contents = Some(std::fs::read(path).map_err(|e| format!("--flash {}: {e}", path.display()))?);

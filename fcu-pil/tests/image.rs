@@ -526,6 +526,24 @@ fn status_lines_report_the_cores_states() {
     assert!(debug_lines + 25 >= expected, "{debug_lines} debug lines, about {expected} expected at 25 Hz");
 }
 
+/// The image as shipped speaks MAVLink from boot (a HEARTBEAT within its first second of
+/// flight, no text line), and the harness leaves its UART as bytes; by default the harness saves
+/// `LINK_PROTOCOL` 0 and reads the same image's text lines.
+#[test]
+fn the_shipped_image_speaks_mavlink_from_boot_and_the_harness_turns_it_to_text_lines() {
+    let mut shipped = boot(&BoardSetup { mavlink_from_boot: true, ..BoardSetup::default() });
+    assert!(shipped.flying(), "{}", shipped.boot_stall());
+    shipped.run_to(1.5).unwrap();
+    let sent: Vec<u8> = shipped.machine.board().records.uart.iter().map(|&(_, b)| b).collect();
+    assert!(shipped.raw_uart && has_heartbeat(&sent), "the board sent: {sent:02x?}");
+    assert!(!String::from_utf8_lossy(&sent).contains("STATUS"), "a text line from the shipped image");
+
+    let mut watched = boot(&BoardSetup::default());
+    assert!(watched.flying(), "{}", watched.boot_stall());
+    watched.run_to(1.5).unwrap();
+    assert!(!watched.raw_uart && !watched.statuses.is_empty(), "no STATUS line: {}", watched.uart_text());
+}
+
 /// The register-level review, measured on the image: the sensor bus never has the MCU and a
 /// sensor drive the data line together (chip select goes high before the line turns around),
 /// a deselected sensor never sees bus traffic while its I2C interface is on (once boot has
@@ -687,7 +705,8 @@ fn the_esc_build_sends_the_idle_pulse_from_boot() {
         None => firmware::build_esc_elf().unwrap_or_else(|e| panic!("{e}")),
     };
     let image = Image::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    let setup = BoardSetup { boot_timeout_s: Some(0.02), ..BoardSetup::default() };
+    // As shipped: the harness's text-line set holds the product's values, not the ESC build's.
+    let setup = BoardSetup { boot_timeout_s: Some(0.02), mavlink_from_boot: true, ..BoardSetup::default() };
     let mut b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap();
     assert!(!b.flying(), "20 ms after reset the sensors are still being set up");
     let now = b.machine.now();
@@ -711,12 +730,10 @@ fn an_image_that_waits_for_pvu_before_starting_the_watchdog_hangs_at_iwdg_sr() {
     assert!(!b.machine.board().iwdg.is_started(), "{stall}");
 }
 
-/// `cargo pil serve`'s bridge on the image: a TCP client receives the firmware's UART text
-/// (bytes out), and the bytes it sends go onto PA10 at the line's rate (bytes in). Today's
-/// image sets up USART1 with `Serial::tx`, which leaves PA10 an input: the bytes reach the pin
-/// and not the receiver, as on the chip (when the link's receive path routes PA10 to AF7 they
-/// reach it, and this test's counts change with it). The flash file is written with the image
-/// in it.
+/// `cargo pil serve`'s bridge on the image: a TCP client receives what USART1 sends (bytes
+/// out: with no saved parameters the board speaks MAVLink from boot, so a HEARTBEAT comes),
+/// and the bytes it sends go onto PA10 at the line's rate and reach USART1's receiver (bytes
+/// in: the link routes PA10 to AF7). The flash file is written with the image in it.
 #[test]
 fn serve_bridges_usart1_to_a_tcp_client() {
     use std::io::{Read, Write};
@@ -744,19 +761,25 @@ fn serve_bridges_usart1_to_a_tcp_client() {
             break;
         }
         received.extend_from_slice(&buf[..n]);
-        if String::from_utf8_lossy(&received).contains("STATUS") {
+        if has_heartbeat(&received) {
             break;
         }
     }
     let report = server.join().expect("server thread").expect("serve");
-    assert!(String::from_utf8_lossy(&received).contains("STATUS"), "the client got: {:?}", String::from_utf8_lossy(&received));
+    assert!(has_heartbeat(&received), "the client got: {received:02x?}");
     assert_eq!(report.bytes_in, 10);
     assert!(report.bytes_out >= received.len() as u64);
-    assert_eq!((report.rx_received, report.rx_lost_on_pin), (0, 10), "{report}");
+    assert_eq!((report.rx_received, report.rx_lost_on_pin), (10, 0), "{report}");
     let saved = std::fs::read(&flash).expect("flash file");
     let _ = std::fs::remove_file(&flash);
     assert_eq!(saved.len(), 256 * 1024);
     let segment = &image().segments[0];
     let at = (segment.address - 0x0800_0000) as usize;
     assert_eq!(&saved[at..at + segment.data.len()], segment.data.as_slice(), "the image is in the saved flash");
+}
+
+/// A MAVLink 2 HEARTBEAT's header in `bytes`: start 0xFD, payload 9 bytes, no incompatibility
+/// flags, message id 0.
+fn has_heartbeat(bytes: &[u8]) -> bool {
+    bytes.windows(10).any(|h| h[0] == 0xFD && h[1] == 9 && h[2] == 0 && h[7..10] == [0, 0, 0])
 }

@@ -1,7 +1,6 @@
-//! Parameter saves on the image with the ground link (`--features mavlink`), at DS9716's
-//! maximum flash times: what a save costs the control loop and the clock. The ELF is
-//! `FCU_PIL_LINK_ELF` if set, else the mavlink build made now (CI's `FCU_PIL_ELF` names the
-//! image without the link, which keeps no parameters).
+//! Parameter saves over the ground link, at DS9716's maximum flash times: what a save costs
+//! the control loop and the clock. The ELF is `FCU_PIL_ELF` if set, else the release firmware
+//! built now.
 
 use std::sync::OnceLock;
 
@@ -14,12 +13,9 @@ use fcu_pil::rig::{self, BoardSetup, EmulatedBoard};
 use mavlink::dialects::common::{MavCmd, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_SET_DATA};
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MessageData};
 
-fn link_elf() -> &'static std::path::Path {
+fn elf() -> &'static std::path::Path {
     static ELF: OnceLock<std::path::PathBuf> = OnceLock::new();
-    ELF.get_or_init(|| match std::env::var_os("FCU_PIL_LINK_ELF") {
-        Some(p) => p.into(),
-        None => firmware::build_link_elf().unwrap_or_else(|e| panic!("{e}")),
-    })
+    ELF.get_or_init(|| firmware::resolve_elf(None).unwrap_or_else(|e| panic!("{e}")))
 }
 
 /// The control tick's period, in emulated time units (800 Hz).
@@ -27,7 +23,7 @@ const TICK: Time = TIME_HZ / 800;
 /// The parameter sectors (1 and 2) in the flash model's memory.
 const PARAM_SECTORS: std::ops::Range<usize> = 0x4000..0xC000;
 
-/// The board with the link, booted at `timing` on `flash` (blank if `None`), its UART left
+/// The board, booted at `timing` on `flash` (blank if `None`), its UART left
 /// unparsed (it speaks MAVLink).
 fn boot(flash: Option<Vec<u8>>, timing: FlashTiming) -> EmulatedBoard {
     boot_with_lsi(flash, timing, None)
@@ -35,8 +31,8 @@ fn boot(flash: Option<Vec<u8>>, timing: FlashTiming) -> EmulatedBoard {
 
 /// [`boot`] with the LSI at `lsi_hz` (`None`: its nominal 32 kHz).
 fn boot_with_lsi(flash: Option<Vec<u8>>, timing: FlashTiming, lsi_hz: Option<u64>) -> EmulatedBoard {
-    let image = Image::load(link_elf()).unwrap_or_else(|e| panic!("{e}"));
-    let setup = BoardSetup { flash_contents: flash, lsi_hz, ..BoardSetup::default() };
+    let image = Image::load(elf()).unwrap_or_else(|e| panic!("{e}"));
+    let setup = BoardSetup { flash_contents: flash, lsi_hz, mavlink_from_boot: true, ..BoardSetup::default() };
     let mut b = EmulatedBoard::boot(image, &setup, rig::imu_at_rest(1)).unwrap_or_else(|e| panic!("boot: {e}"));
     assert!(b.flying(), "{}", b.boot_stall());
     b.raw_uart = true;

@@ -295,3 +295,20 @@ fn the_generated_sessions_reach_flight_saves_erases_reboots_and_cuts() {
     }
     assert!(total.arms > 0 && total.saves > 0 && total.erases > 0 && total.reboots > 0 && total.cuts_in_flash > 0, "{total:?}");
 }
+
+/// Found by the fuzzer (its checker, not the board): saves asked for, then a reset to the
+/// defaults. The board resets when it takes the command and its owed save writes the defaults,
+/// ahead of the reset's acknowledgement in the answers' queue; the ground station's view must
+/// take the reset when the save shows it, not only at the acknowledgement.
+#[test]
+fn a_save_owed_before_a_reset_writes_the_defaults_the_reset_left() {
+    let history = vec![Planted { sequence: 1, changes: vec![(index("RATE_RLL_P"), 150.0)] }];
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let mut ops: Vec<Op> = (0..6).map(|_| save()).collect();
+    ops.push(reset);
+    ops.push(Op::Wait { ms: 3000 });
+    let b = Scenario { history, seed: 1, ops }.run(&DEFAULTS);
+    assert!(b.counts.saves >= 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_RLL_P")), parameters::value(&DEFAULTS, index("RATE_RLL_P")));
+}

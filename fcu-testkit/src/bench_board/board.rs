@@ -100,6 +100,7 @@ pub struct Counts {
 }
 
 /// One power-on of the board: what a reset starts again.
+#[derive(Clone)]
 struct Boot {
     tick: ControlTick,
     outer: OuterStep,
@@ -162,7 +163,9 @@ impl Boot {
     }
 }
 
-/// The board, its flash, the pilot and the ground station.
+/// The board, its flash, the pilot and the ground station. `Clone` is a deep copy: a clone
+/// runs on exactly as the original would (the boot cache, [`super::BootCache`], relies on it).
+#[derive(Clone)]
 pub struct Bench {
     pub flash: Flash,
     defaults: &'static Config,
@@ -186,7 +189,13 @@ pub struct Bench {
     pub counts: Counts,
     /// Bench time, ticks since the bench was switched on (stalls and power cuts included).
     time_ticks: u64,
+    /// Every byte the board sent, folded into an FNV-1a hash: two benches that answered
+    /// alike have the same.
+    downlink_hash: u64,
 }
+
+/// FNV-1a's offset basis.
+const FNV_OFFSET: u64 = 0xCBF2_9CE4_8422_2325;
 
 impl Bench {
     /// A board with `flash` as it is, switched on; `seed` sets the radio's frame phase and
@@ -215,6 +224,7 @@ impl Bench {
             checker,
             counts: Counts::default(),
             time_ticks: 0,
+            downlink_hash: FNV_OFFSET,
         }
     }
 
@@ -254,6 +264,11 @@ impl Bench {
     /// The configuration the control loop runs with.
     pub fn config(&self) -> &Config {
         &self.boot.cfg
+    }
+
+    /// A hash (FNV-1a) of every byte the board sent since switched on.
+    pub fn downlink_hash(&self) -> u64 {
+        self.downlink_hash
     }
 
     /// Bench time, ms since switched on.
@@ -428,7 +443,7 @@ impl Bench {
         self.uart_credit -= sent as f64;
     }
 
-    /// One period of the link task, as the firmware's `with_link::step` runs it: the status,
+    /// One period of the link task, as the firmware's `gcs::step` runs it: the status,
     /// the bytes received, the period, the UART, and the flash or reset work due, done at once.
     fn period(&mut self) {
         let observed = Observed { status: self.boot.status, battery_mv: BATTERY_MV, rc_widths_counts: self.radio_frame_widths() };
@@ -452,6 +467,9 @@ impl Bench {
         let mut out = [0u8; UART_CHUNK_BYTES];
         let n = b.task.poll_tx(&mut out[..room]);
         b.uart_queued += n;
+        for &byte in &out[..n] {
+            self.downlink_hash = (self.downlink_hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01B3);
+        }
         let idle = b.uart_queued == 0;
         let t = self.time_ticks;
         match self.answers.push(&out[..n]) {

@@ -90,15 +90,17 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
 /// Keeps at most this many violations of each invariant.
 const KEEP: usize = 4;
 
+#[derive(Clone)]
 pub struct Checker {
     defaults: &'static Config,
     model: Config,
     /// PARAM_SETs sent and not confirmed yet: (index, value, where the frame starts in the
     /// bytes sent).
     pending_sets: Vec<(usize, f32, u64)>,
-    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, and where they
-    /// start.
-    pending_storage: VecDeque<(f32, u64)>,
+    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, where they
+    /// start, and whether a reset among them was already seen done (in a save ahead of its
+    /// acknowledgement).
+    pending_storage: VecDeque<(f32, u64, bool)>,
     /// Bytes the ground station sent.
     sent_bytes: u64,
     /// Values replaced by a set seen in a save or a load before its answer: (index, bits).
@@ -180,7 +182,7 @@ impl Checker {
                     self.pending_sets.push((i, value, at));
                 }
             }
-            GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at)),
+            GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
             _ => {}
         }
     }
@@ -301,8 +303,8 @@ impl Checker {
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
-                if let Some((p1, _)) = self.pending_storage.pop_front() {
-                    if *result == 0 && p1 == 2.0 {
+                if let Some((p1, _, seen_done)) = self.pending_storage.pop_front() {
+                    if *result == 0 && p1 == 2.0 && !seen_done {
                         self.model = *self.defaults;
                         let v = parameters::values(&self.model);
                         self.remember(&v);
@@ -313,12 +315,37 @@ impl Checker {
         }
     }
 
+    /// The board resets the parameters when it takes the command, and a save it owed may write
+    /// the result before the reset's acknowledgement reaches the ground station (the answers
+    /// queue behind each other). A save that the defaults, and the sets asked for since, explain
+    /// is that reset seen early: the model takes it then, and not again at its acknowledgement.
+    fn reset_seen_in(&mut self, saved: &[f32; COUNT], at: u64) {
+        let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
+            return;
+        };
+        let before = self.model;
+        self.model = *self.defaults;
+        self.reconcile(saved, at);
+        if bits(saved) == bits(&parameters::values(&self.model)) {
+            if let Some(entry) = self.pending_storage.get_mut(k) {
+                entry.2 = true;
+            }
+            let v = parameters::values(&self.model);
+            self.remember(&v);
+        } else {
+            self.model = before;
+        }
+    }
+
     /// A save's words were all programmed.
     pub fn on_saved(&mut self, plan: &SavePlan, at: u64) {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
         self.reconcile(&snap.values, at);
+        if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+            self.reset_seen_in(&snap.values, at);
+        }
         let model = parameters::values(&self.model);
         if bits(&snap.values) != bits(&model) {
             let d = first_difference(&snap.values, &model);
@@ -384,7 +411,7 @@ impl Checker {
         self.model = *cfg;
         self.pending_sets.retain(|&(_, _, start)| start >= delivered_bytes);
         self.stale.clear();
-        self.pending_storage.retain(|&(_, start)| start >= delivered_bytes);
+        self.pending_storage.retain(|&(_, start, _)| start >= delivered_bytes);
         self.remember(&loaded);
     }
 }

@@ -25,6 +25,9 @@ pub use check::{Invariant, Violation};
 pub use flash::{Flash, PowerCut};
 pub use gcs::{cmd, name16, GcsFrame};
 
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
 use fcu_core::Config;
 use fcu_params::{self as parameters, snapshot, COUNT};
 
@@ -62,6 +65,28 @@ pub fn plant(flash: &mut Flash, sequence: u32, values: &[f32; COUNT]) {
     let _whole = flash.program(plan.sector, plan.first_word, &words);
 }
 
+/// Where [`plant`] puts the k-th of consecutively numbered snapshots planted on an erased
+/// flash: (the sector it erases first, the sector, the first word), for as many as a fuzz
+/// input's history holds. The place depends only on which slots hold a whole snapshot and
+/// which is newest, not on the values (every planted snapshot is whole, and the newest is
+/// the last one planted), so one planting of default sets finds it for every history; a
+/// history plants its snapshots without planning each save anew (130-odd plans, each
+/// checking the CRC of every snapshot in both sectors, for one that fills both).
+pub fn planting_order() -> &'static [(Option<usize>, usize, usize)] {
+    static ORDER: OnceLock<Vec<(Option<usize>, usize, usize)>> = OnceLock::new();
+    ORDER.get_or_init(|| {
+        let values = parameters::values(&Config::DEFAULT);
+        let mut flash = Flash::new();
+        (0..3 + 2 * snapshot::SLOTS as u32)
+            .map(|k| {
+                let plan = snapshot::plan_save(flash.sectors(), &values);
+                plant(&mut flash, 1 + k, &values);
+                (plan.erase, plan.sector, plan.first_word)
+            })
+            .collect()
+    })
+}
+
 /// Everything one bench run is made of.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scenario {
@@ -71,11 +96,27 @@ pub struct Scenario {
 }
 
 impl Scenario {
-    /// The flash with the history written, oldest first.
+    /// The flash with the history written, oldest first, each where a save would put it
+    /// ([`plant`]). The places are taken from [`planting_order`] (the same erases and
+    /// programs; `the_planting_order_puts_snapshots_where_a_save_would` shows the flash is
+    /// word for word what [`plant`] makes).
     pub fn flash(&self, defaults: &Config) -> Flash {
         let mut flash = Flash::new();
-        for p in &self.history {
-            plant(&mut flash, p.sequence, &p.values(defaults));
+        let order = planting_order();
+        // The order holds while every snapshot so far was numbered one after the one before.
+        let mut in_order = true;
+        for (k, p) in self.history.iter().enumerate() {
+            let values = p.values(defaults);
+            in_order = in_order && (k == 0 || self.history[k - 1].sequence.checked_add(1) == Some(p.sequence));
+            match order.get(k) {
+                Some(&(erase, sector, first_word)) if in_order => {
+                    if let Some(e) = erase {
+                        let _whole = flash.erase(e);
+                    }
+                    let _whole = flash.program(sector, first_word, &snapshot::encode(p.sequence, &values));
+                }
+                _ => plant(&mut flash, p.sequence, &values),
+            }
         }
         flash
     }
@@ -83,9 +124,23 @@ impl Scenario {
     /// Boots the board on the scenario's flash, lets it settle ([`BOOT_MS`]) and runs the
     /// operations.
     pub fn run(&self, defaults: &'static Config) -> Bench {
-        let mut bench = Bench::new(self.flash(defaults), defaults, self.seed);
-        bench.run_ms(BOOT_MS);
+        let mut bench = Scenario::booted(self.flash(defaults), defaults, self.seed);
         bench.run(&self.ops);
+        bench
+    }
+
+    /// As [`Scenario::run`], the board booted taken from `cache` when a scenario with the
+    /// same history and seed booted it before.
+    pub fn run_cached(&self, cache: &mut BootCache) -> Bench {
+        let mut bench = cache.booted(self);
+        bench.run(&self.ops);
+        bench
+    }
+
+    /// The board switched on with `flash` and settled for [`BOOT_MS`], before any operation.
+    fn booted(flash: Flash, defaults: &'static Config, seed: u64) -> Bench {
+        let mut bench = Bench::new(flash, defaults, seed);
+        bench.run_ms(BOOT_MS);
         bench
     }
 
@@ -110,18 +165,30 @@ impl Scenario {
     /// | `0xB8..=0xBF` | erases take `250 + (k & 7) · 35` ms |
     /// | `0xC0..=0xFF` | wait `(k & 63) + 1` ms |
     pub fn from_bytes(data: &[u8]) -> Scenario {
+        Scenario::from_bytes_marked(data).0
+    }
+
+    /// [`Scenario::from_bytes`], with where each operation byte's operations end: a
+    /// [`Mark`] for every one whose bytes are all in `data` (one byte at least follows it).
+    /// Decoding reads forward only, so the operations up to a mark, and the board's state
+    /// after them, depend on `data[..mark.bytes]` alone.
+    pub fn from_bytes_marked(data: &[u8]) -> (Scenario, Vec<Mark>) {
         let mut it = data.iter().copied();
         let seed = u64::from(it.next().unwrap_or(0));
         let history = Scenario::history_from(&mut it);
         let mut ops = Vec::new();
+        let mut marks = Vec::new();
         let mut ms = 0u32;
         while let Some(k) = it.next() {
             if ms >= MAX_FUZZ_MS {
                 break;
             }
             ms += Scenario::push_op(k, &mut it, &mut ops);
+            if it.len() > 0 {
+                marks.push(Mark { bytes: data.len() - it.len(), ops: ops.len() });
+            }
         }
-        Scenario { history, seed, ops }
+        (Scenario { history, seed, ops }, marks)
     }
 
     /// The flash history a scenario starts from: its header byte and the entries it takes
@@ -211,6 +278,121 @@ impl Scenario {
     }
 }
 
+/// Where the operations of one operation byte end: `data[..bytes]` decodes to the first
+/// `ops` operations (see [`Scenario::from_bytes_marked`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Mark {
+    pub bytes: usize,
+    pub ops: usize,
+}
+
+/// A history as a key: the values by their bits (a NaN is a value like any other).
+type HistoryKey = Vec<(u32, Vec<(usize, u32)>)>;
+
+fn history_key(history: &[Planted]) -> HistoryKey {
+    history.iter().map(|p| (p.sequence, p.changes.iter().map(|&(i, v)| (i, v.to_bits())).collect())).collect()
+}
+
+/// Booted benches by flash history and seed, planted flashes by history, and benches part
+/// way through a fuzz input's operations by the input's bytes up to there, for a run of many
+/// scenarios (the fuzzer's). The bench is deterministic and a clone a deep copy, so a
+/// scenario run from a cached state runs exactly as from its own boot (shown by
+/// `a_cached_boot_runs_on_as_a_fresh_boot` and
+/// `an_input_run_from_a_cached_prefix_runs_as_from_its_boot`); what it saves is the boot
+/// (2,400 ticks and 600 link periods), planting a history (a history that fills both sectors
+/// plans 130-odd saves, each scanning both sectors), and the operations an input shares with
+/// one run before (a fuzzer's mutation keeps the bytes ahead of it). Bounded: a map that
+/// reaches [`BootCache::CAPACITY`] entries is emptied.
+pub struct BootCache {
+    defaults: &'static Config,
+    booted: HashMap<(HistoryKey, u64), Bench>,
+    flashes: HashMap<HistoryKey, Flash>,
+    prefixes: HashMap<Vec<u8>, Bench>,
+    /// Boots taken from the cache, and boots run.
+    pub hits: u64,
+    pub misses: u64,
+    /// Inputs run on from a cached prefix of their operations.
+    pub prefix_hits: u64,
+}
+
+impl BootCache {
+    /// Entries each map holds at most (a bench is some 50 KiB, a flash 32 KiB).
+    pub const CAPACITY: usize = 1024;
+
+    pub fn new(defaults: &'static Config) -> BootCache {
+        BootCache {
+            defaults,
+            booted: HashMap::new(),
+            flashes: HashMap::new(),
+            prefixes: HashMap::new(),
+            hits: 0,
+            misses: 0,
+            prefix_hits: 0,
+        }
+    }
+
+    /// Bench time between two prefixes kept, ms: a clone costs about what a few ms of bench
+    /// time do.
+    pub const PREFIX_EVERY_MS: u64 = 500;
+
+    /// [`Scenario::from_bytes`]`(data)` run (as [`Scenario::run`]), from the longest prefix of
+    /// its operations a run before kept, or from a cached boot; keeps its own prefixes.
+    pub fn run_bytes(&mut self, data: &[u8]) -> Bench {
+        let (scenario, marks) = Scenario::from_bytes_marked(data);
+        let found = marks.iter().rev().find_map(|m| self.prefixes.get(&data[..m.bytes]).map(|b| (*m, b.clone())));
+        let (mut bench, mut done) = match found {
+            Some((m, bench)) => {
+                self.prefix_hits += 1;
+                (bench, m.ops)
+            }
+            None => (self.booted(&scenario), 0),
+        };
+        let mut kept_ms = bench.time_ms();
+        let from = done;
+        for m in marks.iter().filter(|m| m.ops > from) {
+            bench.run(&scenario.ops[done..m.ops]);
+            done = m.ops;
+            if bench.time_ms() >= kept_ms + Self::PREFIX_EVERY_MS {
+                kept_ms = bench.time_ms();
+                if self.prefixes.len() >= Self::CAPACITY {
+                    self.prefixes.clear();
+                }
+                self.prefixes.entry(data[..m.bytes].to_vec()).or_insert_with(|| bench.clone());
+            }
+        }
+        bench.run(&scenario.ops[done..]);
+        bench
+    }
+
+    /// A copy of the board `scenario` boots (its history, its seed), settled for [`BOOT_MS`].
+    pub fn booted(&mut self, scenario: &Scenario) -> Bench {
+        let history = history_key(&scenario.history);
+        let key = (history, scenario.seed);
+        if let Some(bench) = self.booted.get(&key) {
+            self.hits += 1;
+            return bench.clone();
+        }
+        self.misses += 1;
+        let flash = match self.flashes.get(&key.0) {
+            Some(flash) => flash.clone(),
+            None => {
+                let flash = scenario.flash(self.defaults);
+                if self.flashes.len() >= Self::CAPACITY {
+                    self.flashes.clear();
+                }
+                self.flashes.insert(key.0.clone(), flash.clone());
+                flash
+            }
+        };
+        let bench = Scenario::booted(flash, self.defaults, scenario.seed);
+        if self.booted.len() >= Self::CAPACITY {
+            self.booted.clear();
+        }
+        self.booted.insert(key, bench.clone());
+        bench
+    }
+}
+
 /// The most time a fuzz input's operations may take, ms (a case stays some tens of ms of CPU).
 pub const MAX_FUZZ_MS: u32 = 20_000;
 
@@ -289,5 +471,80 @@ mod tests {
                 assert_eq!(pair[0].sequence.checked_add(1), Some(pair[1].sequence), "{h:#x}");
             }
         }
+    }
+
+    /// What a bench shows from outside: the status, the flash, what it sent, what it counted
+    /// and what the checks found.
+    fn seen(b: &Bench) -> (String, Vec<u32>, u64, Counts, u64, Vec<Violation>) {
+        let flash = b.flash.sectors().iter().flat_map(|s| s.iter().copied()).collect();
+        (format!("{:?}", b.status()), flash, b.downlink_hash(), b.counts, b.time_ms(), b.checker.violations().to_vec())
+    }
+
+    #[test]
+    fn the_planting_order_puts_snapshots_where_a_save_would() {
+        static DEFAULTS: Config = Config::DEFAULT;
+        // Headers: no history, three snapshots, both sectors filled from 1 and from near the
+        // top of the sequence numbers, with changed (some refused) values.
+        for header in [
+            &[0u8, 0][..],
+            &[0, 3, 1, 4, 9, 2, 1, 3, 3, 5, 7, 0, 1, 2, 3],
+            &[0, 0x43, 1, 3, 4, 2, 6, 6, 1, 2, 1],
+            &[0, 0xC3, 2, 1, 2, 3, 4],
+            &[0, 0xFE, 1, 2, 6],
+        ] {
+            let scenario = Scenario::from_bytes(header);
+            let mut planted = Flash::new();
+            for p in &scenario.history {
+                plant(&mut planted, p.sequence, &p.values(&DEFAULTS));
+            }
+            let fast = scenario.flash(&DEFAULTS);
+            assert_eq!(fast.sectors(), planted.sectors(), "{header:?}");
+            // The erase and program counts too.
+            assert_eq!(format!("{fast:?}"), format!("{planted:?}"), "{header:?}");
+        }
+    }
+
+    #[test]
+    fn a_cached_boot_runs_on_as_a_fresh_boot() {
+        static DEFAULTS: Config = Config::DEFAULT;
+        // Histories (none, one refused value, both sectors full), seeds, and operations that
+        // set, save, reboot, arm, fly and cut the power.
+        let ops: &[u8] =
+            &[0x60, 5, 2, 0x70, 1, 1, 0x45, 0x42, 0x20, 0x43, 0x70, 0, 1, 0x3F, 0xA3, 9, 0, 0x55, 0x70, 1, 1, 0x3F, 0x90, 0x9A, 0xB0, 0x10];
+        let mut cache = BootCache::new(&DEFAULTS);
+        for header in [&[7u8, 0][..], &[7, 0x81, 1, 3, 4], &[200, 0xC2, 1, 0, 0, 2, 5, 1, 9, 130], &[3, 0x43, 2, 1, 2, 3, 4]] {
+            let input = [header, ops].concat();
+            let scenario = Scenario::from_bytes(&input);
+            let fresh = scenario.run(&DEFAULTS);
+            let first = scenario.run_cached(&mut cache);
+            let again = scenario.run_cached(&mut cache);
+            assert_eq!(seen(&first), seen(&fresh), "{header:?}");
+            assert_eq!(seen(&again), seen(&fresh), "{header:?}");
+            assert!(fresh.counts.saves > 0 && fresh.counts.reboots + fresh.counts.power_cuts > 0, "{header:?}: {:?}", fresh.counts);
+        }
+        assert_eq!((cache.hits, cache.misses), (4, 4));
+    }
+
+    #[test]
+    fn an_input_run_from_a_cached_prefix_runs_as_from_its_boot() {
+        static DEFAULTS: Config = Config::DEFAULT;
+        let base: &[u8] = &[
+            9, 0x41, 1, 4, 7, 0x60, 5, 2, 0x3F, 0x70, 1, 1, 0x3F, 0x45, 0x42, 0x30, 0x43, 0x98, 0x70, 0, 1, 0x3F, 0xA3, 9, 0, 0x55, 0x3F,
+            0x70, 1, 1, 0x3F, 0x3F, 0xB0, 0x10,
+        ];
+        let mut cache = BootCache::new(&DEFAULTS);
+        let first = cache.run_bytes(base);
+        assert_eq!(seen(&first), seen(&Scenario::from_bytes(base).run(&DEFAULTS)));
+        // The fuzzer's mutations: a byte changed, cut short, bytes appended, an op's bytes
+        // cut in the middle, the same input again.
+        let mut changed = base.to_vec();
+        changed[25] = 0x70;
+        let mut longer = base.to_vec();
+        longer.extend([0x70, 0, 1, 0x3F, 0x60, 200, 7, 0x20]);
+        for input in [&changed[..], &base[..20], &longer, &base[..23], base] {
+            let ran = cache.run_bytes(input);
+            assert_eq!(seen(&ran), seen(&Scenario::from_bytes(input).run(&DEFAULTS)), "{input:?}");
+        }
+        assert!(cache.prefix_hits >= 4, "{}", cache.prefix_hits);
     }
 }
