@@ -26,9 +26,9 @@
 
 mod block;
 mod derived;
-mod ground;
+mod gcs;
 #[cfg(test)]
-mod ground_tests;
+mod gcs_tests;
 mod heading;
 mod output;
 mod sensors;
@@ -48,7 +48,7 @@ use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
-use crate::ground::GroundInput;
+use crate::gcs::GcsInput;
 use crate::imu::{CalibrationPhase, RawImu, SensorFault};
 use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
 use crate::rc::{EdgeDecoder, PulseBatch, Sticks};
@@ -251,9 +251,9 @@ impl FlightController {
         self.outer_step.set_battery_mv(battery_mv);
     }
 
-    /// A ground station's input (see [`ControlTick::take_ground`]).
-    pub fn take_ground(&mut self, input: &GroundInput) {
-        self.control_tick.take_ground(input);
+    /// A ground station's input (see [`ControlTick::take_gcs`]).
+    pub fn take_gcs(&mut self, input: &GcsInput) {
+        self.control_tick.take_gcs(input);
     }
 
     /// Run an outer step now and apply its result.
@@ -366,12 +366,12 @@ impl ControlTick {
         self.run(imu, flags)
     }
 
-    /// A ground station's input ([`crate::ground`]), between ticks as a configuration change
+    /// A ground station's input ([`crate::gcs`]), between ticks as a configuration change
     /// is: a disarm and an IMU calibration go to the supervisor's next decision, a motor test
     /// or a radio calibration starts (if the state still allows it) or ends, the save's level
     /// is kept. The reference's supervisor takes none of it.
-    pub fn take_ground(&mut self, input: &GroundInput) {
-        self.supervision.take_ground(input, &self.params);
+    pub fn take_gcs(&mut self, input: &GcsInput) {
+        self.supervision.take_gcs(input, &self.params);
     }
 
     /// A ground station's radio calibration runs (arming is blocked meanwhile).

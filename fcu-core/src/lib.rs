@@ -15,7 +15,7 @@
 //! | the order of a tick, what runs when | [`flight::ControlTick`]'s `run` (one call per stage; the stages are `flight`'s submodules) and [`flight::OuterStep::run`] |
 //! | what a configuration comes to for the tick, the gains that scale it in flight | [`flight::TickParams`] (worked out in one place, `flight/derived.rs`, a function of the configuration and the gains), [`control::Gains`], [`control::GainSchedule`] |
 //! | arming, disarming, failsafe stages, blockers | [`supervisor`]: the conditions and the transition's actions in [`supervisor::Supervisor::decide`], the state table in [`supervisor::transitions`] (every rule has tests named after it, the table its own), the numbers in [`supervisor::SafetyConfig`] |
-//! | what a ground station may ask (disarm, motor test, calibrations, a save) and its rules | [`ground`], the tick's side in `flight/ground.rs` |
+//! | what a ground station may ask (disarm, motor test, calibrations, a save) and its rules | [`gcs`], the tick's side in `flight/gcs.rs` |
 //! | when the last decision may simply stand | [`supervisor::Supervisor::steady`] (the rule) and the tick's command stage (`flight/supervision.rs`, the cache) |
 //! | what a valid pulse, a channel and the link are | [`rc::EdgeDecoder`], [`rc::Receiver`], [`rc::RcConfig`] |
 //! | which input is which stick, endpoints, reversing | [`rc::RcMap`], [`rc::RcInput`] (`stick_from_width`) |
@@ -56,7 +56,7 @@ pub mod config;
 pub mod control;
 pub mod filter;
 pub mod flight;
-pub mod ground;
+pub mod gcs;
 pub mod imu;
 pub mod math;
 pub mod mixer;

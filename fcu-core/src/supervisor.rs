@@ -15,7 +15,7 @@
 //! 3. the transition's actions (what starts or ends with a state) are applied, and the
 //!    [`Decision`] follows from the new state.
 
-use crate::ground::{disarm_rule, GroundCommands};
+use crate::gcs::GcsCommands;
 use crate::imu::SensorFault;
 use crate::rc::{Gesture, StickCounts, Sticks};
 
@@ -157,7 +157,7 @@ pub enum Blocker {
     BootSettling = 1 << 7,
     GestureNotReleased = 1 << 8,
     /// A ground station's motor test runs, or a stick that ended one has not come back to rest
-    /// ([`crate::ground`]).
+    /// ([`crate::gcs`]).
     MotorTest = 1 << 9,
     /// A ground station's radio calibration runs.
     RadioCalibration = 1 << 10,
@@ -248,8 +248,8 @@ pub struct Inputs {
     /// good while it is below the channel timeout). Read only while the link is not good: lost
     /// time counts from that pulse.
     pub silence_ticks: u32,
-    /// What the ground station asks this tick ([`crate::ground`]).
-    pub ground: GroundCommands,
+    /// What the ground station asks this tick ([`crate::gcs`]).
+    pub gcs: GcsCommands,
 }
 
 impl Inputs {
@@ -266,7 +266,7 @@ impl Inputs {
         calibrating: false,
         sensor_fault: None,
         tilt_rad: 0.0,
-        ground: GroundCommands::NONE,
+        gcs: GcsCommands::NONE,
     };
 }
 
@@ -303,10 +303,10 @@ pub enum Condition {
     LossBudgetSpent = 1 << 23,
     /// The link has been good for [`SafetyConfig::recovery_ticks`].
     Recovered = 1 << 24,
-    /// The ground station asked for a disarm, and [`crate::ground::disarm_rule`] lets it act.
-    GroundDisarm = 1 << 25,
+    /// The ground station asked for a disarm, and [`crate::gcs::Disarm::checked`] lets it act.
+    GcsDisarm = 1 << 25,
     /// The ground station asked for an IMU calibration.
-    GroundCalibrate = 1 << 26,
+    GcsCalibrate = 1 << 26,
 }
 
 /// A set of conditions: the [`Blocker`]s on their own bits (the low 16) and the other
@@ -393,8 +393,8 @@ const STICKS_CENTRED: Conditions = Conditions::of(Condition::SticksCentred);
 const THROTTLE_LOW_TOO_LONG: Conditions = Conditions::of(Condition::ThrottleLowTooLong);
 const LOSS_BUDGET_SPENT: Conditions = Conditions::of(Condition::LossBudgetSpent);
 const RECOVERED: Conditions = Conditions::of(Condition::Recovered);
-const GROUND_DISARM: Conditions = Conditions::of(Condition::GroundDisarm);
-const GROUND_CALIBRATE: Conditions = Conditions::of(Condition::GroundCalibrate);
+const GROUND_DISARM: Conditions = Conditions::of(Condition::GcsDisarm);
+const GROUND_CALIBRATE: Conditions = Conditions::of(Condition::GcsCalibrate);
 
 /// The way out of every state, ahead of the state's own: a latched sensor fault ends
 /// everything. (Fault has no other way out.)
@@ -425,7 +425,7 @@ const FROM_ARMING: [Transition; 6] = [
 ];
 
 const FROM_ARMED: [Transition; 6] = [
-    // Only with the throttle low or forced (`ground::disarm_rule`): the motors stop now.
+    // Only with the throttle low or forced (`gcs::Disarm::checked`): the motors stop now.
     way(FlightState::Disarmed, GROUND_DISARM, NONE),
     way(FlightState::FailsafeOff, NO_LINK.and(LOSS_BUDGET_SPENT), NONE),
     way(FlightState::FailsafeLevel, NO_LINK, NONE),
@@ -566,7 +566,7 @@ impl Supervisor {
         if !self.released {
             b.insert(Blocker::GestureNotReleased);
         }
-        let holds = i.ground.holds;
+        let holds = i.gcs.holds;
         for (held, blocker) in [
             (holds.motor_test, Blocker::MotorTest),
             (holds.radio_calibration, Blocker::RadioCalibration),
@@ -632,8 +632,8 @@ impl Supervisor {
         c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
         c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
         c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
-        c.set(Condition::GroundDisarm, i.ground.disarm.is_some_and(|d| disarm_rule(self.state, i.throttle_low, d.forced).is_ok()));
-        c.set(Condition::GroundCalibrate, i.ground.calibrate);
+        c.set(Condition::GcsDisarm, i.gcs.disarm.is_some_and(|d| d.checked(self.state, i.throttle_low).is_ok()));
+        c.set(Condition::GcsCalibrate, i.gcs.calibrate);
         c
     }
 
@@ -823,7 +823,7 @@ mod tests {
             calibrating: true,
             sensor_fault: None,
             tilt_rad: 0.0,
-            ground: GroundCommands::NONE,
+            gcs: GcsCommands::NONE,
         };
         let d = s.decide(&CFG, &i);
         assert_eq!(d.state, FlightState::Calibrating);
@@ -1334,7 +1334,7 @@ mod tests {
             calibrating,
             sensor_fault: fault.then_some(SensorFault::Stuck),
             tilt_rad: if tilted { 1.0 } else { 0.0 },
-            ground: GroundCommands::NONE,
+            gcs: GcsCommands::NONE,
         }
     }
 
@@ -1400,32 +1400,32 @@ mod tests {
     }
 
     /// One tick with a ground station's commands, then none again.
-    fn with_ground(r: &mut Rig, ground: GroundCommands) -> Decision {
-        r.i.ground = ground;
+    fn with_gcs(r: &mut Rig, gcs: GcsCommands) -> Decision {
+        r.i.gcs = gcs;
         let d = r.step();
-        r.i.ground = GroundCommands::NONE;
+        r.i.gcs = GcsCommands::NONE;
         d
     }
 
-    const DISARM_ASKED: GroundCommands = GroundCommands { disarm: Some(crate::ground::Disarm { forced: false }), ..GroundCommands::NONE };
-    const DISARM_FORCED: GroundCommands = GroundCommands { disarm: Some(crate::ground::Disarm { forced: true }), ..GroundCommands::NONE };
+    const DISARM_ASKED: GcsCommands = GcsCommands { disarm: Some(crate::gcs::Disarm { forced: false }), ..GcsCommands::NONE };
+    const DISARM_FORCED: GcsCommands = GcsCommands { disarm: Some(crate::gcs::Disarm { forced: true }), ..GcsCommands::NONE };
 
     #[test]
     fn a_ground_disarm_acts_on_the_ground_and_in_the_air_only_forced() {
         let mut r = Rig::new();
         r.arm();
         // Throttle low: the motors are stopped, the disarm acts at once.
-        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
+        assert_eq!(with_gcs(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
         // Flying: refused without the force value, taken with it.
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
-        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Armed);
+        assert_eq!(with_gcs(&mut r, DISARM_ASKED).state, FlightState::Armed);
         assert_eq!(r.step().state, FlightState::Armed, "a refused disarm is not kept for later");
         r.sticks(IDLE);
         assert_eq!(r.step().state, FlightState::Armed, "a refused disarm is not kept for later");
         r.sticks(FLY);
-        let d = with_ground(&mut r, DISARM_FORCED);
+        let d = with_gcs(&mut r, DISARM_FORCED);
         assert_eq!((d.state, d.motors_enabled), (FlightState::Disarmed, false));
     }
 
@@ -1434,7 +1434,7 @@ mod tests {
         let mut r = Rig::new();
         r.run(ARM, CFG.arm_hold_ticks / 2);
         assert_eq!(r.last.state, FlightState::Arming);
-        assert_eq!(with_ground(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
+        assert_eq!(with_gcs(&mut r, DISARM_ASKED).state, FlightState::Disarmed);
         // The gesture still held must be let go before it arms again.
         r.run(ARM, CFG.arm_hold_ticks + 10);
         assert_eq!(r.last.state, FlightState::Disarmed);
@@ -1443,16 +1443,16 @@ mod tests {
         r.arm();
         r.run(FLY, 10);
         assert_eq!(r.lose_link(1).state, FlightState::FailsafeLevel);
-        r.i.ground = DISARM_ASKED;
+        r.i.gcs = DISARM_ASKED;
         assert_eq!(r.lose_link(1).state, FlightState::FailsafeLevel);
-        r.i.ground = DISARM_FORCED;
+        r.i.gcs = DISARM_FORCED;
         let d = r.lose_link(1);
         assert_eq!((d.state, d.motors_enabled), (FlightState::FailsafeOff, false));
     }
 
     #[test]
     fn arming_waits_while_the_ground_holds_it_and_a_hold_ends_an_arming() {
-        use crate::ground::Holds;
+        use crate::gcs::Holds;
         let each = [
             (Holds { motor_test: true, ..Holds::NONE }, Blocker::MotorTest, "motor-test"),
             (Holds { radio_calibration: true, ..Holds::NONE }, Blocker::RadioCalibration, "radio-calibration"),
@@ -1461,20 +1461,20 @@ mod tests {
         ];
         for (holds, blocker, name) in each {
             let mut r = Rig::new();
-            r.i.ground = GroundCommands { holds, ..GroundCommands::NONE };
+            r.i.gcs = GcsCommands { holds, ..GcsCommands::NONE };
             let d = r.run(ARM, CFG.arm_hold_ticks + 10);
             assert_eq!(d.state, FlightState::Disarmed, "{name}");
             assert_eq!(d.blockers.iter().collect::<std::vec::Vec<_>>(), [blocker], "{name}");
             assert_eq!(blocker.name(), name);
             // Held no more: a fresh gesture arms.
-            r.i.ground = GroundCommands::NONE;
+            r.i.gcs = GcsCommands::NONE;
             r.run(IDLE, 2);
             r.arm();
 
             let mut r = Rig::new();
             r.run(ARM, 10);
             assert_eq!(r.last.state, FlightState::Arming);
-            r.i.ground = GroundCommands { holds, ..GroundCommands::NONE };
+            r.i.gcs = GcsCommands { holds, ..GcsCommands::NONE };
             assert_eq!(r.step().state, FlightState::Disarmed, "{name}");
         }
     }
@@ -1482,13 +1482,13 @@ mod tests {
     #[test]
     fn a_ground_calibration_starts_disarmed_only() {
         let mut r = Rig::new();
-        let d = with_ground(&mut r, GroundCommands { calibrate: true, ..GroundCommands::NONE });
+        let d = with_gcs(&mut r, GcsCommands { calibrate: true, ..GcsCommands::NONE });
         assert_eq!(d.state, FlightState::Calibrating);
         assert!(d.request_calibration);
         let mut r = Rig::new();
         r.arm();
         r.run(FLY, 10);
-        let d = with_ground(&mut r, GroundCommands { calibrate: true, ..GroundCommands::NONE });
+        let d = with_gcs(&mut r, GcsCommands { calibrate: true, ..GcsCommands::NONE });
         assert_eq!((d.state, d.request_calibration), (FlightState::Armed, false));
     }
 

@@ -16,7 +16,7 @@
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
-//! | ground_link  | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
+//! | gcs_link     | software (monotonic)    | 1    | MAVLink: USART1 RX ring → `fcu_link::Link`,  |
 //! |              |                         |      | parameter changes and commands → the control |
 //! |              |                         |      | loop, saves to flash, frames → the UART      |
 //! |              |                         |      | queue (200 Hz)                               |
@@ -25,7 +25,7 @@
 
 mod clock;
 mod cycles;
-mod ground;
+mod link_task;
 mod param_flash;
 mod sensor_bus;
 mod supply;
@@ -41,7 +41,7 @@ use fcu_core::mixer::MixerConfig;
 pub use clock::Mono;
 
 /// The flight profile this build flies: the product (`Config::DEFAULT`), or its ESC variant
-/// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the ground link keeps
+/// with the `esc` feature (TIM4 400 Hz, 850..1700 idle/max). In flash: the link task keeps
 /// a reference to it for a reset to defaults, not a copy built in RAM.
 static FLIGHT_CONFIG: fcu_core::Config = if cfg!(feature = "esc") { fcu_core::Config::esc() } else { fcu_core::Config::DEFAULT };
 
@@ -236,13 +236,13 @@ mod app {
         radio_mutes: u32,
         /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
         bus: SensorBus,
-        /// The latest status for the ground link (MAVLink), from `report`.
+        /// The latest status for the link task (MAVLink), from `report`.
         latest: Option<Snapshot>,
-        /// What the ground link hands the control loop: accepted configuration changes for
+        /// What the link task hands the control loop: accepted configuration changes for
         /// both halves, the station's commands (disarm, motor test, calibrations, a save
         /// running) for the control tick.
-        mailbox: crate::ground::Mailbox,
-        /// Fed by the control tick; stretched by the ground link around a flash erase.
+        mailbox: crate::link_task::Mailbox,
+        /// Fed by the control tick; stretched by the link task around a flash erase.
         watchdog: Option<Watchdog>,
         /// The UART speaks MAVLink: from boot (the link's protocol parameter), or from the first
         /// valid MAVLink frame a ground station sent to a board set to text lines.
@@ -264,8 +264,8 @@ mod app {
         adc: Adc<ADC1>,
         battery_pin: PB1<Analog>,
         reporter: Reporter,
-        /// The ground link's own state (`crate::ground`).
-        ground: crate::ground::GroundLink,
+        /// The link task's own state (`crate::link_task`).
+        link: crate::link_task::LinkTask,
     }
 
     /// Edges the capture may queue between two control ticks: its budget allows 4 × 16 per
@@ -287,13 +287,13 @@ mod app {
         let gpioc = dp.GPIOC.split(&mut rcc);
 
         let defaults = &crate::FLIGHT_CONFIG;
-        let (cfg, stored) = crate::ground::load_parameters(dp.FLASH, defaults);
+        let (cfg, stored) = crate::link_task::load_parameters(dp.FLASH, defaults);
         // Motors first: off from the very start.
         let motors = start_motors(dp.TIM4, (gpiob.pb6, gpiob.pb7, gpiob.pb8, gpiob.pb9), &cfg, &mut rcc);
         let mut leds = Leds { led1: gpiob.pb5.into_push_pull_output(), led2: gpiob.pb4.into_push_pull_output() };
         leds.show(tlm::Leds { led1: true, led2: true });
         let mut uart = start_uart(dp.USART1, gpioa.pa9, gpioa.pa10, &mut rcc, &mut leds);
-        let receiver = crate::ground::start_receiver(dp.DMA2, &mut rcc);
+        let receiver = crate::link_task::start_receiver(dp.DMA2, &mut rcc);
         uart.send(tlm::BOOT_BANNER.as_bytes());
         if cfg.mixer.off_compare() != crate::MOTORS_OFF_COMPARE {
             halt(&mut leds, Some(&mut uart.tx), "the build's motor-off compare disagrees with its flight configuration");
@@ -313,7 +313,7 @@ mod app {
 
         let (boot, watchdog) = arm_watchdog(boot, dp.IWDG, &dp.DBGMCU);
         start_tasks(boot, tick_start);
-        let ground = crate::ground::GroundLink::new(cfg, defaults, stored, receiver);
+        let link = crate::link_task::LinkTask::new(cfg, defaults, stored, receiver);
         let shared = Shared {
             outer_result: None,
             outer_job: None,
@@ -323,13 +323,13 @@ mod app {
             radio_mutes: 0,
             bus,
             latest: None,
-            mailbox: crate::ground::Mailbox::new(cfg),
+            mailbox: crate::link_task::Mailbox::new(cfg),
             watchdog,
-            mavlink_on: ground.speaks_mavlink_from_boot(),
+            mavlink_on: link.speaks_mavlink_from_boot(),
         };
         let reporter = Reporter::firmware();
         let local =
-            Local { capture, edges_out, edges_in, decoder, tick_timer, inner, outer, motors, leds, adc, battery_pin, reporter, ground };
+            Local { capture, edges_out, edges_in, decoder, tick_timer, inner, outer, motors, leds, adc, battery_pin, reporter, link };
         (shared, local)
     }
 
@@ -408,7 +408,7 @@ mod app {
 
     /// The tasks that run from the end of `init`: the control tick, or, on a board that may
     /// not fly (the core's verdict), the fault report instead (TIM9 stays stopped, so
-    /// `control` never runs and the motors stay off); the LEDs and battery; the ground link.
+    /// `control` never runs and the motors stay off); the LEDs and battery; the link task.
     fn start_tasks(boot: BootVerdict, tick_start: TickStart) {
         if boot.may_fly() {
             if start_ticking::spawn(tick_start).is_err() {
@@ -420,8 +420,8 @@ mod app {
         if housekeeping::spawn().is_err() {
             defmt::error!("housekeeping already running");
         }
-        if ground_link::spawn(boot).is_err() {
-            defmt::error!("ground link already running");
+        if gcs_link::spawn(boot).is_err() {
+            defmt::error!("link task already running");
         }
     }
 
@@ -473,7 +473,7 @@ mod app {
     }
 
     /// USART1 at 115200 8N1: the transmit side for telemetry and the link, and the receiver
-    /// on PA10 (AF7), whose bytes DMA2 takes (`ground::start_receiver`).
+    /// on PA10 (AF7), whose bytes DMA2 takes (`link_task::start_receiver`).
     fn start_uart(
         usart: USART1,
         tx_pin: stm32f4xx_hal::gpio::PA9,
@@ -677,7 +677,7 @@ mod app {
             if let Some(result) = cx.shared.outer_result.lock(Option::take) {
                 inner.apply_outer(&result);
             }
-            // A parameter change the ground link accepted (the core checked it against the
+            // A parameter change the link task accepted (the core checked it against the
             // armed state) and the ground station's commands, taken between ticks (the core
             // decides again with its own state).
             cx.shared.mailbox.lock(|mailbox| mailbox.deliver_to_tick(inner));
@@ -748,7 +748,7 @@ mod app {
     #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, mailbox], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
         while let Some(job) = cx.shared.outer_job.lock(Option::take) {
-            crate::ground::config_to_outer(&mut cx.shared.mailbox, cx.local.outer);
+            crate::link_task::config_to_outer(&mut cx.shared.mailbox, cx.local.outer);
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);
@@ -802,10 +802,10 @@ mod app {
         tick_start.start();
     }
 
-    /// The ground station's link (`crate::ground`): MAVLink on USART1.
-    #[task(priority = 1, shared = [uart, latest, battery_mv, mailbox, watchdog, mavlink_on], local = [ground])]
-    async fn ground_link(cx: ground_link::Context, boot: BootVerdict) {
-        crate::ground::run(cx.local.ground, cx.shared, boot).await;
+    /// The ground station's link (`crate::link_task`): MAVLink on USART1.
+    #[task(priority = 1, shared = [uart, latest, battery_mv, mailbox, watchdog, mavlink_on], local = [link])]
+    async fn gcs_link(cx: gcs_link::Context, boot: BootVerdict) {
+        crate::link_task::run(cx.local.link, cx.shared, boot).await;
     }
 
     /// USART1 transmit-empty: one queued byte out per interrupt.
@@ -843,7 +843,7 @@ mod app {
             // Bytes shown as ASCII: a `str` would need UTF-8 validation code in flash for an
             // ASCII line.
             defmt::error!("{=[u8]:a}", line.as_bytes());
-            // With MAVLink on the UART, the ground link sends it as a STATUSTEXT instead.
+            // With MAVLink on the UART, the link task sends it as a STATUSTEXT instead.
             if !cx.shared.mavlink_on.lock(|on| *on) {
                 cx.shared.uart.lock(|uart| uart.send(line.as_bytes()));
             }

@@ -6,7 +6,7 @@
 //! the brown-out reset off. The PVD is set to level 6 (PLS = 110): its falling threshold is 2.85 V
 //! at the least and its rising one 3.10 V at the most (DS9716), so PVDO = 0 says VDD is above
 //! 2.7 V, and the board's 3.3 V regulator reads above both. The firmware only reports it
-//! ([`vdd_ok_for_flash`]); whether a save may run is the ground link's decision. (Brown-out level
+//! ([`vdd_ok_for_flash`]); whether a save may run is the link task's decision. (Brown-out level
 //! 3 in the option bytes was the other way: it would reset the chip at any dip under 2.7 V in
 //! flight too, where the F401 runs down to 1.7 V, and it is a permanent change of the part made
 //! by a flash write of its own.)
@@ -35,7 +35,7 @@ fn watch_vdd(pwr: PWR, rcc: &mut stm32f4xx_hal::rcc::Rcc) {
 }
 
 /// VDD is above the PVD's level-6 threshold (PVDO = 0): high enough for the flash's x32
-/// program and erase. What the ground link hands to `fcu-link`, which decides.
+/// program and erase. What the link task hands to `fcu-link`, which decides.
 pub fn vdd_ok_for_flash() -> bool {
     // SAFETY: a read of PWR_CSR, a status register no code writes after `watch_vdd`.
     let pwr = unsafe { &*PWR::ptr() };

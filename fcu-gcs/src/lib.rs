@@ -7,7 +7,7 @@
 //!
 //! - [`Station`]: fcu-core's parameter table, configuration and status as the link's
 //!   [`fcu_link::Vehicle`], with the rules for what a ground station may ask (fcu-core's, in
-//!   [`fcu_core::ground`]) and the deferred save and reboot;
+//!   [`fcu_core::gcs`]) and the deferred save and reboot;
 //! - [`Service`]: one period of the link task's work, the link and the station together, and
 //!   the pacing that lets an acknowledgement out before the flash stalls or the board resets.
 // The unit tests run on the host with std (fcu-link's mock vehicle and decoder allocate).

@@ -18,7 +18,7 @@
 
 use fcu_core::config::LinkProtocol;
 use fcu_core::flight::{ConfigChange, Status};
-use fcu_core::ground::GroundInput;
+use fcu_core::gcs::GcsInput;
 use fcu_core::telemetry::LineBuf;
 use fcu_core::Config;
 use fcu_params::snapshot;
@@ -44,8 +44,8 @@ pub struct Observed {
 pub struct ToControl {
     /// A changed configuration, for both halves of the control loop.
     pub config: Option<ConfigChange>,
-    /// Commands and levels for the control tick ([`fcu_core::flight::ControlTick::take_ground`]).
-    pub ground: Option<GroundInput>,
+    /// Commands and levels for the control tick ([`fcu_core::flight::ControlTick::take_gcs`]).
+    pub gcs: Option<GcsInput>,
 }
 
 /// The link, the station behind it, and the link task's pacing (see the module docs).
@@ -108,12 +108,12 @@ impl<const TX: usize> Service<TX> {
         if config.is_some() {
             self.link.set_rates(self.station.rates());
         }
-        let ground = self.station.take_ground();
+        let gcs = self.station.take_gcs();
         // Asked before `due`: what is dropped there is said in the next period.
         if let Some(text) = self.station.take_notice() {
             let _queued = self.link.send_text(Severity::Warning, text);
         }
-        ToControl { config, ground }
+        ToControl { config, gcs }
     }
 
     /// Moves bytes for the UART into `out`; returns how many. Before a save or a reboot only

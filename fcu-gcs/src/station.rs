@@ -5,16 +5,18 @@
 //! The station holds the configuration in force and a copy of the latest status; its owner
 //! (the firmware's link task) feeds it the status, hands the configuration changes it accepts
 //! to the control loop ([`Station::take_change`]), hands the commands it accepts to the control
-//! tick ([`Station::take_ground`]) and does the flash work it asks for ([`Station::save_due`],
-//! [`Station::saved`]). It decides what a ground station may do, with the rules of fcu-core's
-//! parameter table and of [`fcu_core::ground`] (which the control tick applies again with the
-//! state it is in); the owner only moves bytes and words.
+//! tick ([`Station::take_gcs`]) and does the flash work it asks for ([`Station::save_due`],
+//! [`Station::saved`]). It answers a ground station with the verdicts of fcu-core's parameter
+//! table and of [`fcu_core::gcs`] (which the control tick applies again with the state it is
+//! in), adding only the rules of its own work (a save or reboot pending, the reference
+//! supervisor); the link maps the verdict to MAVLink's answer, and the owner only moves bytes
+//! and words.
 //!
 //! # Deferred actions
 //!
 //! A save and a reboot are not carried out when they are asked for: a save waits for the
 //! changes to settle, both wait for the acknowledgement to leave. Each first tells the control
-//! tick ([`GroundInput::saving`], [`GroundInput::rebooting`]), which refuses to arm from then on
+//! tick ([`GcsInput::saving`], [`GcsInput::rebooting`]), which refuses to arm from then on
 //! with a blocker of its own ([`Blocker::Saving`], [`Blocker::RebootPending`]), and is due only
 //! once two status snapshots taken after that show the refusal with the board disarmed (the
 //! first may predate the tick taking the input). [`Station::due`] asks again at the instant the
@@ -23,15 +25,14 @@
 //! tick), is dropped with a text saying so ([`Station::take_notice`]). An erase stalls every
 //! instruction fetch, the control tick's included; a reset stops the motors.
 //!
-//! A save is refused while a motor test runs (the motor would keep its duty through the erase)
-//! and a motor test or a calibration while a save or a reboot is pending.
+//! A motor test or a calibration is refused while a save or a reboot is pending.
 
 use fcu_core::flight::{ChangeKind, ConfigChange, Status};
-use fcu_core::ground::{self, Disarm, GroundInput, MotorTest, MotorTestChange};
+use fcu_core::gcs::{self, Disarm, GcsInput, MotorTest, MotorTestChange, Refused};
 use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
-use fcu_params::{self as parameters, snapshot, RULE_ARMED};
+use fcu_params::{self as parameters, snapshot};
 
 use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
 
@@ -51,8 +52,6 @@ const HOLD_CONFIRMATIONS: u8 = 2;
 /// control loop that has stopped reporting, or a flood that keeps the link from going quiet.
 pub const ACTION_TIMEOUT_MS: u32 = 5000;
 
-/// Rule: a save is refused while a motor test runs.
-pub const RULE_MOTOR_TEST_RUNNING: &str = "motor test running";
 /// Rule: nothing new starts while a save is pending.
 pub const RULE_SAVING: &str = "save pending";
 /// Rule: nothing new starts while a reboot is pending.
@@ -88,9 +87,9 @@ pub struct Station {
     reboot_asked_ms: Option<u32>,
     /// The commands for the control tick not taken yet, and the levels of the save and the
     /// reboot.
-    ground: GroundInput,
-    /// `ground` differs from what the control tick last took.
-    ground_pending: bool,
+    gcs: GcsInput,
+    /// `gcs` differs from what the control tick last took.
+    gcs_pending: bool,
     /// Snapshots since the levels went out that show them in force (see the module docs).
     hold_confirmed: u8,
     /// A dropped action's text, for the ground station.
@@ -111,8 +110,8 @@ impl Station {
             unsaved_since_ms: None,
             save_asked_ms: None,
             reboot_asked_ms: None,
-            ground: GroundInput::default(),
-            ground_pending: false,
+            gcs: GcsInput::default(),
+            gcs_pending: false,
             hold_confirmed: 0,
             notice: None,
         }
@@ -124,12 +123,12 @@ impl Station {
         self.battery_mv = battery_mv.min(u32::from(u16::MAX)) as u16;
         self.rc_widths_counts = rc_widths_counts;
         self.now_ms = now_ms;
-        let held = self.ground.saving || self.ground.rebooting;
+        let held = self.gcs.saving || self.gcs.rebooting;
         let shows = |level: bool, blocker: Blocker| !level || status.blockers.contains(blocker);
         let refusing = !status.state.changes_restricted()
-            && shows(self.ground.saving, Blocker::Saving)
-            && shows(self.ground.rebooting, Blocker::RebootPending);
-        self.hold_confirmed = if held && !self.ground_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
+            && shows(self.gcs.saving, Blocker::Saving)
+            && shows(self.gcs.rebooting, Blocker::RebootPending);
+        self.hold_confirmed = if held && !self.gcs_pending && refusing { self.hold_confirmed.saturating_add(1) } else { 0 };
         if matches!(status.state, FlightState::Armed | FlightState::FailsafeLevel) {
             // Armed before the refusal reached the tick: what was asked cannot be done now,
             // and is not to be done by surprise later. (An arming gesture under way is ended
@@ -168,22 +167,22 @@ impl Station {
         self.change_pending.take().map(|kind| ConfigChange { cfg: self.cfg, kind })
     }
 
-    /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_ground`]): the
+    /// What the control tick is to take ([`fcu_core::flight::ControlTick::take_gcs`]): the
     /// commands accepted since the last call, and whether a save is wanted; `None` when nothing
     /// changed.
-    pub fn take_ground(&mut self) -> Option<GroundInput> {
+    pub fn take_gcs(&mut self) -> Option<GcsInput> {
         let saving = self.save_wanted();
         let rebooting = self.reboot_asked_ms.is_some();
-        if (saving, rebooting) != (self.ground.saving, self.ground.rebooting) {
-            self.ground.saving = saving;
-            self.ground.rebooting = rebooting;
-            self.ground_pending = true;
+        if (saving, rebooting) != (self.gcs.saving, self.gcs.rebooting) {
+            self.gcs.saving = saving;
+            self.gcs.rebooting = rebooting;
+            self.gcs_pending = true;
         }
-        if !core::mem::take(&mut self.ground_pending) {
+        if !core::mem::take(&mut self.gcs_pending) {
             return None;
         }
-        let input = self.ground;
-        self.ground = GroundInput { saving, rebooting, ..GroundInput::default() };
+        let input = self.gcs;
+        self.gcs = GcsInput { saving, rebooting, ..GcsInput::default() };
         Some(input)
     }
 
@@ -228,19 +227,19 @@ impl Station {
     /// refuses to arm for it (see the module docs). The reference's supervisor has no such
     /// refusal: only the armed state counts there.
     pub fn save_due(&self) -> bool {
-        self.save_wanted() && self.held(self.ground.saving)
+        self.save_wanted() && self.held(self.gcs.saving)
     }
 
     /// Whether the board should reset now: asked for, nothing left to save, and the control
     /// tick refuses to arm for it.
     fn reboot_due(&self) -> bool {
-        self.reboot_asked_ms.is_some() && !self.unsaved() && self.held(self.ground.rebooting)
+        self.reboot_asked_ms.is_some() && !self.unsaved() && self.held(self.gcs.rebooting)
     }
 
     /// The control tick shows the refusal `level` asks for (always, for the reference's
     /// supervisor, which has none).
     fn held(&self, level: bool) -> bool {
-        let confirmed = level && !self.ground_pending && self.hold_confirmed >= HOLD_CONFIRMATIONS;
+        let confirmed = level && !self.gcs_pending && self.hold_confirmed >= HOLD_CONFIRMATIONS;
         !self.armed() && (confirmed || !self.safe_supervisor())
     }
 
@@ -311,11 +310,11 @@ impl Station {
     }
 
     /// Why a new motor test or calibration may not start now: a save or a reboot is pending.
-    fn pending_rule(&self) -> Result<(), &'static str> {
+    fn pending_rule(&self) -> Result<(), Refused> {
         if self.reboot_asked_ms.is_some() {
-            Err(RULE_REBOOTING)
-        } else if self.save_wanted() || self.ground.saving {
-            Err(RULE_SAVING)
+            Err(Refused::denied(RULE_REBOOTING))
+        } else if self.save_wanted() || self.gcs.saving {
+            Err(Refused::denied(RULE_SAVING))
         } else {
             Ok(())
         }
@@ -333,12 +332,12 @@ impl Station {
 
     /// The commands for the control tick, to add one to; the safe supervisor's only. Not
     /// generic over what is added (a closure each): one copy for every command.
-    fn for_tick(&mut self) -> Result<&mut GroundInput, &'static str> {
+    fn for_tick(&mut self) -> Result<&mut GcsInput, Refused> {
         if !self.safe_supervisor() {
-            return Err(ground::RULE_REFERENCE);
+            return Err(Refused::denied(gcs::RULE_REFERENCE));
         }
-        self.ground_pending = true;
-        Ok(&mut self.ground)
+        self.gcs_pending = true;
+        Ok(&mut self.gcs)
     }
 
     fn changed(&mut self, kind: ChangeKind) {
@@ -352,8 +351,6 @@ impl Vehicle for Station {
         let Some(s) = self.status else {
             return VehicleState {
                 state: FlightState::Calibrating,
-                in_air: false,
-                throttle_low: true,
                 attitude: Attitude::default(),
                 rc_widths_us: [0; 8],
                 rc_channel_count: 0,
@@ -369,13 +366,10 @@ impl Vehicle for Station {
         for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
             *out = (u32::from(w) / COUNTS_PER_US) as u16;
         }
-        let throttle_low = self.cfg.rc.throttle_low(&s.sticks);
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;
         let motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
         VehicleState {
             state: s.state,
-            in_air: armed && !throttle_low,
-            throttle_low,
             attitude: Attitude {
                 roll_rad: s.tilt.roll_rad,
                 pitch_rad: s.tilt.pitch_rad,
@@ -444,42 +438,43 @@ impl Vehicle for Station {
         Ok(others)
     }
 
-    fn request(&mut self, request: Request) -> Result<(), &'static str> {
+    fn request(&mut self, request: Request) -> Result<(), Refused> {
+        let state = self.flight_state();
         match request {
-            Request::SaveParams if self.armed() => Err(RULE_ARMED),
-            Request::SaveParams if self.motor_test_running() => Err(RULE_MOTOR_TEST_RUNNING),
+            Request::Arm => gcs::arm_rule(),
             Request::SaveParams => {
+                gcs::save_rule(state, self.motor_test_running())?;
                 self.save_asked_ms = Some(self.now_ms);
                 Ok(())
             }
-            Request::ResetParams if self.armed() => Err(RULE_ARMED),
             Request::ResetParams => {
-                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| e.rule())?;
+                gcs::disarmed_rule(state)?;
+                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
                 if self.cfg != *self.defaults {
                     self.cfg = *self.defaults;
                     self.changed(change.kind);
                 }
                 Ok(())
             }
-            Request::Reboot if self.armed() => Err(RULE_ARMED),
             Request::Reboot => {
+                gcs::disarmed_rule(state)?;
                 self.reboot_asked_ms = Some(self.now_ms);
                 Ok(())
             }
             Request::Disarm { forced } => {
                 let throttle_low = self.status.is_none_or(|s| self.cfg.rc.throttle_low(&s.sticks));
-                ground::disarm_rule(self.flight_state(), throttle_low, forced)?;
+                Disarm { forced }.checked(state, throttle_low)?;
                 self.for_tick()?.disarm = Some(Disarm { forced });
                 Ok(())
             }
             Request::CalibrateImu => {
-                ground::ground_test_rule(self.flight_state())?;
+                gcs::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.calibrate_imu = true;
                 Ok(())
             }
             Request::CalibrateRadio => {
-                ground::ground_test_rule(self.flight_state())?;
+                gcs::test_or_calibration_rule(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.radio_calibration = Some(true);
                 Ok(())
@@ -489,7 +484,7 @@ impl Vehicle for Station {
                 Ok(())
             }
             Request::MotorTest { motor, throttle_pct, duration_ms } => {
-                let test = MotorTest { motor, duty_pct: throttle_pct, duration_ms }.checked(self.flight_state())?;
+                let test = MotorTest { motor, duty_pct: throttle_pct, duration_ms }.checked(state)?;
                 self.pending_rule()?;
                 self.for_tick()?.motor_test = Some(MotorTestChange::Start(test));
                 Ok(())
@@ -517,6 +512,18 @@ mod tests {
         s
     }
 
+    /// The rule of a request's verdict (whether it is refused for now, the rules' own tests
+    /// in fcu-core show).
+    trait Asked {
+        fn asked(&mut self, request: Request) -> Result<(), &'static str>;
+    }
+
+    impl Asked for Station {
+        fn asked(&mut self, request: Request) -> Result<(), &'static str> {
+            self.request(request).map_err(|refused| refused.rule)
+        }
+    }
+
     const REST: Sticks = Sticks::new(0, 0, 0, 0);
     const UP: Sticks = Sticks::new(0, 0, 1500, 0);
 
@@ -533,56 +540,56 @@ mod tests {
     #[test]
     fn a_disarm_goes_to_the_tick_on_the_ground_and_in_the_air_only_forced() {
         let mut st = station_in(FlightState::Armed, REST);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
-        assert_eq!(st.take_ground(), None, "taken once");
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Ok(()));
+        assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: false }));
+        assert_eq!(st.take_gcs(), None, "taken once");
 
         let mut st = station_in(FlightState::Armed, UP);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_THROTTLE_NOT_LOW));
-        assert_eq!(st.take_ground(), None, "a refusal sends nothing");
-        assert_eq!(st.request(Request::Disarm { forced: true }), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(gcs::RULE_THROTTLE_NOT_LOW));
+        assert_eq!(st.take_gcs(), None, "a refusal sends nothing");
+        assert_eq!(st.asked(Request::Disarm { forced: true }), Ok(()));
+        assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: true }));
 
         let mut st = station_in(FlightState::FailsafeLevel, REST);
-        assert_eq!(st.request(Request::Disarm { forced: false }), Err(ground::RULE_FAILSAFE_LEVEL));
+        assert_eq!(st.asked(Request::Disarm { forced: false }), Err(gcs::RULE_FAILSAFE_LEVEL));
     }
 
     #[test]
     fn a_motor_test_goes_to_the_tick_disarmed_only_capped() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(motor_test(3, 90.0)), Ok(()));
-        let test = MotorTest { motor: 3, duty_pct: ground::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
-        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
-        assert_eq!(st.request(Request::StopMotorTest), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
-        assert_eq!(st.request(motor_test(4, 5.0)), Err(ground::RULE_NO_SUCH_MOTOR));
+        assert_eq!(st.asked(motor_test(3, 90.0)), Ok(()));
+        let test = MotorTest { motor: 3, duty_pct: gcs::MOTOR_TEST_MAX_DUTY_PCT, duration_ms: 2000 };
+        assert_eq!(st.take_gcs().and_then(|g| g.motor_test), Some(MotorTestChange::Start(test)));
+        assert_eq!(st.asked(Request::StopMotorTest), Ok(()));
+        assert_eq!(st.take_gcs().and_then(|g| g.motor_test), Some(MotorTestChange::Stop));
+        assert_eq!(st.asked(motor_test(4, 5.0)), Err(gcs::RULE_NO_SUCH_MOTOR));
 
         for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
             let mut st = station_in(state, REST);
-            assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_DISARMED_ONLY), "{state:?}");
-            assert_eq!(st.take_ground(), None);
+            assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_DISARMED_ONLY), "{state:?}");
+            assert_eq!(st.take_gcs(), None);
         }
-        assert_eq!(station_in(FlightState::Calibrating, REST).request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(station_in(FlightState::Calibrating, REST).asked(motor_test(0, 5.0)), Err(gcs::RULE_CALIBRATING));
         // No status yet: the board is still booting.
         let mut st = Station::new(Config::default(), &Config::DEFAULT);
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_CALIBRATING));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_CALIBRATING));
     }
 
     #[test]
     fn calibrations_go_to_the_tick_disarmed_only_and_an_end_always() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::CalibrateImu), Ok(()));
-        assert_eq!(st.request(Request::CalibrateRadio), Ok(()));
-        let g = st.take_ground().unwrap();
+        assert_eq!(st.asked(Request::CalibrateImu), Ok(()));
+        assert_eq!(st.asked(Request::CalibrateRadio), Ok(()));
+        let g = st.take_gcs().unwrap();
         assert!(g.calibrate_imu);
         assert_eq!(g.radio_calibration, Some(true));
 
         let mut st = station_in(FlightState::Armed, REST);
-        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_DISARMED_ONLY));
-        assert_eq!(st.request(Request::CalibrateRadio), Err(ground::RULE_DISARMED_ONLY));
-        assert_eq!(st.take_ground(), None);
-        assert_eq!(st.request(Request::EndCalibration), Ok(()));
-        assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
+        assert_eq!(st.asked(Request::CalibrateImu), Err(gcs::RULE_DISARMED_ONLY));
+        assert_eq!(st.asked(Request::CalibrateRadio), Err(gcs::RULE_DISARMED_ONLY));
+        assert_eq!(st.take_gcs(), None);
+        assert_eq!(st.asked(Request::EndCalibration), Ok(()));
+        assert_eq!(st.take_gcs().and_then(|g| g.radio_calibration), Some(false));
     }
 
     #[test]
@@ -590,11 +597,11 @@ mod tests {
         const CFG: Config = Config { supervisor: SupervisorConfig::Reference, ..Config::DEFAULT };
         let mut st = Station::new(CFG, &CFG);
         st.observe(&status(FlightState::Disarmed, REST, Blockers::default()), 3900, [0; 4], 0);
-        assert_eq!(st.request(Request::CalibrateImu), Err(ground::RULE_REFERENCE));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(ground::RULE_REFERENCE));
-        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.asked(Request::CalibrateImu), Err(gcs::RULE_REFERENCE));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(gcs::RULE_REFERENCE));
+        assert_eq!(st.take_gcs(), None);
         // A save has no arming refusal to wait for there.
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(st.save_due());
     }
 
@@ -620,9 +627,9 @@ mod tests {
         let idle = status(FlightState::Disarmed, REST, Blockers::default());
         let mut busy = idle;
         busy.blockers.insert(Blocker::Saving);
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         assert!(!st.save_due(), "the tick does not know yet");
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
         // A snapshot that does not show the refusal, then one that may predate the tick's take.
         st.observe(&idle, 3900, [0; 4], 1005);
         st.observe(&busy, 3900, [0; 4], 1010);
@@ -643,13 +650,13 @@ mod tests {
         st.observe(&busy, 3900, [0; 4], 1030);
         st.observe(&busy, 3900, [0; 4], 1035);
         assert!(!st.save_due(), "nothing was changed: nothing left to save");
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
         st.observe(&busy, 3900, [0; 4], 1040);
         assert!(st.save_due());
         st.saved(true);
         assert!(!st.save_due());
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed again");
-        assert_eq!(st.take_ground(), None);
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs(), None);
     }
 
     /// A status in `state` showing `blockers`, fed at `now_ms`.
@@ -664,9 +671,9 @@ mod tests {
     #[test]
     fn a_reboot_is_due_only_once_the_tick_refuses_to_arm_for_it() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
         assert_eq!(st.due(), Due::Nothing, "the tick does not know yet");
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(true));
         feed(&mut st, FlightState::Disarmed, &[], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1010);
         assert_eq!(st.due(), Due::Nothing, "one snapshot may predate the tick's take");
@@ -677,8 +684,8 @@ mod tests {
     #[test]
     fn a_reboot_accepted_disarmed_is_dropped_when_the_board_arms_never_carried_out_in_flight() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
-        let _ = st.take_ground();
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
+        let _ = st.take_gcs();
         // A gesture under way (motors off) is ended by the refusal: the reboot waits for it.
         feed(&mut st, FlightState::Arming, &[Blocker::RebootPending], 1002);
         assert_eq!(st.due(), Due::Nothing);
@@ -688,7 +695,7 @@ mod tests {
         assert_eq!(st.due(), Due::Nothing);
         assert_eq!(st.take_notice(), Some(&b"reboot dropped: the board armed"[..]));
         assert!(!st.reboot_asked());
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(false), "arming allowed again");
         for t in (1010..20_000).step_by(5) {
             feed(&mut st, FlightState::Armed, &[], t);
             assert_eq!(st.due(), Due::Nothing, "at {t} ms");
@@ -703,8 +710,8 @@ mod tests {
     #[test]
     fn a_reboot_never_confirmed_times_out_with_a_text() {
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
-        let _ = st.take_ground();
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
+        let _ = st.take_gcs();
         // The tick never shows the refusal (its status stopped, say).
         feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS - 5);
         assert_eq!(st.due(), Due::Nothing);
@@ -712,7 +719,7 @@ mod tests {
         feed(&mut st, FlightState::Disarmed, &[], 1000 + ACTION_TIMEOUT_MS);
         assert_eq!(st.due(), Due::Nothing);
         assert_eq!(st.take_notice(), Some(&b"reboot dropped: arming refusal not confirmed in 5 s"[..]));
-        assert_eq!(st.take_ground().map(|g| g.rebooting), Some(false), "arming allowed again");
+        assert_eq!(st.take_gcs().map(|g| g.rebooting), Some(false), "arming allowed again");
         // A late confirmation does not revive it.
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 5);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1000 + ACTION_TIMEOUT_MS + 10);
@@ -723,18 +730,18 @@ mod tests {
     fn an_asked_save_that_finds_the_board_armed_is_dropped_and_waits_for_the_disarm() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
-        let _ = st.take_ground();
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
+        let _ = st.take_gcs();
         feed(&mut st, FlightState::Armed, &[], 1005);
         assert_eq!(st.take_notice(), Some(&b"save dropped: the board armed (the changes are saved after the disarm)"[..]));
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "no save while armed");
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "no save while armed");
         for t in (1010..10_000).step_by(5) {
             feed(&mut st, FlightState::Armed, &[], t);
             assert_eq!(st.due(), Due::Nothing, "never while armed, at {t} ms");
         }
         // Disarmed: the change is still unsaved, and saved once the refusal shows.
         feed(&mut st, FlightState::Disarmed, &[], 10_000);
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 10_010);
         assert_eq!(st.due(), Due::Save);
@@ -744,14 +751,14 @@ mod tests {
     fn a_reboot_saves_what_is_unsaved_first() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
-        assert_eq!(st.request(Request::Reboot), Ok(()));
-        let g = st.take_ground().unwrap();
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
+        let g = st.take_gcs().unwrap();
         assert!(g.saving && g.rebooting, "{g:?}");
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving, Blocker::RebootPending], 1010);
         assert_eq!(st.due(), Due::Save, "not the reboot: the change would be lost");
         st.saved(true);
-        assert_eq!(st.take_ground().map(|g| (g.saving, g.rebooting)), Some((false, true)));
+        assert_eq!(st.take_gcs().map(|g| (g.saving, g.rebooting)), Some((false, true)));
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1015);
         feed(&mut st, FlightState::Disarmed, &[Blocker::RebootPending], 1020);
         assert_eq!(st.due(), Due::Reboot);
@@ -761,21 +768,21 @@ mod tests {
     fn a_save_is_refused_during_a_motor_test_and_a_test_while_a_save_or_reboot_is_pending() {
         let mut st = station_in(FlightState::Disarmed, REST);
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000);
-        assert_eq!(st.request(Request::SaveParams), Err(RULE_MOTOR_TEST_RUNNING));
+        assert_eq!(st.asked(Request::SaveParams), Err(gcs::RULE_MOTOR_TEST_RUNNING));
         // A change made meanwhile waits for the test to end.
         assert_eq!(st.set_param(parameters::index_of(b"ANGLE_MAX").unwrap() as u16, 25.0).map(|_| ()), Ok(()));
         feed(&mut st, FlightState::Disarmed, &[Blocker::MotorTest], 1000 + SAVE_DEBOUNCE_MS + 100);
-        assert_eq!(st.take_ground().map(|g| g.saving), None);
+        assert_eq!(st.take_gcs().map(|g| g.saving), None);
         assert_eq!(st.due(), Due::Nothing);
 
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_SAVING));
-        assert_eq!(st.request(Request::CalibrateImu), Err(RULE_SAVING));
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(RULE_SAVING));
+        assert_eq!(st.asked(Request::CalibrateImu), Err(RULE_SAVING));
         let mut st = station_in(FlightState::Disarmed, REST);
-        assert_eq!(st.request(Request::Reboot), Ok(()));
-        assert_eq!(st.request(motor_test(0, 5.0)), Err(RULE_REBOOTING));
-        assert_eq!(st.request(Request::CalibrateRadio), Err(RULE_REBOOTING));
+        assert_eq!(st.asked(Request::Reboot), Ok(()));
+        assert_eq!(st.asked(motor_test(0, 5.0)), Err(RULE_REBOOTING));
+        assert_eq!(st.asked(Request::CalibrateRadio), Err(RULE_REBOOTING));
     }
 
     fn index(name: &str) -> u16 {
@@ -843,18 +850,18 @@ mod tests {
     fn a_save_with_the_supply_too_low_is_not_attempted_said_and_tried_again_after_the_debounce() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
-        assert_eq!(st.request(Request::SaveParams), Ok(()));
-        let _ = st.take_ground();
+        assert_eq!(st.asked(Request::SaveParams), Ok(()));
+        let _ = st.take_gcs();
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1005);
         feed(&mut st, FlightState::Disarmed, &[Blocker::Saving], 1010);
         assert_eq!(st.due(), Due::Save);
         st.supply_low();
         assert_eq!(st.take_notice(), Some(&b"parameters NOT saved: supply below 2.7 V"[..]));
         assert!(st.unsaved(), "the change is still to be saved");
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(false), "arming allowed meanwhile");
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(false), "arming allowed meanwhile");
         feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS - 20);
-        assert_eq!(st.take_ground(), None, "not every period: after a debounce");
+        assert_eq!(st.take_gcs(), None, "not every period: after a debounce");
         feed(&mut st, FlightState::Disarmed, &[], 1015 + SAVE_DEBOUNCE_MS);
-        assert_eq!(st.take_ground().map(|g| g.saving), Some(true));
+        assert_eq!(st.take_gcs().map(|g| g.saving), Some(true));
     }
 }

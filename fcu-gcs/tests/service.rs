@@ -67,8 +67,8 @@ impl Board {
         if let Some(change) = to.config {
             self.fc.take_change(&change).unwrap();
         }
-        if let Some(input) = to.ground {
-            self.fc.take_ground(&input);
+        if let Some(input) = to.gcs {
+            self.fc.take_gcs(&input);
         }
         // The UART sends what a period allows; the link fills what room it has.
         let sending = self.uart_queue.min(UART_BYTES_PER_PERIOD);
@@ -234,6 +234,6 @@ fn the_link_alone_cannot_keep_a_motor_spinning_past_the_ticks_deadline() {
     }
     assert!(texts(&b.sent()).iter().all(|t| !t.starts_with("Motor test stopped")), "the link asked no stop");
     let ran_ms = last_spinning_ms.expect("the motor spun") - started_ms;
-    let deadline_ms = fcu_core::ground::MOTOR_TEST_MAX_MS;
+    let deadline_ms = fcu_core::gcs::MOTOR_TEST_MAX_MS;
     assert!((deadline_ms - 2 * PERIOD_MS..=deadline_ms + PERIOD_MS).contains(&ran_ms), "spun for {ran_ms} ms");
 }

@@ -5,7 +5,7 @@
 mod support;
 
 use fcu_core::flight::{FlightController, Status};
-use fcu_core::ground::{Disarm, MotorTestChange};
+use fcu_core::gcs::{Disarm, MotorTestChange};
 use fcu_core::rc::Sticks;
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
@@ -51,21 +51,22 @@ const FORCED: [f32; 7] = [0.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0];
 fn disarm_accepted_on_the_ground_refused_in_the_air_unless_forced() {
     let mut st = station(FlightState::Armed, REST);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM).0, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: false }));
+    assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: false }));
 
     let mut st = station(FlightState::Armed, UP);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
     assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert_eq!(texts.len(), 1);
     assert!(texts[0].contains("21196"), "{texts:?}");
-    assert_eq!(st.take_ground(), None);
+    assert_eq!(st.take_gcs(), None);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, FORCED).0, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(st.take_ground().and_then(|g| g.disarm), Some(Disarm { forced: true }));
+    assert_eq!(st.take_gcs().and_then(|g| g.disarm), Some(Disarm { forced: true }));
 
-    // The level stage: the station's own rule, DENIED with it.
+    // The level stage: refused for now as armed with the throttle up (the stage flies the held
+    // throttle), with its rule.
     let mut st = station(FlightState::FailsafeLevel, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM);
-    assert_eq!(result, MavResult::MAV_RESULT_DENIED);
+    assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert_eq!(texts, ["Disarm refused: in failsafe (force 21196)"]);
 }
 
@@ -74,21 +75,22 @@ fn motor_test_accepted_disarmed_refused_armed_and_while_calibrating() {
     let test = [2.0, 0.0, 50.0, 1.5, 0.0, 0.0, 0.0];
     let mut st = station(FlightState::Disarmed, REST);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test).0, MavResult::MAV_RESULT_ACCEPTED);
-    match st.take_ground().and_then(|g| g.motor_test) {
+    match st.take_gcs().and_then(|g| g.motor_test) {
         Some(MotorTestChange::Start(t)) => {
-            assert_eq!((t.motor, t.duty_pct, t.duration_ms), (1, fcu_core::ground::MOTOR_TEST_MAX_DUTY_PCT, 1500));
+            assert_eq!((t.motor, t.duty_pct, t.duration_ms), (1, fcu_core::gcs::MOTOR_TEST_MAX_DUTY_PCT, 1500));
         }
         other => panic!("{other:?}"),
     }
     let mut st = station(FlightState::Armed, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
-    assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: disarmed only".to_string()]));
-    assert_eq!(st.take_ground(), None);
+    // Refused for now, as a calibration, a save and a reboot are while armed.
+    assert_eq!((result, texts), (MavResult::MAV_RESULT_TEMPORARILY_REJECTED, vec!["Motor test: disarmed only".to_string()]));
+    assert_eq!(st.take_gcs(), None);
     // Which motors there are is the flight controller's rule too.
     let mut st = station(FlightState::Disarmed, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, [5.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]);
     assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: motor must be 1 to 4".to_string()]));
-    assert_eq!(st.take_ground(), None);
+    assert_eq!(st.take_gcs(), None);
     let mut st = station(FlightState::Calibrating, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
     assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Motor test: calibrating".to_string()]));
@@ -100,18 +102,98 @@ fn calibrations_accepted_disarmed_refused_otherwise() {
     let radio = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
     let mut st = station(FlightState::Disarmed, REST);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu).0, MavResult::MAV_RESULT_ACCEPTED);
-    assert!(st.take_ground().is_some_and(|g| g.calibrate_imu));
+    assert!(st.take_gcs().is_some_and(|g| g.calibrate_imu));
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(true));
+    assert_eq!(st.take_gcs().and_then(|g| g.radio_calibration), Some(true));
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]).0, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(st.take_ground().and_then(|g| g.radio_calibration), Some(false));
+    assert_eq!(st.take_gcs().and_then(|g| g.radio_calibration), Some(false));
 
     let mut st = station(FlightState::Fault, REST);
     let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, imu);
     assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Calibration refused: fault or failsafe".to_string()]));
     let mut st = station(FlightState::Armed, REST);
     assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, radio).0, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    assert_eq!(st.take_ground(), None);
+    assert_eq!(st.take_gcs(), None);
+}
+
+#[test]
+fn arming_from_the_link_is_refused_with_the_flight_controllers_rule() {
+    for state in [FlightState::Disarmed, FlightState::Armed] {
+        let mut st = station(state, REST);
+        let (result, texts) = ask(&mut st, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!((result, texts), (MavResult::MAV_RESULT_DENIED, vec!["Arm refused: arm with the stick gesture".to_string()]));
+        assert_eq!(st.take_gcs(), None);
+    }
+}
+
+#[test]
+fn storage_and_reboot_accepted_disarmed_refused_for_now_armed() {
+    let save = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let reset = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let reboot = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut st = station(FlightState::Disarmed, REST);
+    assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save).0, MavResult::MAV_RESULT_ACCEPTED);
+    assert!(st.unsaved());
+    let mut st = station(FlightState::Disarmed, REST);
+    assert_eq!(ask(&mut st, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, reboot).0, MavResult::MAV_RESULT_ACCEPTED);
+    assert!(st.reboot_asked());
+    for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
+        let mut st = station(state, REST);
+        for (cmd, params, what) in [
+            (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save, "Storage"),
+            (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, reset, "Storage"),
+            (MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, reboot, "Reboot"),
+        ] {
+            let (result, texts) = ask(&mut st, cmd, params);
+            assert_eq!(result, MavResult::MAV_RESULT_TEMPORARILY_REJECTED, "{state:?} {cmd:?}");
+            assert_eq!(texts, [format!("{what} refused: disarmed only")]);
+        }
+        assert!(!st.unsaved() && !st.reboot_asked(), "{state:?}");
+        assert_eq!(st.take_change(), None, "{state:?}: a reset refused changes nothing");
+    }
+}
+
+#[test]
+fn whatever_the_flight_controller_refuses_the_link_cannot_carry_out() {
+    // Every command the link decodes, in every state: refused by the station (fcu-core's rules),
+    // the link sends it nowhere: no input for the tick, no configuration change, no save, no
+    // reboot (the link decides nothing, so it has nothing to let through on its own).
+    let commands: [(MavCmd, [f32; 7]); 9] = [
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, DISARM),
+        (MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_STORAGE, [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_DO_MOTOR_TEST, [1.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]),
+        (MavCmd::MAV_CMD_DO_MOTOR_TEST, [5.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0]),
+    ];
+    let mut refused = 0;
+    for state in FlightState::ALL {
+        for sticks in [REST, UP] {
+            for (cmd, params) in commands {
+                let mut st = station(state, sticks);
+                // Differs from the defaults, for a reset to change.
+                let i = parameters::index_of(b"ANGLE_MAX").unwrap() as u16;
+                let _ = st.set_param(i, 25.0);
+                let _ = st.take_change();
+                let mut link = link();
+                link.receive(&v2(&command_long(cmd, params)), 0, &mut st);
+                let sent = drain(&mut link);
+                if ack_of(&sent).1 == MavResult::MAV_RESULT_ACCEPTED {
+                    continue;
+                }
+                refused += 1;
+                let what = format!("{state:?} {sticks:?} {cmd:?} {params:?}");
+                assert_eq!(st.take_gcs(), None, "{what}");
+                assert_eq!(st.take_change(), None, "{what}");
+                assert!(!st.reboot_asked() && !link.reboot_ready(), "{what}");
+                assert_eq!(texts(&sent).len(), 1, "{what}: the rule named");
+            }
+        }
+    }
+    assert!(refused > 40, "{refused} refusals: the states must refuse most of these");
 }
 
 /// Telemetry off but for a heartbeat a minute apart: what goes out is the answers.

@@ -1,12 +1,15 @@
 //! COMMAND_LONG and COMMAND_INT: every command gets a COMMAND_ACK, UNSUPPORTED unless it is
-//! one of these, with the rules real autopilots apply:
+//! one of these. The link decodes a command into a [`Request`] and the vehicle decides it with
+//! fcu-core's rules ([`fcu_core::gcs`]: arming is the stick gesture's, a disarm with the
+//! throttle up needs MAVLink's force value, calibrations, saves and reboots wait for the
+//! disarm...):
 //!
-//! | command | rule |
+//! | command | request |
 //! |---|---|
-//! | COMPONENT_ARM_DISARM | arming stays the stick gesture's: arm is DENIED with a STATUSTEXT. Disarm is passed on on the ground with the throttle low, and in the air (or with the throttle up) only with param2 = [`FORCE_DISARM`], MAVLink's force value; otherwise TEMPORARILY_REJECTED |
-//! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time, disarmed only; every parameter 0: [`Request::EndCalibration`] (PX4's cancel); magnetometer, baro and the rest UNSUPPORTED |
-//! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults; disarmed only |
-//! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot, disarmed only; the host reboots when [`crate::Link::reboot_ready`] |
+//! | COMPONENT_ARM_DISARM | param1 = 1: [`Request::Arm`]; 0: [`Request::Disarm`], forced with param2 = [`FORCE_DISARM`], MAVLink's force value |
+//! | PREFLIGHT_CALIBRATION | gyro (param1 = 1) or accelerometer (param5 ≠ 0): [`Request::CalibrateImu`]; radio (param4 = 1): [`Request::CalibrateRadio`]; one at a time; every parameter 0: [`Request::EndCalibration`] (PX4's cancel); magnetometer, baro and the rest UNSUPPORTED |
+//! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults |
+//! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot; the host reboots when [`crate::Link::reboot_ready`] |
 //! | DO_MOTOR_TEST | one motor; the flight controller decides, caps and stops it ([`crate::motor_test`]) |
 //! | REQUEST_MESSAGE | AUTOPILOT_VERSION (param1 = 148) after the ACK; any other message UNSUPPORTED |
 //! | REQUEST_AUTOPILOT_CAPABILITIES | AUTOPILOT_VERSION after the ACK |
@@ -14,9 +17,10 @@
 //! A running motor test is stopped by any other command that is ACCEPTED (after the vehicle
 //! took it, before its ACK); a command answered UNSUPPORTED or refused leaves it running:
 //! MAVProxy asks for GET_HOME_POSITION every 2 s, which this board answers UNSUPPORTED, and
-//! a test must survive that. A DO_MOTOR_TEST accepted replaces the test. "Disarmed only"
-//! refusals are TEMPORARILY_REJECTED, rule refusals DENIED, both with a STATUSTEXT naming the
-//! rule; a refusal by the vehicle is DENIED with its rule.
+//! a test must survive that. A DO_MOTOR_TEST accepted replaces the test. A refusal by the
+//! vehicle is TEMPORARILY_REJECTED when the flight state of the moment refuses it
+//! ([`crate::Refused::for_now`]: armed, the throttle up), DENIED otherwise, both with a
+//! STATUSTEXT naming the rule; a parameter the link cannot decode is DENIED with its text.
 
 use mavlink::dialects::common::{MavCmd, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA};
 use mavlink::MessageData;
@@ -24,7 +28,7 @@ use mavlink::MessageData;
 use crate::link::{Core, Room};
 use crate::reader::Frame;
 use crate::text::{Severity, Text};
-use crate::vehicle::{Request, Vehicle, VehicleState};
+use crate::vehicle::{Refused, Request, Vehicle};
 
 /// MAVLink's value of COMPONENT_ARM_DISARM's param2 that forces a disarm in flight.
 pub const FORCE_DISARM: f32 = 21196.0;
@@ -132,28 +136,31 @@ fn unsupported() -> Refusal {
     Refusal(MavResult::MAV_RESULT_UNSUPPORTED, [""; 3])
 }
 
-pub(crate) fn while_armed(what: &'static str) -> Refusal {
-    Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, [what, " refused: armed", ""])
-}
-
 pub(crate) fn denied(what: &'static str, rule: &'static str) -> Refusal {
     Refusal(MavResult::MAV_RESULT_DENIED, [what, ": ", rule])
 }
 
-/// Passes a request on to the vehicle, a refusal coming back DENIED with its rule.
+/// The vehicle's verdict as MAVLink says it: TEMPORARILY_REJECTED when the flight state of the
+/// moment refuses, DENIED otherwise, with the rule after `what`.
+pub(crate) fn refusal(what: &'static str, refused: Refused) -> Refusal {
+    let result = if refused.for_now { MavResult::MAV_RESULT_TEMPORARILY_REJECTED } else { MavResult::MAV_RESULT_DENIED };
+    Refusal(result, [what, ": ", refused.rule])
+}
+
+/// Passes a request on to the vehicle and answers with its verdict.
 fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &'static str) -> Result<Then, Refusal> {
-    vehicle.request(request).map(|()| Then::Nothing).map_err(|rule| denied(what, rule))
+    vehicle.request(request).map(|()| Then::Nothing).map_err(|refused| refusal(what, refused))
 }
 
 impl<const TX: usize> Core<TX> {
     pub(crate) fn command<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) {
         let state = vehicle.state();
         let outcome = match command.id {
-            COMPONENT_ARM_DISARM => arm_disarm(command, &state, vehicle),
-            PREFLIGHT_CALIBRATION => calibration(command, &state, vehicle),
-            PREFLIGHT_STORAGE => storage(command, &state, vehicle),
+            COMPONENT_ARM_DISARM => arm_disarm(command, vehicle),
+            PREFLIGHT_CALIBRATION => calibration(command, vehicle),
+            PREFLIGHT_STORAGE => storage(command, vehicle),
             PREFLIGHT_REBOOT_SHUTDOWN => {
-                let outcome = reboot(command, &state, vehicle);
+                let outcome = reboot(command, vehicle);
                 if outcome.is_ok() {
                     self.reboot_pending = true;
                 }
@@ -198,28 +205,18 @@ impl<const TX: usize> Core<TX> {
     }
 }
 
-fn arm_disarm<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+fn arm_disarm<V: Vehicle>(command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
     let [action, force, ..] = command.params;
     if action == 1.0 {
-        return Err(denied("Arm refused", "arm with the stick gesture"));
+        return ask(vehicle, Request::Arm, "Arm refused");
     }
     if action != 0.0 {
         return Err(denied("Arm/disarm", "param1 must be 0 or 1"));
     }
-    if !state.changes_restricted() {
-        return Ok(Then::Nothing);
-    }
-    let forced = force == FORCE_DISARM;
-    if !forced && state.in_air {
-        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, ["Disarm refused: in the air (force 21196)", "", ""]));
-    }
-    if !forced && !state.throttle_low {
-        return Err(Refusal(MavResult::MAV_RESULT_TEMPORARILY_REJECTED, ["Disarm refused: throttle not low", "", ""]));
-    }
-    ask(vehicle, Request::Disarm { forced }, "Disarm refused")
+    ask(vehicle, Request::Disarm { forced: force == FORCE_DISARM }, "Disarm refused")
 }
 
-fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+fn calibration<V: Vehicle>(command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
     let [gyro, mag, baro, radio, accel, p6, p7] = command.params;
     if command.params == [0.0; 7] {
         return ask(vehicle, Request::EndCalibration, "Calibration end refused");
@@ -229,14 +226,11 @@ fn calibration<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mu
     if mag != 0.0 || baro != 0.0 || p6 != 0.0 || p7 != 0.0 || imu == radio {
         return Err(unsupported());
     }
-    if state.changes_restricted() {
-        return Err(while_armed("Calibration"));
-    }
     let request = if imu { Request::CalibrateImu } else { Request::CalibrateRadio };
     ask(vehicle, request, "Calibration refused")
 }
 
-fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+fn storage<V: Vehicle>(command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
     let request = if command.params[0] == 1.0 {
         Request::SaveParams
     } else if command.params[0] == 2.0 {
@@ -244,18 +238,12 @@ fn storage<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V)
     } else {
         return Err(unsupported());
     };
-    if state.changes_restricted() {
-        return Err(while_armed("Storage"));
-    }
     ask(vehicle, request, "Storage refused")
 }
 
-fn reboot<V: Vehicle>(command: &Command, state: &VehicleState, vehicle: &mut V) -> Result<Then, Refusal> {
+fn reboot<V: Vehicle>(command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
     if command.params[0] != 1.0 {
         return Err(unsupported());
-    }
-    if state.changes_restricted() {
-        return Err(while_armed("Reboot"));
     }
     ask(vehicle, Request::Reboot, "Reboot refused")
 }

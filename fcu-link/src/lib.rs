@@ -82,7 +82,7 @@ pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
 pub use text::Severity;
-pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Request, Vehicle, VehicleState};
+pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
 
 /// Our MAVLink system id.
 pub const SYSTEM_ID: u8 = 1;

@@ -14,7 +14,7 @@
 //!   see [`crate::command`]), and no frame for [`MOTOR_TEST_SILENCE_MS`] (a ground station
 //!   sends a HEARTBEAT every second). A new DO_MOTOR_TEST replaces the running one.
 
-use crate::command::{denied, Command, Refusal, Then};
+use crate::command::{denied, refusal, Command, Refusal, Then};
 use crate::link::{Core, Room};
 use crate::text::{Severity, Text};
 use crate::vehicle::{Request, Vehicle, VehicleState};
@@ -49,7 +49,7 @@ fn decode(command: &Command) -> Result<Request, Refusal> {
 impl<const TX: usize> Core<TX> {
     pub(crate) fn start_motor_test<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
         let request = decode(command)?;
-        vehicle.request(request).map_err(|rule| denied(WHAT, rule))?;
+        vehicle.request(request).map_err(|refused| refusal(WHAT, refused))?;
         self.motor_test_silence_stop = false;
         Ok(Then::Nothing)
     }
@@ -117,10 +117,10 @@ mod tests {
             command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, shutdown, 300),
             MavResult::MAV_RESULT_UNSUPPORTED
         );
-        // Refused by the link (arming is the stick gesture's) and by the vehicle.
-        let arm = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, arm, 400), MavResult::MAV_RESULT_DENIED);
-        mock.refuse_requests = Some("busy");
+        // Refused by the link (a malformed command) and by the vehicle.
+        let neither = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, neither, 400), MavResult::MAV_RESULT_DENIED);
+        mock.refuse_requests = Some(crate::Refused::denied("busy"));
         let save = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         assert_eq!(command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_STORAGE, save, 500), MavResult::MAV_RESULT_DENIED);
         mock.refuse_requests = None;

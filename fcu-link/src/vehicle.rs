@@ -1,12 +1,14 @@
 //! The seam between the link and the flight controller: what the link may see and ask.
 //!
 //! The link owns no configuration and decides nothing about flight. The host application (the
-//! firmware, fcu-pil's board, a test's mock) implements [`Vehicle`]: a snapshot of the state
-//! for telemetry and for the command rules, the parameter table, and the requests the link
-//! passes on. Whatever the link already refused never reaches the vehicle; whatever reaches it
-//! the vehicle may still refuse, naming the rule (`Err("...")`), and the link reports that
-//! rule to the ground station in a STATUSTEXT.
+//! firmware's station, fcu-pil's board, a test's mock) implements [`Vehicle`]: a snapshot of
+//! the state for telemetry, the parameter table, and the requests the link passes on. The link
+//! refuses only what it cannot decode (UNSUPPORTED, or DENIED for a malformed parameter); every
+//! request it decodes goes to the vehicle, whose verdict is fcu-core's ([`Refused`], the rules
+//! of [`fcu_core::gcs`]): the link answers it TEMPORARILY_REJECTED when the flight state of
+//! the moment refuses it, DENIED otherwise, and names the rule in a STATUSTEXT.
 
+pub use fcu_core::gcs::Refused;
 use fcu_core::supervisor::FlightState;
 
 /// Attitude in MAVLink's convention (ATTITUDE): roll right side down positive, pitch nose up
@@ -54,15 +56,11 @@ pub struct Health {
     pub prearm: bool,
 }
 
-/// A snapshot of the vehicle for one telemetry tick or one command decision.
+/// A snapshot of the vehicle for one telemetry tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VehicleState {
     /// The supervisor's state (HEARTBEAT says it: [`crate::heartbeat`]).
     pub state: FlightState,
-    /// Flying (armed and past take-off); a disarm then needs MAVLink's force value.
-    pub in_air: bool,
-    /// Throttle stick at its low end.
-    pub throttle_low: bool,
     /// For ATTITUDE.
     pub attitude: Attitude,
     /// Radio pulse widths, µs, in receiver channel order; 0 for a channel without pulses.
@@ -80,14 +78,6 @@ pub struct VehicleState {
     pub load_permille: u16,
     /// A motor test runs, as the flight controller reports it (it decides when one stops).
     pub motor_test: bool,
-}
-
-impl VehicleState {
-    /// Changes are restricted (arming, armed, or the failsafe's level stage): a command that
-    /// needs the board disarmed is TEMPORARILY_REJECTED.
-    pub fn changes_restricted(&self) -> bool {
-        self.state.changes_restricted()
-    }
 }
 
 /// One parameter: name (at most 16 characters, upper case) and value in force.
@@ -154,30 +144,33 @@ impl ParamMask {
     }
 }
 
-/// What the link asks the vehicle to do, once its own rules let the command through.
+/// What the link asks the vehicle to do, as decoded; the vehicle decides whether it may
+/// ([`fcu_core::gcs`] names each rule).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Request {
-    /// Disarm now. `forced` when the ground station sent MAVLink's force value (the link has
-    /// checked: on the ground with the throttle low, or forced).
+    /// Arm (the vehicle refuses: arming is the stick gesture's).
+    Arm,
+    /// Disarm now. `forced` when the ground station sent MAVLink's force value (armed with the
+    /// throttle up or in the failsafe's level stage, the vehicle disarms only forced).
     Disarm {
         /// Sent with the force value 21196.
         forced: bool,
     },
-    /// Gyro/accelerometer calibration (the boot calibration). Disarmed (checked).
+    /// Gyro/accelerometer calibration (the boot calibration); disarmed only.
     CalibrateImu,
     /// Radio calibration: the ground station reads the radio's widths (RC_CHANNELS) and writes
     /// the endpoints and trims as parameters; the vehicle refuses to arm meanwhile. Disarmed
-    /// (checked).
+    /// only.
     CalibrateRadio,
     /// End the radio calibration (PREFLIGHT_CALIBRATION with every parameter 0, the way PX4
     /// cancels one). Taken armed or not.
     EndCalibration,
-    /// Save the parameters to flash. Disarmed (checked).
+    /// Save the parameters to flash; disarmed only.
     SaveParams,
-    /// Reset the parameters to the defaults. Disarmed (checked).
+    /// Reset the parameters to the defaults; disarmed only.
     ResetParams,
     /// Reboot once [`crate::Link::reboot_ready`] says the acknowledgement is out and any
-    /// pending save is done. Disarmed (checked).
+    /// pending save is done; disarmed only.
     Reboot,
     /// Spin one motor for a motor test, as the ground station asked: the vehicle decides
     /// whether it may (disarmed, a motor it has), caps the throttle and the duration, and stops
@@ -219,6 +212,7 @@ pub trait Vehicle {
     /// a refusal nothing may change.
     fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str>;
 
-    /// Carries out a request, or refuses it naming the rule.
-    fn request(&mut self, request: Request) -> Result<(), &'static str>;
+    /// Carries out a request, or refuses it with fcu-core's verdict (the rule, and whether the
+    /// flight state of the moment refuses it).
+    fn request(&mut self, request: Request) -> Result<(), Refused>;
 }

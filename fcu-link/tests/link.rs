@@ -5,7 +5,7 @@ mod support;
 
 use fcu_core::supervisor::FlightState;
 use fcu_link::command::FORCE_DISARM;
-use fcu_link::{Link, LinkConfig, Rates, Request, Severity};
+use fcu_link::{Link, LinkConfig, Rates, Refused, Request, Severity};
 use mavlink::dialects::common::{
     self as common, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
 };
@@ -482,100 +482,84 @@ fn autopilot_version_on_request_after_the_ack() {
 }
 
 #[test]
-fn arming_from_the_link_is_refused_with_a_reason() {
+fn arm_and_disarm_are_decoded_and_the_vehicle_decides() {
     let mut link = link();
     let mut mock = Mock::new();
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
-    assert_eq!(texts(&sent), ["Arm refused: arm with the stick gesture"]);
-    // Forcing does not help.
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
-    assert!(mock.requests.is_empty());
-}
-
-#[test]
-fn disarm_on_the_ground_with_the_throttle_low() {
-    let mut link = link();
-    let mut mock = Mock::new();
-    mock.state.state = FlightState::Armed;
+    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED, "the link has no rule of its own");
     let disarm = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, disarm);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(mock.requests, [Request::Disarm { forced: false }]);
-
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, disarm);
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0, 21195.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let disarms = [Request::Disarm { forced: false }, Request::Disarm { forced: false }, Request::Disarm { forced: true }];
+    assert_eq!(mock.requests[..], [[Request::Arm].as_slice(), &disarms].concat()[..]);
+    // Neither arm nor disarm: refused here, never asked.
     mock.requests.clear();
-    mock.state.throttle_low = false;
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, disarm);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    assert_eq!(texts(&sent), ["Disarm refused: throttle not low"]);
-    assert!(mock.requests.is_empty());
-}
-
-#[test]
-fn disarm_in_the_air_only_with_the_force_value() {
-    let mut link = link();
-    let mut mock = Mock::new();
-    mock.state.state = FlightState::Armed;
-    mock.state.in_air = true;
-    mock.state.throttle_low = false;
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    assert_eq!(texts(&sent), ["Disarm refused: in the air (force 21196)"]);
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0, 21195.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    assert!(mock.requests.is_empty());
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0, FORCE_DISARM, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(mock.requests, [Request::Disarm { forced: true }]);
-}
-
-#[test]
-fn a_vehicle_refusal_is_denied_with_its_rule() {
-    let mut link = link();
-    let mut mock = Mock::new();
-    mock.refuse_requests = Some("flash busy");
-    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_STORAGE, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
-    assert_eq!(texts(&sent), ["Storage refused: flash busy"]);
+    assert!(mock.requests.is_empty());
 }
 
 #[test]
-fn calibration_storage_and_reboot_only_while_disarmed() {
-    let cases: [([f32; 7], MavCmd, Request); 5] = [
-        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateImu),
-        ([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateImu),
-        ([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateRadio),
-        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_STORAGE, Request::SaveParams),
-        ([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_STORAGE, Request::ResetParams),
+fn a_refusal_for_now_is_temporarily_rejected_and_any_other_denied_each_with_its_rule() {
+    let cases: [([f32; 7], MavCmd, Request, &str); 8] = [
+        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, Request::Arm, "Arm refused"),
+        ([0.0; 7], MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, Request::Disarm { forced: false }, "Disarm refused"),
+        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateImu, "Calibration refused"),
+        ([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateImu, "Calibration refused"),
+        ([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, Request::CalibrateRadio, "Calibration refused"),
+        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_STORAGE, Request::SaveParams, "Storage refused"),
+        ([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_STORAGE, Request::ResetParams, "Storage refused"),
+        ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, Request::Reboot, "Reboot refused"),
     ];
-    for (params, cmd, request) in cases {
-        let mut link = link();
-        let mut mock = Mock::new();
-        let sent = command(&mut link, &mut mock, cmd, params);
-        assert_eq!(ack_of(&sent), (cmd as u16, MavResult::MAV_RESULT_ACCEPTED), "{request:?}");
-        assert_eq!(mock.requests, [request]);
+    for (params, cmd, request, what) in cases {
+        for (refused, result) in [
+            (Refused::for_now("disarmed only"), MavResult::MAV_RESULT_TEMPORARILY_REJECTED),
+            (Refused::denied("calibrating"), MavResult::MAV_RESULT_DENIED),
+        ] {
+            let mut link = link();
+            let mut mock = Mock::new();
+            mock.refuse_requests = Some(refused);
+            let sent = command(&mut link, &mut mock, cmd, params);
+            assert_eq!(ack_of(&sent), (cmd as u16, result), "{request:?}");
+            assert_eq!(texts(&sent), [format!("{what}: {}", refused.rule)], "{request:?}");
+            assert_eq!(mock.requests, [request]);
+            assert!(!link.reboot_ready());
+        }
+    }
+}
 
-        let mut mock = Mock::new();
-        mock.state.state = FlightState::Armed;
-        let sent = command(&mut link, &mut mock, cmd, params);
-        assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED, "{request:?}");
-        assert_eq!(texts(&sent).len(), 1);
-        assert!(texts(&sent)[0].ends_with("refused: armed"));
-        assert!(mock.requests.is_empty());
+#[test]
+fn an_armed_state_alone_refuses_nothing_the_vehicle_accepts() {
+    // The flight state the link reports (armed, in failsafe) is for telemetry: the rules are the
+    // vehicle's, and a vehicle that accepts is obeyed.
+    for state in [FlightState::Arming, FlightState::Armed, FlightState::FailsafeLevel] {
+        for (params, cmd) in [
+            ([0.0; 7], MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+            ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION),
+            ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], MavCmd::MAV_CMD_PREFLIGHT_STORAGE),
+        ] {
+            let mut link = link();
+            let mut mock = Mock::new();
+            mock.state.state = state;
+            let sent = command(&mut link, &mut mock, cmd, params);
+            assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED, "{state:?} {cmd:?}");
+            assert_eq!(mock.requests.len(), 1);
+        }
     }
-    // Every parameter 0 ends a calibration, armed or not (PX4's cancel).
-    for armed in [false, true] {
-        let mut link = link();
-        let mut mock = Mock::new();
-        mock.state.state = if armed { FlightState::Armed } else { FlightState::Disarmed };
-        let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]);
-        assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
-        assert_eq!(mock.requests, [Request::EndCalibration]);
-    }
+}
+
+#[test]
+fn calibration_decoding() {
+    // Every parameter 0 ends a calibration (PX4's cancel).
+    let mut link = link();
+    let mut mock = Mock::new();
+    let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, [0.0; 7]);
+    assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(mock.requests, [Request::EndCalibration]);
     // Magnetometer, baro, two at once: unsupported.
     for params in [[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]] {
-        let mut link = link();
+        let mut link = self::link();
         let mut mock = Mock::new();
         let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_CALIBRATION, params);
         assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_UNSUPPORTED);
@@ -584,15 +568,16 @@ fn calibration_storage_and_reboot_only_while_disarmed() {
 }
 
 #[test]
-fn reboot_comes_after_the_ack_and_only_disarmed() {
+fn reboot_comes_after_the_ack_and_only_when_accepted() {
     let mut link = link();
     let mut mock = Mock::new();
-    mock.state.state = FlightState::Armed;
+    mock.refuse_requests = Some(Refused::for_now("disarmed only"));
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
     assert!(!link.reboot_ready());
 
-    mock.state.state = FlightState::Disarmed;
+    mock.refuse_requests = None;
+    mock.requests.clear();
     let frame = v2(&command_long(MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
     link.receive(&frame, 0, &mut mock);
     assert_eq!(mock.requests, [Request::Reboot]);
@@ -691,7 +676,7 @@ fn motor_test_decoding() {
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, [1.0, 1.0, 1100.0, 1.0, 1.0, 0.0, 0.0]);
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
     // Which motors there are, and whether one may spin now, the vehicle says.
-    mock.refuse_requests = Some("motor must be 1 to 4");
+    mock.refuse_requests = Some(Refused::denied("motor must be 1 to 4"));
     let sent = command(&mut link, &mut mock, MavCmd::MAV_CMD_DO_MOTOR_TEST, motor_test(5.0, 10.0, 1.0));
     assert_eq!(ack_of(&sent).1, MavResult::MAV_RESULT_DENIED);
     assert_eq!(texts(&sent), ["Motor test: motor must be 1 to 4"]);

@@ -65,13 +65,13 @@ pub struct Report {
 }
 
 /// What of an image is the ground-station link, as the ELF's function names tell (LTO inlines
-/// the protocol crate into the link's task): the task (`fcu_firmware::ground`) and what it
+/// the protocol crate into the link's task): the task (`fcu_firmware::link_task`) and what it
 /// calls of its own (`fcu_link`, `fcu_gcs`, the receive ring, the flash store, fcu-core's parameter
 /// table and the configuration checks a change runs), and the USART1 and DMA2 stream 2
 /// interrupts.
 pub fn link_ranges(image: &crate::elf::Image) -> Vec<(u32, u32)> {
     const PARTS: [&str; 11] = [
-        "fcu_firmware::ground::",
+        "fcu_firmware::link_task::",
         "fcu_link::",
         "fcu_gcs::",
         "fcu_firmware::uart_rx::",
@@ -393,7 +393,7 @@ mod tests {
     fn the_link_is_its_task_and_what_it_calls_of_its_own() {
         let with = image_with(&[
             (0x0800_c001, 0x100, "TIM1_BRK_TIM9"),
-            (0x0800_d000, 0x2000, "fcu_firmware::ground::run::{{closure}}"),
+            (0x0800_d000, 0x2000, "fcu_firmware::link_task::run::{{closure}}"),
             (0x0800_f001, 0x40, "fcu_params::snapshot::crc32"),
             (0x0800_f100, 0x80, "fcu_core::flight::ControlTick::tick_with"),
             (0x0800_f200, 0x20, "USART1"),

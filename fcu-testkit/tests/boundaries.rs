@@ -10,7 +10,7 @@ use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
 use fcu_params::{self as parameters, snapshot, COUNT};
 use fcu_testkit::bench_board::{
-    cmd, command_for, gesture, param_set, value_for, Bench, GroundFrame, Invariant, Op, Pilot, Planted, PowerCut, Scenario,
+    cmd, command_for, gesture, param_set, value_for, Bench, GcsFrame, Invariant, Op, Pilot, Planted, PowerCut, Scenario,
 };
 use proptest::prelude::*;
 
@@ -33,11 +33,11 @@ fn param_index() -> impl Strategy<Value = usize> {
 }
 
 fn reboot() -> Op {
-    Op::Send(GroundFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
+    Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
 }
 
 fn save() -> Op {
-    Op::Send(GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
+    Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false })
 }
 
 fn set(name: &str, value: f32) -> Op {
@@ -58,9 +58,9 @@ fn episode() -> impl Strategy<Value = Vec<Op>> {
         3 => (any::<u8>(), any::<u8>(), any::<bool>()).prop_map(|(c, p, int)| vec![Op::Send(command_for(c, p, int))]),
         2 => Just(vec![reboot()]),
         2 => Just(vec![save()]),
-        1 => (0u8..=255).prop_map(|i| vec![Op::Send(GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] })]),
-        1 => Just(vec![Op::Send(GroundFrame::ParamList)]),
-        1 => Just(vec![Op::Send(GroundFrame::Heartbeat)]),
+        1 => (0u8..=255).prop_map(|i| vec![Op::Send(GcsFrame::ParamRead { index: i16::from(i), name: [0; 16] })]),
+        1 => Just(vec![Op::Send(GcsFrame::ParamList)]),
+        1 => Just(vec![Op::Send(GcsFrame::Heartbeat)]),
         2 => (200u32..3000).prop_map(|ms| vec![Op::Flood { ms }]),
         2 => (prop_oneof![0..snapshot::RECORD_WORDS as u32, 0..(snapshot::SECTOR_WORDS + snapshot::RECORD_WORDS) as u32], any::<u32>())
             .prop_map(|(at_word, partial_bits)| vec![Op::CutAtWord(PowerCut { at_word, partial_bits })]),
@@ -303,7 +303,7 @@ fn the_generated_sessions_reach_flight_saves_erases_reboots_and_cuts() {
 #[test]
 fn a_save_owed_before_a_reset_writes_the_defaults_the_reset_left() {
     let history = vec![Planted { sequence: 1, changes: vec![(index("RATE_RLL_P"), 150.0)] }];
-    let reset = Op::Send(GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
     let mut ops: Vec<Op> = (0..6).map(|_| save()).collect();
     ops.push(reset);
     ops.push(Op::Wait { ms: 3000 });

@@ -308,7 +308,7 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
             calibrating,
             sensor_fault,
             tilt_rad,
-            ground: fcu_core::ground::GroundCommands::NONE,
+            gcs: fcu_core::gcs::GcsCommands::NONE,
         },
     )
 }

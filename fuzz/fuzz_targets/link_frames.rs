@@ -4,7 +4,8 @@
 //! the bytes given to the link (found by a scan independent of the reader), and the vehicle
 //! gets a request only when those bytes hold a COMMAND_LONG or COMMAND_INT with a good CRC.
 //!
-//! Input: byte 0 the vehicle's state (bit 0 armed, bit 1 in the air, bit 2 throttle low), then
+//! Input: byte 0 the vehicle's state (bit 0 armed, bit 1 refuses every request, bit 2 refuses
+//! it for now, bit 3 a motor test runs), then
 //! chunks, each followed by one tick, and a chunk starts with a byte `k`:
 //! - `k < 0xC0`: the next `(k & 63) + 1` bytes go to the link as they are; the tick comes
 //!   `(k >> 6) · 500 + 7` ms later;
@@ -14,7 +15,7 @@
 #![no_main]
 
 use fcu_core::supervisor::FlightState;
-use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Request, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
 use libfuzzer_sys::fuzz_target;
 use mavlink::dialects::common::{COMMAND_INT_DATA, COMMAND_LONG_DATA, PARAM_SET_DATA};
 use mavlink::MessageData;
@@ -32,8 +33,6 @@ impl Vehicle for Mock {
     fn state(&self) -> VehicleState {
         VehicleState {
             state: if self.flags & 1 != 0 { FlightState::Armed } else { FlightState::Disarmed },
-            in_air: self.flags & 2 != 0,
-            throttle_low: self.flags & 4 != 0,
             attitude: Attitude::default(),
             rc_widths_us: [1500; 8],
             rc_channel_count: 8,
@@ -71,9 +70,13 @@ impl Vehicle for Mock {
         }
         Ok(others)
     }
-    fn request(&mut self, request: Request) -> Result<(), &'static str> {
+    fn request(&mut self, request: Request) -> Result<(), Refused> {
         self.requests.push(request);
-        Ok(())
+        match self.flags & 6 {
+            0 => Ok(()),
+            2 => Err(Refused::denied("fuzz")),
+            _ => Err(Refused::for_now("fuzz")),
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 //! The end of the tick: the rate loop, the mixer and the guard that writes the compare values.
 
 use super::derived::TickParams;
-use super::ground::TestOutput;
+use super::gcs::TestOutput;
 use crate::control::RateLoop;
 use crate::mixer::Saturation;
 use crate::rc::StickCounts;

@@ -2,9 +2,9 @@
 //! sticks the pipeline flies that follow from it.
 
 use super::derived::TickParams;
-use super::ground::{Ground, TestOutput};
+use super::gcs::{Gcs, TestOutput};
 use super::sensors::Sensors;
-use crate::ground::GroundInput;
+use crate::gcs::GcsInput;
 use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
 
@@ -71,7 +71,7 @@ pub(super) struct Supervision {
     /// Ticks since boot, this one included: the supervisor's clock.
     ticks: u32,
     /// What the ground station asked (the safe supervisor's only).
-    ground: Ground,
+    gcs: Gcs,
     /// Tests only: the supervisor decides every tick, the decision in force never stands.
     #[cfg(feature = "test-switches")]
     table_only: bool,
@@ -97,7 +97,7 @@ impl Supervision {
                 throttle_low: true,
             },
             ticks: 0,
-            ground: Ground::default(),
+            gcs: Gcs::default(),
             #[cfg(feature = "test-switches")]
             table_only: false,
         }
@@ -168,7 +168,7 @@ impl Supervision {
                 if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
                     return false;
                 }
-                let ground = self.ground.commands(self.ticks, &radio.sticks, &p.rc);
+                let gcs = self.gcs.commands(self.ticks, &radio.sticks, &p.rc);
                 let inputs = Inputs {
                     tick: self.ticks,
                     link: radio.link,
@@ -181,10 +181,10 @@ impl Supervision {
                     calibrating: sensors.calibrating(),
                     sensor_fault: sensors.fault(),
                     tilt_rad,
-                    ground,
+                    gcs,
                 };
                 let decision = supervisor.decide(cfg, &inputs);
-                self.ground.decided(decision.state);
+                self.gcs.decided(decision.state);
                 decision
             }
         };
@@ -193,10 +193,10 @@ impl Supervision {
     }
 
     /// A ground station's input, between ticks. The reference's supervisor takes none.
-    pub(super) fn take_ground(&mut self, input: &GroundInput, p: &TickParams) {
+    pub(super) fn take_gcs(&mut self, input: &GcsInput, p: &TickParams) {
         if let Machine::Safe { supervisor, .. } = &mut self.machine {
-            self.ground.take(input, self.ticks, self.in_force.decision.state, p);
-            if self.ground.disarm_pending() {
+            self.gcs.take(input, self.ticks, self.in_force.decision.state, p);
+            if self.gcs.disarm_pending() {
                 // Steady flight repeats the last decision without asking the supervisor.
                 supervisor.unsteady();
             }
@@ -211,12 +211,12 @@ impl Supervision {
 
     /// The motor test's output, while one runs.
     pub(super) fn test_output(&self) -> Option<TestOutput> {
-        self.ground.test_output()
+        self.gcs.test_output()
     }
 
     /// A ground station's radio calibration runs.
     pub(super) fn radio_calibration(&self) -> bool {
-        self.ground.radio_calibration()
+        self.gcs.radio_calibration()
     }
 
     pub(super) fn in_force(&self) -> &InForce {

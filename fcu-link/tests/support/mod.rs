@@ -4,7 +4,7 @@
 #![allow(dead_code)]
 
 use fcu_core::supervisor::FlightState;
-use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Request, Vehicle, VehicleState};
+use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
 use mavlink::dialects::common::{self as common, MavMessage};
 use mavlink::{MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavHeader, Message, MessageData};
 
@@ -23,7 +23,8 @@ pub struct Mock {
     pub params: Vec<MockParam>,
     pub sets: Vec<(u16, f32)>,
     pub requests: Vec<Request>,
-    pub refuse_requests: Option<&'static str>,
+    /// The verdict the mock gives every request (it knows no rule of its own).
+    pub refuse_requests: Option<Refused>,
 }
 
 impl Mock {
@@ -31,8 +32,6 @@ impl Mock {
         Self {
             state: VehicleState {
                 state: FlightState::Disarmed,
-                in_air: false,
-                throttle_low: true,
                 attitude: Attitude {
                     roll_rad: 0.1,
                     pitch_rad: -0.2,
@@ -91,10 +90,10 @@ impl Vehicle for Mock {
         // The mock's parameters are independent: a set changes no other.
         Ok(ParamMask::EMPTY)
     }
-    fn request(&mut self, request: Request) -> Result<(), &'static str> {
+    fn request(&mut self, request: Request) -> Result<(), Refused> {
         self.requests.push(request);
-        if let Some(rule) = self.refuse_requests {
-            return Err(rule);
+        if let Some(refused) = self.refuse_requests {
+            return Err(refused);
         }
         // A test runs from an accepted start until a stop (a vehicle would also end it itself).
         match request {

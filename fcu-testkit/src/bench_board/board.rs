@@ -16,7 +16,7 @@ use fcu_params::snapshot;
 
 use super::check::{BootKind, Checker, Invariant};
 use super::flash::{Flash, PowerCut};
-use super::ground::{AnswerReader, GroundFrame};
+use super::gcs::{AnswerReader, GcsFrame};
 use crate::safety::{sticks, LevelImu, PwmReceiver, RadioFrame};
 
 /// The link's transmit queue, bytes (the firmware's `LINK_TX_BYTES`).
@@ -69,7 +69,7 @@ impl Pilot {
 pub enum Op {
     /// The ground station sends a frame (it goes out at the line's rate, after what it sent
     /// before).
-    Send(GroundFrame),
+    Send(GcsFrame),
     /// The pilot's sticks from now on.
     Pilot(Pilot),
     /// Time passes.
@@ -331,8 +331,8 @@ impl Bench {
                 b.cfg = change.cfg;
             }
         }
-        if let Some(g) = b.to_control.ground.take() {
-            b.tick.take_ground(&g);
+        if let Some(g) = b.to_control.gcs.take() {
+            b.tick.take_gcs(&g);
         }
         self.edges.clear();
         self.radio.tick(&frame, 0, &mut self.edges);
@@ -424,7 +424,7 @@ impl Bench {
             if self.uplink.len() < 64 {
                 let index = self.flood_index as i16;
                 self.flood_index = (self.flood_index + 1) % fcu_params::count() as u16;
-                self.apply(&Op::Send(GroundFrame::ParamRead { index, name: [0; 16] }));
+                self.apply(&Op::Send(GcsFrame::ParamRead { index, name: [0; 16] }));
             }
         }
         self.uplink_credit = (self.uplink_credit + UART_BYTES_PER_TICK).min(2.0 * UART_BYTES_PER_TICK);
@@ -443,7 +443,7 @@ impl Bench {
         self.uart_credit -= sent as f64;
     }
 
-    /// One period of the link task, as the firmware's `ground::step` runs it: the status,
+    /// One period of the link task, as the firmware's `gcs::step` runs it: the status,
     /// the bytes received, the period, the UART, and the flash or reset work due, done at once.
     fn period(&mut self) {
         let observed = Observed { status: self.boot.status, battery_mv: BATTERY_MV, rc_widths_counts: self.radio_frame_widths() };
@@ -460,8 +460,8 @@ impl Bench {
         if to.config.is_some() {
             b.to_control.config = to.config;
         }
-        if let Some(g) = to.ground {
-            b.to_control.ground = Some(b.to_control.ground.map_or(g, |older| older.then(g)));
+        if let Some(g) = to.gcs {
+            b.to_control.gcs = Some(b.to_control.gcs.map_or(g, |older| older.then(g)));
         }
         let room = UART_QUEUE_BYTES.saturating_sub(b.uart_queued).min(UART_CHUNK_BYTES);
         let mut out = [0u8; UART_CHUNK_BYTES];

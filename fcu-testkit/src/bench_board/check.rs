@@ -16,7 +16,7 @@ use fcu_params::{self as parameters, COUNT};
 
 use super::board::TICK_US;
 use super::flash::Flash;
-use super::ground::{cmd, Answer, GroundFrame};
+use super::gcs::{cmd, Answer, GcsFrame};
 
 /// The rules the bench holds the board to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -173,16 +173,16 @@ impl Checker {
     }
 
     /// A frame the ground station sent, `bytes` long.
-    pub fn on_sent(&mut self, frame: &GroundFrame, bytes: usize) {
+    pub fn on_sent(&mut self, frame: &GcsFrame, bytes: usize) {
         let at = self.sent_bytes;
         self.sent_bytes += bytes as u64;
         match *frame {
-            GroundFrame::ParamSet { name, value } => {
+            GcsFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
                     self.pending_sets.push((i, value, at));
                 }
             }
-            GroundFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
+            GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
             _ => {}
         }
     }
@@ -419,7 +419,7 @@ impl Checker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench_board::ground::name16;
+    use crate::bench_board::gcs::name16;
 
     static DEFAULTS: Config = Config::DEFAULT;
 
@@ -432,7 +432,7 @@ mod tests {
         let mut c = Checker::new(&DEFAULTS);
         let (roll, angle) = (index("RATE_RLL_P"), index("ANGLE_MAX"));
         for (i, v) in [(roll, 100.0), (angle, 30.0)] {
-            c.on_sent(&GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v }, 35);
+            c.on_sent(&GcsFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v }, 35);
             c.on_answer(&Answer::ParamValue { name: parameters::name(i).unwrap().into(), value: v, index: i as u16 }, 1);
         }
         assert_eq!(c.accepted_sets, 2);

@@ -4,7 +4,7 @@
 //!
 //! - [`flash`]: two sectors of 4096 words, erase (250–500 ms of stalled CPU) and word
 //!   programming that only clears bits, and a power cut at any word;
-//! - [`ground`]: the ground station's MAVLink frames (any parameter name and value, any command
+//! - [`gcs`]: the ground station's MAVLink frames (any parameter name and value, any command
 //!   number and parameters) and the board's answers read back;
 //! - [`board`]: [`Bench`], the board at 800 Hz with the firmware's link task
 //!   ([`fcu_gcs::Service`]) every 4 ticks, the UART at
@@ -18,12 +18,12 @@
 pub mod board;
 pub mod check;
 pub mod flash;
-pub mod ground;
+pub mod gcs;
 
 pub use board::{Bench, Counts, Op, Pilot};
 pub use check::{Invariant, Violation};
 pub use flash::{Flash, PowerCut};
-pub use ground::{cmd, name16, GroundFrame};
+pub use gcs::{cmd, name16, GcsFrame};
 
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -236,7 +236,7 @@ impl Scenario {
                 ops.extend(gesture(if k == 0x45 { Pilot::Arm } else { Pilot::Disarm }));
                 return 1200;
             }
-            0x47..=0x5F => ops.push(Op::Send(GroundFrame::Heartbeat)),
+            0x47..=0x5F => ops.push(Op::Send(GcsFrame::Heartbeat)),
             0x60..=0x6F => {
                 let i = usize::from(byte()) % (COUNT + 1);
                 let sel = byte();
@@ -249,13 +249,13 @@ impl Scenario {
             0x80..=0x8F => {
                 let i = byte();
                 let frame = if i == 0xFF {
-                    GroundFrame::ParamRead { index: -1, name: name16(parameters::name(0).unwrap_or("")) }
+                    GcsFrame::ParamRead { index: -1, name: name16(parameters::name(0).unwrap_or("")) }
                 } else {
-                    GroundFrame::ParamRead { index: i16::from(i), name: [0; 16] }
+                    GcsFrame::ParamRead { index: i16::from(i), name: [0; 16] }
                 };
                 ops.push(Op::Send(frame));
             }
-            0x90..=0x97 => ops.push(Op::Send(GroundFrame::ParamList)),
+            0x90..=0x97 => ops.push(Op::Send(GcsFrame::ParamList)),
             0x98..=0x9F => {
                 let w = (u32::from(k & 7) + 1) * 200;
                 ops.push(Op::Flood { ms: w });
@@ -403,8 +403,8 @@ pub fn gesture(hold: Pilot) -> [Op; 4] {
 }
 
 /// A PARAM_SET of parameter `i` (an unknown name past the table).
-pub fn param_set(i: usize, value: f32) -> GroundFrame {
-    GroundFrame::ParamSet { name: name16(parameters::name(i).unwrap_or("NO_SUCH_PARAM")), value }
+pub fn param_set(i: usize, value: f32) -> GcsFrame {
+    GcsFrame::ParamSet { name: name16(parameters::name(i).unwrap_or("NO_SUCH_PARAM")), value }
 }
 
 /// A value for parameter `i` from a selector: its default, bounds, the middle and a step past
@@ -430,7 +430,7 @@ pub fn value_for(i: usize, sel: u8) -> f32 {
 
 /// A command from two selector bytes: `c` picks the command (reboot, storage, calibration,
 /// motor test, arm/disarm, home position, or an unlisted number), `p` its parameters.
-pub fn command_for(c: u8, p: u8, int: bool) -> GroundFrame {
+pub fn command_for(c: u8, p: u8, int: bool) -> GcsFrame {
     let command = match c % 8 {
         0 => cmd::PREFLIGHT_REBOOT_SHUTDOWN,
         1 => cmd::PREFLIGHT_STORAGE,
@@ -455,7 +455,7 @@ pub fn command_for(c: u8, p: u8, int: bool) -> GroundFrame {
         cmd::COMPONENT_ARM_DISARM if p & 0x80 != 0 => params[1] = 21196.0,
         _ => {}
     }
-    GroundFrame::Command { command, params, int }
+    GcsFrame::Command { command, params, int }
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! The ground station's link: MAVLink 2 on USART1.
+//! The link task: the ground station's link, MAVLink 2 on USART1.
 //!
 //! Every decision is fcu-gcs', fcu-params' and fcu-core's (`fcu_gcs::station`: the parameter
 //! table's rules, what a command may do); this module moves bytes and words. Received bytes come
@@ -7,14 +7,14 @@
 //! ([`crate::param_flash`]) once the changes settle, disarmed. On a board set to text lines it
 //! listens, and the first valid MAVLink frame turns the UART to MAVLink.
 
-use crate::app::ground_link::SharedResources;
+use crate::app::gcs_link::SharedResources;
 use crate::param_flash::{FlashError, ParamFlash, SECTORS};
 use crate::uart_rx::UartRx;
 use crate::watchdog::Watchdog;
 use crate::Mono;
 use fcu_core::boot::BootVerdict;
 use fcu_core::flight::{ChangeKind, ConfigChange, ControlTick, OuterStep};
-use fcu_core::ground::GroundInput;
+use fcu_core::gcs::GcsInput;
 use fcu_core::telemetry::LineBuf;
 use fcu_core::Config;
 use fcu_gcs::{Due, Observed, Service};
@@ -23,7 +23,7 @@ use fcu_params::snapshot;
 use rtic::Mutex;
 use rtic_monotonics::systick::prelude::*;
 
-/// What the ground link hands the control loop, in one resource: the latest change it accepted
+/// What the link task hands the control loop, in one resource: the latest change it accepted
 /// (the core checked it against the flight state) until the control tick has taken or refused
 /// it, the configuration the tick took until the outer step has taken it, and the station's
 /// commands for the control tick. The outer step follows the tick: a change the tick refuses
@@ -37,30 +37,25 @@ pub struct Mailbox {
     /// because a newer change may arrive before the outer step's turn and be refused.
     for_outer: Option<Config>,
     /// Commands, and the levels of a pending save or reboot (the tick then refuses to arm).
-    ground: Option<GroundInput>,
+    gcs: Option<GcsInput>,
 }
 
 impl Mailbox {
     /// Nothing posted: `config` is the one both halves booted with.
     pub fn new(config: Config) -> Mailbox {
-        Mailbox {
-            change: ConfigChange { cfg: config, kind: ChangeKind::GroundOnly },
-            tick_takes_change: false,
-            for_outer: None,
-            ground: None,
-        }
+        Mailbox { change: ConfigChange { cfg: config, kind: ChangeKind::GroundOnly }, tick_takes_change: false, for_outer: None, gcs: None }
     }
 
     /// The link's output of one period. A change replaces one the tick has not taken yet (the
     /// station's change carries the widest kind of everything since the tick last took one);
     /// commands the tick has not taken yet are merged with, not overwritten.
-    fn post(&mut self, change: Option<ConfigChange>, ground: Option<GroundInput>) {
+    fn post(&mut self, change: Option<ConfigChange>, gcs: Option<GcsInput>) {
         if let Some(change) = change {
             self.change = change;
             self.tick_takes_change = true;
         }
-        if let Some(input) = ground {
-            self.ground = Some(self.ground.map_or(input, |older| older.then(input)));
+        if let Some(input) = gcs {
+            self.gcs = Some(self.gcs.map_or(input, |older| older.then(input)));
         }
     }
 
@@ -71,8 +66,8 @@ impl Mailbox {
         if core::mem::take(&mut self.tick_takes_change) && tick.take_config(&self.change).is_ok() {
             self.for_outer = Some(self.change.cfg);
         }
-        if let Some(input) = self.ground.take() {
-            tick.take_ground(&input);
+        if let Some(input) = self.gcs.take() {
+            tick.take_gcs(&input);
         }
     }
 
@@ -98,16 +93,16 @@ const LINK_PERIOD_MS: u32 = 5;
 /// How often a fatal boot fault is repeated as a STATUSTEXT.
 const FAULT_REPEAT_MS: u32 = 2000;
 
-pub struct GroundLink {
+pub struct LinkTask {
     service: Service<LINK_TX_BYTES>,
     uart_rx: UartRx,
     flash: ParamFlash,
 }
 
-impl GroundLink {
+impl LinkTask {
     pub fn new(cfg: Config, defaults: &'static Config, stored: (ParamFlash, snapshot::Source), uart_rx: UartRx) -> Self {
         let (flash, source) = stored;
-        GroundLink { service: Service::new(cfg, defaults, source, LinkConfig::DEFAULT), uart_rx, flash }
+        LinkTask { service: Service::new(cfg, defaults, source, LinkConfig::DEFAULT), uart_rx, flash }
     }
 
     /// MAVLink from boot, or text lines until a ground station speaks MAVLink (the link's
@@ -137,9 +132,9 @@ pub fn start_receiver(dma: stm32f4xx_hal::pac::DMA2, rcc: &mut stm32f4xx_hal::rc
     UartRx::start(dma, unsafe { &*stm32f4xx_hal::pac::USART1::ptr() })
 }
 
-/// The link task's loop (`app::ground_link`), with the resources it shares: one period every
+/// The link task's loop (`app::gcs_link`), with the resources it shares: one period every
 /// `LINK_PERIOD_MS`.
-pub async fn run(g: &mut GroundLink, mut s: SharedResources<'_>, boot: BootVerdict) {
+pub async fn run(g: &mut LinkTask, mut s: SharedResources<'_>, boot: BootVerdict) {
     let mut next_fatal_ms = 0;
     loop {
         let now_ms = Mono::now().duration_since_epoch().as_millis();
@@ -152,7 +147,7 @@ pub async fn run(g: &mut GroundLink, mut s: SharedResources<'_>, boot: BootVerdi
 /// words). A plain function, out of line: the task's future then holds only what lives
 /// across an await, not every local of the link's work.
 #[inline(never)]
-fn step(g: &mut GroundLink, s: &mut SharedResources<'_>, boot: &BootVerdict, next_fatal_ms: &mut u32, now_ms: u32) {
+fn step(g: &mut LinkTask, s: &mut SharedResources<'_>, boot: &BootVerdict, next_fatal_ms: &mut u32, now_ms: u32) {
     if let Some(snapshot) = s.latest.lock(Option::take) {
         let battery_mv = s.battery_mv.lock(|mv| *mv);
         let observed = Observed { status: snapshot.status, battery_mv, rc_widths_counts: snapshot.rc_widths_counts };
@@ -179,8 +174,8 @@ fn step(g: &mut GroundLink, s: &mut SharedResources<'_>, boot: &BootVerdict, nex
         let _queued = g.service.link_mut().send_text(Severity::Critical, line.as_bytes().trim_ascii_end());
     }
     let to = g.service.period(now_ms);
-    if to.config.is_some() || to.ground.is_some() {
-        s.mailbox.lock(|mailbox| mailbox.post(to.config, to.ground));
+    if to.config.is_some() || to.gcs.is_some() {
+        s.mailbox.lock(|mailbox| mailbox.post(to.config, to.gcs));
     }
     let service = &mut g.service;
     let uart_idle = s.uart.lock(|uart| {

@@ -16,7 +16,7 @@ pub const GCS_COMPONENT: u8 = 190;
 /// `MAV_PARAM_TYPE_REAL32`.
 const REAL32: u8 = 9;
 
-/// Command numbers the bench sends ([`GroundFrame::Command`]).
+/// Command numbers the bench sends ([`GcsFrame::Command`]).
 pub mod cmd {
     pub const PREFLIGHT_CALIBRATION: u16 = 241;
     pub const PREFLIGHT_STORAGE: u16 = 245;
@@ -28,7 +28,7 @@ pub mod cmd {
 
 /// One message from the ground station.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum GroundFrame {
+pub enum GcsFrame {
     Heartbeat,
     /// PARAM_SET of the parameter named `name` (any bytes, up to 16) to `value` (any bits).
     ParamSet {
@@ -58,36 +58,36 @@ pub fn name16(name: &str) -> [u8; 16] {
     out
 }
 
-impl GroundFrame {
+impl GcsFrame {
     /// The frame as MAVLink 2 bytes, with a good CRC, sequence `sequence`, addressed to the
     /// board (system 1, component 1).
     pub fn encode(&self, sequence: u8) -> Vec<u8> {
         let (id, extra, payload) = match *self {
-            GroundFrame::Heartbeat => {
+            GcsFrame::Heartbeat => {
                 // GCS type, invalid autopilot, no mode, active, MAVLink 3.
                 (HEARTBEAT_DATA::ID, HEARTBEAT_DATA::EXTRA_CRC, vec![0, 0, 0, 0, 6, 8, 0, 4, 3])
             }
-            GroundFrame::ParamSet { name, value } => {
+            GcsFrame::ParamSet { name, value } => {
                 let mut p = value.to_le_bytes().to_vec();
                 p.extend_from_slice(&[1, 1]);
                 p.extend_from_slice(&name);
                 p.push(REAL32);
                 (PARAM_SET_DATA::ID, PARAM_SET_DATA::EXTRA_CRC, p)
             }
-            GroundFrame::ParamRead { index, name } => {
+            GcsFrame::ParamRead { index, name } => {
                 let mut p = index.to_le_bytes().to_vec();
                 p.extend_from_slice(&[1, 1]);
                 p.extend_from_slice(&name);
                 (PARAM_REQUEST_READ_DATA::ID, PARAM_REQUEST_READ_DATA::EXTRA_CRC, p)
             }
-            GroundFrame::ParamList => (PARAM_REQUEST_LIST_DATA::ID, PARAM_REQUEST_LIST_DATA::EXTRA_CRC, vec![1, 1]),
-            GroundFrame::Command { command, params, int: false } => {
+            GcsFrame::ParamList => (PARAM_REQUEST_LIST_DATA::ID, PARAM_REQUEST_LIST_DATA::EXTRA_CRC, vec![1, 1]),
+            GcsFrame::Command { command, params, int: false } => {
                 let mut p: Vec<u8> = params.iter().flat_map(|v| v.to_le_bytes()).collect();
                 p.extend_from_slice(&command.to_le_bytes());
                 p.extend_from_slice(&[1, 1, 0]);
                 (COMMAND_LONG_DATA::ID, COMMAND_LONG_DATA::EXTRA_CRC, p)
             }
-            GroundFrame::Command { command, params, int: true } => {
+            GcsFrame::Command { command, params, int: true } => {
                 let mut p: Vec<u8> = params[..4].iter().flat_map(|v| v.to_le_bytes()).collect();
                 p.extend_from_slice(&(params[4] as i32).to_le_bytes());
                 p.extend_from_slice(&(params[5] as i32).to_le_bytes());
@@ -208,12 +208,12 @@ mod tests {
     #[test]
     fn frames_built_here_are_read_by_the_links_reader() {
         let frames = [
-            GroundFrame::Heartbeat,
-            GroundFrame::ParamSet { name: name16("ANGLE_MAX"), value: 60.0 },
-            GroundFrame::ParamRead { index: -1, name: name16("RCMAP_ROLL") },
-            GroundFrame::ParamList,
-            GroundFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false },
-            GroundFrame::Command { command: cmd::DO_MOTOR_TEST, params: [1.0, 0.0, 5.0, 2.0, 1.0, 0.0, 0.0], int: true },
+            GcsFrame::Heartbeat,
+            GcsFrame::ParamSet { name: name16("ANGLE_MAX"), value: 60.0 },
+            GcsFrame::ParamRead { index: -1, name: name16("RCMAP_ROLL") },
+            GcsFrame::ParamList,
+            GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false },
+            GcsFrame::Command { command: cmd::DO_MOTOR_TEST, params: [1.0, 0.0, 5.0, 2.0, 1.0, 0.0, 0.0], int: true },
         ];
         let mut reader = fcu_link::FrameReader::new();
         let mut ids = Vec::new();

@@ -1,4 +1,4 @@
-//! The tick's side of a ground station's requests ([`crate::ground`]): the motor test and the
+//! The tick's side of a ground station's requests ([`crate::gcs`]): the motor test and the
 //! radio calibration that run, the disarm and calibration waiting for the supervisor, and the
 //! flash save the station says is running.
 //!
@@ -7,14 +7,14 @@
 //! motors that may not run, where the motor test's one compare value is written.
 
 use super::derived::TickParams;
-use crate::ground::{ground_test_rule, Disarm, GroundCommands, GroundInput, Holds, MotorTestChange, RADIO_CALIBRATION_MAX_MS};
+use crate::gcs::{test_or_calibration_rule, Disarm, GcsCommands, GcsInput, Holds, MotorTestChange, RADIO_CALIBRATION_MAX_MS};
 use crate::rc::{RcConfig, Sticks};
 use crate::supervisor::FlightState;
 
 /// A motor test running: one motor, its compare value, until a tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct TestOutput {
-    /// Motor index, below [`crate::ground::MOTORS`].
+    /// Motor index, below [`crate::gcs::MOTORS`].
     pub(super) motor: u8,
     pub(super) compare: u16,
     /// The first tick the test no longer runs.
@@ -22,7 +22,7 @@ pub(super) struct TestOutput {
 }
 
 #[derive(Clone, Debug, Default)]
-pub(super) struct Ground {
+pub(super) struct Gcs {
     saving: bool,
     rebooting: bool,
     disarm: Option<Disarm>,
@@ -40,18 +40,18 @@ fn ticks_in(ms: u32, p: &TickParams) -> u32 {
     ((ms as f32 * 0.001 / p.tick_dt_s) as u32).max(1)
 }
 
-impl Ground {
+impl Gcs {
     /// Takes what the station asked, at tick `now` in `state`. A test or calibration that may
-    /// not start in `state` ([`ground_test_rule`], [`crate::ground::MotorTest::checked`]) is dropped: the station answered with an
+    /// not start in `state` ([`test_or_calibration_rule`], [`crate::gcs::MotorTest::checked`]) is dropped: the station answered with an
     /// older view of the state. A save stops a motor test and refuses a new one: an erase
     /// stalls the tick, and the motor would keep its duty through it.
-    pub(super) fn take(&mut self, input: &GroundInput, now: u32, state: FlightState, p: &TickParams) {
+    pub(super) fn take(&mut self, input: &GcsInput, now: u32, state: FlightState, p: &TickParams) {
         self.saving = input.saving;
         self.rebooting = input.rebooting;
         if input.disarm.is_some() {
             self.disarm = input.disarm;
         }
-        let may_start = ground_test_rule(state).is_ok();
+        let may_start = test_or_calibration_rule(state).is_ok();
         self.calibrate |= input.calibrate_imu && may_start;
         let start = match input.motor_test {
             Some(MotorTestChange::Start(asked)) if !input.saving => asked.checked(state).ok(),
@@ -82,9 +82,9 @@ impl Ground {
     }
 
     /// Before the supervisor decides tick `now`: what ran out ends (the motor test also when a
-    /// stick leaves its rest), and what the supervisor reads of the ground, the one-shot
+    /// stick leaves its rest), and what the supervisor reads of the ground station, the one-shot
     /// requests taken.
-    pub(super) fn commands(&mut self, now: u32, sticks: &Sticks, rc: &RcConfig) -> GroundCommands {
+    pub(super) fn commands(&mut self, now: u32, sticks: &Sticks, rc: &RcConfig) -> GcsCommands {
         let ended = |until: u32| (now.wrapping_sub(until) as i32) >= 0;
         // The sticks are looked at only while a test runs or a stick that ended one is still away.
         let at_rest = || rc.throttle_low(sticks) && sticks.attitude_sticks_centred();
@@ -100,7 +100,7 @@ impl Ground {
         if self.radio_calibration_until.is_some_and(ended) {
             self.radio_calibration_until = None;
         }
-        GroundCommands {
+        GcsCommands {
             holds: Holds {
                 motor_test: self.motor_test.is_some() || self.moved_during_test,
                 radio_calibration: self.radio_calibration_until.is_some(),

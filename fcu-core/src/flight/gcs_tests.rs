@@ -1,7 +1,7 @@
-//! The ground station's commands through the whole controller (flight/ground.rs's rules).
+//! The ground station's commands through the whole controller (flight/gcs.rs's rules).
 
 use crate::flight::{FlightController, ForcedRadio};
-use crate::ground::{Disarm, GroundInput, MotorTest, MotorTestChange, MOTOR_TEST_MAX_DUTY_PCT, RADIO_CALIBRATION_MAX_MS};
+use crate::gcs::{Disarm, GcsInput, MotorTest, MotorTestChange, MOTOR_TEST_MAX_DUTY_PCT, RADIO_CALIBRATION_MAX_MS};
 use crate::imu::RawImu;
 use crate::supervisor::{Blocker, FlightState};
 use crate::Config;
@@ -51,8 +51,8 @@ impl Bench {
     }
 }
 
-fn start(motor: u8, duty_pct: f32, duration_ms: u32) -> GroundInput {
-    GroundInput { motor_test: Some(MotorTestChange::Start(MotorTest { motor, duty_pct, duration_ms })), ..GroundInput::default() }
+fn start(motor: u8, duty_pct: f32, duration_ms: u32) -> GcsInput {
+    GcsInput { motor_test: Some(MotorTestChange::Start(MotorTest { motor, duty_pct, duration_ms })), ..GcsInput::default() }
 }
 
 /// The compare value of a duty on the default's range.
@@ -66,7 +66,7 @@ fn a_motor_test_spins_only_its_motor_capped_and_stops_at_its_deadline() {
     let mut b = Bench::new();
     let off = b.run(&REST, 1);
     assert_eq!(off, [0; 4]);
-    b.fc.take_ground(&start(2, 80.0, 1000));
+    b.fc.take_gcs(&start(2, 80.0, 1000));
     let on = b.run(&REST, 1);
     assert_eq!(on, [0, 0, compare_of(MOTOR_TEST_MAX_DUTY_PCT), 0]);
     assert!(on[2] > 0);
@@ -83,7 +83,7 @@ fn a_motor_test_spins_only_its_motor_capped_and_stops_at_its_deadline() {
 #[test]
 fn a_motor_test_lasts_at_most_three_seconds() {
     let mut b = Bench::new();
-    b.fc.take_ground(&start(0, 5.0, 60_000));
+    b.fc.take_gcs(&start(0, 5.0, 60_000));
     assert_eq!(b.run(&REST, 2399)[0], compare_of(5.0));
     assert_eq!(b.run(&REST, 2), [0; 4]);
 }
@@ -91,9 +91,9 @@ fn a_motor_test_lasts_at_most_three_seconds() {
 #[test]
 fn a_motor_test_stops_on_request_and_on_a_stick_move() {
     let mut b = Bench::new();
-    b.fc.take_ground(&start(1, 10.0, 3000));
+    b.fc.take_gcs(&start(1, 10.0, 3000));
     assert_eq!(b.run(&REST, 10)[1], compare_of(10.0));
-    b.fc.take_ground(&GroundInput { motor_test: Some(MotorTestChange::Stop), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { motor_test: Some(MotorTestChange::Stop), ..GcsInput::default() });
     assert_eq!(b.run(&REST, 1), [0; 4]);
 
     for moved in [0, 1, 2, 3] {
@@ -101,7 +101,7 @@ fn a_motor_test_stops_on_request_and_on_a_stick_move() {
         if let Some(w) = radio.width_counts.get_mut(moved) {
             *w += 400;
         }
-        b.fc.take_ground(&start(3, 10.0, 3000));
+        b.fc.take_gcs(&start(3, 10.0, 3000));
         assert_eq!(b.run(&REST, 10)[3], compare_of(10.0));
         assert_eq!(b.run(&radio, 1), [0; 4], "channel {moved} moved");
         assert_eq!(b.run(&REST, 10), [0; 4], "a stopped test stays stopped");
@@ -111,7 +111,7 @@ fn a_motor_test_stops_on_request_and_on_a_stick_move() {
 #[test]
 fn arming_is_refused_while_a_motor_test_runs_and_a_test_is_refused_armed() {
     let mut b = Bench::new();
-    b.fc.take_ground(&start(0, 10.0, 3000));
+    b.fc.take_gcs(&start(0, 10.0, 3000));
     b.run(&REST, 1);
     assert!(b.fc.status().blockers.contains(Blocker::MotorTest));
     // The gesture's sticks leave their rest: the test stops at once, and the gesture begun
@@ -128,10 +128,10 @@ fn arming_is_refused_while_a_motor_test_runs_and_a_test_is_refused_armed() {
 
     let mut b = Bench::new();
     b.arm();
-    b.fc.take_ground(&start(0, 10.0, 3000));
+    b.fc.take_gcs(&start(0, 10.0, 3000));
     assert_eq!(b.run(&REST, 5), [0; 4], "armed, throttle low: no test");
     b.run(&FLY, 5);
-    b.fc.take_ground(&start(0, 10.0, 3000));
+    b.fc.take_gcs(&start(0, 10.0, 3000));
     let flying = b.run(&FLY, 1);
     assert!(flying.iter().all(|&c| c > 0), "the mixer's output, not a test: {flying:?}");
 }
@@ -139,12 +139,12 @@ fn arming_is_refused_while_a_motor_test_runs_and_a_test_is_refused_armed() {
 #[test]
 fn a_save_blocks_arming_until_it_is_done() {
     let mut b = Bench::new();
-    b.fc.take_ground(&GroundInput { saving: true, ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { saving: true, ..GcsInput::default() });
     b.run(&ARM, 900);
     b.run(&REST, 2);
     assert_eq!(b.fc.status().state, FlightState::Disarmed);
     assert!(b.fc.status().blockers.contains(Blocker::Saving));
-    b.fc.take_ground(&GroundInput::default());
+    b.fc.take_gcs(&GcsInput::default());
     b.run(&REST, 2);
     assert!(b.fc.status().blockers.is_empty(), "{:?}", b.fc.status().blockers);
     b.arm();
@@ -153,13 +153,13 @@ fn a_save_blocks_arming_until_it_is_done() {
 #[test]
 fn a_pending_reboot_blocks_arming_by_name_until_dropped() {
     let mut b = Bench::new();
-    b.fc.take_ground(&GroundInput { rebooting: true, ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { rebooting: true, ..GcsInput::default() });
     b.run(&ARM, 900);
     b.run(&REST, 2);
     assert_eq!(b.fc.status().state, FlightState::Disarmed);
     assert!(b.fc.status().blockers.contains(Blocker::RebootPending), "{:?}", b.fc.status().blockers);
     assert_eq!(Blocker::RebootPending.name(), "reboot-pending");
-    b.fc.take_ground(&GroundInput::default());
+    b.fc.take_gcs(&GcsInput::default());
     b.run(&REST, 2);
     assert!(b.fc.status().blockers.is_empty(), "{:?}", b.fc.status().blockers);
     b.arm();
@@ -168,14 +168,14 @@ fn a_pending_reboot_blocks_arming_by_name_until_dropped() {
 #[test]
 fn a_save_stops_a_motor_test_and_refuses_a_new_one() {
     let mut b = Bench::new();
-    b.fc.take_ground(&start(1, 10.0, 3000));
+    b.fc.take_gcs(&start(1, 10.0, 3000));
     assert_eq!(b.run(&REST, 10)[1], compare_of(10.0));
-    b.fc.take_ground(&GroundInput { saving: true, ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { saving: true, ..GcsInput::default() });
     assert_eq!(b.run(&REST, 1), [0; 4], "the motor must not keep its duty through an erase");
-    b.fc.take_ground(&GroundInput { saving: true, ..start(1, 10.0, 3000) });
+    b.fc.take_gcs(&GcsInput { saving: true, ..start(1, 10.0, 3000) });
     assert_eq!(b.run(&REST, 10), [0; 4], "no test starts while a save is pending");
-    b.fc.take_ground(&GroundInput::default());
-    b.fc.take_ground(&start(1, 10.0, 3000));
+    b.fc.take_gcs(&GcsInput::default());
+    b.fc.take_gcs(&start(1, 10.0, 3000));
     assert_eq!(b.run(&REST, 1)[1], compare_of(10.0), "after the save, a test starts again");
 }
 
@@ -184,7 +184,7 @@ fn a_ground_disarm_reaches_steady_flight() {
     let mut b = Bench::new();
     b.arm();
     b.run(&FLY, 400);
-    b.fc.take_ground(&GroundInput { disarm: Some(Disarm { forced: false }), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { disarm: Some(Disarm { forced: false }), ..GcsInput::default() });
     b.run(&FLY, 2);
     assert_eq!(b.fc.status().state, FlightState::Armed, "throttle up: not without the force value");
     b.run(&FLY, 2);
@@ -193,7 +193,7 @@ fn a_ground_disarm_reaches_steady_flight() {
     let quiet = crate::rc::PulseBatch::default();
     b.fc.tick(still(0), &quiet);
     assert!(b.fc.control_tick.supervision.steady(), "steady flight: {:?}", b.fc.status());
-    b.fc.take_ground(&GroundInput { disarm: Some(Disarm { forced: true }), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { disarm: Some(Disarm { forced: true }), ..GcsInput::default() });
     let out = b.fc.tick(still(1), &quiet).compare;
     assert_eq!((b.fc.status().state, out), (FlightState::Disarmed, [0; 4]));
 }
@@ -201,7 +201,7 @@ fn a_ground_disarm_reaches_steady_flight() {
 #[test]
 fn an_imu_calibration_runs_again_disarmed_only() {
     let mut b = Bench::new();
-    b.fc.take_ground(&GroundInput { calibrate_imu: true, ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { calibrate_imu: true, ..GcsInput::default() });
     b.run(&REST, 1);
     assert_eq!(b.fc.status().state, FlightState::Calibrating);
     b.run(&REST, 2000);
@@ -210,7 +210,7 @@ fn an_imu_calibration_runs_again_disarmed_only() {
 
     let mut b = Bench::new();
     b.arm();
-    b.fc.take_ground(&GroundInput { calibrate_imu: true, ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { calibrate_imu: true, ..GcsInput::default() });
     b.run(&FLY, 5);
     assert_eq!(b.fc.status().state, FlightState::Armed);
     b.run(&REST, 5);
@@ -220,7 +220,7 @@ fn an_imu_calibration_runs_again_disarmed_only() {
 #[test]
 fn a_radio_calibration_blocks_arming_until_ended_or_timed_out() {
     let mut b = Bench::new();
-    b.fc.take_ground(&GroundInput { radio_calibration: Some(true), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { radio_calibration: Some(true), ..GcsInput::default() });
     // The sticks go through their ranges meanwhile: nothing stops it but an end.
     b.run(&ARM, 900);
     b.run(&FLY, 100);
@@ -228,11 +228,11 @@ fn a_radio_calibration_blocks_arming_until_ended_or_timed_out() {
     assert!(b.fc.radio_calibration());
     assert_eq!(b.fc.status().state, FlightState::Disarmed);
     assert!(b.fc.status().blockers.contains(Blocker::RadioCalibration));
-    b.fc.take_ground(&GroundInput { radio_calibration: Some(false), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { radio_calibration: Some(false), ..GcsInput::default() });
     b.run(&REST, 1);
     assert!(!b.fc.radio_calibration() && b.fc.status().blockers.is_empty());
 
-    b.fc.take_ground(&GroundInput { radio_calibration: Some(true), ..GroundInput::default() });
+    b.fc.take_gcs(&GcsInput { radio_calibration: Some(true), ..GcsInput::default() });
     let ticks = RADIO_CALIBRATION_MAX_MS * 8 / 10;
     b.run(&REST, ticks - 2);
     assert!(b.fc.radio_calibration());
