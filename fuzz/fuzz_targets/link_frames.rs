@@ -190,11 +190,7 @@ fuzz_target!(|data: &[u8]| {
         assert!(
             !mock.requests.iter().any(|r| matches!(
                 r,
-                Request::SaveParams
-                    | Request::ResetParams
-                    | Request::Reboot
-                    | Request::CalibrateImu
-                    | Request::CalibrateRadio
+                Request::SaveParams | Request::ResetParams | Request::Reboot | Request::CalibrateImu | Request::CalibrateRadio
             )),
             "{:?} while armed",
             mock.requests

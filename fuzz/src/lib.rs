@@ -162,6 +162,32 @@ impl Bytes<'_> {
     }
 }
 
+impl Sensor {
+    /// The IMU's reading for the next tick.
+    fn sample(&self, rig: &mut Rig, b: &mut Bytes, rng: &mut Rng) -> RawImu {
+        match *self {
+            Sensor::Level => rig.imu.sample(),
+            Sensor::Stuck(raw) => raw,
+            Sensor::Random => {
+                let mut w = || rng.next_u64() as i16;
+                RawImu { accel: [w(), w(), w()], gyro: [w(), w(), w()] }
+            }
+            Sensor::FromInput => {
+                if b.pos + 12 <= b.data.len() {
+                    b.raw_imu()
+                } else {
+                    rig.imu.sample()
+                }
+            }
+            Sensor::Extremes => {
+                const X: [i16; 5] = [i16::MIN, -1, 0, 1, i16::MAX];
+                let mut w = || X[(rng.next_u64() % 5) as usize];
+                RawImu { accel: [w(), w(), w()], gyro: [w(), w(), w()] }
+            }
+        }
+    }
+}
+
 /// Run one input; a violated invariant is the error (a panic in the core propagates).
 pub fn run(data: &[u8], target: Target) -> Result<(), Violation> {
     let mut b = Bytes { data, pos: 0 };
@@ -221,26 +247,7 @@ pub fn run(data: &[u8], target: Target) -> Result<(), Violation> {
                 return Ok(());
             }
             ticks += 1;
-            let imu = match sensor {
-                Sensor::Level => rig.imu.sample(),
-                Sensor::Stuck(raw) => raw,
-                Sensor::Random => {
-                    let mut w = || rng.next_u64() as i16;
-                    RawImu { accel: [w(), w(), w()], gyro: [w(), w(), w()] }
-                }
-                Sensor::FromInput => {
-                    if b.pos + 12 <= b.data.len() {
-                        b.raw_imu()
-                    } else {
-                        rig.imu.sample()
-                    }
-                }
-                Sensor::Extremes => {
-                    const X: [i16; 5] = [i16::MIN, -1, 0, 1, i16::MAX];
-                    let mut w = || X[(rng.next_u64() % 5) as usize];
-                    RawImu { accel: [w(), w(), w()], gyro: [w(), w(), w()] }
-                }
-            };
+            let imu = sensor.sample(&mut rig, &mut b, &mut rng);
             rig.radio.tick(&frame, glitches, &mut edges);
             rig.tick_with(imu, &edges)?;
             edges.clear();
