@@ -31,7 +31,7 @@
 //! - LIS2MDL: power-on boot and REBOOT take [`LIS2MDL_BOOT`] = 20 ms (ST examples' BOOT_TIME,
 //!   assumption); SOFT_RST as SW_RESET above.
 //! - LPS22HB: power-on boot and BOOT take [`LPS22HB_BOOT`] = 4.5 ms (assumption); SWRESET as
-//!   SW_RESET above.
+//!   SW_RESET above, except that a write while it runs is ignored (`sensors/lps22hb.rs`).
 //! - During a boot the sensor ignores the bus entirely: a transaction started during it is ignored
 //!   to its end, and the line is undriven.
 //! - LSM6DSL and LIS2MDL: output registers change only between transactions (values given
