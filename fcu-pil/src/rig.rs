@@ -20,6 +20,7 @@ use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
 use crate::board::Board;
 use crate::elf::Image;
 use crate::machine::{Fault, Machine};
+use crate::periph::sensors::ISA_SEA_LEVEL_PA;
 use crate::periph::{time_from_s, time_to_s, Time};
 use crate::telemetry::{self, Line, LineSplitter};
 use crate::timing::TimingProfile;
@@ -325,6 +326,14 @@ impl FlightComputer for EmulatedBoard {
         }
         let now = self.machine.now();
         Ok(self.machine.board_mut().motor_compares(now))
+    }
+
+    /// The barometer reads the ISA pressure at the drone's height, the take-off level at
+    /// standard sea-level pressure.
+    fn air(&mut self, height_m: f64) -> Result<(), SimError> {
+        let baro = &mut self.machine.board_mut().spi2.sensors_mut().lps22hb;
+        baro.set_height_m(height_m, ISA_SEA_LEVEL_PA)
+            .map_err(|e| SimError::Computer(format!("barometer input at height {height_m} m: {e:?}")))
     }
 
     fn view(&self) -> ComputerView {

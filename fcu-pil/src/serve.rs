@@ -339,6 +339,10 @@ impl FlightComputer for Bridge<'_> {
         Ok(compares)
     }
 
+    fn air(&mut self, height_m: f64) -> Result<(), SimError> {
+        self.board.air(height_m)
+    }
+
     fn view(&self) -> ComputerView {
         self.board.view()
     }

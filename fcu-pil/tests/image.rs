@@ -55,6 +55,9 @@ impl<F: FnMut(&mut EmulatedBoard)> FlightComputer for Injecting<F> {
         }
         self.board.step(t_end_s, edges, imu, battery_v)
     }
+    fn air(&mut self, height_m: f64) -> Result<(), SimError> {
+        self.board.air(height_m)
+    }
     fn view(&self) -> ComputerView {
         self.board.view()
     }
@@ -548,6 +551,28 @@ fn the_shipped_image_speaks_mavlink_from_boot_and_the_harness_turns_it_to_text_l
 /// sensor drive the data line together (chip select goes high before the line turns around),
 /// a deselected sensor never sees bus traffic while its I2C interface is on (once boot has
 /// disabled them), no SPI overrun, no write to a read-only sensor register.
+/// The rig passes the simulated drone's height to the LPS22HB model: after a hover, the
+/// pressure the part's output registers hold (the image configures it at 25 Hz, no low-pass)
+/// is the ISA's at the plant's height.
+#[test]
+fn the_barometer_reads_the_simulated_drones_height_on_the_image() {
+    use fcu_pil::periph::sensors::{lps22hb_reg, Sensor};
+    let sc = scenario("hover");
+    let opts = RunOptions { seed: 1, duration_s: Some(6.0), ..RunOptions::default() };
+    let mut b = boot(&BoardSetup::default());
+    let log = sim::run_with(&mut b, &sc, Profile::Default, &opts).unwrap();
+    let height_m = log.rows.last().map_or(0.0, |r| r.alt_m);
+    assert!(height_m > 0.3, "the drone is off the ground: {height_m} m");
+    let now = b.machine.now();
+    let baro = &b.machine.board().spi2.sensors().lps22hb;
+    let byte = |a: u8| baro.register(a, now);
+    let counts = i32::from_le_bytes([byte(lps22hb_reg::PRESS_OUT_XL), byte(lps22hb_reg::PRESS_OUT_L), byte(lps22hb_reg::PRESS_OUT_H), 0]);
+    let pressure_pa = f64::from(counts) * 100.0 / 4096.0;
+    let isa_pa = 101_325.0 * (1.0 - height_m / 44_330.77_f64).powf(1.0 / 0.190_263);
+    // The last sample is at most 40 ms old; 1 Pa is some 8 cm of height.
+    assert!((pressure_pa - isa_pa).abs() < 1.0, "{pressure_pa} Pa at {height_m} m, ISA {isa_pa} Pa");
+}
+
 #[test]
 fn the_sensor_bus_is_clean_on_the_image() {
     let sc = scenario("hover");
@@ -597,6 +622,9 @@ impl FlightComputer for Starving {
         let starved = self.windows_s.iter().any(|&(from, to)| (from..to).contains(&t_end_s));
         self.board.machine.board_mut().dma1.set_starved(3, starved);
         self.board.step(t_end_s, edges, imu, battery_v)
+    }
+    fn air(&mut self, height_m: f64) -> Result<(), SimError> {
+        self.board.air(height_m)
     }
     fn view(&self) -> ComputerView {
         self.board.view()

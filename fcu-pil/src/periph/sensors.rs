@@ -31,11 +31,13 @@
 //! - LIS2MDL: power-on boot and REBOOT take [`LIS2MDL_BOOT`] = 20 ms (ST examples' BOOT_TIME,
 //!   assumption); SOFT_RST as SW_RESET above.
 //! - LPS22HB: power-on boot and BOOT take [`LPS22HB_BOOT`] = 4.5 ms (assumption); SWRESET as
-//!   SW_RESET above.
+//!   SW_RESET above, except that a write while it runs is ignored (`sensors/lps22hb.rs`).
 //! - During a boot the sensor ignores the bus entirely: a transaction started during it is ignored
 //!   to its end, and the line is undriven.
-//! - Output registers change only between transactions (values given during a transaction are
-//!   applied at CS rising), i.e. a burst always reads one coherent sample, as with BDU = 1.
+//! - LSM6DSL and LIS2MDL: output registers change only between transactions (values given
+//!   during a transaction are applied at CS rising), i.e. a burst always reads one coherent
+//!   sample, as with BDU = 1. The LPS22HB samples on its own clock, mid-transaction too, and
+//!   models BDU as its datasheet gives it (`sensors/lps22hb.rs`).
 
 use super::Time;
 
@@ -222,6 +224,13 @@ trait Chip {
     fn i2c_on(&self) -> bool;
     /// CS rose after a transaction (not an ignored one), before a pending sample is applied.
     fn end_transaction(&mut self) {}
+    /// Brings a sensor that samples on its own clock up to `now` (called at every bus event
+    /// before it is handled). The others are given their samples by the rig.
+    fn advance(&mut self, _now: Time) {}
+    /// The value a read of `addr` returns at `now`, without side effects.
+    fn read_value(&self, addr: u8, now: Time) -> u8 {
+        self.port().peek(addr, now)
+    }
 
     /// A new sample: in the output registers at once between transactions, else when CS rises.
     fn stage_output(&mut self, out: Self::Output) {
@@ -243,11 +252,13 @@ fn next_addr(addr: u8, inc: bool) -> u8 {
 
 impl<T: Chip> SpiDevice for T {
     fn cs_fall(&mut self, now: Time) {
+        self.advance(now);
         let p = self.port_mut();
         p.phase = if p.ready(now) { Phase::Command } else { Phase::Ignored };
     }
 
-    fn cs_rise(&mut self, _now: Time) {
+    fn cs_rise(&mut self, now: Time) {
+        self.advance(now);
         let phase = self.port().phase;
         self.port_mut().phase = Phase::Idle;
         if !matches!(phase, Phase::Idle | Phase::Ignored) {
@@ -261,12 +272,13 @@ impl<T: Chip> SpiDevice for T {
     fn output(&self, now: Time) -> Option<u8> {
         let p = self.port();
         match p.phase {
-            Phase::Read { addr, .. } if !p.silent && p.ready(now) && self.three_wire() => Some(p.peek(addr, now)),
+            Phase::Read { addr, .. } if !p.silent && p.ready(now) && self.three_wire() => Some(self.read_value(addr, now)),
             _ => None,
         }
     }
 
     fn clock(&mut self, line: u8, now: Time) {
+        self.advance(now);
         if !self.port().ready(now) {
             // A BOOT written earlier in this transaction: the rest of it is ignored.
             if self.port().phase != Phase::Idle {
@@ -335,7 +347,7 @@ impl<T: Chip> Sensor for T {
     }
 
     fn register(&self, addr: u8, now: Time) -> u8 {
-        self.port().peek(addr & 0x7F, now)
+        self.read_value(addr & 0x7F, now)
     }
 
     fn is_ready(&self, now: Time) -> bool {
@@ -624,120 +636,10 @@ impl Chip for Lis2mdl {
 }
 
 // ---------------------------------------------------------------------------------------------
-// LPS22HB
+// LPS22HB: its own file, for its sampling clock, BDU and pressure input.
 
-pub mod lps22hb_reg {
-    pub const WHO_AM_I: u8 = 0x0F;
-    pub const CTRL_REG1: u8 = 0x10;
-    pub const CTRL_REG2: u8 = 0x11;
-    pub const CTRL_REG3: u8 = 0x12;
-    pub const STATUS: u8 = 0x27;
-    pub const PRESS_OUT_XL: u8 = 0x28;
-    pub const TEMP_OUT_L: u8 = 0x2B;
-    pub const WHO_AM_I_VALUE: u8 = 0xB1;
-
-    /// CTRL_REG1 bits.
-    pub const SIM: u8 = 0x01;
-    pub const ODR_MASK: u8 = 0x70;
-    /// CTRL_REG2 bits.
-    pub const ONE_SHOT: u8 = 0x01;
-    pub const SWRESET: u8 = 0x04;
-    pub const I2C_DIS: u8 = 0x08;
-    pub const IF_ADD_INC: u8 = 0x10;
-    pub const BOOT: u8 = 0x80;
-    /// STATUS bits.
-    pub const P_DA: u8 = 0x01;
-    pub const T_DA: u8 = 0x02;
-}
-
-const LPS22HB: Spec = Spec {
-    who_am_i: (lps22hb_reg::WHO_AM_I, lps22hb_reg::WHO_AM_I_VALUE),
-    control: lps22hb_reg::CTRL_REG2,
-    // SWRESET: registers back to their reset values (SIM = 0: 4-wire again).
-    sw_reset: lps22hb_reg::SWRESET,
-    boot: lps22hb_reg::BOOT,
-    // ONE_SHOT self-clears (no acquisition is modelled).
-    self_clearing: lps22hb_reg::ONE_SHOT,
-    boot_time: LPS22HB_BOOT,
-    // CTRL_REG2 = 0x10 (IF_ADD_INC).
-    reset_values: &[(lps22hb_reg::CTRL_REG2, lps22hb_reg::IF_ADD_INC)],
-    // Datasheet table "Registers address map".
-    access: |addr| match addr {
-        0x0B..=0x0D | 0x10..=0x12 | 0x14..=0x1A => Access::Rw,
-        0x0F | 0x25..=0x2C | 0x33 => Access::Ro,
-        _ => Access::Reserved,
-    },
-};
-
-/// LPS22HB barometer (WHO_AM_I 0xB1). 4-wire SPI at power-up (CTRL_REG1.SIM = 0).
-#[derive(Clone, Debug)]
-pub struct Lps22hb {
-    /// Output sample: raw pressure, raw temperature.
-    port: Port<(u32, i16)>,
-}
-
-impl Default for Lps22hb {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Lps22hb {
-    /// Powered on at time 0: booting for [`LPS22HB_BOOT`].
-    pub fn new() -> Self {
-        Lps22hb { port: Port::new(&LPS22HB) }
-    }
-
-    /// New output: 24-bit raw pressure (hPa × 4096) and raw temperature (°C × 100). Taken only
-    /// while ODR ≠ 0 (continuous mode).
-    pub fn set_output(&mut self, pressure_raw: u32, temperature_raw: i16) {
-        self.stage_output((pressure_raw, temperature_raw));
-    }
-}
-
-impl Chip for Lps22hb {
-    type Output = (u32, i16);
-
-    fn port(&self) -> &Port<Self::Output> {
-        &self.port
-    }
-    fn port_mut(&mut self) -> &mut Port<Self::Output> {
-        &mut self.port
-    }
-
-    fn apply_output(&mut self, (pressure, temperature): Self::Output) {
-        use lps22hb_reg::*;
-        let p = &mut self.port;
-        if p.reg(CTRL_REG1) & ODR_MASK == 0 {
-            return;
-        }
-        let [p0, p1, p2, _] = pressure.to_le_bytes();
-        let [t0, t1] = temperature.to_le_bytes();
-        for (i, b) in [p0, p1, p2, t0, t1].into_iter().enumerate() {
-            *p.reg_mut(PRESS_OUT_XL + i as u8) = b;
-        }
-        *p.reg_mut(STATUS) |= P_DA | T_DA;
-    }
-
-    fn read_effects(&mut self, addr: u8) {
-        use lps22hb_reg::*;
-        if (PRESS_OUT_XL..TEMP_OUT_L).contains(&addr) {
-            *self.port.reg_mut(STATUS) &= !P_DA;
-        } else if (TEMP_OUT_L..=TEMP_OUT_L + 1).contains(&addr) {
-            *self.port.reg_mut(STATUS) &= !T_DA;
-        }
-    }
-
-    fn three_wire(&self) -> bool {
-        self.port.reg(lps22hb_reg::CTRL_REG1) & lps22hb_reg::SIM != 0
-    }
-    fn increments(&self) -> bool {
-        self.port.reg(lps22hb_reg::CTRL_REG2) & lps22hb_reg::IF_ADD_INC != 0
-    }
-    fn i2c_on(&self) -> bool {
-        self.port.reg(lps22hb_reg::CTRL_REG2) & lps22hb_reg::I2C_DIS == 0
-    }
-}
+mod lps22hb;
+pub use lps22hb::{lps22hb_reg, BaroInputError, Lps22hb, ISA_SEA_LEVEL_PA};
 
 // ---------------------------------------------------------------------------------------------
 
@@ -992,43 +894,6 @@ mod tests {
         assert_eq!(read(&mut s, 0x60, 3, t), [0x8C, 0x02, 0x10]);
         s.set_output([0x0102, -2, 3]);
         assert_eq!(read(&mut s, 0x68, 6, t), [0x02, 0x01, 0xFE, 0xFF, 0x03, 0x00]);
-    }
-
-    #[test]
-    fn lps22hb_reset_and_boot_clear_sim_as_the_reference_expects() {
-        let mut s = Lps22hb::new();
-        let t = LPS22HB_BOOT;
-        assert_eq!(s.register(0x11, t), 0x10, "CTRL_REG2 reset: IF_ADD_INC");
-        assert_eq!(read(&mut s, 0x0F, 1, t), [UNDRIVEN], "4-wire at power-up");
-        write(&mut s, 0x10, &[0x01], t);
-        assert_eq!(read(&mut s, 0x0F, 1, t), [0xB1]);
-        write(&mut s, 0x11, &[0x94], t);
-        assert_eq!(read(&mut s, 0x0F, 1, t + LPS22HB_BOOT - 1), [UNDRIVEN], "booting");
-        let later = t + LPS22HB_BOOT;
-        assert_eq!(read(&mut s, 0x0F, 1, later), [UNDRIVEN], "SIM cleared by SWRESET");
-        assert_eq!(s.register(0x11, later), 0x10);
-        write(&mut s, 0x10, &[0x01], later);
-        assert_eq!(read(&mut s, 0x0F, 1, later), [0xB1]);
-    }
-
-    /// Rule: LPS22HB's ONE_SHOT clears itself (datasheet CTRL_REG2): it never reads back set.
-    #[test]
-    fn lps22hb_one_shot_reads_back_clear() {
-        use lps22hb_reg::*;
-        let mut s = Lps22hb::new();
-        write(&mut s, CTRL_REG2, &[IF_ADD_INC | ONE_SHOT], AFTER_BOOT);
-        assert_eq!(s.register(CTRL_REG2, AFTER_BOOT), IF_ADD_INC);
-    }
-
-    #[test]
-    fn lps22hb_i2c_dis_and_pressure_output() {
-        let mut s = Lps22hb::new();
-        let t = LPS22HB_BOOT;
-        write(&mut s, 0x11, &[0x18], t);
-        assert!(!s.i2c_enabled());
-        write(&mut s, 0x10, &[0x33], t);
-        s.set_output(0x3F_5678, 2500);
-        assert_eq!(read(&mut s, 0x28, 5, t), [0x78, 0x56, 0x3F, 0xC4, 0x09]);
     }
 
     #[test]

@@ -141,6 +141,12 @@ pub trait FlightComputer {
     /// and the battery voltage. Returns the compare values that drive the motors over the
     /// next period.
     fn step(&mut self, t_end_s: f64, edges: &[TimedEdge], imu: fcu_core::imu::RawImu, battery_v: f64) -> Result<[u16; 4], SimError>;
+    /// The air at the drone for the [`FlightComputer::step`] that follows: its height above
+    /// the take-off level, m. For a computer with a barometer model (fcu-pil's emulated
+    /// LPS22HB); the others have none and ignore it.
+    fn air(&mut self, _height_m: f64) -> Result<(), SimError> {
+        Ok(())
+    }
     /// What the computer reports about itself now.
     fn view(&self) -> ComputerView;
 }
@@ -246,6 +252,7 @@ pub fn run_streaming(
         let t1 = t0 + tick_s;
         let yaw_rate_cmd_dps = tx.send(t1, &world.plant, &mut edges);
         world.advance(t0, tick_s);
+        computer.air(world.plant.state.pos_earth_m[2])?;
         let compare = computer.step(t1, &edges, world.imu.read(), world.plant.state.battery_v)?;
         motors.deliver(compare, t1, &mut world.plant);
         let sent = Sent { link: scenario.timeline.at(t1).link, thr_us: tx.last_thr_us, yaw_rate_cmd_dps };
