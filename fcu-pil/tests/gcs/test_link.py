@@ -441,9 +441,6 @@ def record_words():
     return count + 6
 
 
-if __name__ == "__main__":
-    unittest.main()
-
 
 class RebootUnderAFlood(unittest.TestCase):
     """Issue finding: a reboot accepted disarmed under a busy downlink was carried out seconds
@@ -509,3 +506,7 @@ class TwoGroundStations(unittest.TestCase):
                 self.assertIsNotNone(board.heartbeat(5.0))
             finally:
                 second.close()
+
+
+if __name__ == "__main__":
+    unittest.main()
