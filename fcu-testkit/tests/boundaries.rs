@@ -312,3 +312,17 @@ fn a_save_owed_before_a_reset_writes_the_defaults_the_reset_left() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), index("RATE_RLL_P")), parameters::value(&DEFAULTS, index("RATE_RLL_P")));
 }
+
+/// Found by the fuzzer (its checker, not the board): a refused RCMAP_ROLL, then ROLL 4 (which
+/// swaps it with YAW), then ROLL 1 (which swaps it back). The refusal's echo carries ROLL's value
+/// in force, 1, the value the third set asks for: the checker took it as that set's answer and
+/// then refused the real one. Sets of a parameter are answered in order.
+#[test]
+fn a_refusal_echo_is_not_the_answer_of_a_later_set_of_the_same_value() {
+    let roll = index("RCMAP_ROLL");
+    let ops = vec![set("RCMAP_ROLL", 3.3448277), set("RCMAP_ROLL", 4.0), set("RCMAP_ROLL", 1.0), Op::Wait { ms: 1200 }];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), roll), Some(1.0));
+    assert_eq!(parameters::value(b.config(), index("RCMAP_YAW")), Some(4.0));
+}

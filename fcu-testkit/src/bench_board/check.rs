@@ -231,6 +231,25 @@ impl Checker {
         self.remember(&v);
     }
 
+    /// A PARAM_VALUE of `i` carrying the value in force answers the oldest set of `i` still
+    /// pending, when that set asked for this value (taken, nothing changed) or for one the table
+    /// refuses (the board echoes the value in force): the board answers a parameter's sets in
+    /// the order they came. A later set of the same value stays pending, as do sets this
+    /// answer cannot be for (a read's answer, a report of another set's swap).
+    fn answered_in_force(&mut self, i: usize, value: f32) {
+        let Some(pos) = self.pending_sets.iter().position(|&(j, _, _)| j == i) else {
+            return;
+        };
+        let Some(&(_, asked, _)) = self.pending_sets.get(pos) else {
+            return;
+        };
+        let mut next = self.model;
+        let refused = parameters::set(&mut next, i, asked, false).is_err();
+        if asked.to_bits() == value.to_bits() || refused {
+            self.pending_sets.remove(pos);
+        }
+    }
+
     /// The pending set of another parameter that, taken now, would move parameter `i` to
     /// `value`.
     fn moved_by_pending(&self, i: usize, value: f32) -> Option<(usize, f32)> {
@@ -274,7 +293,7 @@ impl Checker {
                     );
                 }
                 if current.to_bits() == value.to_bits() {
-                    self.pending_sets.retain(|&(j, v, _)| j != i || v.to_bits() != value.to_bits());
+                    self.answered_in_force(i, *value);
                     // Answered in order: what was queued before the value in force is out.
                     self.stale.retain(|&(j, _)| j != i);
                 } else if self.stale.contains(&(i, value.to_bits())) {
