@@ -326,3 +326,23 @@ fn a_refusal_echo_is_not_the_answer_of_a_later_set_of_the_same_value() {
     assert_eq!(parameters::value(b.config(), roll), Some(1.0));
     assert_eq!(parameters::value(b.config(), index("RCMAP_YAW")), Some(4.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): RCMAP_ROLL 3 (a swap with THROTTLE), then
+/// RCMAP_ROLL 4 (a swap with YAW) under a flood that drops the first set's answers. The board took
+/// both in order, so THROTTLE stays 1; the checker took only the second and expected 3.
+#[test]
+fn an_earlier_set_whose_answer_was_dropped_keeps_its_swap() {
+    let ops = vec![
+        Op::Flood { ms: 1200 },
+        set("RCMAP_ROLL", 3.0),
+        set("RCMAP_ROLL", 4.0),
+        Op::Wait { ms: 64 },
+        Op::Flood { ms: 800 },
+        Op::Wait { ms: 1500 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    let map: Vec<Option<f32>> =
+        ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().map(|n| parameters::value(b.config(), index(n))).collect();
+    assert_eq!(map, [Some(4.0), Some(2.0), Some(1.0), Some(3.0)]);
+}

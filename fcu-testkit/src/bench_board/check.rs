@@ -203,6 +203,15 @@ impl Checker {
                     }
                 }
             }
+            // The board took them in order, so their side effects stand: an RCMAP set swaps
+            // another channel, which the later set of the same parameter does not undo.
+            let earlier: Vec<f32> = self.pending_sets.iter().take(pos).filter(|&&(j, _, _)| j == i).map(|&(_, v, _)| v).collect();
+            for v in earlier {
+                let mut next = self.model;
+                if parameters::set(&mut next, i, v, false).is_ok() {
+                    self.model = next;
+                }
+            }
             let mut k = 0;
             self.pending_sets.retain(|&(j, _, _)| {
                 let keep = j != i || k > pos;
