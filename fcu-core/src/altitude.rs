@@ -34,6 +34,44 @@ pub fn vertical_accel_m_s2(q: Quat, accel_body_mg: Vec3) -> f32 {
     (q.up_in_body().dot(accel_body_mg) * 0.001 - 1.0) * GRAVITY_M_S2
 }
 
+/// The vertical mode the pilot chose (parameter `ALT_MODE`, or a ground station's set-mode).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AltMode {
+    /// The throttle stick sets the collective thrust, as the reference does.
+    #[default]
+    Manual = 0,
+    /// Altitude hold: the stick centred holds the height, outside its deadband it asks for a
+    /// climb rate, at the bottom on the ground it idles.
+    Hold = 1,
+}
+
+/// What the vertical half reports ([`crate::flight::Status::altitude`]): the estimate, the
+/// barometer's last reading and health, and what the hold is doing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AltitudeStatus {
+    /// The mode chosen.
+    pub mode: AltMode,
+    /// The hold sets the collective thrust now (the mode is Hold, or the failsafe descends,
+    /// and the estimate is healthy).
+    pub holding: bool,
+    /// The link-loss failsafe is descending on the height estimate.
+    pub failsafe_descent: bool,
+    /// Above the take-off point (the last re-zero), m.
+    pub height_m: f32,
+    /// Upward, m/s.
+    pub climb_m_s: f32,
+    /// The height the hold holds or moves to, m (`None` when not holding).
+    pub target_m: Option<f32>,
+    /// The last healthy barometer sample, Pa (`None` before the first).
+    pub pressure_pa: Option<f32>,
+    /// The barometer's temperature with that sample, °C.
+    pub temperature_c: f32,
+    /// The barometer's fault, if it has one now.
+    pub baro_fault: Option<crate::baro::BaroFault>,
+    /// The height estimate may be flown on (referenced, fed by a healthy barometer).
+    pub estimate_healthy: bool,
+}
+
 /// The estimator's tunables.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AltitudeConfig {

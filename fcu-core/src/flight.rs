@@ -45,6 +45,8 @@ use self::output::{MotorsAllowed, Output};
 use self::sensors::{AfterCalibration, Sensors};
 use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
+use crate::altitude::AltitudeStatus;
+use crate::baro::RawBaro;
 use crate::config::{Config, ConfigError};
 use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
@@ -77,6 +79,8 @@ pub struct OuterResult {
     pub rate_demand_rad_s: [f32; 3],
     /// The gains the tick's rate loop and throttle map are to be scaled by.
     pub gains: Gains,
+    /// The vertical half's report, for [`Status::altitude`].
+    pub altitude: AltitudeStatus,
 }
 
 /// What telemetry, LEDs and logs need to know.
@@ -106,6 +110,8 @@ pub struct Status {
     /// the heading target moves at this rate and the yaw feedforward passes it on; with it,
     /// both follow its shaped version.
     pub yaw_rate_target_rad_s: f32,
+    /// Height, barometer and altitude hold.
+    pub altitude: AltitudeStatus,
 }
 
 /// What a configuration change reaches, as the parameter table classifies it
@@ -177,6 +183,8 @@ pub struct OuterStep {
     angle_loop: AngleLoop,
     heading: HeadingTarget,
     gains: GainSchedule,
+    /// The barometer burst read since the last step, if any ([`OuterStep::set_baro`]).
+    baro: Option<RawBaro>,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
@@ -251,6 +259,11 @@ impl FlightController {
         self.outer_step.set_battery_mv(battery_mv);
     }
 
+    /// The barometer burst read since the last outer step (see [`OuterStep::set_baro`]).
+    pub fn set_baro(&mut self, raw: Option<RawBaro>) {
+        self.outer_step.set_baro(raw);
+    }
+
     /// A ground station's input (see [`ControlTick::take_gcs`]).
     pub fn take_gcs(&mut self, input: &GcsInput) {
         self.control_tick.take_gcs(input);
@@ -303,6 +316,7 @@ impl ControlTick {
                 target_rad: [0.0; 3],
                 rate_demand_rad_s: [0.0; 3],
                 gains: Gains::UNITY,
+                altitude: AltitudeStatus::default(),
             },
             output: Output::new(),
             unscaled: Unscaled::new(cfg),
@@ -457,6 +471,7 @@ impl ControlTick {
             compare: self.output.compare(),
             thrust_gain: self.outer.gains.thrust,
             yaw_rate_target_rad_s: self.params.rc.yaw_rate_rad_s(&in_force.sticks, self.params.outer_hz),
+            altitude: self.outer.altitude,
         }
     }
 }
@@ -468,6 +483,7 @@ impl OuterStep {
             angle_loop: AngleLoop::default(),
             heading: HeadingTarget::new(cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s()))),
             gains: GainSchedule::new(&cfg.control, &cfg.mixer, params.outer_hz),
+            baro: None,
             params,
         })
     }
@@ -494,12 +510,20 @@ impl OuterStep {
             rate_demand_rad_s[2] += ff;
         }
         let gains = self.gains.update(job.sticks.thr);
-        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains }
+        let altitude = AltitudeStatus::default();
+        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains, altitude }
     }
 
     /// The latest battery reading, mV (for the battery compensation; ignored without it).
     pub fn set_battery_mv(&mut self, battery_mv: u32) {
         self.gains.set_battery_mv(battery_mv);
+    }
+
+    /// The barometer burst read since the last outer step (`None`: none was read, or the bus
+    /// read failed), for the next [`run`](Self::run). The firmware reads it in the control
+    /// tick's bus slot and hands it over with the job.
+    pub fn set_baro(&mut self, raw: Option<RawBaro>) {
+        self.baro = raw;
     }
 
     /// The outer step's half of a change the tick took ([`ControlTick::take_config`]): its

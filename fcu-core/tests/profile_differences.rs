@@ -440,6 +440,7 @@ fn d17_the_thrust_curve_scales_the_rate_loop_but_not_the_throttle_map() {
         target_rad: [0.0; 3],
         rate_demand_rad_s: [0.0; 3],
         gains: fcu_core::control::Gains { thrust: 1.0, rate: 1.25 },
+        altitude: fcu_core::altitude::AltitudeStatus::default(),
     };
     let (mut tick, _) = fc.into_parts();
     tick.apply_outer(&result);
