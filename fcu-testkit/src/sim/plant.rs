@@ -64,6 +64,10 @@ pub struct PlantParams {
     pub vibration_accel_g: f64,
     /// Motor electrical frequency at full speed (8520 motors: ~40 000 rpm), Hz.
     pub motor_full_speed_hz: f64,
+    /// Propeller radius (ground effect), m.
+    pub rotor_radius_m: f64,
+    /// Height of the propeller discs above the floor when the drone sits on it, m.
+    pub rotor_height_m: f64,
 }
 
 impl Default for PlantParams {
@@ -89,6 +93,9 @@ impl Default for PlantParams {
             drag_angular_nm_per_rad_s: 2.0e-6,
             vibration_accel_g: 0.3,
             motor_full_speed_hz: 660.0,
+            // 65 mm propellers, their discs some 3 cm above the floor on the landing feet.
+            rotor_radius_m: 0.0325,
+            rotor_height_m: 0.03,
         }
     }
 }
@@ -122,6 +129,26 @@ impl PlantParams {
             p.motor_max_thrust_n = needed_n;
         }
         p
+    }
+
+    /// Thrust multiplier of ground effect with the drone's reference point `height_m` above
+    /// the floor: Cheeseman and Bennett's `1 / (1 − (R / 4z)²)`, `z` the rotor discs' height,
+    /// with the formula's value at `z = 8R` (where it is 1.001) taken off its `(R / 4z)²` so
+    /// that the effect ends there, continuously: the formula is an in-ground-effect fit, and
+    /// beyond four diameters the air is the open air's. 1.08 sitting on the floor (nominal),
+    /// 1.003 at 0.1 m, exactly 1 from some 0.23 m up. The formula's pole (z = R/4) lies far
+    /// below the discs' lowest point; the ratio is bounded all the same so that no state can
+    /// make the thrust infinite.
+    pub fn ground_effect_factor(&self, height_m: f64) -> f64 {
+        let r = self.rotor_radius_m.max(0.0);
+        let z = (if height_m.is_finite() { height_m.max(0.0) } else { 0.0 } + self.rotor_height_m).max(1e-3);
+        let ratio = |z: f64| (r / (4.0 * z)).powi(2);
+        let excess = (ratio(z) - ratio(8.0 * r)).max(0.0);
+        if excess.is_finite() {
+            1.0 / (1.0 - excess.min(0.5))
+        } else {
+            1.0
+        }
     }
 
     /// Motor positions in the body frame (x right, y forward), M1..M4.
@@ -261,14 +288,9 @@ impl Plant {
         self.kin
     }
 
-    /// Thrust of each motor now, N.
+    /// Thrust of each motor now (ground effect included), N.
     pub fn motor_thrust_n(&self) -> [f64; 4] {
-        let p = &self.params;
-        let mut t = [0.0; 4];
-        for ((t, &w), &s) in t.iter_mut().zip(&self.state.motor_speed).zip(&p.motor_thrust_scale) {
-            *t = p.motor_max_thrust_n * s * w * w;
-        }
-        t
+        self.thrusts(&self.state)
     }
 
     /// Advance by `dt_s` with one classic RK4 step (duty and disturbance held), then the
@@ -325,13 +347,22 @@ impl Plant {
         self.state = s;
     }
 
+    /// Each motor's thrust in state `s`, ground effect included, N.
     fn thrusts(&self, s: &PlantState) -> [f64; 4] {
         let p = &self.params;
+        let ground = p.ground_effect_factor(s.pos_earth_m[2]);
         let mut t = [0.0; 4];
         for ((t, &w), &k) in t.iter_mut().zip(&s.motor_speed).zip(&p.motor_thrust_scale) {
-            *t = p.motor_max_thrust_n * k * w * w;
+            *t = p.motor_max_thrust_n * k * w * w * ground;
         }
         t
+    }
+
+    /// The collective thrust as a fraction of full: the mean of the motors' speed² (each
+    /// motor's thrust over its full-battery, full-duty thrust, before ground effect). What the
+    /// barometer's prop-wash and ground-effect errors scale with.
+    pub fn collective_thrust_fraction(&self) -> f64 {
+        self.state.motor_speed.iter().map(|w| w * w).sum::<f64>() / 4.0
     }
 
     fn non_gravity_force_earth(&self, s: &PlantState, dist: &Disturbance) -> V3 {
@@ -603,6 +634,43 @@ mod tests {
         fly(&mut p, [900; 4], 0.2);
         let w = p.state.rate_body_rad_s;
         assert!(w[0] > 0.0 && w[1] > 0.0 && w[2] < 0.0, "rates {w:?}");
+    }
+
+    #[test]
+    fn ground_effect_lifts_near_the_floor_and_fades_within_a_few_rotor_radii() {
+        let p = PlantParams::default();
+        let on_floor = p.ground_effect_factor(0.0);
+        assert!(on_floor > 1.05 && on_floor < 1.15, "{on_floor}");
+        assert!(p.ground_effect_factor(0.1) < on_floor && p.ground_effect_factor(0.1) > 1.002);
+        assert_eq!(p.ground_effect_factor(0.3), 1.0, "the open air's thrust a few diameters up");
+        assert!(p.ground_effect_factor(0.2) > 1.0 && p.ground_effect_factor(0.2) < 1.0005, "and it fades there continuously");
+        assert_eq!(p.ground_effect_factor(-1.0), on_floor, "below the floor is the floor");
+        assert!(p.ground_effect_factor(f64::NAN).is_finite());
+        // The same duty lifts more at 5 cm than at 2 m.
+        let accel_at = |h: f64| {
+            let mut q = airborne(PlantParams::default());
+            q.state.pos_earth_m[2] = h;
+            fly(&mut q, [850; 4], 0.0);
+            q.step(0.00025, &Disturbance::default());
+            q.state.vel_earth_m_s[2]
+        };
+        assert!(accel_at(0.05) > accel_at(2.0) + 1e-5);
+    }
+
+    #[test]
+    fn a_falling_drone_stops_on_the_floor_and_never_sinks_through_it() {
+        let mut p = airborne(PlantParams::default());
+        p.state.pos_earth_m[2] = 1.0;
+        let dt = 0.00025;
+        let mut fastest_down = 0.0f64;
+        for _ in 0..8000 {
+            p.step(dt, &Disturbance::default());
+            assert!(p.state.pos_earth_m[2] >= 0.0, "below the floor: {}", p.state.pos_earth_m[2]);
+            fastest_down = fastest_down.max(-p.state.vel_earth_m_s[2]);
+        }
+        assert!(p.state.on_ground && p.state.pos_earth_m[2] == 0.0 && p.state.vel_earth_m_s == [0.0; 3]);
+        // A fall from 1 m less the drag: just under √(2 g h) = 4.43 m/s when it touches.
+        assert!(fastest_down > 3.5 && fastest_down < 4.43, "{fastest_down}");
     }
 
     #[test]
