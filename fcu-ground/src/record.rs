@@ -81,6 +81,7 @@ impl Sample {
             calibrated: !matches!(self.state, FlightState::Calibrating),
             calibrating: matches!(self.state, FlightState::Calibrating),
             calibration_restarts: 0,
+            vertical: fcu_log::Vertical::ABSENT,
         }
     }
 

@@ -11,6 +11,8 @@ pub mod plot;
 
 use std::path::{Path, PathBuf};
 
+use fcu_core::altitude::{AltMode, AltitudeStatus};
+use fcu_core::baro::BaroFault;
 use fcu_core::supervisor::FlightState;
 
 /// One logged control tick (or, recorded from a board, one ATTITUDE with the latest of the
@@ -44,19 +46,142 @@ pub struct LogRow {
     pub calibrated: bool,
     pub calibrating: bool,
     pub calibration_restarts: u16,
+    /// The vertical half: the height estimate, the hold and the barometer.
+    pub vertical: Vertical,
+}
+
+/// Who sets the collective thrust at a logged instant (the CSV's `vmode`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VerticalMode {
+    /// The throttle stick (mode manual, or the hold chosen but not in force: on the floor
+    /// before take-off, no healthy height estimate).
+    Manual,
+    /// Altitude hold.
+    Hold,
+    /// The link-loss failsafe's descent on the height estimate.
+    Descent,
+}
+
+impl VerticalMode {
+    /// The mode in force that `status` reports.
+    pub fn of(status: &AltitudeStatus) -> VerticalMode {
+        if status.failsafe_descent {
+            VerticalMode::Descent
+        } else if status.holding {
+            VerticalMode::Hold
+        } else {
+            VerticalMode::Manual
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            VerticalMode::Manual => "manual",
+            VerticalMode::Hold => "hold",
+            VerticalMode::Descent => "descent",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<VerticalMode> {
+        [VerticalMode::Manual, VerticalMode::Hold, VerticalMode::Descent].into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// A barometer fault's name in the CSV's `baro_fault` column.
+pub fn baro_fault_name(f: BaroFault) -> &'static str {
+    match f {
+        BaroFault::NoData => "no-data",
+        BaroFault::Stuck => "stuck",
+        BaroFault::OutOfRange => "out-of-range",
+        BaroFault::Spike => "spike",
+    }
+}
+
+/// The vertical columns of a row. NaN (or `None`) where the row has no value: a flight
+/// computer that reports no altitude, a recording without the simulator's truth. Those are
+/// written as empty fields and not drawn.
+#[derive(Clone, Copy, Debug)]
+pub struct Vertical {
+    /// The flight computer's height estimate above the take-off point, m.
+    pub est_alt_m: f64,
+    /// The height the hold holds or moves to, m (NaN when not holding).
+    pub alt_target_m: f64,
+    /// The true climb rate (upward), m/s.
+    pub climb_m_s: f64,
+    /// The flight computer's estimate of it, m/s.
+    pub est_climb_m_s: f64,
+    /// Who sets the thrust.
+    pub mode: Option<VerticalMode>,
+    /// The mode the pilot chose (`ALT_MODE`), whether or not it is in force.
+    pub mode_chosen: Option<AltMode>,
+    /// The barometer's fault now.
+    pub baro_fault: Option<BaroFault>,
+}
+
+/// Equal when every column would be written the same: an absent value (NaN) equals an absent
+/// one, so that two logs of one flight compare equal row by row.
+impl PartialEq for Vertical {
+    fn eq(&self, other: &Self) -> bool {
+        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || a == b;
+        same(self.est_alt_m, other.est_alt_m)
+            && same(self.alt_target_m, other.alt_target_m)
+            && same(self.climb_m_s, other.climb_m_s)
+            && same(self.est_climb_m_s, other.est_climb_m_s)
+            && self.mode == other.mode
+            && self.mode_chosen == other.mode_chosen
+            && self.baro_fault == other.baro_fault
+    }
+}
+
+impl Vertical {
+    /// A row with no vertical values at all.
+    pub const ABSENT: Vertical = Vertical {
+        est_alt_m: f64::NAN,
+        alt_target_m: f64::NAN,
+        climb_m_s: f64::NAN,
+        est_climb_m_s: f64::NAN,
+        mode: None,
+        mode_chosen: None,
+        baro_fault: None,
+    };
+
+    /// What a flight computer's `status` says, with the true climb rate `climb_m_s` (NaN
+    /// if unknown).
+    pub fn from_status(status: &AltitudeStatus, climb_m_s: f64) -> Vertical {
+        Vertical {
+            est_alt_m: f64::from(status.height_m),
+            alt_target_m: status.target_m.map_or(f64::NAN, f64::from),
+            climb_m_s,
+            est_climb_m_s: f64::from(status.climb_m_s),
+            mode: Some(VerticalMode::of(status)),
+            mode_chosen: Some(status.mode),
+            baro_fault: status.baro_fault,
+        }
+    }
 }
 
 /// The header of a flight's CSV, one row per control tick ([`LogRow::write_csv`]).
 pub const CSV_HEADER: &str = "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,roll_target_deg,\
-                              pitch_target_deg,yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us\n";
+                              pitch_target_deg,yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,battery_v,thr_us,\
+                              est_alt_m,alt_target_m,climb_m_s,est_climb_m_s,vmode,alt_mode,baro_fault\n";
+
+/// A value of the vertical columns: empty when absent.
+fn or_empty(v: f64, decimals: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.decimals$}")
+    } else {
+        String::new()
+    }
+}
 
 impl LogRow {
     /// This row as one line of the flight's CSV (under [`CSV_HEADER`]).
     pub fn write_csv(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
         let r = self;
+        let v = &r.vertical;
         writeln!(
             w,
-            "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1}",
+            "{:.5},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.2},{},{},{},{},{:.4},{:.3},{:.1},{},{},{},{},{},{},{}",
             r.t_s,
             r.state.name(),
             u8::from(r.armed),
@@ -76,7 +201,17 @@ impl LogRow {
             r.motors[3],
             r.alt_m,
             r.battery_v,
-            r.thr_us
+            r.thr_us,
+            or_empty(v.est_alt_m, 4),
+            or_empty(v.alt_target_m, 4),
+            or_empty(v.climb_m_s, 4),
+            or_empty(v.est_climb_m_s, 4),
+            v.mode.map_or("", VerticalMode::name),
+            v.mode_chosen.map_or("", |m| match m {
+                AltMode::Manual => "manual",
+                AltMode::Hold => "hold",
+            }),
+            v.baro_fault.map_or("", baro_fault_name),
         )
     }
 }
@@ -165,14 +300,51 @@ mod tests {
             calibrated: true,
             calibrating: false,
             calibration_restarts: 0,
+            vertical: Vertical::ABSENT,
         };
-        let text = to_csv(&[row]);
+        let holding = LogRow {
+            vertical: Vertical {
+                est_alt_m: 0.98,
+                alt_target_m: 1.0,
+                climb_m_s: -0.01,
+                est_climb_m_s: 0.02,
+                mode: Some(VerticalMode::Hold),
+                mode_chosen: Some(AltMode::Hold),
+                baro_fault: Some(BaroFault::Stuck),
+            },
+            ..row.clone()
+        };
+        let text = to_csv(&[row, holding]);
         let mut lines = text.lines();
         assert_eq!(Some(CSV_HEADER.trim_end()), lines.next());
         assert_eq!(
             lines.next(),
-            Some("0.00125,armed,1,1,1.000,-2.000,3.000,1.500,-2.500,0.000,0.000,NaN,4.00,1,2,3,4,0.5000,3.900,1500.0")
+            Some("0.00125,armed,1,1,1.000,-2.000,3.000,1.500,-2.500,0.000,0.000,NaN,4.00,1,2,3,4,0.5000,3.900,1500.0,,,,,,,")
+        );
+        assert_eq!(
+            lines.next(),
+            Some(
+                "0.00125,armed,1,1,1.000,-2.000,3.000,1.500,-2.500,0.000,0.000,NaN,4.00,1,2,3,4,0.5000,3.900,1500.0,\
+                 0.9800,1.0000,-0.0100,0.0200,hold,hold,stuck"
+            )
         );
         assert_eq!(lines.next(), None);
+    }
+
+    #[test]
+    fn the_vertical_mode_in_force_is_the_descent_then_the_hold_then_the_stick() {
+        let mut st = AltitudeStatus { mode: AltMode::Hold, ..AltitudeStatus::default() };
+        assert_eq!(VerticalMode::of(&st), VerticalMode::Manual, "chosen but not in force");
+        st.holding = true;
+        assert_eq!(VerticalMode::of(&st), VerticalMode::Hold);
+        st.failsafe_descent = true;
+        assert_eq!(VerticalMode::of(&st), VerticalMode::Descent);
+        for m in [VerticalMode::Manual, VerticalMode::Hold, VerticalMode::Descent] {
+            assert_eq!(VerticalMode::from_name(m.name()), Some(m));
+        }
+        let v = Vertical::from_status(&AltitudeStatus { target_m: None, ..st }, 0.5);
+        assert!(v.alt_target_m.is_nan() && v.climb_m_s == 0.5);
+        assert_eq!(v, v, "absent values compare equal: one flight's log equals itself");
+        assert_ne!(v, Vertical { alt_target_m: 1.0, ..v });
     }
 }

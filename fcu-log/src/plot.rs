@@ -1,10 +1,11 @@
-//! One SVG page per flight: roll and pitch (true, estimated, target), the four motor compare
-//! values, and the supervisor's state with the altitude, on a shared time axis.
+//! One SVG page per flight: roll and pitch (true, estimated, target), the height (true,
+//! estimated, the hold's target, where the hold was in force), the four motor compare values,
+//! and the supervisor's state with the altitude, on a shared time axis.
 
 use fcu_core::supervisor::FlightState;
 use plotters::prelude::*;
 
-use crate::LogRow;
+use crate::{LogRow, VerticalMode};
 
 /// Where a state is drawn on the state panel, bottom to top: from no flight at all up to the
 /// motors under stick control. The match is exhaustive, so every state has its level.
@@ -27,6 +28,9 @@ fn state_at_level(level: usize) -> Option<FlightState> {
 
 /// (label, colour, stroke width, which of (true, estimated, target) to draw).
 type Series = (&'static str, RGBColor, u32, fn((f64, f64, f64)) -> f64);
+
+/// (label, colour, stroke width, the value of a row).
+type HeightSeries = (&'static str, RGBColor, u32, fn(&LogRow) -> f64);
 
 /// At most this many points per series: a 26 s flight at 800 Hz has 20 800 rows, far more
 /// than a page can show, and the SVG stays small.
@@ -58,12 +62,12 @@ pub fn write_svg(rows: &[LogRow], title: &str, path: &std::path::Path) -> Result
 }
 
 fn page(rows: &[LogRow], title: &str, path: &std::path::Path) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1200, 1300)).into_drawing_area();
+    let root = SVGBackend::new(path, (1200, 1620)).into_drawing_area();
     root.fill(&WHITE).map_err(text)?;
     let (top, body) = root.split_vertically(40);
     top.titled(title, ("sans-serif", 22)).map_err(text)?;
-    let panels = body.split_evenly((4, 1));
-    let [roll, pitch, motors, state] = panels.as_slice() else {
+    let panels = body.split_evenly((5, 1));
+    let [roll, pitch, height, motors, state] = panels.as_slice() else {
         return Err("plot layout".to_string());
     };
 
@@ -73,6 +77,7 @@ fn page(rows: &[LogRow], title: &str, path: &std::path::Path) -> Result<(), Stri
 
     angle_panel(roll, "roll (° , right side down +)", &rows, t_end, |r| (r.roll_deg, r.est_roll_deg, r.roll_target_deg))?;
     angle_panel(pitch, "pitch (°, nose up +)", &rows, t_end, |r| (r.pitch_deg, r.est_pitch_deg, r.pitch_target_deg))?;
+    height_panel(height, &rows, t_end)?;
     motor_panel(motors, &rows, t_end)?;
     state_panel(state, &rows, t_end)?;
     root.present().map_err(text)
@@ -103,6 +108,58 @@ fn angle_panel(area: &Panel<'_>, name: &str, rows: &[&LogRow], t_end: f64, get: 
             .map_err(text)?
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+    }
+    ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(text)
+}
+
+/// The height: true, estimated, the hold's target, and a band along the bottom where the
+/// hold (green) or the failsafe's descent (red) sets the thrust.
+fn height_panel(area: &Panel<'_>, rows: &[&LogRow], t_end: f64) -> Result<(), String> {
+    let top = rows
+        .iter()
+        .flat_map(|r| [r.alt_m, r.vertical.est_alt_m, r.vertical.alt_target_m])
+        .filter(|v| v.is_finite())
+        .fold(1.0f64, f64::max)
+        .min(100.0)
+        * 1.15;
+    let bottom = -0.1 * top;
+    let mut ch = ChartBuilder::on(area)
+        .caption("height (m above take-off; band: green hold, red failsafe descent)", ("sans-serif", 18))
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..t_end, bottom..top)
+        .map_err(text)?;
+    ch.configure_mesh().x_desc("t (s)").y_desc("m").light_line_style(WHITE.mix(0.0)).draw().map_err(text)?;
+    let series: [HeightSeries; 3] = [
+        ("target", RED, 2, |r| r.vertical.alt_target_m),
+        ("true", BLUE, 2, |r| r.alt_m),
+        ("estimated", ORANGE, 1, |r| r.vertical.est_alt_m),
+    ];
+    for (label, color, width, pick) in series {
+        // A target is drawn only where there is one: a gap where the hold is off.
+        let mut segments: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for r in rows {
+            let v = pick(r);
+            match segments.last_mut() {
+                Some(seg) if v.is_finite() => seg.push((r.t_s, v)),
+                Some(seg) if !seg.is_empty() => segments.push(Vec::new()),
+                _ => {}
+            }
+        }
+        let mut first = true;
+        for seg in segments.into_iter().filter(|s| !s.is_empty()) {
+            let drawn = ch.draw_series(LineSeries::new(seg, color.stroke_width(width))).map_err(text)?;
+            if first {
+                drawn.label(label).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                first = false;
+            }
+        }
+    }
+    let band = 0.6 * bottom;
+    for (mode, color) in [(VerticalMode::Hold, GREEN), (VerticalMode::Descent, RED)] {
+        ch.draw_series(rows.iter().filter(|r| r.vertical.mode == Some(mode)).map(|r| Circle::new((r.t_s, band), 1, color.filled())))
+            .map_err(text)?;
     }
     ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(text)
 }
@@ -181,6 +238,76 @@ fn state_panel(area: &Panel<'_>, rows: &[&LogRow], t_end: f64) -> Result<(), Str
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn row(t_s: f64) -> LogRow {
+        LogRow {
+            t_s,
+            state: FlightState::Armed,
+            armed: true,
+            link_tx: true,
+            link_core: true,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+            yaw_rate_dps: 0.0,
+            est_roll_deg: 0.0,
+            est_pitch_deg: 0.0,
+            roll_target_deg: 0.0,
+            pitch_target_deg: 0.0,
+            yaw_target_deg: 0.0,
+            yaw_rate_cmd_dps: 0.0,
+            motors: [900; 4],
+            alt_m: 1.0,
+            battery_v: 4.0,
+            thr_us: 1500.0,
+            calibrated: true,
+            calibrating: false,
+            calibration_restarts: 0,
+            vertical: crate::Vertical::ABSENT,
+        }
+    }
+
+    /// The `points` of every polyline drawn in `color` (`#RRGGBB`).
+    fn polylines(svg: &str, color: &str) -> Vec<usize> {
+        svg.split("<polyline ")
+            .skip(1)
+            .filter_map(|p| p.split_once("/>").map(|(tag, _)| tag))
+            .filter(|tag| tag.contains(&format!("stroke=\"{color}\"")))
+            .map(|tag| tag.split(" points=\"").nth(1).map_or(0, |p| p.split_whitespace().count()))
+            .collect()
+    }
+
+    #[test]
+    fn the_height_panel_draws_the_target_only_where_the_hold_has_one() {
+        // Held 2–4 s and 6–8 s of a 10 s flight: two target segments, the true height whole.
+        let rows: Vec<LogRow> = (0..1000)
+            .map(|k| {
+                let t = f64::from(k) / 100.0;
+                let mut r = row(t);
+                let held = (2.0..4.0).contains(&t) || (6.0..8.0).contains(&t);
+                r.vertical = crate::Vertical {
+                    est_alt_m: 1.01,
+                    alt_target_m: if held { 1.0 } else { f64::NAN },
+                    climb_m_s: 0.0,
+                    est_climb_m_s: 0.0,
+                    mode: Some(if held { VerticalMode::Hold } else { VerticalMode::Manual }),
+                    mode_chosen: None,
+                    baro_fault: None,
+                };
+                r
+            })
+            .collect();
+        let path = std::env::temp_dir().join(format!("fcu-log-height-{}.svg", std::process::id()));
+        write_svg(&rows, "height", &path).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert!(svg.contains("height (m above take-off"));
+        // Red: the roll and pitch targets (whole) and the height target's two pieces (the
+        // legend's short strokes aside).
+        let red: Vec<usize> = polylines(&svg, "#D62728").into_iter().filter(|&n| n > 10).collect();
+        assert_eq!(red.len(), 4, "{red:?}");
+        assert_eq!(red.iter().filter(|&&n| (199..=201).contains(&n)).count(), 2, "{red:?}");
+    }
 
     #[test]
     fn every_state_has_a_level_of_its_own_on_the_panel() {

@@ -39,12 +39,21 @@ fn fly_hover_writes_csv_and_svg_and_passes() {
         "m3",
         "m4",
         "alt_m",
+        "est_alt_m",
+        "alt_target_m",
+        "climb_m_s",
+        "est_climb_m_s",
+        "vmode",
+        "alt_mode",
+        "baro_fault",
     ] {
         assert!(header.split(',').any(|c| c == col), "missing column {col} in {header}");
     }
     assert!(csv.lines().count() > 20_000);
+    assert!(out.contains("height RMS error while holding") && out.contains("touchdown speed"), "{out}");
     let svg = std::fs::read_to_string(dir.join("flight.svg")).unwrap_or_default();
     assert!(svg.starts_with("<svg"), "not an SVG: {}", svg.get(..80).unwrap_or_default());
+    assert!(svg.contains("height (m above take-off"), "no height panel");
     // The state panel labels every state whatever the flight did; the state line is what must
     // show this one: calibrated, disarmed, through arming to armed, and disarmed at the end.
     let trace = state_trace(&svg);

@@ -61,7 +61,7 @@ impl Default for RunOptions {
     }
 }
 
-pub use fcu_log::{plot, LogRow, CSV_HEADER};
+pub use fcu_log::{plot, LogRow, Vertical, VerticalMode, CSV_HEADER};
 
 /// Everything one flight produced.
 #[derive(Clone, Debug)]
@@ -109,6 +109,8 @@ pub struct ComputerView {
     pub calibrated: bool,
     pub calibrating: bool,
     pub calibration_restarts: u16,
+    /// The vertical half's report (`None`: the computer reports none).
+    pub altitude: Option<fcu_core::altitude::AltitudeStatus>,
 }
 
 impl Default for ComputerView {
@@ -125,6 +127,7 @@ impl Default for ComputerView {
             calibrated: false,
             calibrating: false,
             calibration_restarts: 0,
+            altitude: None,
         }
     }
 }
@@ -146,6 +149,20 @@ pub trait FlightComputer {
     /// LPS22HB); the others have none and ignore it.
     fn air(&mut self, _height_m: f64) -> Result<(), SimError> {
         Ok(())
+    }
+    /// [`FlightComputer::step`] for a computer that reads the simulated LPS22HB itself
+    /// (`baro`, stepped with the plant). The in-process core reads its burst at each outer
+    /// step, as the firmware does; the default ignores the part (a computer with a barometer
+    /// model of its own gets the height through [`FlightComputer::air`]).
+    fn step_with_baro(
+        &mut self,
+        t_end_s: f64,
+        edges: &[TimedEdge],
+        imu: fcu_core::imu::RawImu,
+        battery_v: f64,
+        _baro: &mut baro_model::BaroModel,
+    ) -> Result<[u16; 4], SimError> {
+        self.step(t_end_s, edges, imu, battery_v)
     }
     /// What the computer reports about itself now.
     fn view(&self) -> ComputerView;
@@ -181,6 +198,22 @@ impl FlightComputer for InProcess {
         Ok(ticked.out.compare)
     }
 
+    fn step_with_baro(
+        &mut self,
+        _t_end_s: f64,
+        edges: &[TimedEdge],
+        imu: fcu_core::imu::RawImu,
+        battery_v: f64,
+        baro: &mut baro_model::BaroModel,
+    ) -> Result<[u16; 4], SimError> {
+        self.fc.set_battery_mv((battery_v * 1000.0).round().clamp(0.0, f64::from(u32::MAX)) as u32);
+        // The 6-byte burst as the firmware reads it, decoded by the core's own decoder.
+        let ticked = crate::harness::tick_reading_baro(&mut self.fc, &mut self.decoder, imu, edges.iter().map(|e| e.edge), || {
+            Some(fcu_core::baro::decode_burst(&baro.read_burst()))
+        });
+        Ok(ticked.out.compare)
+    }
+
     fn view(&self) -> ComputerView {
         let st = self.fc.status();
         let (calibrating, restarts) = match st.calibration {
@@ -201,13 +234,16 @@ impl FlightComputer for InProcess {
             calibrated: st.calibrated,
             calibrating,
             calibration_restarts: restarts,
+            altitude: Some(st.altitude),
         }
     }
 }
 
-/// Fly `scenario` with `profile`'s flight core in this process. Deterministic for a given seed.
+/// Fly `scenario` with `profile`'s flight core in this process, the scenario's parameter
+/// settings applied ([`Scenario::configure`]). Deterministic for a given seed.
 pub fn run(scenario: &Scenario, profile: Profile, opts: &RunOptions) -> Result<FlightLog, SimError> {
-    run_streaming(&mut InProcess::new(profile.config())?, scenario, profile, opts, &mut |_| Ok(()))
+    let cfg = scenario.configure(profile.config()).map_err(SimError::Config)?;
+    run_streaming(&mut InProcess::new(cfg)?, scenario, profile, opts, &mut |_| Ok(()))
 }
 
 /// Fly `scenario` with any [`FlightComputer`]; `profile` is the configuration it flies (the
@@ -253,7 +289,7 @@ pub fn run_streaming(
         let yaw_rate_cmd_dps = tx.send(t1, &world.plant, &mut edges);
         world.advance(t0, tick_s);
         computer.air(world.plant.state.pos_earth_m[2])?;
-        let compare = computer.step(t1, &edges, world.imu.read(), world.plant.state.battery_v)?;
+        let compare = computer.step_with_baro(t1, &edges, world.imu.read(), world.plant.state.battery_v, &mut world.baro)?;
         motors.deliver(compare, t1, &mut world.plant);
         let sent = Sent { link: scenario.timeline.at(t1).link, thr_us: tx.last_thr_us, yaw_rate_cmd_dps };
         let logged = log_row(t1, &computer.view(), &world.plant, compare, sent);
@@ -330,6 +366,10 @@ fn log_row(t_s: f64, v: &ComputerView, plant: &Plant, compare: [u16; 4], sent: S
         calibrated: v.calibrated,
         calibrating: v.calibrating,
         calibration_restarts: v.calibration_restarts,
+        vertical: match &v.altitude {
+            Some(a) => fcu_log::Vertical::from_status(a, plant.state.vel_earth_m_s[2]),
+            None => fcu_log::Vertical { climb_m_s: plant.state.vel_earth_m_s[2], ..fcu_log::Vertical::ABSENT },
+        },
     }
 }
 

@@ -1,6 +1,8 @@
 //! The airframe and what acts on it over a control tick: the plant with the motors held, its
-//! IMU following every substep, the air (turbulence and gusts) or a hand rocking it.
+//! IMU and barometer following every substep, the air (turbulence and gusts) or a hand
+//! rocking it.
 
+use super::baro_model::{BaroInputs, BaroModel, BaroModelParams};
 use super::imu_model::{ImuModel, ImuModelParams, Vibration};
 use super::plant::{Disturbance, Plant, PlantParams};
 use super::rng;
@@ -10,6 +12,10 @@ use super::scenario::{self, Gust, HandMotion};
 pub(super) struct World {
     pub(super) plant: Plant,
     pub(super) imu: ImuModel,
+    /// The LPS22HB, read by the flight computer at its outer steps.
+    pub(super) baro: BaroModel,
+    /// When the barometer sticks (the scenario's fault), s.
+    baro_freeze_s: Option<f64>,
     air: Air,
     hand: Option<HandMotion>,
     gusts: Vec<Gust>,
@@ -23,6 +29,8 @@ impl World {
         World {
             plant: Plant::new(params.clone()),
             imu: ImuModel::new(ImuModelParams::default(), seed),
+            baro: BaroModel::new(BaroModelParams::default(), seed),
+            baro_freeze_s: scenario.baro_freeze_s,
             air: Air::new(scenario.turbulence, seed),
             hand: scenario.hand,
             gusts: scenario.gusts.clone(),
@@ -32,24 +40,39 @@ impl World {
     }
 
     /// The tick from `t0_s`, `tick_s` long, with the compare values the plant holds (a
-    /// zero-order hold, like TIM4): the plant and the IMU substep by substep, then the air.
+    /// zero-order hold, like TIM4): the plant, the IMU and the barometer substep by substep,
+    /// then the air.
     pub(super) fn advance(&mut self, t0_s: f64, tick_s: f64) {
         let sub_s = tick_s / f64::from(self.substeps);
         for j in 0..self.substeps {
             let t = t0_s + f64::from(j) * sub_s;
-            match self.hand.filter(|h| t >= h.start_s && t < h.end_s) {
+            let wind_earth_m_s = match self.hand.filter(|h| t >= h.start_s && t < h.end_s) {
                 Some(h) => {
                     let ph = std::f64::consts::TAU * h.freq_hz * (t - h.start_s);
                     self.plant.carry(sub_s, [h.peak_rate_rad_s * ph.sin(), 0.5 * h.peak_rate_rad_s * ph.cos(), 0.0]);
+                    [0.0; 3]
                 }
                 None => {
                     let dist = self.disturbance_at(t);
                     self.plant.step(sub_s, &dist);
+                    dist.wind_earth_m_s
                 }
-            }
+            };
             self.imu.step(sub_s, &self.plant.kinematics(), self.vibration);
+            if self.baro_freeze_s.is_some_and(|f| t >= f) {
+                self.baro.freeze();
+            }
+            self.baro.step(sub_s, &self.baro_inputs(wind_earth_m_s));
         }
         self.air.advance(tick_s);
+    }
+
+    /// What the barometer is exposed to now: the plant's height, its collective thrust and
+    /// the air's speed relative to the drone with `wind_earth_m_s` blowing.
+    fn baro_inputs(&self, wind_earth_m_s: [f64; 3]) -> BaroInputs {
+        let s = &self.plant.state;
+        let rel: f64 = s.vel_earth_m_s.iter().zip(wind_earth_m_s).map(|(v, w)| (v - w) * (v - w)).sum();
+        BaroInputs { height_m: s.pos_earth_m[2], thrust_fraction: self.plant.collective_thrust_fraction(), airspeed_m_s: rel.sqrt() }
     }
 
     /// The turbulence in force and every gust blowing at `t_s`.
