@@ -115,6 +115,8 @@ pub fn prepare_scenario(name: &str, sticks: Option<&Path>, duration_s: Option<f6
         sc.hand = world.hand;
         sc.motor_thrust_scale = world.motor_thrust_scale;
         sc.radio = world.radio;
+        sc.baro_freeze_s = world.baro_freeze_s;
+        sc.settings = world.settings;
     }
     Ok(sc)
 }
@@ -128,6 +130,8 @@ pub fn run(a: &FlyArgs) -> Result<ExitCode, CliError> {
         Some(path) => config_with_params(profile, path)?,
         None => profile.config(),
     };
+    // The scenario's own settings (altitude hold's ALT_MODE) over the file's.
+    let cfg = sc.configure(cfg).map_err(CliError)?;
     let out = OutputDir::prepare(&a.out).map_err(CliError)?;
     let mut csv = FlightCsv::create(&a.out).map_err(|e| out.abandon(e))?;
 

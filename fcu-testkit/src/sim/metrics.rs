@@ -2,7 +2,7 @@
 //! computed from a [`FlightLog`] only (so they can be recomputed from any recorded flight).
 
 use super::scenario::{describe, Axis, Criterion, Scenario};
-use super::{FlightLog, LogRow};
+use super::{FlightLog, LogRow, VerticalMode};
 
 /// Within this many degrees of level counts as "level" after a link loss.
 pub const LEVEL_TOLERANCE_DEG: f64 = 3.0;
@@ -27,6 +27,20 @@ pub struct Metrics {
     /// counts: the noise the controller puts on the motors (the derivative's low-pass is the
     /// main knob).
     pub motor_jitter_counts: Option<f64>,
+    /// RMS of (true height − the hold's target) over the hold window, m.
+    pub height_rms_m: Option<f64>,
+    /// The true height's change over the hold window (its last second's mean minus its first
+    /// second's), m.
+    pub height_drift_m: Option<f64>,
+    /// Downward speed at the first touchdown after the landing began, m/s.
+    pub touchdown_speed_m_s: Option<f64>,
+    /// How far the drone sank below its height at a barometer fault once the hold let go, m.
+    pub height_lost_leaving_hold_m: Option<f64>,
+    /// From the touchdown to disarmed, s.
+    pub disarmed_after_touchdown_s: Option<f64>,
+    /// RMS of the collective motor command in the 1–5 Hz band over the hold window (the
+    /// hover window where there is none), counts.
+    pub throttle_oscillation_counts: Option<f64>,
 }
 
 fn window(log: &FlightLog, from_s: f64, to_s: f64) -> impl Iterator<Item = &LogRow> {
@@ -160,7 +174,109 @@ pub fn compute(log: &FlightLog, s: &Scenario) -> Metrics {
     if let Some((a, b)) = s.hover_window_s {
         m.motor_jitter_counts = motor_jitter_counts(log, a, b);
     }
+    if let Some((a, b)) = s.hold_window_s {
+        m.height_rms_m = height_rms_m(log, a, b);
+        m.height_drift_m = height_drift_m(log, a, b);
+    }
+    if let Some(t) = s.landing_s {
+        let touchdown = touchdown(log, t);
+        m.touchdown_speed_m_s = touchdown.map(|(_, v)| v);
+        m.disarmed_after_touchdown_s = touchdown.and_then(|(t, _)| disarmed_after_s(log, t));
+    }
+    if let Some(t) = s.baro_freeze_s {
+        m.height_lost_leaving_hold_m = height_lost_leaving_hold_m(log, t);
+    }
+    if let Some((a, b)) = s.hold_window_s.or(s.hover_window_s) {
+        m.throttle_oscillation_counts = collective_band_rms_counts(log, a, b, OSCILLATION_BAND_HZ);
+    }
     m
+}
+
+/// Rows with a finite hold target in the window: the hold in force.
+fn holding(log: &FlightLog, from_s: f64, to_s: f64) -> impl Iterator<Item = &LogRow> {
+    window(log, from_s, to_s).filter(|r| r.vertical.alt_target_m.is_finite())
+}
+
+/// RMS of (true height − the hold's target) over the rows of the window where the hold has a
+/// target, m (`None` if it never has one there).
+pub fn height_rms_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
+    let (sum, n) = holding(log, from_s, to_s).fold((0.0, 0usize), |(s, n), r| {
+        let e = r.alt_m - r.vertical.alt_target_m;
+        (s + e * e, n + 1)
+    });
+    (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+fn mean_height_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
+    let (sum, n) = window(log, from_s, to_s).fold((0.0, 0usize), |(s, n), r| (s + r.alt_m, n + 1));
+    (n > 0).then(|| sum / n as f64)
+}
+
+/// The true height's mean over the window's last second minus its mean over the first, m:
+/// the slow wander of a hold (the barometer's drift followed faithfully), the noise averaged.
+pub fn height_drift_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
+    if to_s - from_s < 2.0 {
+        return None;
+    }
+    Some(mean_height_m(log, to_s - 1.0, to_s)? - mean_height_m(log, from_s, from_s + 1.0)?)
+}
+
+/// The first touchdown after `after_s`: the time of the first row on the floor (height 0,
+/// where the plant's floor holds it) that follows a row in the air, and the downward speed of
+/// that last airborne row, m/s.
+pub fn touchdown(log: &FlightLog, after_s: f64) -> Option<(f64, f64)> {
+    let rows: Vec<&LogRow> = window(log, after_s, f64::INFINITY).collect();
+    rows.windows(2).find(|w| w[0].alt_m > 0.0 && w[1].alt_m <= 0.0).map(|w| (w[1].t_s, (-w[0].vertical.climb_m_s).max(0.0)))
+}
+
+/// From `touchdown_s` to the first row disarmed (motors not allowed to run), s.
+pub fn disarmed_after_s(log: &FlightLog, touchdown_s: f64) -> Option<f64> {
+    window(log, touchdown_s, f64::INFINITY).find(|r| !r.armed).map(|r| r.t_s - touchdown_s)
+}
+
+/// The height lost when a barometer fault at `fault_s` ends the hold: the mean true height
+/// over the 0.5 s before the fault minus the lowest true height over the 5 s after it (not
+/// below zero), m. `None` if the log does not reach past the fault.
+pub fn height_lost_leaving_hold_m(log: &FlightLog, fault_s: f64) -> Option<f64> {
+    let before = mean_height_m(log, fault_s - 0.5, fault_s)?;
+    let lowest = window(log, fault_s, fault_s + 5.0).map(|r| r.alt_m).reduce(f64::min)?;
+    Some((before - lowest).max(0.0))
+}
+
+/// The throttle-oscillation band, Hz: faster than a hold's own corrections and slower than
+/// the attitude loops, where a height loop fighting the barometer's noise and the pilot's
+/// corrections show.
+pub const OSCILLATION_BAND_HZ: (f64, f64) = (1.0, 5.0);
+
+/// RMS of the collective motor command (the mean of the four compare values) over
+/// `[from_s, to_s)` in the band `band_hz`, counts: the window's mean taken off, then the
+/// power of its discrete Fourier transform's bins in the band (Parseval). Averaged to 100 Hz
+/// first (what lies above the band's top is of no interest here).
+pub fn collective_band_rms_counts(log: &FlightLog, from_s: f64, to_s: f64, band_hz: (f64, f64)) -> Option<f64> {
+    let per = (log.tick_hz / 100.0).round().max(1.0) as usize;
+    let collective: Vec<f64> = window(log, from_s, to_s).map(|r| r.motors.iter().map(|&m| f64::from(m)).sum::<f64>() / 4.0).collect();
+    let x: Vec<f64> = collective.chunks_exact(per).map(|c| c.iter().sum::<f64>() / per as f64).collect();
+    let n = x.len();
+    if n < 16 {
+        return None;
+    }
+    let dt = per as f64 / log.tick_hz;
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let df = 1.0 / (n as f64 * dt);
+    let (k_lo, k_hi) = ((band_hz.0 / df).ceil() as usize, ((band_hz.1 / df).floor() as usize).min((n - 1) / 2));
+    let mut power = 0.0;
+    for k in k_lo.max(1)..=k_hi {
+        let w = std::f64::consts::TAU * k as f64 / n as f64;
+        let (mut re, mut im) = (0.0, 0.0);
+        for (i, v) in x.iter().enumerate() {
+            let (sin, cos) = (w * i as f64).sin_cos();
+            re += (v - mean) * cos;
+            im -= (v - mean) * sin;
+        }
+        // A one-sided bin carries twice its two-sided power.
+        power += 2.0 * (re * re + im * im) / (n as f64 * n as f64);
+    }
+    Some(power.sqrt())
 }
 
 /// RMS over the four motors of the compare value's change between consecutive ticks in
@@ -258,6 +374,54 @@ pub fn check(log: &FlightLog, c: &Criterion) -> Verdict {
             let first = log.rows.iter().find(|r| r.calibrated).map(|r| r.t_s);
             (first.is_some_and(|f| f <= t_s), format!("calibrated at {}", fmt_opt(first, " s")))
         }
+        Criterion::HeightRmsBelow { from_s, to_s, max_m } => {
+            let v = height_rms_m(log, from_s, to_s);
+            (v.is_some_and(|v| v <= max_m), format!("RMS {}", fmt_opt(v, " m")))
+        }
+        Criterion::HeightDriftBelow { from_s, to_s, max_m } => {
+            let v = height_drift_m(log, from_s, to_s);
+            (v.is_some_and(|v| v.abs() <= max_m), format!("drift {}", fmt_opt(v, " m")))
+        }
+        Criterion::HeightNear { from_s, to_s, target_m, tolerance_m } => {
+            let (lo, hi) =
+                window(log, from_s, to_s).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| (lo.min(r.alt_m), hi.max(r.alt_m)));
+            let ok = lo.is_finite() && (lo - target_m).abs() <= tolerance_m && (hi - target_m).abs() <= tolerance_m;
+            (ok, if lo.is_finite() { format!("between {lo:.3} and {hi:.3} m") } else { "no rows".into() })
+        }
+        Criterion::TouchdownSpeedBelow { after_s, max_m_s } => {
+            let v = touchdown(log, after_s);
+            (v.is_some_and(|(_, v)| v <= max_m_s), v.map_or("no touchdown".into(), |(t, v)| format!("{v:.3} m/s at {t:.3} s")))
+        }
+        Criterion::DisarmedAfterTouchdownWithin { after_s, max_s } => {
+            let v = touchdown(log, after_s).and_then(|(t, _)| disarmed_after_s(log, t));
+            (v.is_some_and(|v| v <= max_s), format!("disarmed {} after the touchdown", fmt_opt(v, " s")))
+        }
+        Criterion::MotorsOffOnlyBelow { from_s, max_m } => {
+            let bad = window(log, from_s, f64::INFINITY).find(|r| r.motors == [0; 4] && r.alt_m > max_m);
+            (bad.is_none(), bad.map_or("never off in the air".into(), |r| format!("motors off at {:.3} m at {:.3} s", r.alt_m, r.t_s)))
+        }
+        Criterion::HeightLostLeavingHoldBelow { t_s, max_m } => {
+            let v = height_lost_leaving_hold_m(log, t_s);
+            (v.is_some_and(|v| v <= max_m), format!("lost {}", fmt_opt(v, " m")))
+        }
+        Criterion::BaroFaultReportedWithin { t_s, max_s } => {
+            let first = window(log, t_s, f64::INFINITY).find(|r| r.vertical.baro_fault.is_some()).map(|r| r.t_s - t_s);
+            (first.is_some_and(|f| f <= max_s), format!("reported {} after", fmt_opt(first, " s")))
+        }
+        Criterion::VerticalModeHolds { from_s, to_s, mode } => {
+            let other = window(log, from_s, to_s).find(|r| r.vertical.mode != Some(mode));
+            (
+                other.is_none(),
+                other.map_or_else(
+                    || "held".into(),
+                    |r| format!("`{}` at {:.3} s", r.vertical.mode.map_or("none", VerticalMode::name), r.t_s),
+                ),
+            )
+        }
+        Criterion::VerticalModeSeen { from_s, to_s, mode } => {
+            let seen = window(log, from_s, to_s).any(|r| r.vertical.mode == Some(mode));
+            (seen, if seen { "seen".into() } else { "not seen".into() })
+        }
     };
     Verdict { criterion: describe(c), passed, detail }
 }
@@ -276,5 +440,114 @@ pub fn lines(m: &Metrics) -> Vec<(&'static str, String)> {
         ("yaw rate RMS error", fmt_opt(m.yaw_rate_rms_dps, " °/s")),
         ("max tilt while armed and airborne", fmt_opt(m.max_tilt_armed_deg, "°")),
         ("motor jitter (tick to tick, RMS, hovering)", fmt_opt(m.motor_jitter_counts, " counts")),
+        ("height RMS error while holding", fmt_opt(m.height_rms_m, " m")),
+        ("height drift over the hold", fmt_opt(m.height_drift_m, " m")),
+        ("touchdown speed", fmt_opt(m.touchdown_speed_m_s, " m/s")),
+        ("height lost on leaving hold", fmt_opt(m.height_lost_leaving_hold_m, " m")),
+        ("disarmed after touchdown", fmt_opt(m.disarmed_after_touchdown_s, " s")),
+        ("throttle oscillation in hold", fmt_opt(m.throttle_oscillation_counts, " counts (collective, 1-5 Hz RMS)")),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use fcu_core::supervisor::FlightState;
+
+    use super::*;
+    use crate::sim::{plant::PlantParams, Profile, Vertical};
+
+    const TICK_HZ: f64 = 800.0;
+
+    /// A log of `secs` at 800 Hz, each row made by `f(t_s)` from an armed, level row.
+    fn log_of(secs: f64, f: impl Fn(f64, &mut LogRow)) -> FlightLog {
+        let rows = (1..=(secs * TICK_HZ).round() as usize)
+            .map(|k| {
+                let t_s = k as f64 / TICK_HZ;
+                let mut r = LogRow {
+                    t_s,
+                    state: FlightState::Armed,
+                    armed: true,
+                    link_tx: true,
+                    link_core: true,
+                    roll_deg: 0.0,
+                    pitch_deg: 0.0,
+                    yaw_deg: 0.0,
+                    yaw_rate_dps: 0.0,
+                    est_roll_deg: 0.0,
+                    est_pitch_deg: 0.0,
+                    roll_target_deg: 0.0,
+                    pitch_target_deg: 0.0,
+                    yaw_target_deg: 0.0,
+                    yaw_rate_cmd_dps: 0.0,
+                    motors: [900; 4],
+                    alt_m: 1.0,
+                    battery_v: 4.0,
+                    thr_us: 1500.0,
+                    calibrated: true,
+                    calibrating: false,
+                    calibration_restarts: 0,
+                    vertical: Vertical { climb_m_s: 0.0, ..Vertical::ABSENT },
+                };
+                f(t_s, &mut r);
+                r
+            })
+            .collect();
+        FlightLog { scenario: "test".into(), profile: Profile::Default, seed: 1, tick_hz: TICK_HZ, plant: PlantParams::default(), rows }
+    }
+
+    #[test]
+    fn the_band_rms_keeps_a_sine_inside_the_band_and_drops_one_outside() {
+        let amplitude = 40.0;
+        for (freq_hz, inside) in [(2.0, true), (4.5, true), (0.3, false), (12.0, false)] {
+            let log = log_of(10.0, |t, r| {
+                let c = 900.0 + amplitude * (std::f64::consts::TAU * freq_hz * t).sin();
+                r.motors = [c.round() as u16; 4];
+            });
+            let rms = collective_band_rms_counts(&log, 0.0, 10.0, OSCILLATION_BAND_HZ).unwrap_or(f64::NAN);
+            let expected = if inside { amplitude / 2f64.sqrt() } else { 0.0 };
+            assert!((rms - expected).abs() < 0.1 * amplitude, "{freq_hz} Hz: {rms:.2} counts, expected {expected:.2}");
+        }
+        assert_eq!(collective_band_rms_counts(&log_of(0.05, |_, _| {}), 0.0, 0.05, OSCILLATION_BAND_HZ), None);
+    }
+
+    #[test]
+    fn the_touchdown_is_the_first_row_on_the_floor_with_the_speed_just_before_it() {
+        // A fall at 0.4 m/s from 1 m from t = 1 s: on the floor at 3.5 s, disarmed 0.6 s later.
+        let log = log_of(6.0, |t, r| {
+            r.alt_m = if t < 1.0 { 1.0 } else { (1.0 - 0.4 * (t - 1.0)).max(0.0) };
+            r.vertical.climb_m_s = if t < 1.0 || r.alt_m <= 0.0 { 0.0 } else { -0.4 };
+            r.armed = t < 4.1;
+        });
+        let (at_s, speed) = touchdown(&log, 0.5).unwrap_or((f64::NAN, f64::NAN));
+        assert!((at_s - 3.5).abs() < 0.01 && (speed - 0.4).abs() < 1e-9, "{at_s} s, {speed} m/s");
+        let disarmed = disarmed_after_s(&log, at_s).unwrap_or(f64::NAN);
+        assert!((disarmed - 0.6).abs() < 0.01, "{disarmed}");
+        assert_eq!(touchdown(&log, 4.0), None, "no touchdown after it");
+    }
+
+    #[test]
+    fn height_error_drift_and_loss_are_measured_on_the_true_height() {
+        // Holding a 1 m target, 2 cm above it, drifting 5 cm over 20 s; a 0.15 m dip after 12 s.
+        let log = log_of(20.0, |t, r| {
+            r.vertical.alt_target_m = 1.0;
+            r.alt_m = 1.02 + 0.05 * t / 20.0 - if (12.0..13.0).contains(&t) { 0.15 } else { 0.0 };
+        });
+        let rms = height_rms_m(&log, 0.0, 11.0).unwrap_or(f64::NAN);
+        assert!((rms - 0.034).abs() < 0.005, "{rms}");
+        let drift = height_drift_m(&log, 0.0, 11.0).unwrap_or(f64::NAN);
+        assert!((drift - 0.05 * 10.0 / 20.0).abs() < 0.002, "{drift}");
+        let lost = height_lost_leaving_hold_m(&log, 12.0).unwrap_or(f64::NAN);
+        assert!((lost - 0.15).abs() < 0.01, "{lost}");
+        assert_eq!(height_rms_m(&log_of(2.0, |_, _| {}), 0.0, 2.0), None, "no target, no hold");
+    }
+
+    #[test]
+    fn motors_off_in_the_air_fails_its_criterion_and_on_the_floor_passes() {
+        let log = log_of(4.0, |t, r| {
+            r.alt_m = (1.0 - t / 2.0).max(0.0);
+            r.motors = if r.alt_m < 0.2 { [0; 4] } else { [900; 4] };
+        });
+        assert!(check(&log, &Criterion::MotorsOffOnlyBelow { from_s: 0.0, max_m: 0.3 }).passed);
+        assert!(!check(&log, &Criterion::MotorsOffOnlyBelow { from_s: 0.0, max_m: 0.1 }).passed);
+    }
 }

@@ -47,6 +47,10 @@ impl<'s> Transmitter<'s> {
                 let thr_us = match row.thr {
                     Throttle::Us(u) => u,
                     Throttle::HoldAltitude { alt_m } => self.pilot.throttle_us(alt_m, plant, &self.cfg, 0.02),
+                    Throttle::Stick(f) => stick_us(&self.cfg, f),
+                    Throttle::ClimbTo { alt_m, stick, release_m } => {
+                        stick_us(&self.cfg, self.pilot.climb_stick(row.t_s, alt_m, stick, release_m, plant))
+                    }
                 };
                 self.last_thr_us = thr_us;
                 TxFrame { width_us: [row.ail_us, row.ele_us, thr_us, row.rud_us], link: row.link }
@@ -57,13 +61,40 @@ impl<'s> Transmitter<'s> {
     }
 }
 
+/// The throttle pulse of the stick at `fraction` of its half travel from the centre (−1 the
+/// bottom, +1 the top) with `cfg`'s throttle endpoints, µs.
+fn stick_us(cfg: &Config, fraction: f64) -> f64 {
+    let e = cfg.rc.input_for(fcu_core::rc::Function::Throttle);
+    let (lo, hi) = (f64::from(e.min_counts), f64::from(e.max_counts));
+    let f = if fraction.is_finite() { fraction.clamp(-1.0, 1.0) } else { 0.0 };
+    (0.5 * (lo + hi) + f * 0.5 * (hi - lo)) / 4.0
+}
+
 /// The simulated pilot on the throttle stick: knows roughly where hover is and holds a height.
 #[derive(Clone, Debug, Default)]
 struct Pilot {
     integral: f64,
+    /// The climb row (by its start time) whose height has been reached: the stick stays
+    /// centred until the next row.
+    released_row_s: Option<f64>,
 }
 
 impl Pilot {
+    /// The stick of a [`Throttle::ClimbTo`] row starting at `row_s`: `stick` towards `alt_m`
+    /// until within `release_m`, then centred (a pilot lets go of the stick at the height and
+    /// the hold keeps it).
+    fn climb_stick(&mut self, row_s: f64, alt_m: f64, stick: f64, release_m: f64, plant: &Plant) -> f64 {
+        if self.released_row_s == Some(row_s) {
+            return 0.0;
+        }
+        let err = alt_m - plant.state.pos_earth_m[2];
+        if err.abs() <= release_m {
+            self.released_row_s = Some(row_s);
+            return 0.0;
+        }
+        stick.abs() * err.signum()
+    }
+
     /// Throttle pulse (µs) to hold `alt_m`, from what a pilot sees (height, climb rate, tilt).
     fn throttle_us(&mut self, alt_target_m: f64, plant: &Plant, cfg: &Config, dt_s: f64) -> f64 {
         let p = &plant.params;

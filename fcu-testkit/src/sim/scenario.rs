@@ -10,6 +10,7 @@ use fcu_core::supervisor::FlightState;
 
 use super::plant::Disturbance;
 use super::radio_model::{RadioParams, Transmitter};
+use super::VerticalMode;
 
 /// Reference radio constants in TIM2 counts (`docs/reference.md#radio`).
 pub const AIL_CENTRE_COUNTS: f64 = 5862.0;
@@ -28,12 +29,30 @@ pub const RUD_CENTRE_US: f64 = RUD_CENTRE_COUNTS / 4.0;
 /// A throttle pulse well below THR_BOTTOM (1112.5 µs): "throttle low".
 pub const THR_LOW_US: f64 = 1000.0;
 
-/// The throttle channel: a fixed pulse, or the simulated pilot holding an altitude (a human
-/// pilot keeps a toy quad at eye level with the throttle; the core has no altitude hold).
+/// The throttle stick's centre with the reference's endpoints (bottom 4450 counts, full scale
+/// 1800, travel twice that), µs: where altitude hold asks for no climb.
+pub const THR_CENTRE_US: f64 = (THR_BOTTOM_COUNTS + FULL_SCALE_COUNTS) / 4.0;
+
+/// The throttle channel: a fixed pulse, the simulated pilot holding an altitude with the
+/// throttle (a human pilot keeps a toy quad at eye level that way, in manual throttle), or
+/// the stick as a pilot moves it in altitude hold.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Throttle {
     Us(f64),
-    HoldAltitude { alt_m: f64 },
+    HoldAltitude {
+        alt_m: f64,
+    },
+    /// The stick at a fraction of its half travel from the centre (−1 bottom, 0 centre, +1
+    /// top), through the flown configuration's throttle endpoints.
+    Stick(f64),
+    /// Altitude hold flown by eye: the stick `stick` (a fraction of the half travel) up or
+    /// down towards `alt_m` until the drone is within `release_m` of it, then centred for
+    /// the rest of the row.
+    ClimbTo {
+        alt_m: f64,
+        stick: f64,
+        release_m: f64,
+    },
 }
 
 /// One row of a stick timeline: from `t_s` until the next row.
@@ -134,14 +153,18 @@ impl Timeline {
         Ok(Timeline { rows })
     }
 
-    /// The timeline as the `--sticks` CSV (pilot-held throttle written as `hold:ALT`-free µs
-    /// is not possible, so such rows are written with the hover estimate `hover_us`).
+    /// The timeline as the `--sticks` CSV (a pilot-held throttle cannot be written as µs, so
+    /// such rows are written with the hover estimate `hover_us`, and a climb to a height as its
+    /// stick).
     pub fn to_csv(&self, hover_us: f64) -> String {
         let mut s = String::from("t_s,ail_us,ele_us,thr_us,rud_us,link\n");
         for r in &self.rows {
             let thr = match r.thr {
                 Throttle::Us(u) => u,
                 Throttle::HoldAltitude { .. } => hover_us,
+                // With the reference's throttle endpoints; a climb to a height as its stick.
+                Throttle::Stick(f) => THR_CENTRE_US + f.clamp(-1.0, 1.0) * FULL_SCALE_COUNTS / 4.0,
+                Throttle::ClimbTo { stick, .. } => THR_CENTRE_US + stick.clamp(-1.0, 1.0) * FULL_SCALE_COUNTS / 4.0,
             };
             let _ = writeln!(s, "{},{},{},{},{},{}", r.t_s, r.ail_us, r.ele_us, thr, r.rud_us, u8::from(r.link));
         }
@@ -231,6 +254,26 @@ pub enum Criterion {
     CalibrationNotDoneAt { t_s: f64 },
     /// Calibration passed by `t_s`.
     CalibratedBy { t_s: f64 },
+    /// RMS of (true height − the hold's target) over the window at most `max_m`.
+    HeightRmsBelow { from_s: f64, to_s: f64, max_m: f64 },
+    /// The true height's drift over the window (last second's mean − first's) within ±`max_m`.
+    HeightDriftBelow { from_s: f64, to_s: f64, max_m: f64 },
+    /// The true height stays within `tolerance_m` of `target_m` over the window.
+    HeightNear { from_s: f64, to_s: f64, target_m: f64, tolerance_m: f64 },
+    /// The first touchdown after `after_s` at most `max_m_s` downward.
+    TouchdownSpeedBelow { after_s: f64, max_m_s: f64 },
+    /// Disarmed at most `max_s` after the first touchdown after `after_s`.
+    DisarmedAfterTouchdownWithin { after_s: f64, max_s: f64 },
+    /// From `from_s` on, the motors are never all off with the drone higher than `max_m`.
+    MotorsOffOnlyBelow { from_s: f64, max_m: f64 },
+    /// After a barometer fault at `t_s` the drone sinks at most `max_m` below its height then.
+    HeightLostLeavingHoldBelow { t_s: f64, max_m: f64 },
+    /// A barometer fault is reported at most `max_s` after `t_s`.
+    BaroFaultReportedWithin { t_s: f64, max_s: f64 },
+    /// Over the window, the vertical mode in force is always this one.
+    VerticalModeHolds { from_s: f64, to_s: f64, mode: VerticalMode },
+    /// The vertical mode is in force somewhere in the window.
+    VerticalModeSeen { from_s: f64, to_s: f64, mode: VerticalMode },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -258,6 +301,29 @@ pub struct Scenario {
     pub steps: Vec<(Axis, f64, f64)>,
     pub link_loss_s: Option<f64>,
     pub yaw_window_s: Option<(f64, f64)>,
+    /// When the barometer sticks at its current words (`BaroModel::freeze`), s.
+    pub baro_freeze_s: Option<f64>,
+    /// Where the altitude metrics look: the steady hold, and when the landing begins (the
+    /// touchdown after it is measured).
+    pub hold_window_s: Option<(f64, f64)>,
+    pub landing_s: Option<f64>,
+    /// Parameters set by name over the profile's configuration before the flight
+    /// ([`Scenario::configure`]), as a pilot sets them from a ground station.
+    pub settings: Vec<(&'static str, f32)>,
+}
+
+impl Scenario {
+    /// `cfg` with the scenario's [`settings`](Scenario::settings) applied through the
+    /// parameter table, each checked as a ground station's set is; the error names the
+    /// parameter and the rule that refused it.
+    pub fn configure(&self, cfg: fcu_core::Config) -> Result<fcu_core::Config, String> {
+        let mut cfg = cfg;
+        for &(name, value) in &self.settings {
+            fcu_params::set_by_name(&mut cfg, name.as_bytes(), value, false)
+                .map_err(|r| format!("scenario {}: parameter {name} = {value} refused: {}", self.name, r.rule))?;
+        }
+        Ok(cfg)
+    }
 }
 
 /// Standard script pieces. Boot: the core settles about 1 s and calibrates about 1 s, and
@@ -339,6 +405,10 @@ fn base(name: &str, about: &str, duration_s: f64, tl: Timeline) -> Scenario {
         steps: Vec::new(),
         link_loss_s: None,
         yaw_window_s: None,
+        baro_freeze_s: None,
+        hold_window_s: None,
+        landing_s: None,
+        settings: Vec::new(),
     }
 }
 
@@ -357,7 +427,7 @@ pub type Build = fn(&str) -> Scenario;
 
 /// The named scenarios, in the order they are listed (`fly --help`, the error for an unknown
 /// name): each name with the function that builds it under that name.
-pub const SCENARIOS: [(&str, Build); 10] = [
+pub const SCENARIOS: [(&str, Build); 15] = [
     ("hover", hover),
     ("steps", steps),
     ("sweeps", sweeps),
@@ -368,6 +438,11 @@ pub const SCENARIOS: [(&str, Build); 10] = [
     ("weak-motor", weak_motor),
     ("calibration-motion", calibration_motion),
     ("other-transmitter", other_transmitter),
+    ("althold-hover", althold_hover),
+    ("althold-steps", althold_steps),
+    ("althold-gust", althold_gust),
+    ("failsafe-descent", failsafe_descent),
+    ("baro-fault", baro_fault),
 ];
 
 /// The names [`by_name`] accepts, in the order of [`SCENARIOS`].
@@ -583,6 +658,162 @@ fn calibration_motion(name: &str) -> Scenario {
     s
 }
 
+/// Altitude hold chosen through the parameter table, as a pilot sets it from a ground station.
+const ALTITUDE_HOLD: (&str, f32) = ("ALT_MODE", 1.0);
+
+/// The issue's goals for altitude hold (issue 28), m and m/s.
+pub const HOLD_RMS_CALM_MAX_M: f64 = 0.05;
+pub const HOLD_RMS_GUSTS_MAX_M: f64 = 0.15;
+pub const HOLD_DRIFT_MAX_M: f64 = 0.10;
+pub const FAILSAFE_TOUCHDOWN_MAX_M_S: f64 = 0.5;
+pub const FAILSAFE_DISARM_AFTER_TOUCHDOWN_MAX_S: f64 = 1.0;
+pub const MOTORS_OFF_MAX_HEIGHT_M: f64 = 0.3;
+pub const BARO_FAULT_HEIGHT_LOST_MAX_M: f64 = 0.2;
+
+/// The stick a pilot climbs and descends with in altitude hold: half its travel up or down.
+const CLIMB_STICK: f64 = 0.5;
+/// A pilot lets go of the stick this close to the height wanted.
+const RELEASE_M: f64 = 0.05;
+
+impl Script {
+    /// Take off in altitude hold: the stick up from the bottom, centred at `alt_m`.
+    fn climb_to(&mut self, at_s: f64, alt_m: f64) -> &mut Self {
+        self.row(at_s, |r| r.thr = Throttle::ClimbTo { alt_m, stick: CLIMB_STICK, release_m: RELEASE_M })
+    }
+
+    /// Land in altitude hold: the stick at the bottom (the hold descends) until the drone sits
+    /// on the floor, then the disarm gesture `disarm_after_s` later.
+    fn land_by_stick_and_disarm(&mut self, at_s: f64, disarm_after_s: f64) -> &mut Self {
+        self.row(at_s, |r| *r = StickRow { t_s: at_s, ..StickRow::idle(at_s) });
+        self.disarm(at_s + disarm_after_s, at_s + disarm_after_s + 1.5)
+    }
+}
+
+/// A scenario flown in altitude hold.
+fn in_hold(name: &str, about: &str, duration_s: f64, tl: Timeline) -> Scenario {
+    let mut s = base(name, about, duration_s, tl);
+    s.settings.push(ALTITUDE_HOLD);
+    s
+}
+
+/// Arm, take off in hold to 1 m, hold it 30 s in still air with the stick centred, land by
+/// pulling the stick to the bottom, disarm by gesture.
+fn althold_hover(name: &str) -> Scenario {
+    let mut sc = Script::new();
+    sc.arm(ARM_AT_S, ARM_RELEASE_S).climb_to(TAKEOFF_S, HOVER_ALT_M).land_by_stick_and_disarm(41.0, 5.0);
+    let mut s = in_hold(name, "altitude hold (ALT_MODE 1): take off to 1 m, hold it 30 s in still air, land by stick, disarm", 49.0, sc.tl);
+    s.hover_window_s = Some((10.0, 40.0));
+    s.hold_window_s = Some((10.0, 40.0));
+    s.landing_s = Some(41.0);
+    s.criteria = flight_criteria((10.0, 40.0), 1.0, 48.5);
+    s.criteria.extend([
+        Criterion::VerticalModeHolds { from_s: 10.0, to_s: 40.0, mode: VerticalMode::Hold },
+        Criterion::HeightNear { from_s: 10.0, to_s: 40.0, target_m: HOVER_ALT_M, tolerance_m: 0.25 },
+        Criterion::HeightRmsBelow { from_s: 10.0, to_s: 40.0, max_m: HOLD_RMS_CALM_MAX_M },
+        Criterion::HeightDriftBelow { from_s: 10.0, to_s: 40.0, max_m: HOLD_DRIFT_MAX_M },
+        Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M },
+    ]);
+    s
+}
+
+/// Climbs and descents by stick in altitude hold: 1 m, up to 2 m, down to 0.5 m, up to
+/// 1.5 m, each held with the stick centred.
+fn althold_steps(name: &str) -> Scenario {
+    let mut sc = Script::new();
+    sc.arm(ARM_AT_S, ARM_RELEASE_S).climb_to(TAKEOFF_S, HOVER_ALT_M);
+    let legs = [(11.0, 2.0), (19.0, 0.5), (27.0, 1.5)];
+    for &(t_s, alt_m) in &legs {
+        sc.climb_to(t_s, alt_m);
+    }
+    sc.land_by_stick_and_disarm(35.0, 5.0);
+    let mut s =
+        in_hold(name, "altitude hold: stick climbs and descents 1 → 2 → 0.5 → 1.5 m, each held with the stick centred", 43.0, sc.tl);
+    s.hover_window_s = Some((8.0, 11.0));
+    s.hold_window_s = Some((8.0, 11.0));
+    s.landing_s = Some(35.0);
+    s.criteria = flight_criteria((8.0, 34.0), 1.5, 42.5);
+    // Each height reached within 5 s of the stick leaving the centre, and held.
+    for (&(t_s, alt_m), end_s) in legs.iter().zip([19.0, 27.0, 35.0]) {
+        s.criteria.push(Criterion::HeightNear { from_s: t_s + 5.0, to_s: end_s, target_m: alt_m, tolerance_m: 0.2 });
+        s.criteria.push(Criterion::VerticalModeHolds { from_s: t_s, to_s: end_s, mode: VerticalMode::Hold });
+    }
+    s.criteria.push(Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M });
+    s
+}
+
+/// The hover of `althold-hover` in light turbulence with gusts from the side and one from
+/// above (a door opening, a fan).
+fn althold_gust(name: &str) -> Scenario {
+    let mut sc = Script::new();
+    sc.arm(ARM_AT_S, ARM_RELEASE_S).climb_to(TAKEOFF_S, HOVER_ALT_M).land_by_stick_and_disarm(31.0, 5.0);
+    let mut s =
+        in_hold(name, "altitude hold at 1 m in light turbulence with three gusts (sideways 2 m/s, a 1 m/s downdraught)", 39.0, sc.tl);
+    s.turbulence = Some(Turbulence::LIGHT);
+    let push = |wind: [f64; 3]| Disturbance { wind_earth_m_s: wind, force_earth_n: [0.0; 3], torque_body_nm: [1.0e-3, -1.0e-3, 0.0] };
+    s.gusts = vec![
+        Gust { start_s: 14.0, duration_s: 0.5, push: push([2.0, 1.0, 0.0]) },
+        Gust { start_s: 19.0, duration_s: 1.0, push: push([0.0, 0.0, -1.0]) },
+        Gust { start_s: 24.0, duration_s: 0.5, push: push([-1.5, 2.0, 0.5]) },
+    ];
+    s.hover_window_s = Some((10.0, 30.0));
+    s.hold_window_s = Some((10.0, 30.0));
+    s.landing_s = Some(31.0);
+    s.criteria = flight_criteria((10.0, 30.0), 2.0, 38.5);
+    s.criteria.extend([
+        Criterion::VerticalModeHolds { from_s: 10.0, to_s: 30.0, mode: VerticalMode::Hold },
+        Criterion::HeightRmsBelow { from_s: 10.0, to_s: 30.0, max_m: HOLD_RMS_GUSTS_MAX_M },
+    ]);
+    s
+}
+
+/// The link lost at 1.5 m in altitude hold: the failsafe levels, descends on the height
+/// estimate, detects the landing and disarms; the link never comes back.
+fn failsafe_descent(name: &str) -> Scenario {
+    let mut sc = Script::new();
+    sc.arm(ARM_AT_S, ARM_RELEASE_S).climb_to(TAKEOFF_S, 1.5);
+    let loss_s = 12.0;
+    sc.row(loss_s, |r| r.link = false);
+    let mut s = in_hold(name, "link lost at 1.5 m: level, descend on the height estimate, detect the landing, disarm", 24.0, sc.tl);
+    s.hover_window_s = Some((9.0, loss_s));
+    s.link_loss_s = Some(loss_s);
+    s.landing_s = Some(loss_s);
+    s.criteria = vec![
+        Criterion::ArmedBy { t_s: ARM_RELEASE_S + 0.2 },
+        Criterion::HeightNear { from_s: 9.0, to_s: loss_s, target_m: 1.5, tolerance_m: 0.25 },
+        Criterion::StateSeen { from_s: loss_s, to_s: loss_s + 1.0, state: FlightState::FailsafeLevel },
+        Criterion::LevelAfterLinkLoss { t_s: loss_s, max_s: 1.0 },
+        Criterion::VerticalModeSeen { from_s: loss_s, to_s: 24.0, mode: VerticalMode::Descent },
+        Criterion::TouchdownSpeedBelow { after_s: loss_s, max_m_s: FAILSAFE_TOUCHDOWN_MAX_M_S },
+        Criterion::DisarmedAfterTouchdownWithin { after_s: loss_s, max_s: FAILSAFE_DISARM_AFTER_TOUCHDOWN_MAX_S },
+        Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M },
+        Criterion::MotorsOffDisarmedFrom { t_s: 23.5 },
+    ];
+    s
+}
+
+/// The barometer sticks in the middle of a hold: the fault is reported and the hold lets go
+/// without a drop; the pilot lands by hand (manual throttle) 6 s later.
+fn baro_fault(name: &str) -> Scenario {
+    let mut sc = Script::new();
+    let freeze_s = 15.0;
+    sc.arm(ARM_AT_S, ARM_RELEASE_S).climb_to(TAKEOFF_S, HOVER_ALT_M);
+    sc.land_and_disarm(freeze_s + 6.0);
+    let mut s =
+        in_hold(name, "the barometer sticks mid-hold at 1 m: fault reported, the hold left with no drop, landed by hand", 28.0, sc.tl);
+    s.baro_freeze_s = Some(freeze_s);
+    s.hover_window_s = Some((10.0, freeze_s));
+    s.hold_window_s = Some((10.0, freeze_s));
+    s.criteria = flight_criteria((10.0, freeze_s + 5.0), 1.0, 27.5);
+    s.criteria.extend([
+        Criterion::VerticalModeHolds { from_s: 10.0, to_s: freeze_s, mode: VerticalMode::Hold },
+        Criterion::BaroFaultReportedWithin { t_s: freeze_s, max_s: 0.5 },
+        Criterion::VerticalModeSeen { from_s: freeze_s, to_s: freeze_s + 1.0, mode: VerticalMode::Manual },
+        Criterion::HeightLostLeavingHoldBelow { t_s: freeze_s, max_m: BARO_FAULT_HEIGHT_LOST_MAX_M },
+        Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M },
+    ]);
+    s
+}
+
 /// A scenario from a `--sticks` file: the timeline is the pilot, the criteria are generic
 /// (no crash while the throttle is up).
 pub fn from_timeline(name: &str, timeline: Timeline, duration_s: f64) -> Scenario {
@@ -617,6 +848,22 @@ pub fn describe(c: &Criterion) -> String {
         }
         Criterion::CalibrationNotDoneAt { t_s } => format!("calibration still rejected at {t_s:.1} s (motion)"),
         Criterion::CalibratedBy { t_s } => format!("calibration passed by {t_s:.1} s"),
+        Criterion::HeightRmsBelow { from_s, to_s, max_m } => format!("height RMS error ≤ {max_m} m over {from_s:.1}–{to_s:.1} s"),
+        Criterion::HeightDriftBelow { from_s, to_s, max_m } => format!("height drift ≤ {max_m} m over {from_s:.1}–{to_s:.1} s"),
+        Criterion::HeightNear { from_s, to_s, target_m, tolerance_m } => {
+            format!("height {target_m} ± {tolerance_m} m over {from_s:.1}–{to_s:.1} s")
+        }
+        Criterion::TouchdownSpeedBelow { after_s, max_m_s } => format!("touchdown after {after_s:.1} s at ≤ {max_m_s} m/s"),
+        Criterion::DisarmedAfterTouchdownWithin { after_s, max_s } => {
+            format!("disarmed within {max_s} s of the touchdown after {after_s:.1} s")
+        }
+        Criterion::MotorsOffOnlyBelow { from_s, max_m } => format!("motors never off above {max_m} m from {from_s:.1} s"),
+        Criterion::HeightLostLeavingHoldBelow { t_s, max_m } => format!("≤ {max_m} m lost after the barometer fault at {t_s:.1} s"),
+        Criterion::BaroFaultReportedWithin { t_s, max_s } => format!("barometer fault reported within {max_s} s of {t_s:.1} s"),
+        Criterion::VerticalModeHolds { from_s, to_s, mode } => {
+            format!("vertical mode `{}` throughout {from_s:.1}–{to_s:.1} s", mode.name())
+        }
+        Criterion::VerticalModeSeen { from_s, to_s, mode } => format!("vertical mode `{}` seen in {from_s:.1}–{to_s:.1} s", mode.name()),
     }
 }
 
