@@ -56,8 +56,8 @@ impl HoldConfig {
         fs_descent_rate_m_s: 0.5,
         deadband: StickCounts(360),
         pos_p: 1.5,
-        vel_p: 700.0,
-        vel_i: 350.0,
+        vel_p: 1100.0,
+        vel_i: 1100.0,
         hover_throttle: StickCounts(530),
     };
 
@@ -124,9 +124,6 @@ pub const FS_CAP_SPARE_S: f32 = 3.0;
 pub const BARO_RECOVERY_S: f32 = 1.0;
 /// The take-off ramp: from the bottom to the hover throttle in this long, s.
 pub const TAKEOFF_RAMP_S: f32 = 1.0;
-/// Furthest the hold's target may lead or trail the height while the stick asks for a rate, m:
-/// a stick released after a climb the drone could not follow stops near where it is.
-pub const TARGET_LEASH_M: f32 = 0.5;
 
 /// What the control tick and the supervisor take from the vertical half.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -193,9 +190,14 @@ pub struct Vertical {
     carry: Option<(f32, bool)>,
     /// Steps in the failsafe.
     failsafe_steps: u32,
+    /// The stick has been in the dead band since the hold engaged in flight: until then it asks
+    /// for no rate (the manual hover's stick, far below the centre, would ask for a descent).
+    stick_centred: bool,
 }
 
 impl Vertical {
+    // Cold (boot and a parameter change), and called from both: one copy in flash.
+    #[inline(never)]
     pub fn new(cfg: AltitudeSettings, tick_hz: f32, mixer: &crate::mixer::MixerConfig) -> Vertical {
         Vertical {
             monitor: BaroMonitor::new(cfg.baro),
@@ -218,12 +220,14 @@ impl Vertical {
             out: 0.0,
             carry: None,
             failsafe_steps: 0,
+            stick_centred: false,
             cfg,
         }
     }
 
     /// New settings in flight: the estimator and the health check keep their state unless
     /// their own numbers changed (those change only on the ground).
+    #[inline(never)]
     pub fn set_config(&mut self, cfg: AltitudeSettings) {
         if cfg.estimator != self.cfg.estimator {
             self.estimator = AltitudeEstimator::new(cfg.estimator);
@@ -254,28 +258,30 @@ impl Vertical {
     /// One outer step: the burst read since the last (`baro`), the attitude and the block's mean
     /// accelerometer (body mg, offsets removed), and the flight state.
     pub fn step(&mut self, baro: Option<RawBaro>, quat: Quat, accel_mg: Vec3, i: &VerticalInput) -> (VerticalCommand, AltitudeStatus) {
-        // 1. The barometer's health. A spike is a sample not used, not a sick sensor.
-        let fault = match self.monitor.check(baro) {
-            Ok(s) => {
-                if let Some(s) = s {
-                    self.pressure_pa = Some(s.pressure_pa);
-                    self.temperature_c = s.temperature_c;
-                }
-                self.since_fault_steps = self.since_fault_steps.saturating_add(1);
+        // 1. The barometer's health. A fault is reported until a healthy sample comes (the
+        // check names it only on the samples it judges); a spike is a sample not used, not a
+        // sick sensor: it does not make the estimate unhealthy.
+        let pressure = match self.monitor.check(baro) {
+            Ok(Some(s)) => {
+                self.pressure_pa = Some(s.pressure_pa);
+                self.temperature_c = s.temperature_c;
                 self.last_fault = None;
-                (None, s.map(|s| s.pressure_pa))
+                Some(s.pressure_pa)
             }
-            Err(BaroFault::Spike) => {
-                self.since_fault_steps = self.since_fault_steps.saturating_add(1);
-                (Some(BaroFault::Spike), None)
-            }
+            Ok(None) => None,
             Err(f) => {
-                self.since_fault_steps = 0;
-                (Some(f), None)
+                self.last_fault = Some(f);
+                if f != BaroFault::Spike {
+                    self.since_fault_steps = 0;
+                }
+                None
             }
         };
-        let (baro_fault, pressure) = fault;
-        self.last_fault = baro_fault;
+        let sick = self.last_fault.is_some_and(|f| f != BaroFault::Spike);
+        if !sick {
+            self.since_fault_steps = self.since_fault_steps.saturating_add(1);
+        }
+        let baro_fault = self.last_fault;
 
         // 2. Arming: the take-off point is here.
         if i.motors_enabled && !self.was_enabled {
@@ -303,7 +309,16 @@ impl Vertical {
         let hold_wanted = healthy && i.motors_enabled && (self.cfg.mode == AltMode::Hold || i.failsafe);
         let mut landed = false;
         let throttle = if hold_wanted {
+            if self.engaged.is_none() {
+                // On the ground the stick takes off at once; in the air it must come to the
+                // dead band first.
+                self.stick_centred = !self.airborne;
+            }
             let rate = self.rate_asked(i);
+            if rate == 0.0 {
+                self.stick_centred = true;
+            }
+            let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
             let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
             landed = !self.airborne && rate <= 0.0;
             Some(t)
@@ -366,7 +381,8 @@ impl Vertical {
         let floor = f32::from(i.min_throttle.0) + 1.0;
         let top = f32::from(i.full_scale.0) * 2.0;
         let flown = f32::from(i.flown.0);
-        if self.engaged.is_none() {
+        let entering = self.engaged.is_none();
+        if entering {
             // Entering: the height now is the target; in the air the throttle flown is the
             // hover (no jump), on the ground the one learned or set.
             self.engaged = Some(height_m);
@@ -397,16 +413,22 @@ impl Vertical {
             }
             return self.out;
         }
-        // The target follows a stick's rate, on a leash to the height.
-        let mut target = self.engaged.unwrap_or(height_m) + rate * dt;
-        target = limit(target, height_m - TARGET_LEASH_M, height_m + TARGET_LEASH_M);
-        if !target.is_finite() {
-            target = height_m;
-        }
-        self.engaged = Some(target);
-        let down = if i.failsafe { h.fs_descent_rate_m_s } else { h.climb_rate_max_m_s };
-        let speed_target = limit(rate + h.pos_p * (target - height_m), -down, h.climb_rate_max_m_s);
+        // Asked for a rate, the rate is flown and the target is where the drone is; centred, the
+        // target stays where the stick came back and the height loop holds it.
+        let speed_target = if rate != 0.0 {
+            self.engaged = Some(height_m);
+            rate
+        } else {
+            let target = self.engaged.filter(|t| t.is_finite()).unwrap_or(height_m);
+            self.engaged = Some(target);
+            let down = if i.failsafe { h.fs_descent_rate_m_s } else { h.climb_rate_max_m_s };
+            limit(h.pos_p * (target - height_m), -down, h.climb_rate_max_m_s)
+        };
         let error = speed_target - climb_m_s;
+        if entering {
+            // Bumpless: the loop starts from the throttle flown, whatever the climb rate now.
+            self.integral = limit(-h.vel_p * error, -self.hover, top);
+        }
         let unlimited = self.hover + self.integral + h.vel_p * error;
         // Integrate unless the throttle is pinned in that direction.
         if !((unlimited >= top && error > 0.0) || (unlimited <= floor && error < 0.0)) {
@@ -465,3 +487,7 @@ impl Vertical {
         ticks.max(1)
     }
 }
+
+#[cfg(test)]
+#[path = "althold_tests.rs"]
+mod tests;
