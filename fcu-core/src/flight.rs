@@ -45,6 +45,7 @@ use self::output::{MotorsAllowed, Output};
 use self::sensors::{AfterCalibration, Sensors};
 use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
+use crate::althold::{Vertical, VerticalCommand, VerticalInput};
 use crate::altitude::AltitudeStatus;
 use crate::baro::RawBaro;
 use crate::config::{Config, ConfigError};
@@ -52,7 +53,7 @@ use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
 use crate::gcs::GcsInput;
 use crate::imu::{CalibrationPhase, RawImu, SensorFault};
-use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
+use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt, Vec3};
 use crate::rc::{EdgeDecoder, PulseBatch, Sticks};
 use crate::supervisor::{Blockers, FlightState};
 
@@ -81,6 +82,9 @@ pub struct OuterResult {
     pub gains: Gains,
     /// The vertical half's report, for [`Status::altitude`].
     pub altitude: AltitudeStatus,
+    /// What the vertical half hands the tick (the hold's throttle) and the supervisor (the
+    /// failsafe descent's cap, a landing).
+    pub vertical: VerticalCommand,
 }
 
 /// What telemetry, LEDs and logs need to know.
@@ -185,6 +189,8 @@ pub struct OuterStep {
     gains: GainSchedule,
     /// The barometer burst read since the last step, if any ([`OuterStep::set_baro`]).
     baro: Option<RawBaro>,
+    /// Barometer, height, altitude hold (`None`: a profile without, the reference's).
+    vertical: Option<Vertical>,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
@@ -317,6 +323,7 @@ impl ControlTick {
                 rate_demand_rad_s: [0.0; 3],
                 gains: Gains::UNITY,
                 altitude: AltitudeStatus::default(),
+                vertical: VerticalCommand::default(),
             },
             output: Output::new(),
             unscaled: Unscaled::new(cfg),
@@ -399,6 +406,7 @@ impl ControlTick {
         if r.gains != self.outer.gains {
             self.params.set_gains(&self.unscaled, r.gains);
         }
+        self.supervision.set_vertical(r.vertical, &self.params);
         self.outer = *r;
         self.heading.result_applied();
     }
@@ -442,8 +450,7 @@ impl ControlTick {
         // One output per branch (docs/performance.md, «one output per branch»).
         if job_due {
             let reset = self.heading.take_target_reset();
-            let job =
-                self.block.take_job(self.sensors.offsets(), in_force.sticks, in_force.throttle_low, self.heading.yaw_est_rad(), reset);
+            let job = self.block.take_job(self.sensors.offsets(), &in_force, self.heading.yaw_est_rad(), reset);
             TickOutput { compare, outer_job: Some(job) }
         } else {
             TickOutput { compare, outer_job: None }
@@ -484,6 +491,7 @@ impl OuterStep {
             heading: HeadingTarget::new(cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s()))),
             gains: GainSchedule::new(&cfg.control, &cfg.mixer, params.outer_hz),
             baro: None,
+            vertical: cfg.altitude.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
             params,
         })
     }
@@ -510,8 +518,23 @@ impl OuterStep {
             rate_demand_rad_s[2] += ff;
         }
         let gains = self.gains.update(job.sticks.thr);
-        let altitude = AltitudeStatus::default();
-        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains, altitude }
+        // The burst is this step's only: the next step has its own.
+        let baro = self.baro.take();
+        let (vertical, altitude) = match &mut self.vertical {
+            Some(v) => {
+                let input = VerticalInput {
+                    motors_enabled: job.state.motors_may_run(),
+                    failsafe: job.state == FlightState::FailsafeLevel,
+                    command: job.command_throttle,
+                    flown: job.sticks.thr,
+                    full_scale: p.rc.full_scale,
+                    min_throttle: p.rc.min_throttle,
+                };
+                v.step(baro, quat, Vec3::new(accel[0], accel[1], accel[2]), &input)
+            }
+            None => (VerticalCommand::default(), AltitudeStatus::default()),
+        };
+        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains, altitude, vertical }
     }
 
     /// The latest battery reading, mV (for the battery compensation; ignored without it).
@@ -531,6 +554,10 @@ impl OuterStep {
     /// state kept.
     pub fn take_config(&mut self, cfg: &Config) {
         self.params = Derived::new(cfg).outer;
+        match (&mut self.vertical, cfg.altitude) {
+            (Some(v), Some(a)) => v.set_config(a),
+            (v, a) => *v = a.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
+        }
     }
 }
 

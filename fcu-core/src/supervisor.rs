@@ -250,6 +250,12 @@ pub struct Inputs {
     pub silence_ticks: u32,
     /// What the ground station asks this tick ([`crate::gcs`]).
     pub gcs: GcsCommands,
+    /// The failsafe may land on the height estimate: the longest the descent from the present
+    /// height may take, ticks (0: no healthy estimate, the failsafe levels and then stops the
+    /// motors, as without a barometer). Latched at the loss of the link.
+    pub descent_cap_ticks: u32,
+    /// The altitude hold detected a landing and holds the motors at the bottom.
+    pub landed: bool,
 }
 
 impl Inputs {
@@ -267,6 +273,8 @@ impl Inputs {
         sensor_fault: None,
         tilt_rad: 0.0,
         gcs: GcsCommands::NONE,
+        descent_cap_ticks: 0,
+        landed: false,
     };
 }
 
@@ -307,6 +315,8 @@ pub enum Condition {
     GcsDisarm = 1 << 25,
     /// The ground station asked for an IMU calibration.
     GcsCalibrate = 1 << 26,
+    /// The altitude hold detected a landing ([`Inputs::landed`]).
+    Landed = 1 << 27,
 }
 
 /// A set of conditions: the [`Blocker`]s on their own bits (the low 16) and the other
@@ -395,6 +405,7 @@ const LOSS_BUDGET_SPENT: Conditions = Conditions::of(Condition::LossBudgetSpent)
 const RECOVERED: Conditions = Conditions::of(Condition::Recovered);
 const GROUND_DISARM: Conditions = Conditions::of(Condition::GcsDisarm);
 const GROUND_CALIBRATE: Conditions = Conditions::of(Condition::GcsCalibrate);
+const LANDED: Conditions = Conditions::of(Condition::Landed);
 
 /// The way out of every state, ahead of the state's own: a latched sensor fault ends
 /// everything. (Fault has no other way out.)
@@ -435,9 +446,11 @@ const FROM_ARMED: [Transition; 6] = [
     way(FlightState::Disarmed, THROTTLE_LOW_TOO_LONG, NONE),
 ];
 
-const FROM_FAILSAFE_LEVEL: [Transition; 3] = [
+const FROM_FAILSAFE_LEVEL: [Transition; 4] = [
     // Forced only: the stage-2 cut, at the ground station's word.
     way(FlightState::FailsafeOff, GROUND_DISARM, NONE),
+    // The descent on the height estimate landed: motors off, disarmed.
+    way(FlightState::FailsafeOff, LANDED, NONE),
     way(FlightState::Armed, RECOVERED, NO_LINK),
     way(FlightState::FailsafeOff, LOSS_BUDGET_SPENT, NONE),
 ];
@@ -485,6 +498,9 @@ pub struct Supervisor {
     fault: Option<SensorFault>,
     /// The last decision was steady flight ([`steady`](Self::steady)).
     steady: bool,
+    /// The failsafe descent's time cap, taken at the loss of the link (0: none, the manual
+    /// failsafe's budget alone).
+    descent_cap_ticks: u32,
 }
 
 impl Default for Supervisor {
@@ -506,6 +522,7 @@ impl Supervisor {
             last_good_throttle: StickCounts::ZERO,
             fault: None,
             steady: false,
+            descent_cap_ticks: 0,
         }
     }
 
@@ -630,11 +647,24 @@ impl Supervisor {
         c.set(Condition::DisarmHeld, self.hold_ticks >= cfg.disarm_hold_ticks);
         c.set(Condition::SticksCentred, i.sticks.attitude_sticks_centred());
         c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
-        c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
+        c.set(Condition::LossBudgetSpent, self.lost_ticks >= self.loss_budget(cfg, i));
         c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
         c.set(Condition::GcsDisarm, i.gcs.disarm.is_some_and(|d| d.checked(self.state, i.throttle_low).is_ok()));
         c.set(Condition::GcsCalibrate, i.gcs.calibrate);
+        c.set(Condition::Landed, i.landed);
         c
+    }
+
+    /// The lost time that ends the flight: the manual failsafe's budget, or, while the height
+    /// estimate stays healthy, the descent's time cap if longer (the one taken at the loss once
+    /// the failsafe holds, the present one at the first tick of a loss). An estimate lost during
+    /// the descent ends it as the manual failsafe would: a budget long spent stops the motors.
+    fn loss_budget(&self, cfg: &SafetyConfig, i: &Inputs) -> u32 {
+        if i.descent_cap_ticks == 0 {
+            return cfg.failsafe_off_ticks;
+        }
+        let cap = if self.state == FlightState::FailsafeLevel { self.descent_cap_ticks } else { i.descent_cap_ticks };
+        cfg.failsafe_off_ticks.max(cap)
     }
 
     /// Step 3: what starts or ends with the transition to `next`, and the decision.
@@ -657,6 +687,7 @@ impl Supervisor {
             // The failsafe holds the last throttle flown on a good link, never more.
             (FlightState::Armed, FlightState::FailsafeLevel | FlightState::FailsafeOff) => {
                 self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
+                self.descent_cap_ticks = i.descent_cap_ticks;
             }
             _ => {}
         }
@@ -824,6 +855,8 @@ mod tests {
             sensor_fault: None,
             tilt_rad: 0.0,
             gcs: GcsCommands::NONE,
+            descent_cap_ticks: 0,
+            landed: false,
         };
         let d = s.decide(&CFG, &i);
         assert_eq!(d.state, FlightState::Calibrating);
@@ -1335,6 +1368,8 @@ mod tests {
             sensor_fault: fault.then_some(SensorFault::Stuck),
             tilt_rad: if tilted { 1.0 } else { 0.0 },
             gcs: GcsCommands::NONE,
+            descent_cap_ticks: 0,
+            landed: false,
         }
     }
 

@@ -256,13 +256,15 @@ fn while_armed_only_gains_and_rates_change() {
             }
         }
     }
-    // What may change armed: the gains, the angle and yaw-rate limits, the telemetry rates.
+    // What may change armed: the gains, the angle and yaw-rate limits, the telemetry rates, and
+    // the altitude mode with the hold's gains and rate (the mode change is smooth, both ways).
     let anytime: std::vec::Vec<&str> = TABLE.iter().filter(|p| p.applies == Applies::Anytime).map(|p| p.name).collect();
     assert!(
         anytime.iter().all(|n| n.starts_with("ANG_")
             || n.starts_with("RATE_")
             || n.starts_with("LINK_")
-            || ["ANGLE_MAX", "YAW_RATE_MAX", "YAW_FF"].contains(n)),
+            || ["ANGLE_MAX", "YAW_RATE_MAX", "YAW_FF"].contains(n)
+            || ["ALT_MODE", "CLIMB_RATE_MAX", "ALT_POS_P", "ALT_VEL_P", "ALT_VEL_I", "ALT_HOVER_US"].contains(n)),
         "{anytime:?}"
     );
     assert!(!anytime.contains(&"RATE_D_LPF_K") && !anytime.contains(&"LINK_PROTOCOL"));
