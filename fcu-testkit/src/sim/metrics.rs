@@ -29,6 +29,10 @@ pub struct Metrics {
     pub motor_jitter_counts: Option<f64>,
     /// RMS of (true height − the hold's target) over the hold window, m.
     pub height_rms_m: Option<f64>,
+    /// Its two parts: the mean of (true height − target), the height estimate's offset from
+    /// the truth once the hold has settled, and the RMS about that mean, the hold's unsteadiness.
+    pub height_offset_m: Option<f64>,
+    pub height_rms_about_offset_m: Option<f64>,
     /// The true height's change over the hold window (its last second's mean minus its first
     /// second's), m.
     pub height_drift_m: Option<f64>,
@@ -176,6 +180,8 @@ pub fn compute(log: &FlightLog, s: &Scenario) -> Metrics {
     }
     if let Some((a, b)) = s.hold_window_s {
         m.height_rms_m = height_rms_m(log, a, b);
+        m.height_offset_m = height_offset_m(log, a, b);
+        m.height_rms_about_offset_m = m.height_rms_m.zip(m.height_offset_m).map(|(r, o)| (r * r - o * o).max(0.0).sqrt());
         m.height_drift_m = height_drift_m(log, a, b);
     }
     if let Some(t) = s.landing_s {
@@ -205,6 +211,12 @@ pub fn height_rms_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
         (s + e * e, n + 1)
     });
     (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+/// The mean of (true height − the hold's target) where the hold has a target, m.
+pub fn height_offset_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
+    let (sum, n) = holding(log, from_s, to_s).fold((0.0, 0usize), |(s, n), r| (s + r.alt_m - r.vertical.alt_target_m, n + 1));
+    (n > 0).then(|| sum / n as f64)
 }
 
 fn mean_height_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
@@ -441,6 +453,8 @@ pub fn lines(m: &Metrics) -> Vec<(&'static str, String)> {
         ("max tilt while armed and airborne", fmt_opt(m.max_tilt_armed_deg, "°")),
         ("motor jitter (tick to tick, RMS, hovering)", fmt_opt(m.motor_jitter_counts, " counts")),
         ("height RMS error while holding", fmt_opt(m.height_rms_m, " m")),
+        ("  of which the estimate's offset (mean)", fmt_opt(m.height_offset_m, " m")),
+        ("  and the hold's unsteadiness (RMS about it)", fmt_opt(m.height_rms_about_offset_m, " m")),
         ("height drift over the hold", fmt_opt(m.height_drift_m, " m")),
         ("touchdown speed", fmt_opt(m.touchdown_speed_m_s, " m/s")),
         ("height lost on leaving hold", fmt_opt(m.height_lost_leaving_hold_m, " m")),
@@ -534,6 +548,8 @@ mod tests {
         });
         let rms = height_rms_m(&log, 0.0, 11.0).unwrap_or(f64::NAN);
         assert!((rms - 0.034).abs() < 0.005, "{rms}");
+        let offset = height_offset_m(&log, 0.0, 11.0).unwrap_or(f64::NAN);
+        assert!((offset - 0.034).abs() < 0.005, "{offset}: the error is almost all offset");
         let drift = height_drift_m(&log, 0.0, 11.0).unwrap_or(f64::NAN);
         assert!((drift - 0.05 * 10.0 / 20.0).abs() < 0.002, "{drift}");
         let lost = height_lost_leaving_hold_m(&log, 12.0).unwrap_or(f64::NAN);

@@ -26,6 +26,11 @@ pub type V3 = [f64; 3];
 /// Standard gravity, m/s². Also the accelerometer's g.
 pub const GRAVITY_M_S2: f64 = 9.80665;
 
+/// The duty the motors run at with the throttle stick just off the bottom: the throttle
+/// map's offset (633.3 of 2000 compare counts, the reference's DC build, which the default
+/// profile keeps).
+pub const LOWEST_RUNNING_DUTY: f64 = 633.333 / 2000.0;
+
 /// Every physical constant of the simulated drone, in one place. Nominal values are the
 /// estimates of `docs/simulation.md#the-drone`; [`PlantParams::randomized`] spreads them for
 /// robustness tests.
@@ -104,8 +109,14 @@ impl PlantParams {
     /// The nominal drone with each physical estimate scaled by an independent factor in
     /// `1 ± spread` (the tests use ±30 %, `docs/simulation.md#the-drone`). Same seed, same drone.
     ///
-    /// One guard: a drone that cannot hover on a sagging battery with 30 % margin tests the
-    /// airframe, not the controller, so the motors' maximum thrust is raised until it can.
+    /// Two guards, as a drone outside them tests the airframe, not the controller:
+    /// - one that cannot hover on a sagging battery with 30 % margin: the motors' maximum
+    ///   thrust is raised until it can;
+    /// - one that climbs at the lowest running throttle: the throttle map runs the motors at
+    ///   [`LOWEST_RUNNING_DUTY`] as soon as the stick leaves the bottom, and an airframe that
+    ///   hovers below it (strong motors on a light frame) can only climb or cut its motors, with
+    ///   the stick, altitude hold or the failsafe's descent alike. Its maximum thrust is lowered
+    ///   until it hovers 10 % above that (on a full battery, where the hover needs least).
     pub fn randomized(seed: u64, spread: f64) -> Self {
         let spread = if spread.is_finite() { spread.clamp(0.0, 0.9) } else { 0.0 };
         let mut r = Rng::fork(seed, 0x0050_4C41_4E54);
@@ -127,6 +138,10 @@ impl PlantParams {
         let needed_n = 1.3 * p.mass_kg * GRAVITY_M_S2 / (4.0 * sagged);
         if p.motor_max_thrust_n < needed_n {
             p.motor_max_thrust_n = needed_n;
+        }
+        let lowest_running = 1.1 * p.thrust_fraction(LOWEST_RUNNING_DUTY);
+        if p.hover_fraction(p.battery_full_v) < lowest_running {
+            p.motor_max_thrust_n = p.mass_kg * GRAVITY_M_S2 / (4.0 * lowest_running);
         }
         p
     }
@@ -683,6 +698,7 @@ mod tests {
             let n = PlantParams::default();
             assert!(p.mass_kg >= 0.7 * n.mass_kg && p.mass_kg <= 1.3 * n.mass_kg);
             assert!(p.hover_duty(p.battery_empty_v) < 0.95, "seed {seed} cannot hover");
+            assert!(p.hover_duty(p.battery_full_v) > LOWEST_RUNNING_DUTY, "seed {seed} climbs at the lowest running throttle");
         }
     }
 

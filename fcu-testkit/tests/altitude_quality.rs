@@ -1,0 +1,106 @@
+//! How well altitude hold flies (issue 28): the altitude scenarios on five airframes with every
+//! parameter randomised by ±30 % and, from the same seeds, the barometer's errors drawn
+//! (offset, warm-up drift, prop wash, ground effect, gust pressure). The goals are on the
+//! medians over the airframes, as tests/control_quality.rs checks the attitude's; the safety
+//! rule (never motors off above 0.3 m) on every airframe. `cargo test -p fcu-testkit --test
+//! altitude_quality -- --nocapture` prints the figures docs/simulation.md and the README quote.
+
+use fcu_testkit::sim::metrics::{self, Metrics};
+use fcu_testkit::sim::scenario::{self, Criterion};
+use fcu_testkit::sim::{self, RunOptions};
+use fcu_testkit::Profile;
+
+const SEEDS: [u64; 5] = [1, 2, 3, 4, 5];
+const SPREAD: f64 = 0.3;
+
+fn fly(name: &str, seed: u64) -> (sim::FlightLog, scenario::Scenario, Metrics) {
+    let sc = scenario::by_name(name).unwrap_or_else(|| panic!("no scenario {name}"));
+    let log = sim::run(&sc, Profile::Default, &RunOptions { seed, plant_spread: SPREAD, ..RunOptions::default() })
+        .unwrap_or_else(|e| panic!("{name}, seed {seed}: {e}"));
+    let m = metrics::compute(&log, &sc);
+    (log, sc, m)
+}
+
+/// One metric of one scenario per seed (`NaN` where the flight did not produce it).
+fn per_seed(name: &str, metric: fn(&Metrics) -> Option<f64>) -> Vec<f64> {
+    SEEDS.iter().map(|&seed| metric(&fly(name, seed).2).unwrap_or(f64::NAN)).collect()
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn report(label: &str, unit: &str, v: &[f64]) -> f64 {
+    let m = median(v);
+    let each: Vec<String> = v.iter().map(|x| format!("{x:.3}")).collect();
+    eprintln!("{label}: median {m:.3} {unit} (seeds {SEEDS:?}, ±30 %: {})", each.join(", "));
+    m
+}
+
+#[test]
+fn a_calm_hold_stays_within_its_goals_over_the_airframes() {
+    let rms = per_seed("althold-hover", |m| m.height_rms_m);
+    report("  of which the estimate's offset (mean, calm)", "m", &per_seed("althold-hover", |m| m.height_offset_m));
+    report("  and the hold's unsteadiness (calm)", "m", &per_seed("althold-hover", |m| m.height_rms_about_offset_m));
+    let drift: Vec<f64> = per_seed("althold-hover", |m| m.height_drift_m).into_iter().map(f64::abs).collect();
+    let rms_median = report("height RMS error while holding (calm)", "m", &rms);
+    let drift_median = report("height drift over the hold (30 s)", "m", &drift);
+    assert!(rms_median <= scenario::HOLD_RMS_CALM_MAX_M, "height RMS error {rms_median:.3} m over the goal");
+    assert!(drift_median <= scenario::HOLD_DRIFT_MAX_M, "drift {drift_median:.3} m over the goal");
+}
+
+#[test]
+fn a_hold_in_gusts_stays_within_its_goal_over_the_airframes() {
+    let rms = per_seed("althold-gust", |m| m.height_rms_m);
+    report("  and the hold's unsteadiness (gusts)", "m", &per_seed("althold-gust", |m| m.height_rms_about_offset_m));
+    let m = report("height RMS error while holding (gusts)", "m", &rms);
+    assert!(m <= scenario::HOLD_RMS_GUSTS_MAX_M, "height RMS error in gusts {m:.3} m over the goal");
+}
+
+#[test]
+fn the_hold_moves_the_throttle_less_than_a_pilot_hovering_by_hand() {
+    let hold = per_seed("althold-hover", |m| m.throttle_oscillation_counts);
+    let manual = per_seed("hover", |m| m.throttle_oscillation_counts);
+    let (h, p) = (report("throttle oscillation in hold", "counts", &hold), report("throttle oscillation, manual hover", "counts", &manual));
+    assert!(h < p, "the hold's {h:.2} counts against the manual hover's {p:.2}");
+}
+
+#[test]
+fn the_failsafe_lands_gently_disarms_and_never_stops_the_motors_in_the_air() {
+    let mut touchdown = Vec::new();
+    let mut disarm = Vec::new();
+    for seed in SEEDS {
+        let (log, sc, m) = fly("failsafe-descent", seed);
+        // On every airframe: the motors never stop above 0.3 m.
+        let rule = metrics::check(
+            &log,
+            &Criterion::MotorsOffOnlyBelow { from_s: scenario::ARM_RELEASE_S, max_m: scenario::MOTORS_OFF_MAX_HEIGHT_M },
+        );
+        assert!(rule.passed, "seed {seed}: {}", rule.detail);
+        assert!(m.level_after_link_loss_s.is_some(), "seed {seed}: not level after the link loss");
+        touchdown.push(m.touchdown_speed_m_s.unwrap_or(f64::NAN));
+        disarm.push(m.disarmed_after_touchdown_s.unwrap_or(f64::NAN));
+        let end = metrics::check(&log, &Criterion::MotorsOffDisarmedFrom { t_s: sc.duration_s - 0.5 });
+        assert!(end.passed, "seed {seed}: {}", end.detail);
+    }
+    let t = report("touchdown speed (failsafe)", "m/s", &touchdown);
+    let d = report("disarmed after touchdown (failsafe)", "s", &disarm);
+    assert!(t <= scenario::FAILSAFE_TOUCHDOWN_MAX_M_S, "touchdown {t:.3} m/s over the goal");
+    assert!(d <= scenario::FAILSAFE_DISARM_AFTER_TOUCHDOWN_MAX_S, "disarmed {d:.3} s after the touchdown, over the goal");
+}
+
+#[test]
+fn a_stuck_barometer_is_reported_and_the_hold_lets_go_without_a_drop() {
+    let mut lost = Vec::new();
+    for seed in SEEDS {
+        let (log, sc, m) = fly("baro-fault", seed);
+        let t = sc.baro_freeze_s.unwrap_or(f64::NAN);
+        let reported = metrics::check(&log, &Criterion::BaroFaultReportedWithin { t_s: t, max_s: 0.5 });
+        assert!(reported.passed, "seed {seed}: {}", reported.detail);
+        lost.push(m.height_lost_leaving_hold_m.unwrap_or(f64::NAN));
+    }
+    let m = report("height lost on leaving hold (stuck barometer)", "m", &lost);
+    assert!(m <= scenario::BARO_FAULT_HEIGHT_LOST_MAX_M, "lost {m:.3} m");
+}
