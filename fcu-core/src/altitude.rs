@@ -2,8 +2,8 @@
 //! accelerometer: a third-order complementary filter with an accelerometer bias state
 //! (`docs/altitude.md` has the equations and the reasons).
 //!
-//! Not yet in flight: nothing calls it from [`crate::flight`] (the next step wires it into the
-//! outer step, the parameter table and the link).
+//! The outer step's vertical half ([`crate::althold::Vertical`]) runs it; altitude hold and the
+//! failsafe's descent fly on it.
 //!
 //! One [`AltitudeEstimator::update`] per outer step: the vertical acceleration of that step
 //! (the accelerometer rotated to earth by the attitude estimate, [`vertical_accel_m_s2`]) and

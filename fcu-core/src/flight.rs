@@ -779,6 +779,77 @@ mod tests {
         assert_eq!(fc.config(), &cfg);
     }
 
+    /// `flown()` with the altitude mode `mode`, flown with a barometer burst before every outer
+    /// step (a new sample on 75 of 160, at 1013.25 hPa), or none from `baro_until` on.
+    fn fly_with_baro(fc: &mut FlightController, from: usize, to: usize, radio: &ForcedRadio, baro_until: usize) {
+        for k in from..to {
+            let imu = RawImu { accel: sample(k).accel, gyro: [0, 0, 0] };
+            let out = fc.tick_forced(imu, radio);
+            if let Some(job) = out.outer_job {
+                let n = k / 5;
+                let due = (n * 75) / 160 != ((n + 1) * 75) / 160;
+                let burst = RawBaro {
+                    status: crate::baro::registers::status::P_DA,
+                    pressure_counts: 4_150_272 + (k % 7) as i32 * 10,
+                    temperature_counts: 2500,
+                };
+                fc.set_baro((due && k < baro_until).then_some(burst));
+                fc.run_outer(&job);
+            }
+        }
+    }
+
+    fn with_alt_mode(mode: crate::altitude::AltMode) -> Config {
+        let mut cfg = flown();
+        if let Some(a) = &mut cfg.altitude {
+            a.mode = mode;
+        }
+        cfg
+    }
+
+    #[test]
+    fn the_outer_step_reports_the_height_and_the_barometer_and_names_its_fault() {
+        let mut fc = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        fly_with_baro(&mut fc, 0, 2500, &ForcedRadio { armed: false, ..FLYING }, usize::MAX);
+        fly_with_baro(&mut fc, 2500, 4000, &FLYING, usize::MAX);
+        let a = fc.status().altitude;
+        assert_eq!(a.mode, crate::altitude::AltMode::Manual);
+        assert!(a.estimate_healthy && !a.holding && a.target_m.is_none() && a.baro_fault.is_none(), "{a:?}");
+        assert!(a.pressure_pa.is_some_and(|p| (p - 101_325.0).abs() < 1.0) && a.temperature_c == 25.0, "{a:?}");
+        // Re-zeroed at the arming: the take-off point is 0.
+        assert!(a.height_m.abs() < 0.3 && a.climb_m_s.abs() < 0.2, "{a:?}");
+        // The part stops answering: NoData within 0.1 s, the estimate no longer healthy.
+        fly_with_baro(&mut fc, 4000, 4200, &FLYING, 0);
+        let a = fc.status().altitude;
+        assert_eq!(a.baro_fault, Some(crate::baro::BaroFault::NoData));
+        assert!(!a.estimate_healthy, "{a:?}");
+    }
+
+    #[test]
+    fn the_holds_throttle_reaches_the_mixer_in_place_of_the_sticks() {
+        // The same flight in both modes: armed on the ground with the stick in the hold's dead
+        // band. Manual: the stick's throttle runs the motors. Hold: on the ground, centred, the
+        // hold idles (the throttle cut stops the motors) until the stick asks for a climb.
+        let centred = ForcedRadio { width_counts: [6100, 5900, 6150, 6300], ..FLYING };
+        let mut manual = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        let mut hold = FlightController::new(with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
+        let disarmed = ForcedRadio { armed: false, ..centred };
+        for fc in [&mut manual, &mut hold] {
+            fly_with_baro(fc, 0, 2500, &disarmed, usize::MAX);
+            fly_with_baro(fc, 2500, 4000, &centred, usize::MAX);
+        }
+        let (m, h) = (manual.status(), hold.status());
+        assert!(m.compare.iter().all(|&c| c > 0), "{:?}", m.compare);
+        assert!(h.altitude.holding, "{:?}", h.altitude);
+        assert_eq!(h.compare, [0; 4], "{:?}", h.altitude);
+        assert_eq!(hold.control_tick.supervision.in_force().sticks.thr, crate::rc::StickCounts(0));
+        // The stick up: the take-off ramp runs the motors.
+        let up = ForcedRadio { width_counts: [6100, 5900, 8400, 6300], ..FLYING };
+        fly_with_baro(&mut hold, 4000, 4400, &up, usize::MAX);
+        let h = hold.status();
+        assert!(h.compare.iter().all(|&c| c > 0), "{:?} {:?}", h.compare, h.altitude);
+    }
+
     #[test]
     #[cfg(feature = "reference")]
     fn a_block_spanning_new_offsets_keeps_each_sample_under_its_own_offsets() {

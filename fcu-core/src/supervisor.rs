@@ -1221,6 +1221,65 @@ mod tests {
     }
 
     #[test]
+    fn with_a_healthy_height_estimate_stage_1_lasts_until_the_descents_cap_taken_at_the_loss() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        // The height at the loss gives a 5 s cap (the vertical half works it out).
+        r.i.descent_cap_ticks = 4000;
+        let d = r.lose_link(CFG.failsafe_off_ticks);
+        assert_eq!(d.state, FlightState::FailsafeLevel, "no stage-2 cut at 1 s");
+        assert!(d.motors_enabled);
+        // A cap worked out lower on the way down does not shorten the one taken at the loss.
+        r.i.descent_cap_ticks = 900;
+        assert_eq!(r.lose_link(4000 - TIMEOUT - CFG.failsafe_off_ticks).state, FlightState::FailsafeLevel);
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff, "the cap");
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn a_landing_detected_in_stage_1_turns_the_motors_off_and_disarms() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.descent_cap_ticks = 8000;
+        assert_eq!(r.lose_link(2000).state, FlightState::FailsafeLevel);
+        r.i.landed = true;
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff);
+        assert!(!d.motors_enabled);
+        // As after any stage 2: the link back gives disarmed, and a full arming is needed.
+        r.i.landed = false;
+        assert_eq!(r.restore_link(1).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn an_estimate_lost_in_stage_1_falls_back_to_the_manual_budget() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.descent_cap_ticks = 8000;
+        assert_eq!(r.lose_link(2000).state, FlightState::FailsafeLevel);
+        // The barometer fails: 2 s lost is long past the manual budget (1 s): off at once.
+        r.i.descent_cap_ticks = 0;
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff);
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn without_a_height_estimate_a_landing_flag_while_armed_does_nothing_by_itself() {
+        // Armed, the landed hold disarms through the automatic disarm (its throttle is low),
+        // not through the flag: the flag acts only in stage 1.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.landed = true;
+        assert_eq!(r.run(FLY, 10).state, FlightState::Armed);
+    }
+
+    #[test]
     fn a_flickering_link_cannot_stretch_stage_1() {
         // Losses of 20 ticks (100 silent each), back for half the recovery time: stage 2 the
         // moment the silences add up to the budget.

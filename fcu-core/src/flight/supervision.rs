@@ -170,17 +170,26 @@ impl Supervision {
     #[inline(always)]
     pub(super) fn decide(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         self.ticks = self.ticks.saturating_add(1);
+        // In steady flight, with nothing new from the radio and no sensor fault, the decision
+        // in force stands: the supervisor would decide it again, the same
+        // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
+        if let Machine::Safe { supervisor, .. } = &self.machine {
+            if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && self.repeats_allowed() {
+                return false;
+            }
+        }
+        self.decide_now(p, sensors, tilt_rad, flags)
+    }
+
+    /// The supervisor decides. Apart from [`decide`](Self::decide) and never inlined into it,
+    /// so that a steady tick, which only checks that the decision stands, pays for none of
+    /// this path's registers (docs/performance.md, «repeat steady flight»).
+    #[inline(never)]
+    fn decide_now(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         let radio = self.receiver.state();
-        let repeats_allowed = self.repeats_allowed();
         let decision = match &mut self.machine {
             Machine::Reference(latch) => latch.decide(radio.link, flags.set_armed, sensors.calibrating()),
             Machine::Safe { cfg, supervisor } => {
-                // In steady flight, with nothing new from the radio and no sensor fault, the
-                // decision in force stands: the supervisor would decide it again, the same
-                // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
-                if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
-                    return false;
-                }
                 let gcs = self.gcs.commands(self.ticks, &radio.sticks, &p.rc);
                 // The throttle flown: the hold's while it flies one (its bottom is the landed
                 // drone's, which the automatic disarm counts), else the stick's.
