@@ -309,6 +309,10 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
             sensor_fault,
             tilt_rad,
             gcs: fcu_core::gcs::GcsCommands::NONE,
+            // The failsafe without a height estimate (levels, then stops the motors): the
+            // monitor models that one; the descent on the estimate is fcu-core's althold tests'.
+            descent_cap_ticks: 0,
+            landed: false,
         },
     )
 }

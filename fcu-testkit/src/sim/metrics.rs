@@ -233,12 +233,21 @@ pub fn height_drift_m(log: &FlightLog, from_s: f64, to_s: f64) -> Option<f64> {
     Some(mean_height_m(log, to_s - 1.0, to_s)? - mean_height_m(log, from_s, from_s + 1.0)?)
 }
 
-/// The first touchdown after `after_s`: the time of the first row on the floor (height 0,
-/// where the plant's floor holds it) that follows a row in the air, and the downward speed of
-/// that last airborne row, m/s.
+/// Within this of the floor a descent is a touchdown, m.
+const TOUCHDOWN_ZONE_M: f64 = 0.01;
+
+/// The first touchdown after `after_s`: where the drone, having come within 1 cm of the
+/// floor, stops or bounces (its true climb rate no longer downward, or on the floor), and its
+/// fastest downward speed from the last row above that centimetre to there, m/s. Not the
+/// first row at height 0: a drone that bounces off the floor within a control tick (its
+/// thrust and ground effect lift it again) shows no such row.
 pub fn touchdown(log: &FlightLog, after_s: f64) -> Option<(f64, f64)> {
     let rows: Vec<&LogRow> = window(log, after_s, f64::INFINITY).collect();
-    rows.windows(2).find(|w| w[0].alt_m > 0.0 && w[1].alt_m <= 0.0).map(|w| (w[1].t_s, (-w[0].vertical.climb_m_s).max(0.0)))
+    let entry = rows.windows(2).position(|w| w[0].alt_m > TOUCHDOWN_ZONE_M && w[1].alt_m <= TOUCHDOWN_ZONE_M)?;
+    let approach = rows.get(entry..)?;
+    let contact = approach.iter().skip(1).position(|r| r.alt_m <= 0.0 || r.vertical.climb_m_s >= 0.0)? + 1;
+    let speed = approach.get(..contact)?.iter().map(|r| -r.vertical.climb_m_s).fold(0.0, f64::max);
+    Some((approach.get(contact)?.t_s, speed))
 }
 
 /// From `touchdown_s` to the first row disarmed (motors not allowed to run), s.

@@ -255,6 +255,21 @@ pub struct Plant {
     /// Duty of each motor, held constant between control ticks (the TIM4 compare register).
     duty: [f64; 4],
     kin: Kinematics,
+    /// A touchdown being felt by the accelerometer.
+    impact: Option<Impact>,
+}
+
+/// How long the landing feet take to stop a touchdown, s: the plant stops at once on its
+/// rigid floor, the accelerometer feels the stop spread over this (a few millimetres of the
+/// feet's give at landing speeds), so that what it integrates is the true change of speed.
+pub const IMPACT_S: f64 = 0.02;
+
+/// A touchdown's deceleration still to be felt.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Impact {
+    remaining_s: f64,
+    /// Upward, m/s².
+    up_m_s2: f64,
 }
 
 /// Derivative of the integrated part of the state (position, velocity, attitude, rates, motors).
@@ -285,6 +300,7 @@ impl Plant {
             },
             duty: [0.0; 4],
             kin: Kinematics { specific_force_body_m_s2: [0.0, 0.0, GRAVITY_M_S2], ..Kinematics::default() },
+            impact: None,
         }
     }
 
@@ -339,16 +355,33 @@ impl Plant {
         let deriv_end = self.deriv(&s, volt_scale, dist);
         s.on_ground = false;
         if s.pos_earth_m[2] <= 0.0 && (s.vel_earth_m_s[2] <= 0.0 || deriv_end.vel[2] <= 0.0) {
+            if !s0.on_ground && s.vel_earth_m_s[2] < 0.0 {
+                // The touchdown: the feet stop the fall over IMPACT_S, and the accelerometer
+                // feels that deceleration (the whole change of speed), as a real one does.
+                self.impact = Some(Impact { remaining_s: IMPACT_S, up_m_s2: -s.vel_earth_m_s[2] / IMPACT_S });
+            }
             s.pos_earth_m[2] = 0.0;
             s.vel_earth_m_s = [0.0; 3];
             s.rate_body_rad_s = [0.0; 3];
             s.quat = yaw_only(s.quat);
             s.on_ground = true;
         }
+        let impact_m_s2 = match self.impact.filter(|_| s.on_ground) {
+            Some(i) => {
+                let felt = i.up_m_s2 * (i.remaining_s.min(dt_s) / dt_s);
+                let remaining_s = i.remaining_s - dt_s;
+                self.impact = (remaining_s > 0.0).then_some(Impact { remaining_s, ..i });
+                felt
+            }
+            None => {
+                self.impact = None;
+                0.0
+            }
+        };
 
         // What the IMU feels: all non-gravitational forces, in body axes.
         let specific = if s.on_ground {
-            quat_rotate_inverse(s.quat, [0.0, 0.0, GRAVITY_M_S2])
+            quat_rotate_inverse(s.quat, [0.0, 0.0, GRAVITY_M_S2 + impact_m_s2])
         } else {
             let f_earth = self.non_gravity_force_earth(&s, dist);
             let f_body = quat_rotate_inverse(s.quat, f_earth);
@@ -678,12 +711,21 @@ mod tests {
         p.state.pos_earth_m[2] = 1.0;
         let dt = 0.00025;
         let mut fastest_down = 0.0f64;
+        let (mut felt_m_s, mut hardest_m_s2) = (0.0, 0.0f64);
         for _ in 0..8000 {
             p.step(dt, &Disturbance::default());
             assert!(p.state.pos_earth_m[2] >= 0.0, "below the floor: {}", p.state.pos_earth_m[2]);
             fastest_down = fastest_down.max(-p.state.vel_earth_m_s[2]);
+            let up = p.kinematics().specific_force_body_m_s2[2] - GRAVITY_M_S2;
+            felt_m_s += up * dt;
+            hardest_m_s2 = hardest_m_s2.max(up);
         }
         assert!(p.state.on_ground && p.state.pos_earth_m[2] == 0.0 && p.state.vel_earth_m_s == [0.0; 3]);
+        // What the accelerometer felt over the fall and the stop (less the 1 g it feels at rest)
+        // adds up to no change of speed: the touchdown's deceleration is in it, spread over the
+        // feet's 20 ms.
+        assert!(felt_m_s.abs() < 0.01, "the accelerometer integrates to {felt_m_s} m/s");
+        assert!((hardest_m_s2 - fastest_down / IMPACT_S).abs() < 1.0, "{hardest_m_s2} m/s² at the stop");
         // A fall from 1 m less the drag: just under √(2 g h) = 4.43 m/s when it touches.
         assert!(fastest_down > 3.5 && fastest_down < 4.43, "{fastest_down}");
     }

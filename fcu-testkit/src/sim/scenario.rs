@@ -578,22 +578,29 @@ fn link_short(name: &str) -> Scenario {
     s
 }
 
+/// A long link loss in manual throttle: with a healthy height estimate the failsafe levels,
+/// then descends and lands on it (docs/safety.md), motors off and disarmed once landed; the link
+/// returns afterwards with the pilot asking for hover, and the motors stay off.
 fn link_long(name: &str) -> Scenario {
     let mut sc = Script::new();
     sc.standard();
     sc.row(8.0, |r| r.link = false);
     // The link returns with the pilot still asking for hover: motors must stay off.
-    sc.row(12.0, |r| r.link = true);
-    sc.row(15.0, |r| r.thr = Throttle::Us(THR_LOW_US));
-    let mut s = base(name, "3 s radio loss: level, then motors off and disarmed; no restart", 18.0, sc.tl);
+    sc.row(17.0, |r| r.link = true);
+    sc.row(19.0, |r| r.thr = Throttle::Us(THR_LOW_US));
+    let mut s =
+        base(name, "9 s radio loss at 1 m: level, descend on the height estimate, land, motors off and disarmed; no restart", 21.0, sc.tl);
     s.hover_window_s = Some((5.5, 8.0));
     s.link_loss_s = Some(8.0);
+    s.landing_s = Some(8.0);
     s.criteria = vec![
         Criterion::ArmedBy { t_s: ARM_RELEASE_S + 0.2 },
         Criterion::StateSeen { from_s: 8.0, to_s: 8.9, state: FlightState::FailsafeLevel },
         Criterion::LevelAfterLinkLoss { t_s: 8.0, max_s: 1.0 },
-        Criterion::StateSeen { from_s: 8.9, to_s: 9.3, state: FlightState::FailsafeOff },
-        Criterion::MotorsOffDisarmedFrom { t_s: 9.3 },
+        Criterion::VerticalModeSeen { from_s: 8.9, to_s: 12.0, mode: VerticalMode::Descent },
+        Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M },
+        Criterion::StateSeen { from_s: 9.0, to_s: 16.0, state: FlightState::FailsafeOff },
+        Criterion::MotorsOffDisarmedFrom { t_s: 16.0 },
     ];
     s
 }
