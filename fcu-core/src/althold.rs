@@ -190,6 +190,8 @@ pub struct Vertical {
     carry: Option<(f32, bool)>,
     /// Steps in the failsafe.
     failsafe_steps: u32,
+    /// Airborne since the arming.
+    has_flown: bool,
     /// The stick has been in the dead band since the hold engaged in flight: until then it asks
     /// for no rate (the manual hover's stick, far below the centre, would ask for a descent).
     stick_centred: bool,
@@ -221,20 +223,17 @@ impl Vertical {
             carry: None,
             failsafe_steps: 0,
             stick_centred: false,
+            has_flown: false,
             cfg,
         }
     }
 
-    /// New settings in flight: the estimator and the health check keep their state unless
-    /// their own numbers changed (those change only on the ground).
+    /// New settings (a parameter change): the estimator takes its new time constant and thrust
+    /// scale with its state kept (those change only on the ground), the hold its new numbers; the
+    /// health check's numbers are no parameter.
     #[inline(never)]
     pub fn set_config(&mut self, cfg: AltitudeSettings) {
-        if cfg.estimator != self.cfg.estimator {
-            self.estimator = AltitudeEstimator::new(cfg.estimator);
-        }
-        if cfg.baro != self.cfg.baro {
-            self.monitor = BaroMonitor::new(cfg.baro);
-        }
+        self.estimator.set_config(cfg.estimator);
         if !self.airborne {
             self.hover = f32::from(cfg.hold.hover_throttle.0);
         }
@@ -287,6 +286,7 @@ impl Vertical {
         if i.motors_enabled && !self.was_enabled {
             self.estimator.rezero();
             self.airborne = false;
+            self.has_flown = false;
             self.land_steps = 0;
         }
         if !i.motors_enabled {
@@ -332,10 +332,19 @@ impl Vertical {
                 (!crossed).then_some(c)
             });
             self.carry = carried.map(|c| (c, self.carry.is_some_and(|(_, b)| b)));
-            let flown = carried.unwrap_or(f32::from(i.command.0));
+            // ALT_MODE 1 without a healthy estimate before the take-off: the stick means
+            // "hold" (its centre is several times the hover), so it takes nothing off the
+            // ground; the motors idle and the automatic disarm counts.
+            let grounded = self.cfg.mode == AltMode::Hold && i.motors_enabled && !self.has_flown && carried.is_none();
+            let flown = if grounded { 0.0 } else { carried.unwrap_or(f32::from(i.command.0)) };
             self.manual_ground_state(flown, est.vertical_speed_m_s, i);
-            carried
+            if grounded {
+                Some(0.0)
+            } else {
+                carried
+            }
         };
+        self.has_flown |= self.airborne;
         let throttle = throttle.map(|t| StickCounts(limit(t, 0.0, f32::from(i.full_scale.0) * 2.0) as i16));
 
         let descent_cap_ticks = if healthy && i.motors_enabled { self.descent_cap_ticks(est.height_m) } else { 0 };

@@ -251,6 +251,19 @@ fn on_the_ground_the_hold_idles_and_the_stick_up_takes_off() {
 }
 
 #[test]
+fn in_hold_without_a_healthy_estimate_the_stick_takes_nothing_off_the_ground() {
+    let mut r = Rig::new(AltMode::Hold);
+    r.baro = Baro::Silent;
+    r.run(Rig::thr(CENTRE), 2.0);
+    assert!(!r.status.estimate_healthy && !r.status.holding);
+    assert_eq!(r.cmd.throttle, Some(StickCounts(0)), "centred means hold: idle, not half throttle");
+    assert_eq!(r.plant.z_m, 0.0);
+    // The automatic disarm counts the idle.
+    r.run(Rig::thr(CENTRE), 3.5);
+    assert_eq!(r.decision.state, FlightState::Disarmed);
+}
+
+#[test]
 fn the_hold_holds_a_height_with_a_noisy_barometer() {
     let mut r = Rig::new(AltMode::Hold);
     r.take_off_to(1.0);

@@ -188,10 +188,9 @@ pub struct AltitudeEstimator {
 
 impl AltitudeEstimator {
     pub fn new(cfg: AltitudeConfig) -> Self {
-        let tau = cfg.time_constant_s;
         AltitudeEstimator {
             cfg,
-            k: [3.0 / tau, 3.0 / (tau * tau), 1.0 / (tau * tau * tau)],
+            k: Self::gains(&cfg),
             height_m: 0.0,
             speed_m_s: 0.0,
             bias_m_s2: 0.0,
@@ -201,6 +200,19 @@ impl AltitudeEstimator {
             gated_in_a_row: 0,
             on_ground: false,
         }
+    }
+
+    /// `3/τ`, `3/τ²`, `1/τ³`: all three poles at `−1/τ`.
+    fn gains(cfg: &AltitudeConfig) -> [f32; 3] {
+        let tau = cfg.time_constant_s;
+        [3.0 / tau, 3.0 / (tau * tau), 1.0 / (tau * tau * tau)]
+    }
+
+    /// New tunables, the state kept (a parameter change on the ground: the take-off's re-zero
+    /// and the floor settle what a new time constant or thrust scale moves).
+    pub fn set_config(&mut self, cfg: AltitudeConfig) {
+        self.k = Self::gains(&cfg);
+        self.cfg = cfg;
     }
 
     pub fn estimate(&self) -> AltitudeEstimate {
@@ -591,6 +603,18 @@ mod tests {
         }
         let e = est.estimate();
         assert!(e.height_m.abs() < 0.01 && e.vertical_speed_m_s.abs() < 0.01, "{e:?}");
+    }
+
+    #[test]
+    fn a_new_time_constant_keeps_the_estimate_and_moves_the_poles() {
+        let mut est = at_ground();
+        for step in 0..20 * STEPS_PER_S {
+            est.update(0.0, baro_due(step).then_some(pressure_at(1.0)), 0.0, false);
+        }
+        let before = est.estimate();
+        est.set_config(AltitudeConfig { time_constant_s: 3.0, ..AltitudeConfig::DEFAULT });
+        assert_eq!(est.estimate(), before);
+        assert_eq!(est.k, AltitudeEstimator::new(AltitudeConfig { time_constant_s: 3.0, ..AltitudeConfig::DEFAULT }).k);
     }
 
     #[test]

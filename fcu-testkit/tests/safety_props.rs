@@ -309,8 +309,7 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
             sensor_fault,
             tilt_rad,
             gcs: fcu_core::gcs::GcsCommands::NONE,
-            // The failsafe without a height estimate (levels, then stops the motors): the
-            // monitor models that one; the descent on the estimate is fcu-core's althold tests'.
+            // No height estimate: the manual failsafe these properties state.
             descent_cap_ticks: 0,
             landed: false,
         },
