@@ -468,7 +468,7 @@ pub fn lines(m: &Metrics) -> Vec<(&'static str, String)> {
         ("touchdown speed", fmt_opt(m.touchdown_speed_m_s, " m/s")),
         ("height lost on leaving hold", fmt_opt(m.height_lost_leaving_hold_m, " m")),
         ("disarmed after touchdown", fmt_opt(m.disarmed_after_touchdown_s, " s")),
-        ("throttle oscillation in hold", fmt_opt(m.throttle_oscillation_counts, " counts (collective, 1-5 Hz RMS)")),
+        ("throttle oscillation in hold", fmt_opt(m.throttle_oscillation_counts, " counts")),
     ]
 }
 
