@@ -366,7 +366,9 @@ impl Plant {
             s.quat = yaw_only(s.quat);
             s.on_ground = true;
         }
-        let impact_m_s2 = match self.impact.filter(|_| s.on_ground) {
+        // Felt to the end even if the thrust lifts the drone off again at once (a bounce): the
+        // floor took the whole fall's speed.
+        let impact_m_s2 = match self.impact {
             Some(i) => {
                 let felt = i.up_m_s2 * (i.remaining_s.min(dt_s) / dt_s);
                 let remaining_s = i.remaining_s - dt_s;
@@ -383,9 +385,9 @@ impl Plant {
         let specific = if s.on_ground {
             quat_rotate_inverse(s.quat, [0.0, 0.0, GRAVITY_M_S2 + impact_m_s2])
         } else {
-            let f_earth = self.non_gravity_force_earth(&s, dist);
-            let f_body = quat_rotate_inverse(s.quat, f_earth);
-            f_body.map(|f| f / self.params.mass_kg)
+            let mut a_earth = self.non_gravity_force_earth(&s, dist).map(|f| f / self.params.mass_kg);
+            a_earth[2] += impact_m_s2;
+            quat_rotate_inverse(s.quat, a_earth)
         };
         self.kin = Kinematics {
             specific_force_body_m_s2: specific,
@@ -728,6 +730,30 @@ mod tests {
         assert!((hardest_m_s2 - fastest_down / IMPACT_S).abs() < 1.0, "{hardest_m_s2} m/s² at the stop");
         // A fall from 1 m less the drag: just under √(2 g h) = 4.43 m/s when it touches.
         assert!(fastest_down > 3.5 && fastest_down < 4.43, "{fastest_down}");
+    }
+
+    #[test]
+    fn a_touchdown_that_bounces_off_at_once_is_still_felt_whole() {
+        // Descending at 0.5 m/s onto the floor with more thrust than the weight (the hold near
+        // the floor, ground effect on top): the floor takes the speed, the thrust lifts it again
+        // within a substep, and what the accelerometer integrates is still the speed's change.
+        let mut p = airborne(PlantParams::default());
+        p.state.pos_earth_m[2] = 0.01;
+        let duty = p.params.duty_for_fraction(1.1 * p.params.hover_fraction(p.state.battery_v));
+        fly(&mut p, [(duty * 2000.0) as u16; 4], 0.0);
+        p.state.vel_earth_m_s[2] = -0.5;
+        let dt = 0.00025;
+        let mut felt_m_s = 0.0;
+        let mut touched = false;
+        for _ in 0..400 {
+            p.step(dt, &Disturbance::default());
+            touched |= p.state.pos_earth_m[2] == 0.0;
+            let k = p.kinematics().specific_force_body_m_s2;
+            felt_m_s += (k[2] - GRAVITY_M_S2) * dt;
+        }
+        assert!(touched, "never reached the floor");
+        let change = p.state.vel_earth_m_s[2] + 0.5;
+        assert!((felt_m_s - change).abs() < 0.02, "felt {felt_m_s:.3} m/s, the speed changed by {change:.3} m/s");
     }
 
     #[test]
