@@ -8,10 +8,12 @@
 //!   estimate, and the output (rate loop → mixer → guard). Every fifth tick it hands out an
 //!   [`OuterJob`] (the block's accelerometer words and summed gyro, and the sticks).
 //! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler and
-//!   tilt → stick targets and the heading target → angle loop → the run-time [`Gains`], and
-//!   returns an [`OuterResult`] that the control tick applies at its next tick
-//!   ([`ControlTick::apply_outer`]). The outer step is the only owner of the heading target,
-//!   the tilt and the gains.
+//!   tilt → stick targets and the heading target → angle loop → the run-time [`Gains`] → the
+//!   vertical half (the barometer burst given by [`OuterStep::set_baro`], the height estimate,
+//!   altitude hold: [`crate::althold::Vertical`]), and returns an [`OuterResult`] that the
+//!   control tick applies at its next tick ([`ControlTick::apply_outer`]). The outer step is the
+//!   only owner of the heading target, the tilt, the gains and the height; the tick takes one
+//!   value from the vertical half, the throttle the hold flies instead of the stick's.
 //!
 //! The configuration is never changed: what both halves read is worked out from it once (the
 //! tick's [`TickParams`]), and the gains scale only the tick's rate loop and throttle map.
