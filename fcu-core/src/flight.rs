@@ -835,10 +835,13 @@ mod tests {
         let centred = ForcedRadio { width_counts: [6100, 5900, 6150, 6300], ..FLYING };
         let mut manual = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
         let mut hold = FlightController::new(with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
-        let disarmed = ForcedRadio { armed: false, ..centred };
+        // Armed with the throttle low (as the safe supervisor arms), then the stick centred.
+        let disarmed = ForcedRadio { armed: false, width_counts: [6100, 5900, 4400, 6300], ..centred };
+        let armed_low = ForcedRadio { armed: true, ..disarmed };
         for fc in [&mut manual, &mut hold] {
             fly_with_baro(fc, 0, 2500, &disarmed, usize::MAX);
-            fly_with_baro(fc, 2500, 4000, &centred, usize::MAX);
+            fly_with_baro(fc, 2500, 2600, &armed_low, usize::MAX);
+            fly_with_baro(fc, 2600, 4000, &centred, usize::MAX);
         }
         let (m, h) = (manual.status(), hold.status());
         assert!(m.compare.iter().all(|&c| c > 0), "{:?}", m.compare);
