@@ -47,9 +47,10 @@ fn a_calm_hold_drifts_less_than_0_10_m_over_30_s() {
 }
 
 /// The goal is not met: the hold itself is steady (its RMS about its mean is printed, some
-/// 0.015 m), but the height estimate sits 0.1–0.4 m off the true height after the climb (the
-/// ground effect in the lift-off reference fading on the way up, docs/altitude.md), and the
-/// error is measured on the true height. `-- --ignored` runs it.
+/// 0.015 m), but the height estimate sits 0.06–0.36 m off the true height after the climb (the
+/// prop wash between the lift-off's thrust, where the estimate is re-referenced, and the
+/// hover's; docs/simulation.md), and the error is measured on the true height. `-- --ignored`
+/// runs it.
 #[test]
 #[ignore = "issue 28 goal missed: height RMS error in a calm hold, median 0.24 m against 0.05 m (the estimate's offset)"]
 fn a_calm_hold_stays_within_0_05_m_rms() {
