@@ -583,7 +583,6 @@ mod app {
     /// barometer's from `fcu_core::baro::registers`, the configuration its burst is read
     /// with (75 Hz, ODR/20 low-pass, BDU, auto-increment). The reference's own LPS22HB table
     /// sets it to 25 Hz unfiltered, never reads it, and waits a second for its reset.
-    #[inline(never)]
     fn boot_table(sensor: Sensor) -> BootTable {
         match sensor {
             Sensor::Lps22hb => BootTable {
