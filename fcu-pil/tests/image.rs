@@ -529,6 +529,33 @@ fn status_lines_report_the_cores_states() {
     assert!(debug_lines + 25 >= expected, "{debug_lines} debug lines, about {expected} expected at 25 Hz");
 }
 
+/// A scenario's parameter settings (`BoardSetup::settings`, by name, as a ground station sets
+/// them) are in the set saved in flash before power-on, over the product's defaults, with the
+/// text lines the harness reads; the image boots on that set and flies. A name the table does
+/// not know fails the boot, naming it.
+#[test]
+fn parameter_settings_are_saved_before_power_on_and_the_image_boots_on_them() {
+    use fcu_params::snapshot;
+    let setup = BoardSetup { settings: vec![("RATE_PIT_P".into(), 0.0123)], ..BoardSetup::default() };
+    let mut b = boot(&setup);
+    assert!(b.flying(), "{}", b.boot_stall());
+    b.run_to(1.5).unwrap();
+    assert!(!b.raw_uart && !b.statuses.is_empty(), "no STATUS line: {}", b.uart_text());
+    let memory = b.machine.board().flash.memory();
+    let sector = |k: usize| -> Vec<u32> {
+        memory[0x4000 + k * 0x4000..0x8000 + k * 0x4000].chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect()
+    };
+    let (saved, source) = snapshot::load_config([&sector(0), &sector(1)], &fcu_core::Config::default());
+    assert!(!matches!(source, snapshot::Source::Refused(_)), "{source:?}");
+    let value = |name: &str| fcu_params::index_of(name.as_bytes()).and_then(|i| fcu_params::value(&saved, i));
+    assert_eq!(value("RATE_PIT_P"), Some(0.0123));
+    assert_eq!(value("LINK_PROTOCOL"), Some(0.0), "text lines for the harness");
+
+    let unknown = BoardSetup { settings: vec![("NO_SUCH_PARAM".into(), 1.0)], ..BoardSetup::default() };
+    let refused = EmulatedBoard::boot(image(), &unknown, rig::imu_at_rest(1)).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(refused.contains("NO_SUCH_PARAM"), "{refused}");
+}
+
 /// The image as shipped speaks MAVLink from boot (a HEARTBEAT within its first second of
 /// flight, no text line), and the harness leaves its UART as bytes; by default the harness saves
 /// `LINK_PROTOCOL` 0 and reads the same image's text lines.
