@@ -207,6 +207,30 @@ fn a_wrong_who_am_i_keeps_the_drone_on_the_ground() {
     assert!(dark_blinks >= 2, "LED1 never blinked the sensor's count: {leds:?}");
 }
 
+/// A barometer that does not answer at boot (its WHO_AM_I read 0x00 through fcu-core's
+/// LPS22HB sequence, tried three times): named on the UART's FATAL line and by three blinks,
+/// as a missing IMU is by one. Whether the board may fly without it is the core's rule
+/// (`BootVerdict`): today it may not, so the control timer never starts and the motors stay off.
+#[test]
+fn a_barometer_that_does_not_answer_at_boot_is_named_on_the_uart_and_the_leds() {
+    let setup = BoardSetup { who_am_i_override: [None, None, Some(0x00)], boot_timeout_s: Some(7.0), ..BoardSetup::default() };
+    let mut b = boot(&setup);
+    assert!(!b.flying(), "the control timer started with the barometer missing");
+    b.run_to(0.0).unwrap();
+    let fatal: Vec<_> = b.lines.iter().filter(|l| matches!(l.line, Line::Fatal(_))).collect();
+    assert!(fatal.len() >= 2, "the FATAL line should repeat; UART:\n{}", b.uart_text());
+    assert!(fatal[0].text.starts_with("FATAL sensor LPS22HB WHO_AM_I=0x00 expected 0xB1"), "{}", fatal[0].text);
+    assert!(!b.uart_text().contains("LPS22HB initialized"), "{}", b.uart_text());
+    let leds = &b.machine.board().records.leds;
+    let cycle_s = f64::from(fcu_core::telemetry::FAULT_CYCLE_MS) / 1000.0;
+    let last_cycle: Vec<_> =
+        leds.iter().filter(|&&(t, _, _)| (7.0 - cycle_s - 0.01..7.0 - 0.01).contains(&fcu_pil::periph::time_to_s(t))).collect();
+    let dark_blinks = last_cycle.iter().filter(|&&&(_, led1, _)| !led1).count();
+    assert_eq!(dark_blinks, 3, "LED1 should go dark 3 times per fault cycle: {last_cycle:?}");
+    let now = b.machine.now();
+    assert_eq!(b.machine.board_mut().motor_compares(now), [0; 4]);
+}
+
 /// A dead HSE crystal: the boot's wait for it is bounded, the board runs on the HSI, says so
 /// on the UART and with its LED code (4 blinks), and never starts the control tick: not a
 /// dark, silent board.
