@@ -11,8 +11,10 @@
 //! |              |                         |      | its edge budget muted till the wrap          |
 //! | control      | TIM1_BRK_TIM9 (CC1, tick)| 3   | CC1: start the IMU burst; tick: edges →      |
 //! |              |                         |      | decoder, burst → `ControlTick::tick` → TIM4, |
+//! |              |                         |      | every second outer job the barometer's burst,|
 //! |              |                         |      | feed IWDG                                    |
-//! | outer_step   | software                | 2    | battery reading + `OuterStep::run` → `control`  |
+//! | outer_step   | software                | 2    | battery reading, the job's barometer burst + |
+//! |              |                         |      | `OuterStep::run` → `control`                 |
 //! | report       | software                | 1    | status snapshots → lines into the UART queue |
 //! | uart_tx      | USART1 (TXE)            | 1    | drains the UART queue, one byte per TXE      |
 //! | housekeeping | software (monotonic)    | 1    | LEDs, battery ADC (10 Hz)                    |
@@ -22,6 +24,10 @@
 //! |              |                         |      | queue (200 Hz)                               |
 #![no_std]
 #![no_main]
+// RTIC's generated `spawn` gives a task's message back in its `Err` when the task is busy: the
+// status snapshot (its `Status` carries the altitude report) is that message, and a busy
+// `report` only skips it. Nothing is boxed on a board without a heap.
+#![allow(clippy::result_large_err)]
 
 mod clock;
 mod cycles;
@@ -109,10 +115,11 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
-    use crate::sensor_bus::{BusError, SensorBus, BURST_BYTES};
+    use crate::sensor_bus::{BusError, SensorBus};
     use crate::timers::{Motors, RcCapture, TickStart, TickTimer};
     use crate::watchdog::Watchdog;
     use crate::Mono;
+    use fcu_core::baro::{self, registers as baro_registers, RawBaro};
     use fcu_core::boot::BootVerdict;
     use fcu_core::flight::{ControlTick, OuterJob, OuterResult, OuterStep, Status};
     use fcu_core::imu::registers::{self, lsm6dsl, Sensor};
@@ -139,8 +146,13 @@ mod app {
     const FAULT_REPEAT_MS: u32 = 2000;
     /// How long the control tick waits for an IMU burst still in flight (it starts 60 µs
     /// before the tick and takes about 41 µs) before it ticks without a sample: 100 µs of the
-    /// 84 MHz cycle counter.
+    /// 84 MHz cycle counter. The barometer's burst (6 bytes, about 24 µs) has the same bound.
     const BURST_WAIT_CYCLES: u32 = 8_400;
+    /// The barometer is read with every second outer job: at 80 Hz (every tenth 800 Hz tick),
+    /// the tick multiple just above its 75 Hz output rate, so each of its samples is read at
+    /// least once and none is overwritten unread (the outer step in between gets `None`, which
+    /// the core's health check takes as a read with no new sample).
+    const OUTER_JOBS_PER_BARO_READ: u8 = 2;
     /// How long the address byte (3 µs at 2.625 MHz) may take to leave: 20 µs.
     const ADDRESS_WAIT_CYCLES: u32 = 1_680;
     const UART_BAUD: u32 = 115_200;
@@ -225,16 +237,18 @@ mod app {
     #[shared]
     struct Shared {
         outer_result: Option<OuterResult>,
-        /// The job the control tick hands the outer step. Passed through this slot rather
-        /// than as the spawn's message: RTIC copies a message inside a critical section, and
-        /// this one (376 bytes) held every interrupt off for 4 µs with slow flash.
-        outer_job: Option<OuterJob>,
+        /// The job the control tick hands the outer step, with the barometer burst read for it
+        /// (`None`: none read for this job, or the read failed). Passed through this slot
+        /// rather than as the spawn's message: RTIC copies a message inside a critical
+        /// section, and this one (376 bytes) held every interrupt off for 4 µs with slow flash.
+        outer_job: Option<(OuterJob, Option<RawBaro>)>,
         uart: UartOut,
         led_pattern: LedPattern,
         battery_mv: u32,
         /// Radio pins muted for an edge storm since boot (`RcCapture::take_edges`).
         radio_mutes: u32,
-        /// The sensor bus: the control tick starts the IMU burst, the SPI2 interrupt receives it.
+        /// The sensor bus: the control tick starts the IMU's and the barometer's bursts, DMA1
+        /// receives them.
         bus: SensorBus,
         /// The latest status for the link task (MAVLink), from `report`.
         latest: Option<Snapshot>,
@@ -556,8 +570,38 @@ mod app {
         crate::cycles::wait_since(crate::cycles::now(), cycles);
     }
 
-    /// Plays each sensor's boot table from `fcu_core::imu::registers` and collects the
-    /// `WHO_AM_I` answers; the core decides what they mean.
+    /// What the boot plays on one sensor: interface writes, a settle time, writes before
+    /// `WHO_AM_I`, then the configuration.
+    struct BootTable {
+        interface: &'static [registers::RegWrite],
+        settle_ms: u32,
+        after_settle: &'static [registers::RegWrite],
+        config: &'static [registers::RegWrite],
+    }
+
+    /// The IMU's and the magnetometer's tables from `fcu_core::imu::registers`; the
+    /// barometer's from `fcu_core::baro::registers`, the configuration its burst is read
+    /// with (75 Hz, ODR/20 low-pass, BDU, auto-increment). The reference's own LPS22HB table
+    /// sets it to 25 Hz unfiltered, never reads it, and waits a second for its reset.
+    fn boot_table(sensor: Sensor) -> BootTable {
+        match sensor {
+            Sensor::Lps22hb => BootTable {
+                interface: &baro_registers::INTERFACE,
+                settle_ms: baro_registers::RESET_SETTLE_MS,
+                after_settle: &baro_registers::AFTER_RESET,
+                config: &baro_registers::CONFIG,
+            },
+            Sensor::Lsm6dsl | Sensor::Lis2mdl => BootTable {
+                interface: sensor.interface_writes(),
+                settle_ms: sensor.settle_ms(),
+                after_settle: sensor.after_settle_writes(),
+                config: sensor.config_writes(),
+            },
+        }
+    }
+
+    /// Plays each sensor's boot table ([`boot_table`]) and collects the `WHO_AM_I` answers;
+    /// the core decides what they mean.
     fn init_sensors(bus: &mut SensorBus, uart: &mut UartOut) -> BootVerdict {
         // The sensors boot after power-up and drop what they hear meanwhile.
         delay_ms(registers::POWER_UP_MS);
@@ -580,21 +624,22 @@ mod app {
     fn init_sensor(bus: &mut SensorBus, sensor: Sensor) -> u8 {
         const BUS_FAILED: u8 = 0x00;
         let play = |bus: &mut SensorBus, writes: &[registers::RegWrite]| writes.iter().try_for_each(|w| bus.write(sensor, w.addr, w.value));
+        let table = boot_table(sensor);
         let mut who_am_i = BUS_FAILED;
         for attempt in 0..registers::WHO_AM_I_ATTEMPTS {
             if attempt > 0 {
                 delay_ms(registers::WHO_AM_I_RETRY_MS);
             }
-            if play(bus, sensor.interface_writes()).is_err() {
+            if play(bus, table.interface).is_err() {
                 continue;
             }
-            delay_ms(sensor.settle_ms());
-            if play(bus, sensor.after_settle_writes()).is_err() {
+            delay_ms(table.settle_ms);
+            if play(bus, table.after_settle).is_err() {
                 continue;
             }
             who_am_i = bus.read_u8(sensor, sensor.who_am_i_addr()).unwrap_or(BUS_FAILED);
             if sensor.identifies(who_am_i) {
-                return match play(bus, sensor.config_writes()) {
+                return match play(bus, table.config) {
                     Ok(()) => who_am_i,
                     Err(_) => BUS_FAILED,
                 };
@@ -624,17 +669,19 @@ mod app {
         }
     }
 
-    /// The IMU burst's DMA is done but for the last byte: stop the clock during it, at the
-    /// highest priority (the 3-wire end-of-read window is met from this entry).
+    /// A burst's DMA (the IMU's or the barometer's) is done but for the last byte: stop the
+    /// clock during it, at the highest priority (the 3-wire end-of-read window is met from
+    /// this entry).
     #[task(binds = DMA1_STREAM3, priority = 5, shared = [bus])]
     fn sensor_dma(mut cx: sensor_dma::Context) {
         cx.shared.bus.lock(SensorBus::on_dma_complete);
     }
 
-    /// Starts the IMU burst: the address byte goes out with the bus unlocked between short
-    /// looks (the radio's capture interrupt is never held off for the byte's 3 µs).
-    fn start_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<(), BusError> {
-        bus.lock(|bus| bus.send_burst_address(Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G))?;
+    /// Starts a burst of `N` bytes from `sensor`'s register `addr`: the address byte goes out
+    /// with the bus unlocked between short looks (the radio's capture interrupt is never held
+    /// off for the byte's 3 µs).
+    fn start_burst<const N: usize>(bus: &mut impl rtic::Mutex<T = SensorBus>, sensor: Sensor, addr: u8) -> Result<(), BusError> {
+        bus.lock(|bus| bus.send_burst_address::<N>(sensor, addr))?;
         if crate::cycles::poll(ADDRESS_WAIT_CYCLES, || bus.lock(|bus| bus.address_sent()).then_some(())).is_none() {
             bus.lock(SensorBus::abandon_burst);
             return Err(BusError::Timeout);
@@ -644,13 +691,13 @@ mod app {
 
     /// Waits for the burst the DMA receives (the radio's and the DMA's interrupts run
     /// meanwhile); a burst that does not come in time is abandoned.
-    fn wait_for_burst(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<[u8; BURST_BYTES], BusError> {
+    fn wait_for_burst<const N: usize>(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Result<[u8; N], BusError> {
         let taken = crate::cycles::poll(BURST_WAIT_CYCLES, || {
             // The flag first: the bus's lock would hold off the very interrupt that sets it.
             crate::sensor_bus::last_byte_started().then(|| bus.lock(SensorBus::take_burst)).flatten()
         });
         match taken {
-            Some(done) => done.map(crate::sensor_bus::burst_bytes),
+            Some(done) => done.map(crate::sensor_bus::burst_bytes::<N>),
             None => {
                 bus.lock(SensorBus::abandon_burst);
                 Err(BusError::Timeout)
@@ -658,12 +705,22 @@ mod app {
         }
     }
 
-    /// The control tick: IMU burst → `ControlTick::tick` → TIM4; the outer step when due.
+    /// The barometer's burst, STATUS through TEMP_OUT_H (`None` when the read failed; the
+    /// core decides what that means). Read after the motor write: the IMU's burst is in, so
+    /// the bus is free, and the next one starts a millisecond later.
+    fn read_baro(bus: &mut impl rtic::Mutex<T = SensorBus>) -> Option<RawBaro> {
+        const N: usize = baro_registers::BURST_LEN;
+        start_burst::<N>(bus, Sensor::Lps22hb, baro_registers::BURST_START).ok()?;
+        wait_for_burst::<N>(bus).ok().map(|bytes| baro::decode_burst(&bytes))
+    }
+
+    /// The control tick: IMU burst → `ControlTick::tick` → TIM4; the outer step when due, with
+    /// the barometer's burst read for it every second time.
     #[task(
         binds = TIM1_BRK_TIM9,
         priority = 3,
         shared = [outer_result, outer_job, bus, mailbox, watchdog],
-        local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
+        local = [tick_timer, edges_in, decoder, inner, motors, burst_started: bool = false, outer_overruns: u32 = 0, bus_errors: u32 = 0, baro_reads: u32 = 0, baro_bus_errors: u32 = 0, baro_countdown: u8 = 0, ticks: u32 = 0, snapshot_countdown: u16 = 0, rc_widths_counts: [u16; 4] = [0; 4]]
     )]
     fn control(mut cx: control::Context) {
         let events = cx.local.tick_timer.take_events();
@@ -673,7 +730,7 @@ mod app {
             // A lead before the tick: the burst's bytes arrive by DMA meanwhile, and the
             // work that does not need them is done now, off the path from the tick to the
             // motors (the tick's state does not change until the tick).
-            *cx.local.burst_started = start_burst(&mut cx.shared.bus).is_ok();
+            *cx.local.burst_started = start_burst::<{ lsm6dsl::BURST_LEN }>(&mut cx.shared.bus, Sensor::Lsm6dsl, lsm6dsl::OUTX_L_G).is_ok();
             if let Some(result) = cx.shared.outer_result.lock(Option::take) {
                 inner.apply_outer(&result);
             }
@@ -712,7 +769,19 @@ mod app {
         cx.local.motors.write(out.compare);
 
         if let Some(job) = out.outer_job {
-            if cx.shared.outer_job.lock(|slot| slot.replace(job).is_some()) {
+            *cx.local.baro_countdown = cx.local.baro_countdown.saturating_sub(1);
+            let baro = if *cx.local.baro_countdown == 0 {
+                *cx.local.baro_countdown = OUTER_JOBS_PER_BARO_READ;
+                let read = read_baro(&mut cx.shared.bus);
+                match read {
+                    Some(_) => *cx.local.baro_reads = cx.local.baro_reads.saturating_add(1),
+                    None => *cx.local.baro_bus_errors = cx.local.baro_bus_errors.saturating_add(1),
+                }
+                read
+            } else {
+                None
+            };
+            if cx.shared.outer_job.lock(|slot| slot.replace((job, baro)).is_some()) {
                 // The previous job was never started (the outer step still ran the one
                 // before): it is lost to this one; counted and reported on the status line.
                 *cx.local.outer_overruns = cx.local.outer_overruns.saturating_add(1);
@@ -747,11 +816,14 @@ mod app {
     /// The outer step (estimator + angle loop) on each job's snapshot, as long as one waits.
     #[task(priority = 2, shared = [outer_result, outer_job, battery_mv, mailbox], local = [outer])]
     async fn outer_step(mut cx: outer_step::Context) {
-        while let Some(job) = cx.shared.outer_job.lock(Option::take) {
+        while let Some((job, baro)) = cx.shared.outer_job.lock(Option::take) {
             crate::link_task::config_to_outer(&mut cx.shared.mailbox, cx.local.outer);
             // The battery compensation's input (the core filters it and decides what it does).
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             cx.local.outer.set_battery_mv(battery_mv);
+            // The barometer's burst read for this job, or `None` (the core's health check
+            // tells a missed read from a dead part).
+            cx.local.outer.set_baro(baro);
             let result = cx.local.outer.run(&job);
             cx.shared.outer_result.lock(|slot| *slot = Some(result));
         }

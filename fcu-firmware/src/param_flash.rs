@@ -15,8 +15,10 @@
 //! word's worst-case programming time away ([`QUIET_CYCLES`]). The check and the store that
 //! starts the operation are one critical section. A word then ends before the next burst
 //! starts; an erase, which outlasts hundreds of ticks, stalls the tick whole (no burst starts
-//! until it ends) instead of cutting one. `docs/firmware.md#parameter-saves` says why this and
-//! not code in RAM.
+//! until it ends) instead of cutting one. The barometer's burst starts and ends within one run
+//! of the control task, after the tick's motor write, so an operation started from a lower
+//! priority never overlaps it. `docs/firmware.md#parameter-saves` says why this and not code in
+//! RAM.
 
 use stm32f4xx_hal::pac::{FLASH, TIM9};
 

@@ -1,14 +1,15 @@
 //! SPI2 as the board wires it: 3-wire half-duplex (one bidirectional data line, PB15), mode 3,
 //! with a software chip select per sensor. Only moves bytes; what to write where is in
-//! `fcu_core::imu::registers`.
+//! `fcu_core::imu::registers` and `fcu_core::baro::registers`.
 //!
 //! The HAL configures the peripheral (`Spi::new_bidi`), but its bidirectional receive path
 //! leaves BIDIOE set, so reads are done here on the registers with the receive sequence of
 //! the reference manual (RM0368, "bidirectional receive-only procedure"): in 1-line receive
 //! mode the master clocks continuously from the moment SPE is set, so the clock is stopped by
 //! clearing SPE during the last byte. At boot the reads are polled (interrupts are off in
-//! `init`); in flight the IMU burst's bytes go to memory by DMA1 stream 3 and its
-//! transfer-complete interrupt stops the clock, so nothing polls with interrupts masked.
+//! `init`); in flight the bursts' bytes (the IMU's every control tick, the barometer's at its
+//! rate) go to memory by DMA1 stream 3 and its transfer-complete interrupt stops the clock, so
+//! nothing polls with interrupts masked.
 
 use core::sync::atomic::{fence, AtomicBool, AtomicU8, Ordering};
 use fcu_core::imu::registers::{read_address, write_address, Sensor};
@@ -72,26 +73,35 @@ pub struct SensorBus {
     rx_stopped_at: u32,
 }
 
-/// Bytes of the one burst read in flight: the IMU's accel + gyro block.
-pub const BURST_BYTES: usize = fcu_core::imu::registers::lsm6dsl::BURST_LEN;
+/// The longest burst read: the IMU's accel + gyro block (the barometer's is 6 bytes).
+pub const MAX_BURST_BYTES: usize = fcu_core::imu::registers::lsm6dsl::BURST_LEN;
+
+/// A burst of `N` bytes fits the DMA's buffer and has a last byte apart from the DMA's (the
+/// stream moves `N − 1`, and a stream of 0 items is not a transfer): checked when the
+/// firmware is built, not in flight.
+const fn check_burst_len<const N: usize>() {
+    assert!(N >= 2 && N <= MAX_BURST_BYTES, "a burst is 2 to MAX_BURST_BYTES bytes");
+}
 
 /// The DMA stream that receives SPI2's bytes.
 const RX_STREAM: usize = 3;
 
 /// The burst's first bytes, written by the DMA (the last one is read from DR once the clock
 /// has stopped). Atomics: the CPU reads what another bus master wrote, with no `unsafe`.
-static BURST_DMA: [AtomicU8; BURST_BYTES - 1] = [const { AtomicU8::new(0) }; BURST_BYTES - 1];
+static BURST_DMA: [AtomicU8; MAX_BURST_BYTES - 1] = [const { AtomicU8::new(0) }; MAX_BURST_BYTES - 1];
 
 /// Set once the transfer-complete interrupt has stopped the clock: the control tick polls
 /// this without taking the bus, whose lock would mask that very interrupt and could push it
 /// past the end-of-read window.
 static LAST_BYTE_STARTED: AtomicBool = AtomicBool::new(false);
 
-/// The burst taken by [`SensorBus::take_burst`]: the bytes the DMA wrote, then `last`.
-pub fn burst_bytes(last: u8) -> [u8; BURST_BYTES] {
+/// The burst of `N` bytes taken by [`SensorBus::take_burst`] (started with the same `N`): the
+/// bytes the DMA wrote, then `last`.
+pub fn burst_bytes<const N: usize>(last: u8) -> [u8; N] {
+    const { check_burst_len::<N>() };
     // What the DMA wrote is complete before its flag rose and the last byte was seen.
     fence(Ordering::Acquire);
-    let mut bytes = [last; BURST_BYTES];
+    let mut bytes = [last; N];
     for (b, slot) in bytes.iter_mut().zip(BURST_DMA.iter()) {
         *b = slot.load(Ordering::Relaxed);
     }
@@ -262,14 +272,15 @@ impl SensorBus {
         stopped.ok_or(BusError::Timeout)
     }
 
-    /// Starts a burst read of [`BURST_BYTES`] from `addr`, in two steps so that no lock is
+    /// Starts a burst read of `N` bytes from `addr`, in two steps so that no lock is
     /// held while the address byte shifts out (3 µs): this one selects the sensor, readies the
     /// DMA stream and writes the address; once [`SensorBus::address_sent`],
     /// [`SensorBus::receive_burst`] turns the line around and starts the clock. Then SPI2
     /// clocks the bytes in and DMA1 stream 3 moves all but the last to memory, so nothing polls
     /// the bus or takes an interrupt per byte. A burst still in flight (its waiter gave up
     /// without abandoning it) is abandoned first.
-    pub fn send_burst_address(&mut self, sensor: Sensor, addr: u8) -> Result<(), BusError> {
+    pub fn send_burst_address<const N: usize>(&mut self, sensor: Sensor, addr: u8) -> Result<(), BusError> {
+        const { check_burst_len::<N>() };
         if self.burst.is_some() {
             self.abandon_burst();
         }
@@ -285,13 +296,14 @@ impl SensorBus {
         let stream = self.dma.st(RX_STREAM);
         let dr = self.spi.dr().as_ptr() as u32;
         let memory = BURST_DMA.as_ptr() as u32;
-        // SAFETY: the stream reads SPI2's data register and writes BURST_DMA, a static of
-        // exactly NDTR bytes that only this module reads; nothing else is given to it.
+        // SAFETY: the stream reads SPI2's data register and writes BURST_DMA, a static of at
+        // least NDTR bytes (`check_burst_len`) that only this module reads; nothing else is
+        // given to it.
         unsafe {
             stream.par().write(|w| w.pa().bits(dr));
             stream.m0ar().write(|w| w.m0a().bits(memory));
         }
-        stream.ndtr().write(|w| w.ndt().set((BURST_BYTES - 1) as u16));
+        stream.ndtr().write(|w| w.ndt().set((N - 1) as u16));
         stream.cr().write(|w| w.chsel().set(0).dir().peripheral_to_memory().minc().set_bit().tcie().set_bit().pl().high());
         self.select(sensor, true);
         if let Err(e) = self.send(read_address(addr)) {

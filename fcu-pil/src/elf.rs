@@ -22,6 +22,8 @@ pub struct Image {
     /// Word 0 of the vector table.
     pub initial_sp: u32,
     pub symbols: HashMap<String, u32>,
+    /// The symbols' sizes in bytes, for the ones that give one (a static's extent in RAM).
+    pub symbol_sizes: HashMap<String, u32>,
     /// Functions by address: (start, size, name), sorted, for naming a PC.
     pub functions: Vec<(u32, u32, String)>,
     /// Flash bytes (vector table + text + rodata + data's load image), as `cargo size` adds them.
@@ -63,11 +65,15 @@ impl Image {
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .ok_or_else(|| format!("{name}: vector table too short"))?;
         let mut symbols = HashMap::new();
+        let mut symbol_sizes = HashMap::new();
         let mut functions = Vec::new();
         for sym in elf.symbols() {
             if let Ok(n) = sym.name() {
                 if !n.is_empty() {
                     symbols.insert(n.to_string(), sym.address() as u32);
+                    if sym.size() > 0 {
+                        symbol_sizes.insert(n.to_string(), sym.size() as u32);
+                    }
                     if sym.kind() == object::SymbolKind::Text && sym.size() > 0 {
                         // Thumb functions have bit 0 set in their symbol value.
                         functions.push(((sym.address() as u32) & !1, sym.size() as u32, n.to_string()));
@@ -91,7 +97,7 @@ impl Image {
                 _ => {}
             }
         }
-        Ok(Image { path: path.to_path_buf(), segments, initial_sp, symbols, functions, flash_bytes, ram_bytes })
+        Ok(Image { path: path.to_path_buf(), segments, initial_sp, symbols, symbol_sizes, functions, flash_bytes, ram_bytes })
     }
 
     /// The function containing `pc`, its Rust path readable (`fcu_firmware::watchdog::Watchdog::start`).
@@ -113,6 +119,15 @@ impl Image {
 
     pub fn symbol(&self, name: &str) -> Option<u32> {
         self.symbols.get(name).copied()
+    }
+
+    /// The address and size of the one symbol whose (mangled) name contains `part` and that
+    /// gives a size (a static: an RTIC resource's extent in RAM).
+    pub fn sized_symbol_containing(&self, part: &str) -> Option<(u32, u32)> {
+        let mut found =
+            self.symbol_sizes.iter().filter(|(n, _)| n.contains(part)).filter_map(|(n, &size)| Some((*self.symbols.get(n)?, size)));
+        let first = found.next()?;
+        found.all(|s| s == first).then_some(first)
     }
 
     /// The address of the one symbol whose (mangled) name contains `part`, e.g.

@@ -1843,6 +1843,7 @@ mod tests {
             segments: vec![Segment { address: FLASH_BASE, data: flash }],
             initial_sp: SRAM_BASE + 0x1000,
             symbols: HashMap::new(),
+            symbol_sizes: HashMap::new(),
             functions: Vec::new(),
             flash_bytes: 0x400,
             ram_bytes: 0,

@@ -383,6 +383,7 @@ mod tests {
             segments: Vec::new(),
             initial_sp: 0,
             symbols: std::collections::HashMap::new(),
+            symbol_sizes: std::collections::HashMap::new(),
             functions: functions.iter().map(|&(a, n, name)| (a, n, name.to_string())).collect(),
             flash_bytes: 0,
             ram_bytes: 0,

@@ -63,6 +63,12 @@ pub struct BoardSetup {
     /// Add up the time spent in these code ranges from the end of boot
     /// ([`Machine::measure_time_in`]).
     pub measure_time_in: Option<Vec<(u32, u32)>>,
+    /// Parameters set by name over the saved set (`flash_contents`', or the product's
+    /// defaults) before power-on, as a ground station would have set and saved them: a
+    /// scenario's settings (`ALT_MODE` for altitude hold). Saved with `LINK_PROTOCOL` 0, so the
+    /// harness reads the text lines; a name or value the parameter table refuses fails the
+    /// boot, naming it (as does asking for them with [`BoardSetup::mavlink_from_boot`]).
+    pub settings: Vec<(String, f32)>,
 }
 
 impl BoardSetup {
@@ -70,6 +76,11 @@ impl BoardSetup {
     pub fn timing_profile(&self) -> Result<TimingProfile, String> {
         self.timing.map_or_else(TimingProfile::from_env, Ok)
     }
+}
+
+/// `settings` as a parameter file (`NAME VALUE` lines, fcu-params' format).
+fn settings_file(settings: &[(String, f32)]) -> String {
+    settings.iter().map(|(name, value)| format!("{name} {value}\n")).collect()
 }
 
 /// A parsed UART line with the time its last byte left the UART.
@@ -120,11 +131,19 @@ impl EmulatedBoard {
             board.pwr.set_vdd_volts(volts);
         }
         let text_lines;
-        let contents = match (&setup.flash_contents, setup.mavlink_from_boot) {
-            (Some(contents), _) => Some(contents),
-            (None, true) => None,
-            (None, false) => {
-                text_lines = crate::serve::flash_for_flight(Vec::new(), None).map_err(|e| Fault::Setup(format!("{e:?}")))?;
+        let contents = match (&setup.flash_contents, setup.mavlink_from_boot, setup.settings.is_empty()) {
+            (Some(contents), _, true) => Some(contents),
+            (None, true, true) => None,
+            (_, true, false) => {
+                return Err(Fault::Setup(
+                    "parameter settings are saved with LINK_PROTOCOL 0 (text lines): not with mavlink_from_boot".into(),
+                ))
+            }
+            (saved, false, _) => {
+                let file = settings_file(&setup.settings);
+                let text = (!file.is_empty()).then_some(file.as_str());
+                text_lines = crate::serve::flash_for_flight(saved.clone().unwrap_or_default(), text)
+                    .map_err(|e| Fault::Setup(format!("parameter settings {:?}: {e:?}", setup.settings)))?;
                 Some(&text_lines)
             }
         };

@@ -1334,6 +1334,7 @@ mod flash_program {
             segments: vec![Segment { address: 0x0800_0000, data: flash }],
             initial_sp: 0x2001_0000,
             symbols: HashMap::new(),
+            symbol_sizes: HashMap::new(),
             functions: Vec::new(),
             flash_bytes: 0x400,
             ram_bytes: 0,

@@ -639,7 +639,7 @@ impl Chip for Lis2mdl {
 // LPS22HB: its own file, for its sampling clock, BDU and pressure input.
 
 mod lps22hb;
-pub use lps22hb::{lps22hb_reg, BaroInputError, Lps22hb, ISA_SEA_LEVEL_PA};
+pub use lps22hb::{lps22hb_reg, BaroInputError, Lps22hb, PressureReads, ISA_SEA_LEVEL_PA};
 
 // ---------------------------------------------------------------------------------------------
 

@@ -34,6 +34,16 @@
 //!   the datasheet says the bit clears itself when the reset is done and gives no access in
 //!   between; ignoring it is the assumption that catches a driver which does not wait.
 //! - ONE_SHOT with ODR ≠ 0 does nothing (the datasheet's one-shot is for power-down).
+//! - RES_CONF.LC_EN changed while the part converts (ODR ≠ 0) is ignored and counted: the
+//!   datasheet asks for the change in power-down only and does not say what happens otherwise;
+//!   ignoring it is the assumption that catches a driver writing it too late.
+//!
+//! # What a driver read
+//! [`Lps22hb::pressure_reads`]: every read of PRESS_OUT_H (the byte that completes a pressure
+//! word and clears P_DA), how many of them followed a STATUS read with P_DA set in the same
+//! transaction (a burst from STATUS, as the firmware reads it), how many samples were replaced
+//! before being read, and the last word read with its time. For the image's tests: the rate the
+//! firmware reads at, that it misses no sample, and what it got.
 //!
 //! # Assumptions (not in the datasheet)
 //! - A one-shot conversion is in the output registers when the write's byte ends, and the bit
@@ -59,6 +69,7 @@ pub mod lps22hb_reg {
     pub const TEMP_OUT_H: u8 = 0x2C;
     /// Reading it restarts the pressure low-pass.
     pub const LPFP_RES: u8 = 0x33;
+    pub const RES_CONF: u8 = 0x1A;
     pub const WHO_AM_I_VALUE: u8 = 0xB1;
 
     /// CTRL_REG1 bits.
@@ -74,6 +85,8 @@ pub mod lps22hb_reg {
     pub const I2C_DIS: u8 = 0x08;
     pub const IF_ADD_INC: u8 = 0x10;
     pub const BOOT: u8 = 0x80;
+    /// RES_CONF.LC_EN: low-current mode.
+    pub const LC_EN: u8 = 0x01;
     /// STATUS bits.
     pub const P_DA: u8 = 0x01;
     pub const T_DA: u8 = 0x02;
@@ -158,6 +171,29 @@ struct Output {
     held: Option<(i32, u64)>,
 }
 
+/// The pressure as drivers read it ([`Lps22hb::pressure_reads`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PressureReads {
+    /// Reads of PRESS_OUT_H: each completes a pressure word and clears P_DA.
+    pub reads: u64,
+    /// Of those, the ones whose transaction had read STATUS with P_DA set before: a driver
+    /// reading the burst from STATUS was told the word is new.
+    pub fresh: u64,
+    /// Samples that never reached a read: replaced in the output registers before their MSB
+    /// was read, or made and replaced while BDU held the outputs.
+    pub lost: u64,
+    /// The last word read (24-bit two's complement, sign-extended) and the time of its MSB.
+    pub last: Option<(Time, i32)>,
+}
+
+/// What the transaction in progress has read so far: STATUS, and the pressure's low bytes.
+#[derive(Clone, Copy, Debug, Default)]
+struct TransactionReads {
+    status: Option<u8>,
+    xl: Option<u8>,
+    l: Option<u8>,
+}
+
 /// LPS22HB barometer (WHO_AM_I 0xB1). 4-wire SPI at power-up (CTRL_REG1.SIM = 0).
 #[derive(Clone, Debug)]
 pub struct Lps22hb {
@@ -171,6 +207,10 @@ pub struct Lps22hb {
     pressure: Output,
     temperature: Output,
     samples: u64,
+    transaction: TransactionReads,
+    pressure_reads: PressureReads,
+    /// The time of the latest bus event (every one brings the part up to its time first).
+    bus_time: Time,
 }
 
 impl Default for Lps22hb {
@@ -191,6 +231,9 @@ impl Lps22hb {
             pressure: Output::default(),
             temperature: Output::default(),
             samples: 0,
+            transaction: TransactionReads::default(),
+            pressure_reads: PressureReads::default(),
+            bus_time: 0,
         }
     }
 
@@ -233,6 +276,35 @@ impl Lps22hb {
         self.samples
     }
 
+    /// The pressure as drivers read it since power-on (see the module documentation).
+    pub fn pressure_reads(&self) -> PressureReads {
+        self.pressure_reads
+    }
+
+    /// A byte of `addr` is being read (before the read's own effects): what the driver got, for
+    /// [`Lps22hb::pressure_reads`]. The registers hold what the line carried: the bus brought
+    /// the part up to this instant before the byte was driven.
+    fn note_read(&mut self, addr: u8) {
+        let value = self.port.reg(addr);
+        let seen = &mut self.transaction;
+        match addr {
+            STATUS => seen.status = Some(value),
+            PRESS_OUT_XL => seen.xl = Some(value),
+            PRESS_OUT_L => seen.l = Some(value),
+            PRESS_OUT_H => {
+                let xl = seen.xl.unwrap_or(self.port.reg(PRESS_OUT_XL));
+                let l = seen.l.unwrap_or(self.port.reg(PRESS_OUT_L));
+                let counts = i32::from_le_bytes([xl, l, value, 0]) << 8 >> 8;
+                let fresh = seen.status.is_some_and(|st| st & P_DA != 0);
+                let reads = &mut self.pressure_reads;
+                reads.reads += 1;
+                reads.fresh += u64::from(fresh);
+                reads.last = Some((self.bus_time, counts));
+            }
+            _ => {}
+        }
+    }
+
     /// `n` ≥ 1 samples made since the last look, the last of them at the current input.
     fn take_samples(&mut self, n: u64, continuous: bool) {
         let x = self.pressure_pa;
@@ -268,6 +340,8 @@ impl Lps22hb {
         *self.port.reg_mut(PRESS_OUT_XL) = xl;
         *self.port.reg_mut(PRESS_OUT_L) = l;
         *self.port.reg_mut(PRESS_OUT_H) = h;
+        let unread = u64::from(self.port.reg(STATUS) & P_DA != 0);
+        self.pressure_reads.lost += n.saturating_sub(1) + unread;
         let status = self.port.reg_mut(STATUS);
         if *status & P_DA != 0 || n >= 2 {
             *status |= P_OR;
@@ -327,6 +401,7 @@ impl Chip for Lps22hb {
     fn apply_output(&mut self, (): ()) {}
 
     fn advance(&mut self, now: Time) {
+        self.bus_time = self.bus_time.max(now);
         let Some(next) = self.next_sample_at else { return };
         if now < next {
             return;
@@ -351,6 +426,7 @@ impl Chip for Lps22hb {
     }
 
     fn read_effects(&mut self, addr: u8) {
+        self.note_read(addr);
         let bdu = self.port.reg(CTRL_REG1) & BDU != 0;
         match addr {
             PRESS_OUT_XL | PRESS_OUT_L if bdu => self.pressure.locked = true,
@@ -368,8 +444,17 @@ impl Chip for Lps22hb {
         }
     }
 
+    fn end_transaction(&mut self) {
+        self.transaction = TransactionReads::default();
+    }
+
     fn write(&mut self, addr: u8, value: u8, now: Time) {
         if now < self.port.reset_until {
+            self.port.unexpected_writes += 1;
+            return;
+        }
+        let converting = odr_period(self.port.reg(CTRL_REG1)).is_some();
+        if addr == RES_CONF && (value ^ self.port.reg(RES_CONF)) & LC_EN != 0 && converting {
             self.port.unexpected_writes += 1;
             return;
         }
@@ -806,5 +891,94 @@ mod tests {
         write(&mut s, CTRL_REG1, &[SIM], t + P75);
         s.advance(t + TIME_HZ);
         assert_eq!(s.samples_made(), 1, "power-down stops it");
+    }
+
+    /// Plays `writes` (a table of fcu-core's) at `now`.
+    fn play(s: &mut Lps22hb, writes: &[fcu_core::imu::registers::RegWrite], now: Time) {
+        for w in writes {
+            write(s, w.addr, &[w.value], now);
+        }
+    }
+
+    #[test]
+    fn the_cores_boot_sequence_sets_the_flight_configuration_and_the_burst_reads_a_fresh_sample() {
+        use fcu_core::baro::registers as core;
+        let mut s = Lps22hb::new();
+        s.set_pressure_pa(101_325.0).unwrap();
+        s.set_temperature_c(25.0).unwrap();
+        play(&mut s, &core::INTERFACE, T0);
+        let settled = T0 + Time::from(core::RESET_SETTLE_MS) * MS;
+        play(&mut s, &core::AFTER_RESET, settled);
+        assert_eq!(read(&mut s, WHO_AM_I, 1, settled), [0xB1]);
+        play(&mut s, &core::CONFIG, settled);
+        assert_eq!(
+            (s.register(CTRL_REG1, settled), s.register(CTRL_REG2, settled)),
+            (0x5F, 0x18),
+            "75 Hz, ODR/20, BDU, 3-wire; IF_ADD_INC, I2C off"
+        );
+        assert_eq!(s.unexpected_writes(), 0);
+        assert!(!s.i2c_enabled());
+        assert_eq!(read(&mut s, STATUS, 1, settled + P75 - 1), [0], "no sample before one 75 Hz period");
+        let burst = read(&mut s, core::BURST_START, core::BURST_LEN, settled + P75);
+        let raw = fcu_core::baro::decode_burst(&burst.clone().try_into().unwrap());
+        assert!(raw.pressure_fresh(), "{burst:02x?}");
+        assert_eq!((raw.pressure_pa(), raw.temperature_c()), (101_325.0, 25.0), "the filter starts at the first sample");
+        let reads = s.pressure_reads();
+        assert_eq!((reads.reads, reads.fresh, reads.lost), (1, 1, 0));
+        assert_eq!(reads.last, Some((settled + P75, 4_150_272)));
+    }
+
+    #[test]
+    fn without_the_settle_the_reset_swallows_the_3_wire_write_and_who_am_i_is_undriven() {
+        use fcu_core::baro::registers as core;
+        let mut s = Lps22hb::new();
+        play(&mut s, &core::INTERFACE, T0);
+        play(&mut s, &core::AFTER_RESET, T0 + 1);
+        assert_eq!(s.unexpected_writes(), 1, "the write during the reset");
+        assert_eq!(read(&mut s, WHO_AM_I, 1, T0 + SW_RESET_TIME), [UNDRIVEN], "still 4-wire");
+    }
+
+    #[test]
+    fn a_burst_from_status_at_80_hz_reads_every_75_hz_sample_once() {
+        let mut s = configured(0x50 | EN_LPFP | LPFP_CFG | BDU);
+        write(&mut s, CTRL_REG2, &[IF_ADD_INC | I2C_DIS], T0);
+        let period_80 = TIME_HZ / 80;
+        for k in 1..=80 {
+            read(&mut s, STATUS, 6, T0 + k * period_80);
+        }
+        let reads = s.pressure_reads();
+        assert_eq!(s.samples_made(), 75);
+        assert_eq!(reads.reads, 80);
+        assert_eq!((reads.fresh, reads.lost), (75, 0), "each sample read once, as new, and none lost");
+        // At 70 Hz, slower than the part, samples replace unread ones.
+        let mut s = configured(0x50 | BDU);
+        for k in 1..=70 {
+            read(&mut s, STATUS, 6, T0 + k * (TIME_HZ / 70));
+        }
+        assert!(s.pressure_reads().lost >= 4, "{:?}", s.pressure_reads());
+    }
+
+    #[test]
+    fn a_read_of_the_low_bytes_only_with_bdu_loses_the_samples_it_holds_back() {
+        let mut s = configured(0x50 | BDU);
+        read(&mut s, PRESS_OUT_XL, 2, T0 + P75);
+        read(&mut s, PRESS_OUT_H, 1, T0 + 5 * P75);
+        let reads = s.pressure_reads();
+        // The MSB read completes the first sample's word; of the four made while it was held,
+        // the newest lands (new, P_DA set), the three before it never reach the registers.
+        assert_eq!((reads.reads, reads.fresh, reads.lost), (1, 0, 3));
+        assert_eq!(s.register(STATUS, T0 + 5 * P75) & P_DA, P_DA);
+    }
+
+    #[test]
+    fn a_change_of_lc_en_while_converting_is_ignored_and_counted() {
+        let mut s = configured(0);
+        write(&mut s, RES_CONF, &[LC_EN], T0);
+        assert_eq!((s.register(RES_CONF, T0), s.unexpected_writes()), (LC_EN, 0), "in power-down it is taken");
+        let mut s = configured(0x50);
+        write(&mut s, RES_CONF, &[LC_EN], T0);
+        assert_eq!((s.register(RES_CONF, T0), s.unexpected_writes()), (0, 1), "at 75 Hz it is not");
+        write(&mut s, RES_CONF, &[0], T0);
+        assert_eq!(s.unexpected_writes(), 1, "writing the value it has changes nothing");
     }
 }
