@@ -26,7 +26,17 @@
 //! instruction fetch, the control tick's included; a reset stops the motors.
 //!
 //! A motor test or a calibration is refused while a save or a reboot is pending.
+//!
+//! # Set-mode
+//!
+//! A ground station's set-mode (manual throttle or altitude hold) is carried out as a set of
+//! the parameter [`ALT_MODE`], found in fcu-params' table by name: the same checks as a
+//! PARAM_SET of it (its range, whether it may change armed, the configuration's validation),
+//! the same save after the debounce, and the link echoes its PARAM_VALUE. A table without the
+//! parameter refuses it ([`gcs::RULE_NO_ALTITUDE_HOLD`]); a set the table refuses is refused
+//! with the table's rule (for now when it is the armed one).
 
+use fcu_core::altitude::{AltMode, AltitudeStatus};
 use fcu_core::flight::{ChangeKind, ConfigChange, Status};
 use fcu_core::gcs::{self, Disarm, GcsInput, MotorTest, MotorTestChange, Refused};
 use fcu_core::rc::COUNTS_PER_US;
@@ -34,7 +44,10 @@ use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 use fcu_params::{self as parameters, snapshot};
 
-use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
+use fcu_link::{Altitude, Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState, VerticalMode};
+
+/// The parameter a set-mode sets: the pilot's vertical mode (0 manual, 1 altitude hold).
+pub const ALT_MODE: &[u8] = b"ALT_MODE";
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
@@ -346,6 +359,32 @@ impl Station {
     }
 }
 
+/// The vertical half's report as the link says it: the height only while the estimate may be
+/// flown on, the failsafe's descent over the pilot's mode.
+fn altitude(a: &AltitudeStatus) -> Altitude {
+    let mode = match a.mode {
+        _ if a.failsafe_descent => VerticalMode::FailsafeDescent,
+        AltMode::Manual => VerticalMode::Manual,
+        AltMode::Hold => VerticalMode::AltitudeHold,
+    };
+    let known = a.estimate_healthy;
+    Altitude {
+        height_m: known.then_some(a.height_m),
+        climb_m_s: known.then_some(a.climb_m_s),
+        pressure_pa: a.pressure_pa,
+        temperature_c: a.temperature_c,
+        mode,
+    }
+}
+
+/// Restores the defaults. Out of line, with both configurations as arguments: through `self`,
+/// the compiler cannot tell the defaults (`&'static`) from the configuration in force and
+/// copies with `memmove`, whose 1.6 KB the image otherwise never needs.
+#[inline(never)]
+fn restore(cfg: &mut Config, defaults: &Config) {
+    *cfg = *defaults;
+}
+
 impl Vehicle for Station {
     fn state(&self) -> VehicleState {
         let Some(s) = self.status else {
@@ -359,6 +398,7 @@ impl Vehicle for Station {
                 health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
                 load_permille: 0,
                 motor_test: false,
+                altitude: Altitude::default(),
             };
         };
         let armed = self.armed();
@@ -392,6 +432,7 @@ impl Vehicle for Station {
             },
             load_permille: 0,
             motor_test: self.motor_test_running(),
+            altitude: altitude(&s.altitude),
         }
     }
 
@@ -438,9 +479,33 @@ impl Vehicle for Station {
         Ok(others)
     }
 
-    fn request(&mut self, request: Request) -> Result<(), Refused> {
+    fn request(&mut self, request: Request) -> Result<ParamMask, Refused> {
+        if let Request::SetMode(mode) = request {
+            return self.set_mode(mode);
+        }
+        self.command(request).map(|()| ParamMask::EMPTY)
+    }
+}
+
+impl Station {
+    /// A set-mode: the parameter [`ALT_MODE`]'s set (see the module docs). `Ok` carries it
+    /// and any other parameter the set changed.
+    fn set_mode(&mut self, mode: AltMode) -> Result<ParamMask, Refused> {
+        let Some(index) = parameters::index_of(ALT_MODE) else {
+            return Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD));
+        };
+        let index = index as u16;
+        let mut set =
+            self.set_param(index, f32::from(mode as u8)).map_err(|rule| Refused { rule, for_now: rule == parameters::RULE_ARMED })?;
+        set.insert(index);
+        Ok(set)
+    }
+
+    /// Every request but a set-mode.
+    fn command(&mut self, request: Request) -> Result<(), Refused> {
         let state = self.flight_state();
         match request {
+            Request::SetMode(mode) => self.set_mode(mode).map(|_| ()),
             Request::Arm => gcs::arm_rule(),
             Request::SaveParams => {
                 gcs::save_rule(state, self.motor_test_running())?;
@@ -451,7 +516,7 @@ impl Vehicle for Station {
                 gcs::disarmed_rule(state)?;
                 let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
                 if self.cfg != *self.defaults {
-                    self.cfg = *self.defaults;
+                    restore(&mut self.cfg, self.defaults);
                     self.changed(change.kind);
                 }
                 Ok(())
@@ -520,7 +585,7 @@ mod tests {
 
     impl Asked for Station {
         fn asked(&mut self, request: Request) -> Result<(), &'static str> {
-            self.request(request).map_err(|refused| refused.rule)
+            self.request(request).map(|_| ()).map_err(|refused| refused.rule)
         }
     }
 
@@ -844,6 +909,92 @@ mod tests {
         assert_eq!(st.set_param(index("YAW_DEADBAND_US"), -0.0), Ok(ParamMask::EMPTY));
         assert!(!st.unsaved());
         assert_eq!(st.take_change(), None);
+    }
+
+    #[test]
+    fn the_height_is_said_only_while_the_estimate_may_be_flown_on_and_the_failsafe_descent_over_the_mode() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.state().altitude, Altitude::default(), "nothing known at boot");
+        let mut s = status(FlightState::Armed, REST, Blockers::default());
+        s.altitude = AltitudeStatus {
+            mode: AltMode::Hold,
+            height_m: 2.5,
+            climb_m_s: 0.25,
+            pressure_pa: Some(100_500.0),
+            temperature_c: 21.0,
+            estimate_healthy: true,
+            ..AltitudeStatus::default()
+        };
+        st.observe(&s, 3900, [0; 4], 1000);
+        let said = st.state().altitude;
+        assert_eq!(
+            said,
+            Altitude {
+                height_m: Some(2.5),
+                climb_m_s: Some(0.25),
+                pressure_pa: Some(100_500.0),
+                temperature_c: 21.0,
+                mode: VerticalMode::AltitudeHold
+            }
+        );
+        s.altitude.estimate_healthy = false;
+        s.altitude.failsafe_descent = true;
+        st.observe(&s, 3900, [0; 4], 1005);
+        let said = st.state().altitude;
+        assert_eq!((said.height_m, said.climb_m_s, said.pressure_pa), (None, None, Some(100_500.0)), "the last sample stays");
+        assert_eq!(said.mode, VerticalMode::FailsafeDescent);
+        s.altitude = AltitudeStatus::default();
+        st.observe(&s, 3900, [0; 4], 1010);
+        assert_eq!(st.state().altitude.mode, VerticalMode::Manual);
+    }
+
+    #[test]
+    fn a_set_mode_is_the_alt_mode_parameters_set_by_name_or_refused_by_name() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        let Some(index) = parameters::index_of(ALT_MODE) else {
+            // A table without altitude hold: refused with the rule's name, nothing changed.
+            assert_eq!(st.request(Request::SetMode(AltMode::Hold)), Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD)));
+            assert_eq!(st.request(Request::SetMode(AltMode::Manual)), Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD)));
+            assert!(!st.unsaved());
+            assert_eq!(st.take_change(), None);
+            return;
+        };
+        let value = |st: &Station| parameters::value(st.config(), index);
+        let mut mask = ParamMask::EMPTY;
+        mask.insert(index as u16);
+        // Taken as a PARAM_SET of ALT_MODE: echoed, saved after the debounce, handed on.
+        let set = st.request(Request::SetMode(AltMode::Hold)).unwrap();
+        assert!(set.contains(index as u16));
+        assert_eq!(value(&st), Some(1.0));
+        assert!(st.unsaved());
+        assert!(st.take_change().is_some());
+        // The mode in force again: still echoed, nothing changes.
+        assert_eq!(st.request(Request::SetMode(AltMode::Hold)), Ok(mask));
+        assert_eq!(st.take_change(), None);
+        // The table's rules are the set's: in flight when the table allows it, refused with its rule
+        // otherwise.
+        st.observe(&status(FlightState::Armed, UP, Blockers::default()), 3900, [0; 4], 1000);
+        let mut armed = st.clone();
+        match parameters::set(&mut armed.cfg.clone(), index, 0.0, true) {
+            Ok(_) => {
+                assert_eq!(armed.request(Request::SetMode(AltMode::Manual)), Ok(mask));
+                assert_eq!(value(&armed), Some(0.0));
+            }
+            Err(refusal) => {
+                let refused = armed.request(Request::SetMode(AltMode::Manual)).unwrap_err();
+                assert_eq!(refused.rule, refusal.rule);
+                assert_eq!(value(&armed), Some(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn a_reset_to_defaults_restores_them() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
+        assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
+        assert!(st.config() == &Config::DEFAULT);
+        assert!(st.unsaved());
     }
 
     #[test]

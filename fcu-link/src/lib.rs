@@ -82,7 +82,7 @@ pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
 pub use text::Severity;
-pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
+pub use vehicle::{AltMode, Altitude, Attitude, Battery, Health, Param, ParamMask, Refused, Request, Vehicle, VehicleState, VerticalMode};
 
 /// Our MAVLink system id.
 pub const SYSTEM_ID: u8 = 1;

@@ -1,5 +1,6 @@
 //! The link: frames in, answers and telemetry out (see [`Link`]).
 
+use mavlink::dialects::common::{ALTITUDE_DATA, SCALED_PRESSURE_DATA, VFR_HUD_DATA};
 use mavlink::dialects::common::{
     ATTITUDE_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA, FILE_TRANSFER_PROTOCOL_DATA,
     HEARTBEAT_DATA, MISSION_REQUEST_LIST_DATA, PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, RC_CHANNELS_DATA,
@@ -65,7 +66,7 @@ pub struct LinkStats {
 }
 
 /// Bytes of the transmit queue that answers to requests leave free, for telemetry: every
-/// stream due in the same tick, each frame at its longest (239 B). A ground station flooding
+/// stream due in the same tick, each frame at its longest (341 B). A ground station flooding
 /// the link with requests (MAVProxy asking for parameters again and again) then fills the
 /// queue up to here and no further, and HEARTBEAT, ATTITUDE and the rest keep their rates.
 ///
@@ -78,7 +79,10 @@ pub const TELEMETRY_RESERVE: usize = telemetry_frame::<HEARTBEAT_DATA>()
     + telemetry_frame::<SYS_STATUS_DATA>()
     + telemetry_frame::<BATTERY_STATUS_DATA>()
     + telemetry_frame::<RC_CHANNELS_DATA>()
-    + telemetry_frame::<SERVO_OUTPUT_RAW_DATA>();
+    + telemetry_frame::<SERVO_OUTPUT_RAW_DATA>()
+    + telemetry_frame::<VFR_HUD_DATA>()
+    + telemetry_frame::<ALTITUDE_DATA>()
+    + telemetry_frame::<SCALED_PRESSURE_DATA>();
 
 const fn telemetry_frame<D: MessageData>() -> usize {
     frame::V2_HEADER + D::ENCODED_LEN + 2
@@ -148,6 +152,9 @@ pub(crate) struct Schedule {
     pub(crate) battery: Stream,
     pub(crate) rc_channels: Stream,
     pub(crate) servo_output: Stream,
+    pub(crate) vfr_hud: Stream,
+    pub(crate) altitude: Stream,
+    pub(crate) scaled_pressure: Stream,
     pub(crate) param: Stream,
 }
 
@@ -178,13 +185,14 @@ pub(crate) struct Core<const TX: usize> {
 /// The MAVLink 2 link of one flight controller.
 ///
 /// `TX` is the transmit queue's size in bytes: it must hold a tick's telemetry
-/// ([`TELEMETRY_RESERVE`], 239 bytes, which answers to requests leave free) plus the answers
+/// ([`TELEMETRY_RESERVE`], 341 bytes, which answers to requests leave free) plus the answers
 /// to a burst of requests; 512 is a good size at 115200 baud drained every few milliseconds.
 /// Telemetry keeps its rates whatever the ground station asks: an answer that finds only the
 /// reserve free is dropped and counted, a telemetry message that finds no room stays due.
 ///
-/// Sent: HEARTBEAT, ATTITUDE, SYS_STATUS, BATTERY_STATUS, RC_CHANNELS, SERVO_OUTPUT_RAW at
-/// [`Rates`]; STATUSTEXT on refusals and on the host's events ([`Link::send_text`]), in
+/// Sent: HEARTBEAT (the flight state and the vertical mode: [`crate::heartbeat`]), ATTITUDE,
+/// SYS_STATUS, BATTERY_STATUS, RC_CHANNELS, SERVO_OUTPUT_RAW, VFR_HUD, ALTITUDE and
+/// SCALED_PRESSURE (from the barometer's first sample on) at [`Rates`]; STATUSTEXT on refusals and on the host's events ([`Link::send_text`]), in
 /// chunks past 50 bytes ([`crate::text`]); AUTOPILOT_VERSION on request (capabilities
 /// MAVLINK2 and PARAM_ENCODE_C_CAST).
 ///
@@ -203,7 +211,9 @@ pub(crate) struct Core<const TX: usize> {
 /// - FILE_TRANSFER_PROTOCOL: a NAK (UnknownCommand), so that MAVProxy falls back to the
 ///   parameter protocol at once;
 /// - COMMAND_LONG and COMMAND_INT: always a COMMAND_ACK, UNSUPPORTED unless the command is one
-///   of [`crate::command`]'s.
+///   of [`crate::command`]'s;
+/// - SET_MODE: a set-mode as DO_SET_MODE's ([`crate::command`]), answered with a COMMAND_ACK
+///   whose command is SET_MODE's message id, 11, as ArduPilot answers it.
 ///
 /// Messages addressed to another system or component are counted and ignored. Signed MAVLink 2
 /// frames are not supported: they are counted ([`ReaderStats::signed`]) and dropped, answered
@@ -236,6 +246,9 @@ impl<const TX: usize> Link<TX> {
                     battery: Stream { next_ms: 0 },
                     rc_channels: Stream { next_ms: 0 },
                     servo_output: Stream { next_ms: 0 },
+                    vfr_hud: Stream { next_ms: 0 },
+                    altitude: Stream { next_ms: 0 },
+                    scaled_pressure: Stream { next_ms: 0 },
                     param: Stream { next_ms: 0 },
                 },
                 param_cursor: None,
@@ -412,6 +425,13 @@ impl<const TX: usize> Core<TX> {
             },
             PARAM_SET_DATA::ID => self.param_set(payload, vehicle),
             MISSION_REQUEST_LIST_DATA::ID => self.mission_request_list(&frame),
+            crate::command::SET_MODE_ID => match Command::decode_set_mode(&frame) {
+                Some(command) if for_us(command.target_system, command.target_component) => {
+                    self.set_mode_message(&command, vehicle);
+                }
+                Some(_) => bump(&mut self.stats.not_for_us),
+                None => bump(&mut self.stats.bad_payload),
+            },
             COMMAND_LONG_DATA::ID | COMMAND_INT_DATA::ID => match Command::decode(&frame) {
                 Some(command) if for_us(command.target_system, command.target_component) => {
                     self.command(&command, vehicle);

@@ -53,7 +53,9 @@ const fn handled<D: MessageData>(extension_bytes: u8) -> Handled {
 
 /// The messages whose frames are checked and kept. HEARTBEAT is kept (not decoded) because a
 /// ground station's heartbeats are what tells the link it is still there.
-pub const HANDLED: [Handled; 8] = [
+// SET_MODE: marked deprecated by the dialect (see `command::SET_MODE_ID`).
+#[allow(deprecated)]
+pub const HANDLED: [Handled; 9] = [
     handled::<HEARTBEAT_DATA>(0),
     handled::<PARAM_REQUEST_READ_DATA>(0),
     handled::<PARAM_REQUEST_LIST_DATA>(0),
@@ -63,6 +65,7 @@ pub const HANDLED: [Handled; 8] = [
     handled::<COMMAND_INT_DATA>(0),
     handled::<COMMAND_LONG_DATA>(0),
     handled::<FILE_TRANSFER_PROTOCOL_DATA>(0),
+    handled::<mavlink::dialects::common::SET_MODE_DATA>(0),
 ];
 
 /// The handled message with this id.
