@@ -416,13 +416,9 @@ impl<const TX: usize> Core<TX> {
                     self.text(severity, text, Room::Event);
                 }
             }
-            PARAM_REQUEST_LIST_DATA::ID => match frame::decode::<PARAM_REQUEST_LIST_DATA>(payload) {
-                Some(m) if for_us(m.target_system, m.target_component) => {
-                    self.param_cursor = Some(0);
-                }
-                Some(_) => bump(&mut self.stats.not_for_us),
-                None => bump(&mut self.stats.bad_payload),
-            },
+            // target_system, target_component: its only fields.
+            PARAM_REQUEST_LIST_DATA::ID if for_us(frame.byte(0), frame.byte(1)) => self.param_cursor = Some(0),
+            PARAM_REQUEST_LIST_DATA::ID => bump(&mut self.stats.not_for_us),
             PARAM_REQUEST_READ_DATA::ID => match frame::decode::<PARAM_REQUEST_READ_DATA>(payload) {
                 Some(m) => self.param_request_read(&m, vehicle),
                 None => bump(&mut self.stats.bad_payload),

@@ -99,6 +99,15 @@ pub struct Frame<'a> {
     pub payload: &'a [u8],
 }
 
+impl Frame<'_> {
+    /// Payload byte `at`, 0 past the bytes received (MAVLink 2 drops a payload's trailing
+    /// zeros). For messages whose fields the link reads as bytes: no decode through the
+    /// crate's generated code, which is a copy of code for each message.
+    pub fn byte(&self, at: usize) -> u8 {
+        self.payload.get(at).copied().unwrap_or(0)
+    }
+}
+
 /// Why frames were dropped, and how many were kept. Counters saturate.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ReaderStats {
