@@ -408,7 +408,6 @@ impl<const TX: usize> Core<TX> {
         let silent_before = self.last_rx_ms.is_none_or(|last| self.now_ms.wrapping_sub(last) > STATION_GONE_MS);
         self.last_rx_ms = Some(self.now_ms);
         self.motor_test_silence_stop = false;
-        let payload = frame.payload;
         match frame.message_id {
             HEARTBEAT_DATA::ID => {
                 // A station that connects after the board booted missed what it said then.
@@ -419,11 +418,8 @@ impl<const TX: usize> Core<TX> {
             // target_system, target_component: its only fields.
             PARAM_REQUEST_LIST_DATA::ID if for_us(frame.byte(0), frame.byte(1)) => self.param_cursor = Some(0),
             PARAM_REQUEST_LIST_DATA::ID => bump(&mut self.stats.not_for_us),
-            PARAM_REQUEST_READ_DATA::ID => match frame::decode::<PARAM_REQUEST_READ_DATA>(payload) {
-                Some(m) => self.param_request_read(&m, vehicle),
-                None => bump(&mut self.stats.bad_payload),
-            },
-            PARAM_SET_DATA::ID => self.param_set(payload, vehicle),
+            PARAM_REQUEST_READ_DATA::ID => self.param_request_read(&frame, vehicle),
+            PARAM_SET_DATA::ID => self.param_set(&frame, vehicle),
             MISSION_REQUEST_LIST_DATA::ID => self.mission_request_list(&frame),
             crate::command::SET_MODE_ID => match Command::decode_set_mode(&frame) {
                 Some(command) if for_us(command.target_system, command.target_component) => {
