@@ -359,6 +359,22 @@ impl Station {
     }
 }
 
+/// What the link says before the first status (the board boots: calibrating, nothing measured
+/// but the battery), and the fields no status changes. One constant the state starts from, in
+/// flash, rather than a second list of stores.
+const BOOTING: VehicleState = VehicleState {
+    state: FlightState::Calibrating,
+    attitude: Attitude { roll_rad: 0.0, pitch_rad: 0.0, yaw_rad: 0.0, roll_rate_rad_s: 0.0, pitch_rate_rad_s: 0.0, yaw_rate_rad_s: 0.0 },
+    rc_widths_us: [0; 8],
+    rc_channel_count: 0,
+    motor_outputs_us: [1000; 4],
+    battery: Battery { voltage_mv: 0, current_ca: -1, remaining_pct: -1 },
+    health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
+    load_permille: 0,
+    motor_test: false,
+    altitude: Altitude { height_m: None, climb_m_s: None, pressure_pa: None, temperature_c: 0.0, mode: VerticalMode::Manual },
+};
+
 /// The vertical half's report as the link says it: the height only while the estimate may be
 /// flown on, the failsafe's descent over the pilot's mode.
 fn altitude(a: &AltitudeStatus) -> Altitude {
@@ -395,53 +411,33 @@ fn restore(cfg: &mut Config, defaults: &Config) {
 
 impl Vehicle for Station {
     fn state(&self) -> VehicleState {
+        let mut said = BOOTING;
+        said.battery.voltage_mv = self.battery_mv;
         let Some(s) = self.status else {
-            return VehicleState {
-                state: FlightState::Calibrating,
-                attitude: Attitude::default(),
-                rc_widths_us: [0; 8],
-                rc_channel_count: 0,
-                motor_outputs_us: [1000; 4],
-                battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-                health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
-                load_permille: 0,
-                motor_test: false,
-                altitude: Altitude::default(),
-            };
+            return said;
         };
         let armed = self.armed();
-        let mut rc_widths_us = [0u16; 8];
-        for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
+        for (out, &w) in said.rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
             *out = (u32::from(w) / COUNTS_PER_US) as u16;
         }
+        said.rc_channel_count = 4;
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;
-        let motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
-        VehicleState {
-            state: s.state,
-            attitude: Attitude {
-                roll_rad: s.tilt.roll_rad,
-                pitch_rad: s.tilt.pitch_rad,
-                // fcu-core's heading turns anticlockwise seen from above; MAVLink's clockwise.
-                yaw_rad: -s.yaw_est_rad,
-                roll_rate_rad_s: 0.0,
-                pitch_rate_rad_s: 0.0,
-                yaw_rate_rad_s: 0.0,
-            },
-            rc_widths_us,
-            rc_channel_count: 4,
-            motor_outputs_us,
-            battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-            health: Health {
-                imu: s.fault.is_none(),
-                radio: s.link,
-                estimator: s.calibrated,
-                battery: true,
-                prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
-            },
-            load_permille: 0,
-            motor_test: self.motor_test_running(),
-            altitude: altitude(&s.altitude),
-        }
+        said.motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
+        said.state = s.state;
+        said.attitude.roll_rad = s.tilt.roll_rad;
+        said.attitude.pitch_rad = s.tilt.pitch_rad;
+        // fcu-core's heading turns anticlockwise seen from above; MAVLink's clockwise.
+        said.attitude.yaw_rad = -s.yaw_est_rad;
+        said.health = Health {
+            imu: s.fault.is_none(),
+            radio: s.link,
+            estimator: s.calibrated,
+            battery: true,
+            prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
+        };
+        said.motor_test = self.motor_test_running();
+        said.altitude = altitude(&s.altitude);
+        said
     }
 
     fn param_count(&self) -> u16 {
