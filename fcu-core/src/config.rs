@@ -12,6 +12,7 @@
 //! gain, a zero sample time or a non-finite value is a [`ConfigError`] naming the field.
 
 use crate::ahrs::{EstimatorConfig, EstimatorError, MahonyConfig, VqfConfig};
+use crate::althold::AltitudeSettings;
 use crate::control::{AxisGains, BatteryCompensation, BatterySense, ControlConfig, Derivative, ThrustCurve, YawShaping};
 use crate::filter::BiquadCoeffs;
 use crate::imu::{CalibrationConfig, HealthConfig, ImuConfig, MotionCheck};
@@ -130,6 +131,9 @@ pub struct Config {
     pub battery_sense: BatterySense,
     /// The telemetry link.
     pub link: LinkConfig,
+    /// The barometer, the height estimate and altitude hold (`None` in the reference, which
+    /// never reads the barometer: its tick flies the stick's throttle).
+    pub altitude: Option<AltitudeSettings>,
     /// Evaluate the reference's double-precision expressions in f64 (bit-exact replay; needs
     /// the crate's `reference` feature). Off, everything is f32 (much cheaper on the Cortex-M4,
     /// whose FPU is single only).
@@ -159,6 +163,7 @@ pub enum ConfigError {
     Supervisor,
     BatterySense,
     Link,
+    Altitude,
 }
 
 impl ConfigError {
@@ -183,6 +188,7 @@ impl ConfigError {
             ConfigError::Supervisor => "supervisor",
             ConfigError::BatterySense => "battery sense",
             ConfigError::Link => "telemetry link",
+            ConfigError::Altitude => "altitude hold",
         }
     }
 
@@ -205,6 +211,7 @@ impl ConfigError {
             ConfigError::Supervisor => "FS_* must exceed RC_TIMEOUT_MS",
             ConfigError::BatterySense => "battery scale invalid",
             ConfigError::Link => "link rates invalid",
+            ConfigError::Altitude => "altitude settings invalid",
         }
     }
 }
@@ -241,6 +248,7 @@ impl Config {
             supervisor: SupervisorConfig::Reference,
             battery_sense: BatterySense::BOARD,
             link: LinkConfig::REFERENCE,
+            altitude: None,
             reference_arithmetic: true,
         }
     }
@@ -327,6 +335,9 @@ impl Config {
         }
         if !self.link.is_valid() {
             return Err(ConfigError::Link);
+        }
+        if !self.altitude.is_none_or(|a| a.is_valid() && (a.estimator.step_dt_s - self.timing.outer_dt_s()).abs() < 1e-6) {
+            return Err(ConfigError::Altitude);
         }
         Ok(())
     }
@@ -449,6 +460,9 @@ impl Config {
             battery_sense: BatterySense::BOARD,
             // MAVLink: QGroundControl and MAVProxy find the board with nothing set up.
             link: LinkConfig::DEFAULT,
+            // The barometer's height, the failsafe's descent, and altitude hold for who sets
+            // `ALT_MODE` (manual throttle by default: `AltitudeSettings::DEFAULT`).
+            altitude: Some(AltitudeSettings::DEFAULT),
             reference_arithmetic: false,
         }
     }

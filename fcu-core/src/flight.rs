@@ -45,6 +45,7 @@ use self::output::{MotorsAllowed, Output};
 use self::sensors::{AfterCalibration, Sensors};
 use self::supervision::{RadioFlags, Supervision};
 use crate::ahrs::{Estimator, MDPS_TO_RAD_S};
+use crate::althold::{Vertical, VerticalCommand, VerticalInput};
 use crate::altitude::AltitudeStatus;
 use crate::baro::RawBaro;
 use crate::config::{Config, ConfigError};
@@ -52,7 +53,7 @@ use crate::control::{AngleLoop, GainSchedule, Gains, YawRateShaper};
 use crate::filter::block_mean;
 use crate::gcs::GcsInput;
 use crate::imu::{CalibrationPhase, RawImu, SensorFault};
-use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt};
+use crate::math::{quat_to_tilt_with, tilt_angle_rad, Quat, Tilt, Vec3};
 use crate::rc::{EdgeDecoder, PulseBatch, Sticks};
 use crate::supervisor::{Blockers, FlightState};
 
@@ -81,6 +82,9 @@ pub struct OuterResult {
     pub gains: Gains,
     /// The vertical half's report, for [`Status::altitude`].
     pub altitude: AltitudeStatus,
+    /// What the vertical half hands the tick (the hold's throttle) and the supervisor (the
+    /// failsafe descent's cap, a landing).
+    pub vertical: VerticalCommand,
 }
 
 /// What telemetry, LEDs and logs need to know.
@@ -185,6 +189,8 @@ pub struct OuterStep {
     gains: GainSchedule,
     /// The barometer burst read since the last step, if any ([`OuterStep::set_baro`]).
     baro: Option<RawBaro>,
+    /// Barometer, height, altitude hold (`None`: a profile without, the reference's).
+    vertical: Option<Vertical>,
 }
 
 /// The whole flight controller: both halves, for callers that run the outer step inline.
@@ -317,6 +323,7 @@ impl ControlTick {
                 rate_demand_rad_s: [0.0; 3],
                 gains: Gains::UNITY,
                 altitude: AltitudeStatus::default(),
+                vertical: VerticalCommand::default(),
             },
             output: Output::new(),
             unscaled: Unscaled::new(cfg),
@@ -399,6 +406,7 @@ impl ControlTick {
         if r.gains != self.outer.gains {
             self.params.set_gains(&self.unscaled, r.gains);
         }
+        self.supervision.set_vertical(r.vertical, &self.params);
         self.outer = *r;
         self.heading.result_applied();
     }
@@ -442,8 +450,7 @@ impl ControlTick {
         // One output per branch (docs/performance.md, «one output per branch»).
         if job_due {
             let reset = self.heading.take_target_reset();
-            let job =
-                self.block.take_job(self.sensors.offsets(), in_force.sticks, in_force.throttle_low, self.heading.yaw_est_rad(), reset);
+            let job = self.block.take_job(self.sensors.offsets(), &in_force, self.heading.yaw_est_rad(), reset);
             TickOutput { compare, outer_job: Some(job) }
         } else {
             TickOutput { compare, outer_job: None }
@@ -484,6 +491,7 @@ impl OuterStep {
             heading: HeadingTarget::new(cfg.control.yaw_shaping.map(|y| YawRateShaper::new(&y, cfg.timing.outer_dt_s()))),
             gains: GainSchedule::new(&cfg.control, &cfg.mixer, params.outer_hz),
             baro: None,
+            vertical: cfg.altitude.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
             params,
         })
     }
@@ -510,8 +518,23 @@ impl OuterStep {
             rate_demand_rad_s[2] += ff;
         }
         let gains = self.gains.update(job.sticks.thr);
-        let altitude = AltitudeStatus::default();
-        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains, altitude }
+        // The burst is this step's only: the next step has its own.
+        let baro = self.baro.take();
+        let (vertical, altitude) = match &mut self.vertical {
+            Some(v) => {
+                let input = VerticalInput {
+                    motors_enabled: job.state.motors_may_run(),
+                    failsafe: job.state == FlightState::FailsafeLevel,
+                    command: job.command_throttle,
+                    flown: job.sticks.thr,
+                    full_scale: p.rc.full_scale,
+                    min_throttle: p.rc.min_throttle,
+                };
+                v.step(baro, quat, Vec3::new(accel[0], accel[1], accel[2]), &input)
+            }
+            None => (VerticalCommand::default(), AltitudeStatus::default()),
+        };
+        OuterResult { quat, tilt, tilt_from_level_rad, target_rad, rate_demand_rad_s, gains, altitude, vertical }
     }
 
     /// The latest battery reading, mV (for the battery compensation; ignored without it).
@@ -531,6 +554,10 @@ impl OuterStep {
     /// state kept.
     pub fn take_config(&mut self, cfg: &Config) {
         self.params = Derived::new(cfg).outer;
+        match (&mut self.vertical, cfg.altitude) {
+            (Some(v), Some(a)) => v.set_config(a),
+            (v, a) => *v = a.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
+        }
     }
 }
 
@@ -750,6 +777,77 @@ mod tests {
         let reference = Config { supervisor: crate::supervisor::SupervisorConfig::Reference, ..cfg };
         assert_eq!(fc.take_change(&ground_only(reference)), Err(TakeError::OtherSupervisor));
         assert_eq!(fc.config(), &cfg);
+    }
+
+    /// `flown()` with the altitude mode `mode`, flown with a barometer burst before every outer
+    /// step (a new sample on 75 of 160, at 1013.25 hPa), or none from `baro_until` on.
+    fn fly_with_baro(fc: &mut FlightController, from: usize, to: usize, radio: &ForcedRadio, baro_until: usize) {
+        for k in from..to {
+            let imu = RawImu { accel: sample(k).accel, gyro: [0, 0, 0] };
+            let out = fc.tick_forced(imu, radio);
+            if let Some(job) = out.outer_job {
+                let n = k / 5;
+                let due = (n * 75) / 160 != ((n + 1) * 75) / 160;
+                let burst = RawBaro {
+                    status: crate::baro::registers::status::P_DA,
+                    pressure_counts: 4_150_272 + (k % 7) as i32 * 10,
+                    temperature_counts: 2500,
+                };
+                fc.set_baro((due && k < baro_until).then_some(burst));
+                fc.run_outer(&job);
+            }
+        }
+    }
+
+    fn with_alt_mode(mode: crate::altitude::AltMode) -> Config {
+        let mut cfg = flown();
+        if let Some(a) = &mut cfg.altitude {
+            a.mode = mode;
+        }
+        cfg
+    }
+
+    #[test]
+    fn the_outer_step_reports_the_height_and_the_barometer_and_names_its_fault() {
+        let mut fc = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        fly_with_baro(&mut fc, 0, 2500, &ForcedRadio { armed: false, ..FLYING }, usize::MAX);
+        fly_with_baro(&mut fc, 2500, 4000, &FLYING, usize::MAX);
+        let a = fc.status().altitude;
+        assert_eq!(a.mode, crate::altitude::AltMode::Manual);
+        assert!(a.estimate_healthy && !a.holding && a.target_m.is_none() && a.baro_fault.is_none(), "{a:?}");
+        assert!(a.pressure_pa.is_some_and(|p| (p - 101_325.0).abs() < 1.0) && a.temperature_c == 25.0, "{a:?}");
+        // Re-zeroed at the arming: the take-off point is 0.
+        assert!(a.height_m.abs() < 0.3 && a.climb_m_s.abs() < 0.2, "{a:?}");
+        // The part stops answering: NoData within 0.1 s, the estimate no longer healthy.
+        fly_with_baro(&mut fc, 4000, 4200, &FLYING, 0);
+        let a = fc.status().altitude;
+        assert_eq!(a.baro_fault, Some(crate::baro::BaroFault::NoData));
+        assert!(!a.estimate_healthy, "{a:?}");
+    }
+
+    #[test]
+    fn the_holds_throttle_reaches_the_mixer_in_place_of_the_sticks() {
+        // The same flight in both modes: armed on the ground with the stick in the hold's dead
+        // band. Manual: the stick's throttle runs the motors. Hold: on the ground, centred, the
+        // hold idles (the throttle cut stops the motors) until the stick asks for a climb.
+        let centred = ForcedRadio { width_counts: [6100, 5900, 6150, 6300], ..FLYING };
+        let mut manual = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        let mut hold = FlightController::new(with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
+        let disarmed = ForcedRadio { armed: false, ..centred };
+        for fc in [&mut manual, &mut hold] {
+            fly_with_baro(fc, 0, 2500, &disarmed, usize::MAX);
+            fly_with_baro(fc, 2500, 4000, &centred, usize::MAX);
+        }
+        let (m, h) = (manual.status(), hold.status());
+        assert!(m.compare.iter().all(|&c| c > 0), "{:?}", m.compare);
+        assert!(h.altitude.holding, "{:?}", h.altitude);
+        assert_eq!(h.compare, [0; 4], "{:?}", h.altitude);
+        assert_eq!(hold.control_tick.supervision.in_force().sticks.thr, crate::rc::StickCounts(0));
+        // The stick up: the take-off ramp runs the motors.
+        let up = ForcedRadio { width_counts: [6100, 5900, 8400, 6300], ..FLYING };
+        fly_with_baro(&mut hold, 4000, 4400, &up, usize::MAX);
+        let h = hold.status();
+        assert!(h.compare.iter().all(|&c| c > 0), "{:?} {:?}", h.compare, h.altitude);
     }
 
     #[test]

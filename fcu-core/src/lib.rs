@@ -49,6 +49,7 @@
 extern crate std;
 
 pub mod ahrs;
+pub mod althold;
 pub mod altitude;
 pub mod baro;
 pub mod boot;

@@ -250,6 +250,12 @@ pub struct Inputs {
     pub silence_ticks: u32,
     /// What the ground station asks this tick ([`crate::gcs`]).
     pub gcs: GcsCommands,
+    /// The failsafe may land on the height estimate: the longest the descent from the present
+    /// height may take, ticks (0: no healthy estimate, the failsafe levels and then stops the
+    /// motors, as without a barometer). Latched at the loss of the link.
+    pub descent_cap_ticks: u32,
+    /// The altitude hold detected a landing and holds the motors at the bottom.
+    pub landed: bool,
 }
 
 impl Inputs {
@@ -267,6 +273,8 @@ impl Inputs {
         sensor_fault: None,
         tilt_rad: 0.0,
         gcs: GcsCommands::NONE,
+        descent_cap_ticks: 0,
+        landed: false,
     };
 }
 
@@ -307,6 +315,8 @@ pub enum Condition {
     GcsDisarm = 1 << 25,
     /// The ground station asked for an IMU calibration.
     GcsCalibrate = 1 << 26,
+    /// The altitude hold detected a landing ([`Inputs::landed`]).
+    Landed = 1 << 27,
 }
 
 /// A set of conditions: the [`Blocker`]s on their own bits (the low 16) and the other
@@ -395,6 +405,7 @@ const LOSS_BUDGET_SPENT: Conditions = Conditions::of(Condition::LossBudgetSpent)
 const RECOVERED: Conditions = Conditions::of(Condition::Recovered);
 const GROUND_DISARM: Conditions = Conditions::of(Condition::GcsDisarm);
 const GROUND_CALIBRATE: Conditions = Conditions::of(Condition::GcsCalibrate);
+const LANDED: Conditions = Conditions::of(Condition::Landed);
 
 /// The way out of every state, ahead of the state's own: a latched sensor fault ends
 /// everything. (Fault has no other way out.)
@@ -435,9 +446,11 @@ const FROM_ARMED: [Transition; 6] = [
     way(FlightState::Disarmed, THROTTLE_LOW_TOO_LONG, NONE),
 ];
 
-const FROM_FAILSAFE_LEVEL: [Transition; 3] = [
+const FROM_FAILSAFE_LEVEL: [Transition; 4] = [
     // Forced only: the stage-2 cut, at the ground station's word.
     way(FlightState::FailsafeOff, GROUND_DISARM, NONE),
+    // The descent on the height estimate landed: motors off, disarmed.
+    way(FlightState::FailsafeOff, LANDED, NONE),
     way(FlightState::Armed, RECOVERED, NO_LINK),
     way(FlightState::FailsafeOff, LOSS_BUDGET_SPENT, NONE),
 ];
@@ -485,6 +498,9 @@ pub struct Supervisor {
     fault: Option<SensorFault>,
     /// The last decision was steady flight ([`steady`](Self::steady)).
     steady: bool,
+    /// The failsafe descent's time cap, taken at the loss of the link (0: none, the manual
+    /// failsafe's budget alone).
+    descent_cap_ticks: u32,
 }
 
 impl Default for Supervisor {
@@ -506,6 +522,7 @@ impl Supervisor {
             last_good_throttle: StickCounts::ZERO,
             fault: None,
             steady: false,
+            descent_cap_ticks: 0,
         }
     }
 
@@ -630,11 +647,24 @@ impl Supervisor {
         c.set(Condition::DisarmHeld, self.hold_ticks >= cfg.disarm_hold_ticks);
         c.set(Condition::SticksCentred, i.sticks.attitude_sticks_centred());
         c.set(Condition::ThrottleLowTooLong, self.low_throttle_ticks >= cfg.auto_disarm_ticks);
-        c.set(Condition::LossBudgetSpent, self.lost_ticks >= cfg.failsafe_off_ticks);
+        c.set(Condition::LossBudgetSpent, self.lost_ticks >= self.loss_budget(cfg, i));
         c.set(Condition::Recovered, i.tick.saturating_sub(self.last_lost_tick) >= cfg.recovery_ticks);
         c.set(Condition::GcsDisarm, i.gcs.disarm.is_some_and(|d| d.checked(self.state, i.throttle_low).is_ok()));
         c.set(Condition::GcsCalibrate, i.gcs.calibrate);
+        c.set(Condition::Landed, i.landed);
         c
+    }
+
+    /// The lost time that ends the flight: the manual failsafe's budget, or, while the height
+    /// estimate stays healthy, the descent's time cap if longer (the one taken at the loss once
+    /// the failsafe holds, the present one at the first tick of a loss). An estimate lost during
+    /// the descent ends it as the manual failsafe would: a budget long spent stops the motors.
+    fn loss_budget(&self, cfg: &SafetyConfig, i: &Inputs) -> u32 {
+        if i.descent_cap_ticks == 0 {
+            return cfg.failsafe_off_ticks;
+        }
+        let cap = if self.state == FlightState::FailsafeLevel { self.descent_cap_ticks } else { i.descent_cap_ticks };
+        cfg.failsafe_off_ticks.max(cap)
     }
 
     /// Step 3: what starts or ends with the transition to `next`, and the decision.
@@ -657,6 +687,7 @@ impl Supervisor {
             // The failsafe holds the last throttle flown on a good link, never more.
             (FlightState::Armed, FlightState::FailsafeLevel | FlightState::FailsafeOff) => {
                 self.last_good_throttle = self.last_good_throttle.min(i.sticks.thr);
+                self.descent_cap_ticks = i.descent_cap_ticks;
             }
             _ => {}
         }
@@ -824,6 +855,8 @@ mod tests {
             sensor_fault: None,
             tilt_rad: 0.0,
             gcs: GcsCommands::NONE,
+            descent_cap_ticks: 0,
+            landed: false,
         };
         let d = s.decide(&CFG, &i);
         assert_eq!(d.state, FlightState::Calibrating);
@@ -1188,6 +1221,65 @@ mod tests {
     }
 
     #[test]
+    fn with_a_healthy_height_estimate_stage_1_lasts_until_the_descents_cap_taken_at_the_loss() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        // The height at the loss gives a 5 s cap (the vertical half works it out).
+        r.i.descent_cap_ticks = 4000;
+        let d = r.lose_link(CFG.failsafe_off_ticks);
+        assert_eq!(d.state, FlightState::FailsafeLevel, "no stage-2 cut at 1 s");
+        assert!(d.motors_enabled);
+        // A cap worked out lower on the way down does not shorten the one taken at the loss.
+        r.i.descent_cap_ticks = 900;
+        assert_eq!(r.lose_link(4000 - TIMEOUT - CFG.failsafe_off_ticks).state, FlightState::FailsafeLevel);
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff, "the cap");
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn a_landing_detected_in_stage_1_turns_the_motors_off_and_disarms() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.descent_cap_ticks = 8000;
+        assert_eq!(r.lose_link(2000).state, FlightState::FailsafeLevel);
+        r.i.landed = true;
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff);
+        assert!(!d.motors_enabled);
+        // As after any stage 2: the link back gives disarmed, and a full arming is needed.
+        r.i.landed = false;
+        assert_eq!(r.restore_link(1).state, FlightState::Disarmed);
+    }
+
+    #[test]
+    fn an_estimate_lost_in_stage_1_falls_back_to_the_manual_budget() {
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.descent_cap_ticks = 8000;
+        assert_eq!(r.lose_link(2000).state, FlightState::FailsafeLevel);
+        // The barometer fails: 2 s lost is long past the manual budget (1 s): off at once.
+        r.i.descent_cap_ticks = 0;
+        let d = r.lose_link(1);
+        assert_eq!(d.state, FlightState::FailsafeOff);
+        assert!(!d.motors_enabled);
+    }
+
+    #[test]
+    fn without_a_height_estimate_a_landing_flag_while_armed_does_nothing_by_itself() {
+        // Armed, the landed hold disarms through the automatic disarm (its throttle is low),
+        // not through the flag: the flag acts only in stage 1.
+        let mut r = Rig::new();
+        r.arm();
+        r.run(FLY, 10);
+        r.i.landed = true;
+        assert_eq!(r.run(FLY, 10).state, FlightState::Armed);
+    }
+
+    #[test]
     fn a_flickering_link_cannot_stretch_stage_1() {
         // Losses of 20 ticks (100 silent each), back for half the recovery time: stage 2 the
         // moment the silences add up to the budget.
@@ -1335,6 +1427,8 @@ mod tests {
             sensor_fault: fault.then_some(SensorFault::Stuck),
             tilt_rad: if tilted { 1.0 } else { 0.0 },
             gcs: GcsCommands::NONE,
+            descent_cap_ticks: 0,
+            landed: false,
         }
     }
 

@@ -221,6 +221,8 @@ fn level_job(sticks: Sticks, throttle_low: bool) -> OuterJob {
         throttle_low,
         yaw_est_rad: 0.0,
         yaw_target_reset: false,
+        command_throttle: sticks.thr,
+        state: fcu_core::supervisor::FlightState::Armed,
     }
 }
 
@@ -441,6 +443,7 @@ fn d17_the_thrust_curve_scales_the_rate_loop_but_not_the_throttle_map() {
         rate_demand_rad_s: [0.0; 3],
         gains: fcu_core::control::Gains { thrust: 1.0, rate: 1.25 },
         altitude: fcu_core::altitude::AltitudeStatus::default(),
+        vertical: fcu_core::althold::VerticalCommand::default(),
     };
     let (mut tick, _) = fc.into_parts();
     tick.apply_outer(&result);

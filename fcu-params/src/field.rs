@@ -3,10 +3,13 @@
 
 use super::{
     gyro_cutoff_hz, ms_from_ticks, safety_ms, set_endpoint_us, set_gyro_cutoff, set_safety_ms, stick_from_us, stick_us, ticks_from_ms,
-    us_from_counts, SetResult, RULE_REV,
+    us_from_counts, SetResult, RULE_NO_SAFETY, RULE_REV,
 };
+use fcu_core::althold::AltitudeSettings;
+use fcu_core::altitude::AltMode;
 use fcu_core::config::{Config, LinkProtocol};
 use fcu_core::control::AxisGains;
+use fcu_core::rc::COUNTS_PER_US;
 use fcu_core::rc::{Function, RcInput};
 use fcu_core::supervisor::SafetyConfig;
 
@@ -35,6 +38,69 @@ pub(super) enum Field {
     LinkProtocol,
     LinkAttitudeHz,
     LinkRcHz,
+    /// An altitude setting.
+    Alt(Alt),
+}
+
+/// The altitude settings ([`fcu_core::althold::AltitudeSettings`]); throttles in µs of stick
+/// (four capture counts each: the conversion is exact).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Alt {
+    Mode,
+    ClimbRateMax,
+    FsDescentRate,
+    Deadband,
+    PosP,
+    VelP,
+    VelI,
+    Hover,
+    EstimatorTau,
+    ThrustScale,
+}
+
+/// The altitude settings in `cfg`, the default's for a profile without (the reference).
+fn altitude(cfg: &Config) -> AltitudeSettings {
+    cfg.altitude.unwrap_or(AltitudeSettings::DEFAULT)
+}
+
+fn alt_get(cfg: &Config, which: Alt) -> f32 {
+    let a = altitude(cfg);
+    let per_us = COUNTS_PER_US as f32;
+    match which {
+        Alt::Mode => match a.mode {
+            AltMode::Manual => 0.0,
+            AltMode::Hold => 1.0,
+        },
+        Alt::ClimbRateMax => a.hold.climb_rate_max_m_s,
+        Alt::FsDescentRate => a.hold.fs_descent_rate_m_s,
+        Alt::Deadband => stick_us(a.hold.deadband),
+        Alt::PosP => a.hold.pos_p,
+        Alt::VelP => a.hold.vel_p / per_us,
+        Alt::VelI => a.hold.vel_i / per_us,
+        Alt::Hover => stick_us(a.hold.hover_throttle),
+        Alt::EstimatorTau => a.estimator.time_constant_s,
+        Alt::ThrustScale => a.estimator.thrust_scale_pa,
+    }
+}
+
+fn alt_set(cfg: &mut Config, which: Alt, v: f32) -> SetResult {
+    let Some(a) = &mut cfg.altitude else {
+        return Err(RULE_NO_SAFETY);
+    };
+    let per_us = COUNTS_PER_US as f32;
+    match which {
+        Alt::Mode => a.mode = if v == 0.0 { AltMode::Manual } else { AltMode::Hold },
+        Alt::ClimbRateMax => a.hold.climb_rate_max_m_s = v,
+        Alt::FsDescentRate => a.hold.fs_descent_rate_m_s = v,
+        Alt::Deadband => a.hold.deadband = stick_from_us(v),
+        Alt::PosP => a.hold.pos_p = v,
+        Alt::VelP => a.hold.vel_p = v * per_us,
+        Alt::VelI => a.hold.vel_i = v * per_us,
+        Alt::Hover => a.hold.hover_throttle = stick_from_us(v),
+        Alt::EstimatorTau => a.estimator.time_constant_s = v,
+        Alt::ThrustScale => a.estimator.thrust_scale_pa = v,
+    }
+    Ok(())
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -172,6 +238,7 @@ impl Field {
             },
             Field::LinkAttitudeHz => f32::from(cfg.link.attitude_hz),
             Field::LinkRcHz => f32::from(cfg.link.rc_hz),
+            Field::Alt(which) => alt_get(cfg, which),
         }
     }
 
@@ -210,6 +277,7 @@ impl Field {
             Field::LinkProtocol => cfg.link.protocol = if v == 0.0 { LinkProtocol::TextLines } else { LinkProtocol::Mavlink },
             Field::LinkAttitudeHz => cfg.link.attitude_hz = v as u8,
             Field::LinkRcHz => cfg.link.rc_hz = v as u8,
+            Field::Alt(which) => return alt_set(cfg, which, v),
         }
         Ok(())
     }

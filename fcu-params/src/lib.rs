@@ -66,7 +66,7 @@ use fcu_core::flight::{ChangeKind, ConfigChange, TakeError};
 use fcu_core::rc::{Function, StickCounts, COUNTS_PER_US};
 use fcu_core::supervisor::{SafetyConfig, SupervisorConfig};
 use fcu_core::FlightController;
-use field::{Axis, Endpoint, Field, Gain, SafetyTime, Stick};
+use field::{Alt, Axis, Endpoint, Field, Gain, SafetyTime, Stick};
 
 /// The longest name: MAVLink's `param_id` is 16 bytes, NUL-terminated only when shorter.
 pub const NAME_LEN: usize = 16;
@@ -124,6 +124,10 @@ pub enum Unit {
     Hertz,
     Degrees,
     DegreesPerSecond,
+    MetresPerSecond,
+    Seconds,
+    Pascals,
+    PerSecond,
 }
 
 impl Unit {
@@ -135,6 +139,10 @@ impl Unit {
             Unit::Hertz => "Hz",
             Unit::Degrees => "deg",
             Unit::DegreesPerSecond => "deg/s",
+            Unit::MetresPerSecond => "m/s",
+            Unit::Seconds => "s",
+            Unit::Pascals => "Pa",
+            Unit::PerSecond => "1/s",
         }
     }
 }
@@ -787,6 +795,22 @@ macro_rules! safety_ms {
     };
 }
 
+macro_rules! alt {
+    ($name:literal, $which:ident, $unit:ident, $min:literal, $max:literal, $step:ident, $applies:ident, $what:literal) => {
+        Param {
+            name: $name,
+            unit: Unit::$unit,
+            min: $min,
+            max: $max,
+            step: Step::$step,
+            applies: Applies::$applies,
+            field: Field::Alt(Alt::$which),
+            #[cfg(feature = "descriptions")]
+            description: $what,
+        }
+    };
+}
+
 macro_rules! stick_us {
     ($name:literal, $which:ident, $min:literal, $max:literal, $what:literal) => {
         Param {
@@ -804,7 +828,7 @@ macro_rules! stick_us {
 }
 
 /// The number of parameters.
-pub const COUNT: usize = 50;
+pub const COUNT: usize = 60;
 
 /// The table, in the order of indices, of `PARAM_VALUE`'s `param_index` and of a snapshot.
 /// Appending keeps every index; any change of names or order changes [`LAYOUT_HASH`].
@@ -965,6 +989,70 @@ pub static TABLE: [Param; COUNT] = [
         #[cfg(feature = "descriptions")]
         description: "radio input and motor output messages per second",
     },
+    alt!(
+        "ALT_MODE",
+        Mode,
+        None,
+        0.0,
+        1.0,
+        Integer,
+        Anytime,
+        "0 manual: the throttle stick sets the thrust; 1 altitude hold: the stick centred holds the height, beyond its dead band it climbs or descends"
+    ),
+    alt!("CLIMB_RATE_MAX", ClimbRateMax, MetresPerSecond, 0.1, 5.0, Any, Anytime, "altitude hold: climb and descent rate at full throttle stick"),
+    alt!(
+        "FS_DESCENT_RATE",
+        FsDescentRate,
+        MetresPerSecond,
+        0.1,
+        3.0,
+        Any,
+        Disarmed,
+        "link-loss failsafe with a healthy height estimate: the descent's rate to the landing"
+    ),
+    alt!(
+        "ALT_DEADBAND_US",
+        Deadband,
+        Microseconds,
+        0.0,
+        400.0,
+        QuarterUs,
+        Disarmed,
+        "altitude hold: throttle stick travel either side of its centre that holds the height"
+    ),
+    alt!("ALT_POS_P", PosP, PerSecond, 0.0, 10.0, Any, Anytime, "altitude hold: climb rate asked per metre of height error, 1/s"),
+    alt!("ALT_VEL_P", VelP, None, 0.0, 2500.0, Any, Anytime, "altitude hold: throttle (us of stick) per m/s of climb-rate error"),
+    alt!("ALT_VEL_I", VelI, None, 0.0, 2500.0, Any, Anytime, "altitude hold: throttle (us of stick) per metre of integrated climb-rate error"),
+    alt!(
+        "ALT_HOVER_US",
+        Hover,
+        Microseconds,
+        1.0,
+        900.0,
+        QuarterUs,
+        Anytime,
+        "throttle stick travel above its bottom that hovers: the hold's first guess (it learns the airframe's in flight)"
+    ),
+    alt!(
+        "ALT_EST_TAU",
+        EstimatorTau,
+        Seconds,
+        0.2,
+        10.0,
+        Any,
+        Disarmed,
+        "height estimate: below 1/(2 pi tau) Hz the barometer is trusted, above it the accelerometer"
+    ),
+    alt!(
+        "BARO_THRUST_PA",
+        ThrustScale,
+        Pascals,
+        -100.0,
+        100.0,
+        Any,
+        Disarmed,
+        "prop wash: pressure error at full thrust, taken off the barometer in proportion to the thrust (measured per airframe)"
+    ),
 ];
 
 #[cfg(test)]

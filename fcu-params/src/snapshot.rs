@@ -157,6 +157,9 @@ pub fn decode(words: &[u32]) -> Option<Snapshot> {
 }
 
 /// A whole record found in a slot.
+// Only ever one or two on the stack while a sector is read at boot, and there is no heap to
+// box the values in: the size difference costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Record {
     /// This firmware's.

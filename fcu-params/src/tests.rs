@@ -57,6 +57,7 @@ fn every_rule_fits_a_statustext_with_the_name() {
         ConfigError::Supervisor,
         ConfigError::BatterySense,
         ConfigError::Link,
+        ConfigError::Altitude,
     ];
     // Every rule RcConfig::problem can name: break each in turn.
     let mut rc_rules = std::vec::Vec::new();
@@ -256,13 +257,15 @@ fn while_armed_only_gains_and_rates_change() {
             }
         }
     }
-    // What may change armed: the gains, the angle and yaw-rate limits, the telemetry rates.
+    // What may change armed: the gains, the angle and yaw-rate limits, the telemetry rates, and
+    // the altitude mode with the hold's gains and rate (the mode change is smooth, both ways).
     let anytime: std::vec::Vec<&str> = TABLE.iter().filter(|p| p.applies == Applies::Anytime).map(|p| p.name).collect();
     assert!(
         anytime.iter().all(|n| n.starts_with("ANG_")
             || n.starts_with("RATE_")
             || n.starts_with("LINK_")
-            || ["ANGLE_MAX", "YAW_RATE_MAX", "YAW_FF"].contains(n)),
+            || ["ANGLE_MAX", "YAW_RATE_MAX", "YAW_FF"].contains(n)
+            || ["ALT_MODE", "CLIMB_RATE_MAX", "ALT_POS_P", "ALT_VEL_P", "ALT_VEL_I", "ALT_HOVER_US"].contains(n)),
         "{anytime:?}"
     );
     assert!(!anytime.contains(&"RATE_D_LPF_K") && !anytime.contains(&"LINK_PROTOCOL"));
@@ -335,6 +338,65 @@ fn times_are_whole_ticks_and_the_reference_supervisor_has_none_to_set() {
     let mut r = Config { supervisor: Supervisor::Reference, ..Config::default() };
     let before = r;
     assert_eq!(set(&mut r, idx("ARM_HOLD_MS"), 2000.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
+    assert_eq!(r, before);
+}
+
+#[test]
+fn the_altitude_parameters_reach_the_configuration_in_their_units() {
+    use fcu_core::altitude::AltMode;
+    let mut c = Config::default();
+    let alt = |c: &Config| c.altitude.expect("the default flies altitude");
+    assert_eq!(get(&c, "ALT_MODE"), 0.0, "manual by default");
+    assert_eq!(set(&mut c, idx("ALT_MODE"), 1.0, false).map(|a| a.value), Ok(1.0));
+    assert_eq!(alt(&c).mode, AltMode::Hold);
+    assert_eq!(set(&mut c, idx("ALT_MODE"), 0.5, false).map_err(|r| r.rule), Err(RULE_NOT_WHOLE));
+    assert_eq!(set(&mut c, idx("ALT_MODE"), 2.0, false).map_err(|r| r.rule), Err(RULE_ABOVE_MAX));
+    assert_eq!(set(&mut c, idx("CLIMB_RATE_MAX"), 2.5, false).map(|a| a.value), Ok(2.5));
+    assert_eq!(alt(&c).hold.climb_rate_max_m_s, 2.5);
+    assert_eq!(set(&mut c, idx("FS_DESCENT_RATE"), 0.05, false).map_err(|r| r.rule), Err(RULE_BELOW_MIN));
+    // Throttles in µs of stick: four capture counts each.
+    assert_eq!(set(&mut c, idx("ALT_DEADBAND_US"), 100.25, false).map(|a| a.value), Ok(100.25));
+    assert_eq!(alt(&c).hold.deadband, StickCounts(401));
+    assert_eq!(set(&mut c, idx("ALT_DEADBAND_US"), 100.1, false).map_err(|r| r.rule), Err(RULE_NOT_QUARTER_US));
+    assert_eq!(set(&mut c, idx("ALT_HOVER_US"), 150.0, false).map(|a| a.value), Ok(150.0));
+    assert_eq!(alt(&c).hold.hover_throttle, StickCounts(600));
+    assert_eq!(set(&mut c, idx("ALT_VEL_P"), 300.0, false).map(|a| a.value), Ok(300.0));
+    assert_eq!(alt(&c).hold.vel_p, 1200.0);
+    assert_eq!(set(&mut c, idx("ALT_EST_TAU"), 2.0, false).map(|a| a.value), Ok(2.0));
+    assert_eq!(alt(&c).estimator.time_constant_s, 2.0);
+    assert_eq!(set(&mut c, idx("BARO_THRUST_PA"), -7.5, false).map(|a| a.value), Ok(-7.5));
+    assert_eq!(alt(&c).estimator.thrust_scale_pa, -7.5);
+}
+
+#[test]
+fn in_flight_the_altitude_mode_and_the_holds_gains_change_and_the_failsafe_and_estimator_do_not() {
+    let mut c = Config::default();
+    for (name, v) in [
+        ("ALT_MODE", 1.0),
+        ("CLIMB_RATE_MAX", 0.5),
+        ("ALT_POS_P", 2.0),
+        ("ALT_VEL_P", 200.0),
+        ("ALT_VEL_I", 100.0),
+        ("ALT_HOVER_US", 140.0),
+    ] {
+        assert_eq!(set(&mut c, idx(name), v, true).map(|a| a.value), Ok(v), "{name}");
+    }
+    for (name, v) in [("FS_DESCENT_RATE", 1.0), ("ALT_DEADBAND_US", 50.0), ("ALT_EST_TAU", 3.0), ("BARO_THRUST_PA", 5.0)] {
+        assert_eq!(set(&mut c, idx(name), v, true).map_err(|r| r.rule), Err(RULE_ARMED), "{name}");
+    }
+    // A change of the mode alone is an in-flight change the controller takes armed.
+    let mut hold = Config::default();
+    set(&mut hold, idx("ALT_MODE"), 1.0, false).unwrap();
+    assert_eq!(check_change(&Config::default(), &hold, true).map(|c| c.kind), Ok(ChangeKind::InFlight));
+}
+
+#[test]
+fn the_reference_profile_has_no_altitude_to_set() {
+    let mut r = Config::reference();
+    r.reference_arithmetic = false;
+    let before = r;
+    assert_eq!(get(&r, "ALT_MODE"), 0.0);
+    assert_eq!(set(&mut r, idx("ALT_MODE"), 1.0, false).map_err(|r| r.rule), Err(RULE_NO_SAFETY));
     assert_eq!(r, before);
 }
 

@@ -309,6 +309,9 @@ fn inputs_strategy() -> impl Strategy<Value = Inputs> {
             sensor_fault,
             tilt_rad,
             gcs: fcu_core::gcs::GcsCommands::NONE,
+            // No height estimate: the manual failsafe these properties state.
+            descent_cap_ticks: 0,
+            landed: false,
         },
     )
 }

@@ -1,8 +1,8 @@
 //! The barometer boundary: an LPS22HB burst → pressure (Pa) and temperature (°C), and the
 //! sensor's health, with its faults named as the IMU's are ([`crate::imu::SensorFault`]).
 //!
-//! Not yet read in flight: the firmware, the flight controller and the link learn of it in the
-//! next step (`docs/altitude.md`).
+//! The outer step checks every burst handed to it ([`crate::flight::OuterStep::set_baro`]) in
+//! its vertical half ([`crate::althold::Vertical`]; `docs/altitude.md`).
 
 pub mod registers;
 

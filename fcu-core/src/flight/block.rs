@@ -1,9 +1,11 @@
 //! The block of five ticks the outer step runs on: each tick's accelerometer words and the
 //! running sum of the low-passed gyro, handed out as an [`OuterJob`] when the block is full.
 
+use super::supervision::InForce;
 use crate::filter::{accumulate, BLOCK};
 use crate::imu::{Decoder, Offsets};
-use crate::rc::Sticks;
+use crate::rc::{StickCounts, Sticks};
+use crate::supervisor::FlightState;
 
 /// The accelerometer words of a block, one per slot, aligned to 4 bytes (docs/performance.md,
 /// «aligned words»).
@@ -57,24 +59,19 @@ impl Block {
 
     /// The full block's job, with what the rest of the tick adds to it; the next block starts.
     #[inline(always)]
-    pub(super) fn take_job(
-        &mut self,
-        offsets: Offsets,
-        sticks: Sticks,
-        throttle_low: bool,
-        yaw_est_rad: f32,
-        yaw_target_reset: bool,
-    ) -> OuterJob {
+    pub(super) fn take_job(&mut self, offsets: Offsets, in_force: &InForce, yaw_est_rad: f32, yaw_target_reset: bool) -> OuterJob {
         let job = OuterJob {
             accel_words: self.accel_words,
             accel_offsets: offsets,
             accel_sum_before_mg: self.accel_sum_before_mg,
             first_raw_slot: self.first_raw_slot,
             gyro_sum_mdps: self.gyro_sum_mdps,
-            sticks,
-            throttle_low,
+            sticks: in_force.sticks,
+            throttle_low: in_force.throttle_low,
             yaw_est_rad,
             yaw_target_reset,
+            command_throttle: in_force.command_thr,
+            state: in_force.decision.state,
         };
         self.len = 0;
         self.accel_sum_before_mg = [0.0; 3];
@@ -103,13 +100,19 @@ pub struct OuterJob {
     pub first_raw_slot: u8,
     /// Low-passed gyro summed over the block, mdps, body axes.
     pub gyro_sum_mdps: [f32; 3],
-    /// The sticks in force (the failsafe's level sticks while it holds).
+    /// The sticks in force (the failsafe's level sticks while it holds), with the throttle
+    /// flown (the altitude hold's while it flies one).
     pub sticks: Sticks,
     pub throttle_low: bool,
     /// The yaw estimate at the end of the tick, rad.
     pub yaw_est_rad: f32,
     /// The throttle was low on some tick since the last job: the yaw target restarts at 0.
     pub yaw_target_reset: bool,
+    /// The throttle the sticks (or the failsafe) ask, before the altitude hold's.
+    pub command_throttle: StickCounts,
+    /// The supervisor's state (the vertical half re-zeroes the height at arming and lands in
+    /// the failsafe).
+    pub state: FlightState,
 }
 
 impl OuterJob {

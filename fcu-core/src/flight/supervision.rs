@@ -4,6 +4,7 @@
 use super::derived::TickParams;
 use super::gcs::{Gcs, TestOutput};
 use super::sensors::Sensors;
+use crate::althold::VerticalCommand;
 use crate::gcs::GcsInput;
 use crate::rc::{Gesture, PulseBatch, RadioState, Receiver, StickCounts, Sticks, CHANNELS};
 use crate::supervisor::{Blockers, Decision, FlightState, Inputs, ReferenceLatch, SafetyConfig, Supervisor, SupervisorConfig};
@@ -27,15 +28,22 @@ pub(super) struct InForce {
     pub(super) sticks: Sticks,
     /// Whether their throttle is low (motors stopped, integrators and yaw reset).
     pub(super) throttle_low: bool,
+    /// The throttle the sticks (or the failsafe) ask: `sticks.thr` unless the altitude hold
+    /// flies its own ([`VerticalCommand::throttle`]).
+    pub(super) command_thr: StickCounts,
 }
 
 impl InForce {
     /// A new decision, and what follows from it and the radio's sticks: the one writer of all
     /// three, written in place (docs/performance.md, «in place»).
     #[inline(always)]
-    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams) {
+    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams, hold: Option<StickCounts>) {
         self.decision = decision;
         self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);
+        self.command_thr = self.sticks.thr;
+        if let Some(t) = hold {
+            self.sticks.thr = t;
+        }
         self.throttle_low = p.rc.throttle_low(&self.sticks);
     }
 }
@@ -72,6 +80,9 @@ pub(super) struct Supervision {
     ticks: u32,
     /// What the ground station asked (the safe supervisor's only).
     gcs: Gcs,
+    /// The vertical half's last word: the throttle the hold flies, the failsafe descent's cap,
+    /// a landing.
+    vertical: VerticalCommand,
     /// Tests only: the supervisor decides every tick, the decision in force never stands.
     #[cfg(feature = "test-switches")]
     table_only: bool,
@@ -95,7 +106,9 @@ impl Supervision {
                 },
                 sticks: Sticks::default(),
                 throttle_low: true,
+                command_thr: StickCounts::ZERO,
             },
+            vertical: VerticalCommand::default(),
             ticks: 0,
             gcs: Gcs::default(),
             #[cfg(feature = "test-switches")]
@@ -157,39 +170,71 @@ impl Supervision {
     #[inline(always)]
     pub(super) fn decide(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         self.ticks = self.ticks.saturating_add(1);
+        // In steady flight, with nothing new from the radio and no sensor fault, the decision
+        // in force stands: the supervisor would decide it again, the same
+        // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
+        if let Machine::Safe { supervisor, .. } = &self.machine {
+            if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && self.repeats_allowed() {
+                return false;
+            }
+        }
+        self.decide_now(p, sensors, tilt_rad, flags)
+    }
+
+    /// The supervisor decides. Apart from [`decide`](Self::decide) and never inlined into it,
+    /// so that a steady tick, which only checks that the decision stands, pays for none of
+    /// this path's registers (docs/performance.md, «repeat steady flight»).
+    #[inline(never)]
+    fn decide_now(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         let radio = self.receiver.state();
-        let repeats_allowed = self.repeats_allowed();
         let decision = match &mut self.machine {
             Machine::Reference(latch) => latch.decide(radio.link, flags.set_armed, sensors.calibrating()),
             Machine::Safe { cfg, supervisor } => {
-                // In steady flight, with nothing new from the radio and no sensor fault, the
-                // decision in force stands: the supervisor would decide it again, the same
-                // (`Supervisor::steady`; docs/performance.md, «repeat steady flight»).
-                if supervisor.steady() && !self.receiver.changed() && sensors.fault().is_none() && repeats_allowed {
-                    return false;
-                }
                 let gcs = self.gcs.commands(self.ticks, &radio.sticks, &p.rc);
+                // The throttle flown: the hold's while it flies one (its bottom is the landed
+                // drone's, which the automatic disarm counts), else the stick's.
+                let flown = Sticks { thr: self.vertical.throttle.unwrap_or(radio.sticks.thr), ..radio.sticks };
                 let inputs = Inputs {
                     tick: self.ticks,
                     link: radio.link,
                     // Only read without a good link.
                     silence_ticks: if radio.link { 0 } else { self.receiver.silence_ticks(&p.rc) },
-                    sticks: radio.sticks,
+                    sticks: flown,
                     gesture: radio.gesture,
-                    throttle_low: p.rc.throttle_low(&radio.sticks),
+                    throttle_low: p.rc.throttle_low(&flown),
                     calibrated: sensors.calibrated(),
                     calibrating: sensors.calibrating(),
                     sensor_fault: sensors.fault(),
                     tilt_rad,
                     gcs,
+                    descent_cap_ticks: self.vertical.descent_cap_ticks,
+                    landed: self.vertical.landed,
                 };
                 let decision = supervisor.decide(cfg, &inputs);
                 self.gcs.decided(decision.state);
                 decision
             }
         };
-        self.in_force.decided(decision, radio.sticks, p);
+        self.in_force.decided(decision, radio.sticks, p, self.vertical.throttle);
         decision.request_calibration
+    }
+
+    /// The vertical half's new word (from an outer step's result): the throttle the hold flies
+    /// is in force at once; a change the supervisor must see (the throttle flown going low or
+    /// coming up, a landing) ends steady flight so that it is decided.
+    pub(super) fn set_vertical(&mut self, v: VerticalCommand, p: &TickParams) {
+        if v == self.vertical {
+            return;
+        }
+        let f = &mut self.in_force;
+        f.sticks.thr = v.throttle.unwrap_or(f.command_thr);
+        let low = p.rc.throttle_low(&f.sticks);
+        let news = low != f.throttle_low || v.landed != self.vertical.landed;
+        f.throttle_low = low;
+        self.vertical = v;
+        if let (true, Machine::Safe { supervisor, .. }) = (news, &mut self.machine) {
+            supervisor.unsteady();
+        }
     }
 
     /// A ground station's input, between ticks. The reference's supervisor takes none.

@@ -92,7 +92,8 @@ fn a_snapshot_reads_back_and_its_crc_is_zlibs() {
     assert_eq!(decode(&w), Some(Snapshot { sequence: 7, values: values(3) }));
     assert_eq!(w[0], MAGIC);
     assert_eq!(w[RECORD_WORDS - 1], COMMIT);
-    const { assert!(SLOTS >= 64) };
+    // Tens of saves per erase of a sector (62 with the 60 parameters).
+    const { assert!(SLOTS >= 60) };
 }
 
 #[test]
