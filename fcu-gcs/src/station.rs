@@ -393,20 +393,12 @@ fn altitude(a: &AltitudeStatus) -> Altitude {
     }
 }
 
-/// Whether any parameter of `a` differs from `b`'s, bit for bit. The configurations the station
-/// holds differ in parameters only ([`parameters::check_change`] refuses any other
-/// difference), and comparing the table's values reuses its getters where the derived
-/// `Config: PartialEq`, built with fcu-core at opt-level 3 and inlined here, cost 1.5 KB.
+/// Whether any parameter of `a` differs from `b`'s, bit for bit. The station's configurations
+/// differ in parameters only (each comes from the one before through the table's setters),
+/// and comparing the table's values reuses its getters where the derived `Config: PartialEq`,
+/// built with fcu-core at opt-level 3 and inlined, cost 1.5 KB (2 KB with altitude hold).
 fn differs(a: &Config, b: &Config) -> bool {
     (0..parameters::count()).any(|i| parameters::value(a, i).map(f32::to_bits) != parameters::value(b, i).map(f32::to_bits))
-}
-
-/// Restores the defaults. Out of line, with both configurations as arguments: through `self`,
-/// the compiler cannot tell the defaults (`&'static`) from the configuration in force and
-/// copies with `memmove`, whose 1.6 KB the image otherwise never needs.
-#[inline(never)]
-fn restore(cfg: &mut Config, defaults: &Config) {
-    *cfg = *defaults;
 }
 
 impl Vehicle for Station {
@@ -476,9 +468,15 @@ impl Vehicle for Station {
             }
         }
         if any {
-            let change = parameters::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
+            // `next` comes from the configuration in force through the table's setter, which
+            // validated it: what it reaches is the table's to say, and a set that moved a
+            // parameter not changeable in flight (a radio map's partner) waits for the disarm.
+            let kind = parameters::change_kind(&self.cfg, &next);
+            if !kind.allowed(armed) {
+                return Err(parameters::ApplyError::Armed.rule());
+            }
             self.cfg = next;
-            self.changed(change.kind);
+            self.changed(kind);
         }
         Ok(others)
     }
@@ -518,10 +516,13 @@ impl Station {
             }
             Request::ResetParams => {
                 gcs::disarmed_rule(state)?;
-                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
-                if differs(&self.cfg, self.defaults) {
-                    restore(&mut self.cfg, self.defaults);
-                    self.changed(change.kind);
+                // Every parameter to its default, through the table's setters and checked as a
+                // whole (as a snapshot loaded at boot is).
+                let next = parameters::with_values(&self.cfg, &parameters::values(self.defaults)).map_err(Refused::denied)?;
+                if differs(&self.cfg, &next) {
+                    let kind = parameters::change_kind(&self.cfg, &next);
+                    self.cfg = next;
+                    self.changed(kind);
                 }
                 Ok(())
             }
