@@ -103,4 +103,3 @@ fn payload_len(payload: &[u8; MAX_PAYLOAD], full: usize) -> usize {
 pub fn frame_len(header: Header, payload: &[u8; MAX_PAYLOAD]) -> usize {
     V2_HEADER + payload_len(payload, header.encoded_len) + 2
 }
-

@@ -459,10 +459,7 @@ impl From<TakeError> for ApplyError {
 /// those by construction, and need not link `check_change`'s field-by-field comparison of two
 /// configurations (about 2 KB of flash on the board).
 pub fn change_kind(old: &Config, new: &Config) -> ChangeKind {
-    TABLE
-        .iter()
-        .filter(|p| p.get(new).to_bits() != p.get(old).to_bits())
-        .fold(ChangeKind::InFlight, |kind, p| kind.max(p.applies.kind()))
+    TABLE.iter().filter(|p| p.get(new).to_bits() != p.get(old).to_bits()).fold(ChangeKind::InFlight, |kind, p| kind.max(p.applies.kind()))
 }
 
 /// Whether `new` may replace `old` at run time, with changes restricted or not
