@@ -994,6 +994,25 @@ mod tests {
     }
 
     #[test]
+    fn the_kind_the_station_hands_on_is_check_changes() {
+        // The station classifies its changes with the table alone (`change_kind`): the same
+        // verdict `check_change` gives with its checks, for every change it makes.
+        let mut st = station_in(FlightState::Disarmed, REST);
+        for (name, value) in [("ANGLE_MAX", 25.0), ("RCMAP_ROLL", 3.0), ("RC1_TRIM", 1470.0), ("RATE_YAW_I", 0.0)] {
+            let before = *st.config();
+            st.set_param(index(name), value).unwrap();
+            let kind = parameters::check_change(&before, st.config(), false).map(|c| c.kind);
+            assert_eq!(Ok(parameters::change_kind(&before, st.config())), kind, "{name}");
+            assert_eq!(st.take_change().map(|c| c.kind), kind.ok().filter(|_| before != *st.config()), "{name}");
+        }
+        let before = *st.config();
+        assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
+        let kind = parameters::check_change(&before, st.config(), false).map(|c| c.kind);
+        assert_eq!(st.take_change().map(|c| c.kind), kind.ok());
+        assert!(*st.config() == Config::DEFAULT);
+    }
+
+    #[test]
     fn a_reset_to_defaults_restores_them() {
         let mut st = station_in(FlightState::Disarmed, REST);
         assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
