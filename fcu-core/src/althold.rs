@@ -17,7 +17,7 @@
 //! - it has landed when, descending, the collective has stayed below [`LAND_FRACTION`] of the
 //!   hover throttle with the height estimate still ([`LAND_SPEED_M_S`]) for [`LAND_TIME_S`].
 
-use crate::altitude::{vertical_accel_m_s2, AltMode, AltitudeConfig, AltitudeEstimator, AltitudeStatus};
+use crate::altitude::{vertical_accel_m_s2, AltMode, AltitudeConfig, AltitudeEstimate, AltitudeEstimator, AltitudeStatus};
 use crate::baro::{BaroFault, BaroHealthConfig, BaroMonitor, RawBaro};
 use crate::math::{limit, within, Quat, Vec3};
 use crate::rc::StickCounts;
@@ -106,12 +106,18 @@ impl AltitudeSettings {
 
 /// The collective must stay at this share of the hover throttle for a lift-off to be counted.
 pub const LIFTOFF_FRACTION: f32 = 0.75;
+/// The barometer this far above the take-off level counts as airborne, m.
+pub const LIFTOFF_BARO_M: f32 = 1.0;
 /// A landing: the collective below this share of the hover throttle…
 pub const LAND_FRACTION: f32 = 0.75;
 /// …with the estimated climb rate within this, m/s…
 pub const LAND_SPEED_M_S: f32 = 0.2;
-/// …for this long, s.
+/// …for this long, s, within this of the take-off level, m: a drone that cannot sink on the
+/// lowest throttle that keeps its motors turning (an airframe lighter than the throttle map's
+/// floor) looks landed by the first three, anywhere. The margin is the estimate's drift over a
+/// flight and the props' wash near the floor, twice over.
 pub const LAND_TIME_S: f32 = 1.0;
+pub const LAND_HEIGHT_M: f32 = 0.75;
 /// The failsafe holds the height this long before it descends, s (the level stage of the
 /// manual failsafe, in which a brief loss comes back).
 pub const FS_LEVEL_S: f32 = 1.0;
@@ -301,8 +307,20 @@ impl Vertical {
 
         // 3. The estimate, on the ground state of the last step and the throttle flown.
         let accel_up = vertical_accel_m_s2(quat, accel_mg);
+        let thrust = self.thrust_share(i.flown, i.min_throttle);
+        if let (Some(p), true) = (pressure, i.motors_enabled && !self.airborne) {
+            // The barometer well above the take-off level: airborne, whatever the throttle said
+            // (a hover throttle set too high would otherwise keep a flying drone "on the
+            // ground", its height pinned at 0). The margin is twice the most the props' wash and
+            // ground effect move the reading at the floor.
+            let h = self.estimator.baro_height_m(p, thrust);
+            if h > LIFTOFF_BARO_M {
+                self.airborne = true;
+                self.estimator.airborne_at(h);
+            }
+        }
         let on_ground = !i.motors_enabled || !self.airborne;
-        let est = self.estimator.update(accel_up, pressure, self.thrust_share(i.flown, i.min_throttle), on_ground);
+        let est = self.estimator.update(accel_up, pressure, thrust, on_ground);
         let healthy = self.healthy();
 
         // 4. The hold, or the stick (with what the hold gave carried until the stick crosses it).
@@ -337,7 +355,7 @@ impl Vertical {
             // ground; the motors idle and the automatic disarm counts.
             let grounded = self.cfg.mode == AltMode::Hold && i.motors_enabled && !self.has_flown && carried.is_none();
             let flown = if grounded { 0.0 } else { carried.unwrap_or(f32::from(i.command.0)) };
-            self.manual_ground_state(flown, est.vertical_speed_m_s, i);
+            self.manual_ground_state(flown, &est, i);
             if grounded {
                 Some(0.0)
             } else {
@@ -397,6 +415,13 @@ impl Vertical {
             self.engaged = Some(height_m);
             self.carry = None;
             self.integral = 0.0;
+            // Motors turning above the throttle cut when the hold takes over (the failsafe, a
+            // mode change): flying, or about to, whatever the ground state thought; the hold
+            // never takes a drone it might be flying for one on the floor.
+            if flown > floor {
+                self.airborne = true;
+                self.land_steps = 0;
+            }
             if self.airborne {
                 self.hover = limit(flown, floor, top);
                 self.out = self.hover;
@@ -450,7 +475,8 @@ impl Vertical {
         }
         // Landing: asked down, the throttle well under the hover, the height still.
         let holding = self.hover + self.integral;
-        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && climb_m_s.abs() < LAND_SPEED_M_S {
+        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && climb_m_s.abs() < LAND_SPEED_M_S && height_m < LAND_HEIGHT_M
+        {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
@@ -466,7 +492,8 @@ impl Vertical {
 
     /// Without the hold: airborne once the throttle flown reaches the lift-off share of the
     /// hover throttle, landed once it stays under the landing share with the height still.
-    fn manual_ground_state(&mut self, flown: f32, climb_m_s: f32, i: &VerticalInput) {
+    fn manual_ground_state(&mut self, flown: f32, est: &AltitudeEstimate, i: &VerticalInput) {
+        let climb_m_s = est.vertical_speed_m_s;
         if !i.motors_enabled {
             return;
         }
@@ -475,7 +502,7 @@ impl Vertical {
             self.land_steps = 0;
             return;
         }
-        if flown < LAND_FRACTION * self.hover && climb_m_s.abs() < LAND_SPEED_M_S {
+        if flown < LAND_FRACTION * self.hover && climb_m_s.abs() < LAND_SPEED_M_S && est.height_m < LAND_HEIGHT_M {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;

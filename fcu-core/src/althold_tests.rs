@@ -23,6 +23,7 @@ const SAFETY: SafetyConfig = SafetyConfig::DEFAULT;
 /// The airframe of the simulator's nominal plant, vertically: 65 g, four motors of 0.33 N at
 /// full duty with its thrust curve, a 50 ms motor lag, linear drag, a rigid floor.
 struct Plant {
+    mass_kg: f32,
     z_m: f32,
     v_m_s: f32,
     thrust_n: f32,
@@ -31,7 +32,7 @@ struct Plant {
 }
 
 impl Plant {
-    const MASS_KG: f32 = 0.065;
+    const NOMINAL_KG: f32 = 0.065;
     const DRAG_N_PER_M_S: f32 = 0.02;
     const G: f32 = 9.80665;
 
@@ -48,7 +49,7 @@ impl Plant {
     fn step(&mut self, throttle: f32, running: bool, dt: f32) {
         self.thrust_n += (Self::thrust_for(throttle, running) - self.thrust_n) * dt / 0.05;
         let force = self.thrust_n - Self::DRAG_N_PER_M_S * self.v_m_s;
-        let mut a = force / Self::MASS_KG - Self::G;
+        let mut a = force / self.mass_kg - Self::G;
         if self.z_m <= 0.0 && a <= 0.0 && self.v_m_s <= 0.0 {
             // On the floor: it pushes back.
             a = 0.0;
@@ -113,7 +114,7 @@ impl Rig {
             decision: crate::supervisor::ReferenceLatch::default().decide(false, None, false),
             cmd: VerticalCommand::default(),
             status: AltitudeStatus::default(),
-            plant: Plant { z_m: 0.0, v_m_s: 0.0, thrust_n: 0.0, specific_force: Plant::G },
+            plant: Plant { mass_kg: Plant::NOMINAL_KG, z_m: 0.0, v_m_s: 0.0, thrust_n: 0.0, specific_force: Plant::G },
             noise: Noise(11),
             tick: 0,
             steps: 0,
@@ -397,7 +398,7 @@ fn entering_hold_in_flight_takes_the_height_and_the_thrust_flown() {
     assert!(r.status.climb_m_s < -0.3, "{:?}", r.status);
 }
 
-/// Manual flight at about `height_m`, then the link lost.
+/// Manual flight at about `height_m`.
 fn hovering_manually_at(height_m: f32) -> Rig {
     let mut r = Rig::new(AltMode::Manual);
     r.run(Rig::thr(700), 0.3);
@@ -570,4 +571,59 @@ fn non_finite_estimates_never_reach_the_throttle() {
         let t = r.v.hold(0.0, h, v, &input);
         assert!(t.is_finite() && (f32::from(MIN_THROTTLE.0)..=3600.0).contains(&t), "{h} {v}: {t}");
     }
+}
+
+/// An airframe `mass` times the nominal, in manual flight near `height_m` on a throttle found
+/// by a pilot: a little above its hover to climb, then its hover.
+fn flying_manually(mass: f32, height_m: f32) -> Rig {
+    let mut r = Rig::new(AltMode::Manual);
+    r.plant.mass_kg = Plant::NOMINAL_KG * mass;
+    let hover = (0..3600).find(|&t| Plant::thrust_for(f32::from(t as i16), true) > r.plant.mass_kg * Plant::G).unwrap_or(3600) as i16;
+    while r.plant.z_m < height_m {
+        r.run(Rig::thr(hover + 60), 0.05);
+    }
+    r.run(Rig::thr(hover), 1.0);
+    r
+}
+
+#[test]
+fn an_airframe_lighter_than_the_hover_setting_is_seen_airborne_and_its_failsafe_lands() {
+    // 0.9 × the nominal mass hovers at about 270 stick counts, under 75 % of ALT_HOVER_US's
+    // 530: the throttle alone never says airborne. Above 1 m the barometer does; below it the
+    // failsafe's hold takes running motors for flight.
+    for (height, loss_at) in [(2.0, "2 m"), (0.6, "0.6 m")] {
+        let mut r = flying_manually(0.9, height);
+        if height > 1.5 {
+            assert!((r.status.height_m - r.plant.z_m).abs() < 0.3, "{loss_at}: estimate {} true {}", r.status.height_m, r.plant.z_m);
+        }
+        let z = r.plant.z_m;
+        r.link = false;
+        let mut off = None;
+        let mut lowest_running = f32::MAX;
+        let mut t = 0.0;
+        r.watch(Rig::thr(0), 20.0, |r| {
+            t += STEP_S;
+            if off.is_none() && r.decision.state == FlightState::FailsafeOff {
+                off = Some((t, r.plant.z_m));
+            }
+            if r.decision.motors_enabled {
+                lowest_running = lowest_running.min(r.plant.z_m);
+            }
+        });
+        let (t_off, z_off) = off.unwrap_or_else(|| panic!("{loss_at}: never stage 2"));
+        assert_eq!(z_off, 0.0, "{loss_at}: motors off at {z_off} m after {t_off} s (lost at {z} m)");
+    }
+}
+
+#[test]
+fn an_airframe_heavier_than_the_hover_setting_takes_off_holds_and_lands_in_hold() {
+    let mut r = Rig::new(AltMode::Hold);
+    r.plant.mass_kg = Plant::NOMINAL_KG * 1.2;
+    r.take_off_to(1.0);
+    let z = r.plant.z_m;
+    r.run(Rig::thr(CENTRE), 10.0);
+    assert!((r.plant.z_m - z).abs() < 0.2, "{z} -> {}", r.plant.z_m);
+    r.run(Rig::thr(0), 12.0);
+    assert_eq!(r.plant.z_m, 0.0);
+    assert_eq!(r.decision.state, FlightState::Disarmed);
 }

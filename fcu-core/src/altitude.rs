@@ -215,6 +215,23 @@ impl AltitudeEstimator {
         self.cfg = cfg;
     }
 
+    /// The barometer's own height of `pressure_pa` above the reference (the take-off level once
+    /// re-zeroed), with the thrust's compensation, m; NaN before a reference.
+    pub fn baro_height_m(&self, pressure_pa: f32, thrust: f32) -> f32 {
+        let thrust = if thrust.is_finite() { crate::math::limit(thrust, 0.0, 1.0) } else { 0.0 };
+        self.reference_pa.map_or(f32::NAN, |r| baro_height_m(pressure_pa - self.cfg.thrust_scale_pa * thrust, r))
+    }
+
+    /// Found flying at `height_m` (the barometer's, well above the take-off level) while it was
+    /// taken for on the ground: the estimate starts from there, and the lift-off's
+    /// re-reference, made for a lift-off from the floor, is not made.
+    pub fn airborne_at(&mut self, height_m: f32) {
+        if height_m.is_finite() {
+            self.height_m = height_m;
+        }
+        self.on_ground = false;
+    }
+
     pub fn estimate(&self) -> AltitudeEstimate {
         AltitudeEstimate {
             height_m: self.height_m,

@@ -8,10 +8,12 @@
 //!   estimate, and the output (rate loop → mixer → guard). Every fifth tick it hands out an
 //!   [`OuterJob`] (the block's accelerometer words and summed gyro, and the sticks).
 //! - [`OuterStep`] runs the job: accelerometer conversion → block means → estimator → Euler and
-//!   tilt → stick targets and the heading target → angle loop → the run-time [`Gains`], and
-//!   returns an [`OuterResult`] that the control tick applies at its next tick
-//!   ([`ControlTick::apply_outer`]). The outer step is the only owner of the heading target,
-//!   the tilt and the gains.
+//!   tilt → stick targets and the heading target → angle loop → the run-time [`Gains`] → the
+//!   vertical half (the barometer burst given by [`OuterStep::set_baro`], the height estimate,
+//!   altitude hold: [`crate::althold::Vertical`]), and returns an [`OuterResult`] that the
+//!   control tick applies at its next tick ([`ControlTick::apply_outer`]). The outer step is the
+//!   only owner of the heading target, the tilt, the gains and the height; the tick takes one
+//!   value from the vertical half, the throttle the hold flies instead of the stick's.
 //!
 //! The configuration is never changed: what both halves read is worked out from it once (the
 //! tick's [`TickParams`]), and the gains scale only the tick's rate loop and throttle map.
@@ -833,10 +835,13 @@ mod tests {
         let centred = ForcedRadio { width_counts: [6100, 5900, 6150, 6300], ..FLYING };
         let mut manual = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
         let mut hold = FlightController::new(with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
-        let disarmed = ForcedRadio { armed: false, ..centred };
+        // Armed with the throttle low (as the safe supervisor arms), then the stick centred.
+        let disarmed = ForcedRadio { armed: false, width_counts: [6100, 5900, 4400, 6300], ..centred };
+        let armed_low = ForcedRadio { armed: true, ..disarmed };
         for fc in [&mut manual, &mut hold] {
             fly_with_baro(fc, 0, 2500, &disarmed, usize::MAX);
-            fly_with_baro(fc, 2500, 4000, &centred, usize::MAX);
+            fly_with_baro(fc, 2500, 2600, &armed_low, usize::MAX);
+            fly_with_baro(fc, 2600, 4000, &centred, usize::MAX);
         }
         let (m, h) = (manual.status(), hold.status());
         assert!(m.compare.iter().all(|&c| c > 0), "{:?}", m.compare);

@@ -23,6 +23,7 @@
 //! | sticks to attitude and yaw targets, gestures | [`rc::RcConfig`] (`tilt_targets`, `yaw_step`, `gesture`) |
 //! | sensor faults, calibration | [`imu::HealthMonitor`], [`imu::Calibrator`] |
 //! | the attitude estimate | [`ahrs`] (the reference's Mahony, the default's VQF-style estimator) |
+//! | the barometer, the height, altitude hold, landing detection, the failsafe's descent | [`baro`], [`altitude`], [`althold`] (the outer step's vertical half), the failsafe's rules in [`supervisor`] (`Inputs::descent_cap_ticks`, `Inputs::landed`) |
 //! | gains, feedforward, battery compensation | [`control`] and the `control` field of [`Config::default`] |
 //! | motor mixing and saturation | [`mixer`] |
 //! | stick values and compare counts (both 16-bit counts, never mixed up) | [`rc::StickCounts`], [`mixer::CompareCounts`] |
