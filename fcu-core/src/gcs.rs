@@ -28,6 +28,9 @@
 //! - **Radio calibration**: while it runs the ground station reads the radio's widths and
 //!   writes the endpoints and trims as parameters; arming is blocked meanwhile. It ends on
 //!   request or after [`RADIO_CALIBRATION_MAX_MS`].
+//! - **Set-mode** (manual throttle or altitude hold): a set of the parameter `ALT_MODE`, by
+//!   name, with that parameter's checks (it may change in flight); refused with
+//!   [`RULE_NO_ALTITUDE_HOLD`] where the table has no such parameter.
 //! - **Saving and rebooting**: the ground station says when a flash save or a reboot it accepted
 //!   is pending and when it is done or dropped; arming is blocked meanwhile, since an erase
 //!   stalls every instruction fetch and a reset stops the motors. The station carries either out
@@ -68,6 +71,9 @@ pub const RULE_NOT_READY: &str = "fault or failsafe";
 pub const RULE_REFERENCE: &str = "not with the reference supervisor";
 /// Rule: the motor index.
 pub const RULE_NO_SUCH_MOTOR: &str = "motor must be 1 to 4";
+/// Rule: a set-mode is the parameter `ALT_MODE`'s set (the same checks apply), refused on a
+/// board whose parameter table has no such parameter.
+pub const RULE_NO_ALTITUDE_HOLD: &str = "no altitude hold on this board";
 
 /// A request refused: the rule, and whether the flight state of the moment refuses it (armed,
 /// the throttle up: the same request may pass later, MAVLink's TEMPORARILY_REJECTED) or the

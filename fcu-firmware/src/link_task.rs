@@ -179,10 +179,19 @@ fn step(g: &mut LinkTask, s: &mut SharedResources<'_>, boot: &BootVerdict, next_
     }
     let service = &mut g.service;
     let uart_idle = s.uart.lock(|uart| {
+        // Everything the UART queue has room for, through a small buffer: a tick whose
+        // streams all fall due (341 bytes) leaves the link's queue at once, and a request
+        // that comes in the next period finds room for its answer beside the telemetry's
+        // reserve (`fcu_link::TELEMETRY_RESERVE`).
         let mut out = [0u8; 128];
-        let room = uart.room().min(out.len());
-        let n = service.poll_tx(out.get_mut(..room).unwrap_or_default());
-        uart.send(out.get(..n).unwrap_or_default());
+        loop {
+            let room = uart.room().min(out.len());
+            let n = service.poll_tx(out.get_mut(..room).unwrap_or_default());
+            if n == 0 {
+                break;
+            }
+            uart.send(out.get(..n).unwrap_or_default());
+        }
         uart.is_idle()
     });
     // Asked at the instant of acting, and acted on at once.

@@ -26,7 +26,17 @@
 //! instruction fetch, the control tick's included; a reset stops the motors.
 //!
 //! A motor test or a calibration is refused while a save or a reboot is pending.
+//!
+//! # Set-mode
+//!
+//! A ground station's set-mode (manual throttle or altitude hold) is carried out as a set of
+//! the parameter [`ALT_MODE`], found in fcu-params' table by name: the same checks as a
+//! PARAM_SET of it (its range, whether it may change armed, the configuration's validation),
+//! the same save after the debounce, and the link echoes its PARAM_VALUE. A table without the
+//! parameter refuses it ([`gcs::RULE_NO_ALTITUDE_HOLD`]); a set the table refuses is refused
+//! with the table's rule (for now when it is the armed one).
 
+use fcu_core::altitude::{AltMode, AltitudeStatus};
 use fcu_core::flight::{ChangeKind, ConfigChange, Status};
 use fcu_core::gcs::{self, Disarm, GcsInput, MotorTest, MotorTestChange, Refused};
 use fcu_core::rc::COUNTS_PER_US;
@@ -34,7 +44,10 @@ use fcu_core::supervisor::{Blocker, FlightState, SupervisorConfig};
 use fcu_core::Config;
 use fcu_params::{self as parameters, snapshot};
 
-use fcu_link::{Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState};
+use fcu_link::{Altitude, Attitude, Battery, Health, Param, ParamMask, Rates, Request, Vehicle, VehicleState, VerticalMode};
+
+/// The parameter a set-mode sets: the pilot's vertical mode (0 manual, 1 altitude hold).
+pub const ALT_MODE: &[u8] = b"ALT_MODE";
 
 /// How long after the last parameter change a save waits, so that a ground station setting
 /// twenty parameters in a row (a radio calibration) costs one erase, not twenty.
@@ -346,53 +359,77 @@ impl Station {
     }
 }
 
+/// What the link says before the first status (the board boots: calibrating, nothing measured
+/// but the battery), and the fields no status changes. One constant the state starts from, in
+/// flash, rather than a second list of stores.
+const BOOTING: VehicleState = VehicleState {
+    state: FlightState::Calibrating,
+    attitude: Attitude { roll_rad: 0.0, pitch_rad: 0.0, yaw_rad: 0.0, roll_rate_rad_s: 0.0, pitch_rate_rad_s: 0.0, yaw_rate_rad_s: 0.0 },
+    rc_widths_us: [0; 8],
+    rc_channel_count: 0,
+    motor_outputs_us: [1000; 4],
+    battery: Battery { voltage_mv: 0, current_ca: -1, remaining_pct: -1 },
+    health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
+    load_permille: 0,
+    motor_test: false,
+    altitude: Altitude { height_m: None, climb_m_s: None, pressure_pa: None, temperature_c: 0.0, mode: VerticalMode::Manual },
+};
+
+/// The vertical half's report as the link says it: the height only while the estimate may be
+/// flown on, the failsafe's descent over the pilot's mode.
+fn altitude(a: &AltitudeStatus) -> Altitude {
+    let mode = match a.mode {
+        _ if a.failsafe_descent => VerticalMode::FailsafeDescent,
+        AltMode::Manual => VerticalMode::Manual,
+        AltMode::Hold => VerticalMode::AltitudeHold,
+    };
+    let known = a.estimate_healthy;
+    Altitude {
+        height_m: known.then_some(a.height_m),
+        climb_m_s: known.then_some(a.climb_m_s),
+        pressure_pa: a.pressure_pa,
+        temperature_c: a.temperature_c,
+        mode,
+    }
+}
+
+/// Whether any parameter of `a` differs from `b`'s, bit for bit. The station's configurations
+/// differ in parameters only (each comes from the one before through the table's setters),
+/// and comparing the table's values reuses its getters where the derived `Config: PartialEq`,
+/// built with fcu-core at opt-level 3 and inlined, cost 1.5 KB (2 KB with altitude hold).
+fn differs(a: &Config, b: &Config) -> bool {
+    (0..parameters::count()).any(|i| parameters::value(a, i).map(f32::to_bits) != parameters::value(b, i).map(f32::to_bits))
+}
+
 impl Vehicle for Station {
     fn state(&self) -> VehicleState {
+        let mut said = BOOTING;
+        said.battery.voltage_mv = self.battery_mv;
         let Some(s) = self.status else {
-            return VehicleState {
-                state: FlightState::Calibrating,
-                attitude: Attitude::default(),
-                rc_widths_us: [0; 8],
-                rc_channel_count: 0,
-                motor_outputs_us: [1000; 4],
-                battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-                health: Health { imu: false, radio: false, estimator: false, battery: true, prearm: false },
-                load_permille: 0,
-                motor_test: false,
-            };
+            return said;
         };
         let armed = self.armed();
-        let mut rc_widths_us = [0u16; 8];
-        for (out, &w) in rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
+        for (out, &w) in said.rc_widths_us.iter_mut().zip(self.rc_widths_counts.iter()) {
             *out = (u32::from(w) / COUNTS_PER_US) as u16;
         }
+        said.rc_channel_count = 4;
         let arr = u32::from(self.cfg.mixer.timer_arr) + 1;
-        let motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
-        VehicleState {
-            state: s.state,
-            attitude: Attitude {
-                roll_rad: s.tilt.roll_rad,
-                pitch_rad: s.tilt.pitch_rad,
-                // fcu-core's heading turns anticlockwise seen from above; MAVLink's clockwise.
-                yaw_rad: -s.yaw_est_rad,
-                roll_rate_rad_s: 0.0,
-                pitch_rate_rad_s: 0.0,
-                yaw_rate_rad_s: 0.0,
-            },
-            rc_widths_us,
-            rc_channel_count: 4,
-            motor_outputs_us,
-            battery: Battery { voltage_mv: self.battery_mv, current_ca: -1, remaining_pct: -1 },
-            health: Health {
-                imu: s.fault.is_none(),
-                radio: s.link,
-                estimator: s.calibrated,
-                battery: true,
-                prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
-            },
-            load_permille: 0,
-            motor_test: self.motor_test_running(),
-        }
+        said.motor_outputs_us = s.compare.map(|c| (1000 + u32::from(c) * 1000 / arr).min(2000) as u16);
+        said.state = s.state;
+        said.attitude.roll_rad = s.tilt.roll_rad;
+        said.attitude.pitch_rad = s.tilt.pitch_rad;
+        // fcu-core's heading turns anticlockwise seen from above; MAVLink's clockwise.
+        said.attitude.yaw_rad = -s.yaw_est_rad;
+        said.health = Health {
+            imu: s.fault.is_none(),
+            radio: s.link,
+            estimator: s.calibrated,
+            battery: true,
+            prearm: armed || (s.state == FlightState::Disarmed && s.blockers.is_empty()),
+        };
+        said.motor_test = self.motor_test_running();
+        said.altitude = altitude(&s.altitude);
+        said
     }
 
     fn param_count(&self) -> u16 {
@@ -431,16 +468,46 @@ impl Vehicle for Station {
             }
         }
         if any {
-            let change = parameters::check_change(&self.cfg, &next, armed).map_err(|e| e.rule())?;
+            // `next` comes from the configuration in force through the table's setter, which
+            // validated it: what it reaches is the table's to say, and a set that moved a
+            // parameter not changeable in flight (a radio map's partner) waits for the disarm.
+            let kind = parameters::change_kind(&self.cfg, &next);
+            if !kind.allowed(armed) {
+                return Err(parameters::ApplyError::Armed.rule());
+            }
             self.cfg = next;
-            self.changed(change.kind);
+            self.changed(kind);
         }
         Ok(others)
     }
 
-    fn request(&mut self, request: Request) -> Result<(), Refused> {
+    fn request(&mut self, request: Request) -> Result<ParamMask, Refused> {
+        if let Request::SetMode(mode) = request {
+            return self.set_mode(mode);
+        }
+        self.command(request).map(|()| ParamMask::EMPTY)
+    }
+}
+
+impl Station {
+    /// A set-mode: the parameter [`ALT_MODE`]'s set (see the module docs). `Ok` carries it
+    /// and any other parameter the set changed.
+    fn set_mode(&mut self, mode: AltMode) -> Result<ParamMask, Refused> {
+        let Some(index) = parameters::index_of(ALT_MODE) else {
+            return Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD));
+        };
+        let index = index as u16;
+        let mut set =
+            self.set_param(index, f32::from(mode as u8)).map_err(|rule| Refused { rule, for_now: rule == parameters::RULE_ARMED })?;
+        set.insert(index);
+        Ok(set)
+    }
+
+    /// Every request but a set-mode.
+    fn command(&mut self, request: Request) -> Result<(), Refused> {
         let state = self.flight_state();
         match request {
+            Request::SetMode(mode) => self.set_mode(mode).map(|_| ()),
             Request::Arm => gcs::arm_rule(),
             Request::SaveParams => {
                 gcs::save_rule(state, self.motor_test_running())?;
@@ -449,10 +516,13 @@ impl Vehicle for Station {
             }
             Request::ResetParams => {
                 gcs::disarmed_rule(state)?;
-                let change = parameters::check_change(&self.cfg, self.defaults, false).map_err(|e| Refused::denied(e.rule()))?;
-                if self.cfg != *self.defaults {
-                    self.cfg = *self.defaults;
-                    self.changed(change.kind);
+                // Every parameter to its default, through the table's setters and checked as a
+                // whole (as a snapshot loaded at boot is).
+                let next = parameters::with_values(&self.cfg, &parameters::values(self.defaults)).map_err(Refused::denied)?;
+                if differs(&self.cfg, &next) {
+                    let kind = parameters::change_kind(&self.cfg, &next);
+                    self.cfg = next;
+                    self.changed(kind);
                 }
                 Ok(())
             }
@@ -520,7 +590,7 @@ mod tests {
 
     impl Asked for Station {
         fn asked(&mut self, request: Request) -> Result<(), &'static str> {
-            self.request(request).map_err(|refused| refused.rule)
+            self.request(request).map(|_| ()).map_err(|refused| refused.rule)
         }
     }
 
@@ -844,6 +914,114 @@ mod tests {
         assert_eq!(st.set_param(index("YAW_DEADBAND_US"), -0.0), Ok(ParamMask::EMPTY));
         assert!(!st.unsaved());
         assert_eq!(st.take_change(), None);
+    }
+
+    #[test]
+    fn the_height_is_said_only_while_the_estimate_may_be_flown_on_and_the_failsafe_descent_over_the_mode() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.state().altitude, Altitude::default(), "nothing known at boot");
+        let mut s = status(FlightState::Armed, REST, Blockers::default());
+        s.altitude = AltitudeStatus {
+            mode: AltMode::Hold,
+            height_m: 2.5,
+            climb_m_s: 0.25,
+            pressure_pa: Some(100_500.0),
+            temperature_c: 21.0,
+            estimate_healthy: true,
+            ..AltitudeStatus::default()
+        };
+        st.observe(&s, 3900, [0; 4], 1000);
+        let said = st.state().altitude;
+        assert_eq!(
+            said,
+            Altitude {
+                height_m: Some(2.5),
+                climb_m_s: Some(0.25),
+                pressure_pa: Some(100_500.0),
+                temperature_c: 21.0,
+                mode: VerticalMode::AltitudeHold
+            }
+        );
+        s.altitude.estimate_healthy = false;
+        s.altitude.failsafe_descent = true;
+        st.observe(&s, 3900, [0; 4], 1005);
+        let said = st.state().altitude;
+        assert_eq!((said.height_m, said.climb_m_s, said.pressure_pa), (None, None, Some(100_500.0)), "the last sample stays");
+        assert_eq!(said.mode, VerticalMode::FailsafeDescent);
+        s.altitude = AltitudeStatus::default();
+        st.observe(&s, 3900, [0; 4], 1010);
+        assert_eq!(st.state().altitude.mode, VerticalMode::Manual);
+    }
+
+    #[test]
+    fn a_set_mode_is_the_alt_mode_parameters_set_by_name_or_refused_by_name() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        let Some(index) = parameters::index_of(ALT_MODE) else {
+            // A table without altitude hold: refused with the rule's name, nothing changed.
+            assert_eq!(st.request(Request::SetMode(AltMode::Hold)), Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD)));
+            assert_eq!(st.request(Request::SetMode(AltMode::Manual)), Err(Refused::denied(gcs::RULE_NO_ALTITUDE_HOLD)));
+            assert!(!st.unsaved());
+            assert_eq!(st.take_change(), None);
+            return;
+        };
+        let value = |st: &Station| parameters::value(st.config(), index);
+        let mut mask = ParamMask::EMPTY;
+        mask.insert(index as u16);
+        // Taken as a PARAM_SET of ALT_MODE: echoed, saved after the debounce, handed on.
+        let set = st.request(Request::SetMode(AltMode::Hold)).unwrap();
+        assert!(set.contains(index as u16));
+        assert_eq!(value(&st), Some(1.0));
+        assert!(st.unsaved());
+        assert!(st.take_change().is_some());
+        // The mode in force again: still echoed, nothing changes.
+        assert_eq!(st.request(Request::SetMode(AltMode::Hold)), Ok(mask));
+        assert_eq!(st.take_change(), None);
+        // The table's rules are the set's: in flight when the table allows it, refused with its rule
+        // otherwise.
+        st.observe(&status(FlightState::Armed, UP, Blockers::default()), 3900, [0; 4], 1000);
+        let mut armed = st.clone();
+        match parameters::set(&mut armed.cfg.clone(), index, 0.0, true) {
+            Ok(_) => {
+                assert_eq!(armed.request(Request::SetMode(AltMode::Manual)), Ok(mask));
+                assert_eq!(value(&armed), Some(0.0));
+            }
+            Err(refusal) => {
+                let refused = armed.request(Request::SetMode(AltMode::Manual)).unwrap_err();
+                assert_eq!(refused.rule, refusal.rule);
+                assert_eq!(value(&armed), Some(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn the_kind_the_station_hands_on_is_check_changes() {
+        // The station classifies its changes with the table alone (`change_kind`): the same
+        // verdict `check_change` gives with its checks, for every change it makes.
+        let mut st = station_in(FlightState::Disarmed, REST);
+        for (name, value) in [("ANGLE_MAX", 25.0), ("RCMAP_ROLL", 3.0), ("RC1_TRIM", 1470.0), ("RATE_YAW_I", 0.0)] {
+            let before = *st.config();
+            st.set_param(index(name), value).unwrap();
+            let kind = parameters::check_change(&before, st.config(), false).map(|c| c.kind);
+            assert_eq!(Ok(parameters::change_kind(&before, st.config())), kind, "{name}");
+            assert_eq!(st.take_change().map(|c| c.kind), kind.ok().filter(|_| before != *st.config()), "{name}");
+        }
+        let before = *st.config();
+        assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
+        let kind = parameters::check_change(&before, st.config(), false).map(|c| c.kind);
+        assert_eq!(st.take_change().map(|c| c.kind), kind.ok());
+        assert!(*st.config() == Config::DEFAULT);
+    }
+
+    #[test]
+    fn a_reset_to_defaults_restores_them() {
+        let mut st = station_in(FlightState::Disarmed, REST);
+        assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
+        assert!(!st.unsaved(), "at the defaults already: nothing to save");
+        assert_eq!(st.take_change(), None);
+        assert!(st.set_param(index("ANGLE_MAX"), 25.0).is_ok());
+        assert_eq!(st.request(Request::ResetParams), Ok(ParamMask::EMPTY));
+        assert!(st.config() == &Config::DEFAULT);
+        assert!(st.unsaved());
     }
 
     #[test]

@@ -204,6 +204,9 @@ fn quiet_link() -> Link<512> {
         battery_ms: 0,
         rc_channels_ms: 0,
         servo_output_ms: 0,
+        vfr_hud_ms: 0,
+        altitude_ms: 0,
+        scaled_pressure_ms: 0,
         heartbeat_ms: 60_000,
         param_ms: 10,
     };
@@ -253,9 +256,11 @@ fn a_param_set_that_changes_other_parameters_reports_them_too() {
 #[test]
 fn param_values_a_set_owes_go_out_on_the_next_tick_when_the_queue_is_full() {
     // A STATUSTEXT of 50 bytes is a 63-byte frame, of 10 bytes a 23-byte one; answers may
-    // fill the queue up to its size less the telemetry's reserve.
+    // fill the queue up to its size less the telemetry's reserve (341 bytes: 512 - 21 for the
+    // heartbeat - 341 leaves 150 for texts and answers, a PARAM_VALUE is 37).
+    assert_eq!(fcu_link::TELEMETRY_RESERVE, 341);
     let fifty = [b'x'; 50];
-    for (texts, sent_at_once) in [(&[&fifty[..], &fifty, &fifty, &fifty][..], 0), (&[&fifty[..], &fifty, &fifty, b"0123456789"][..], 1)] {
+    for (texts, sent_at_once) in [(&[&fifty[..], &fifty][..], 0), (&[&fifty[..], b"0123456789"][..], 1)] {
         let mut link = quiet_link();
         let mut st = booted_station();
         link.tick(0, &mut st);
@@ -275,5 +280,32 @@ fn param_values_a_set_owes_go_out_on_the_next_tick_when_the_queue_is_full() {
         assert_eq!(copy, downloaded(&st));
         let stats = link.stats();
         assert_eq!((stats.tx_dropped, stats.answers_dropped), (0, 0), "nothing lost");
+    }
+}
+
+/// What a ground station hears back of pymavlink's `set_mode` (a DO_SET_MODE with ArduCopter's
+/// mode number): with `ALT_MODE` in the table, the ACK and the parameter's PARAM_VALUE; without
+/// it, a named refusal.
+#[test]
+fn a_set_mode_sets_alt_mode_by_name_or_is_refused_by_name() {
+    const ALT_HOLD: [f32; 7] = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut st = station(FlightState::Disarmed, REST);
+    let mut link = link();
+    link.receive(&v2(&command_long(MavCmd::MAV_CMD_DO_SET_MODE, ALT_HOLD)), 0, &mut st);
+    let sent = drain(&mut link);
+    match parameters::index_of(fcu_gcs::station::ALT_MODE) {
+        None => {
+            assert_eq!(ack_of(&sent), (MavCmd::MAV_CMD_DO_SET_MODE as u16, MavResult::MAV_RESULT_DENIED));
+            assert_eq!(texts(&sent), [format!("Mode refused: {}", fcu_core::gcs::RULE_NO_ALTITUDE_HOLD)]);
+            assert!(param_values(&sent).is_empty());
+            assert!(!st.unsaved());
+        }
+        Some(i) => {
+            assert_eq!(ack_of(&sent), (MavCmd::MAV_CMD_DO_SET_MODE as u16, MavResult::MAV_RESULT_ACCEPTED));
+            let values = param_values(&sent);
+            assert_eq!(values.len(), 1, "{values:?}");
+            assert_eq!((values[0].0.as_str(), values[0].1, usize::from(values[0].2)), ("ALT_MODE", 1.0, i));
+            assert!(st.unsaved(), "saved after the debounce, as a PARAM_SET");
+        }
     }
 }

@@ -94,7 +94,10 @@ fn run(stream: TcpStream, state: &Mutex<MockState>) {
         let mut answers = Vec::new();
         match msg {
             MavMessage::HEARTBEAT(_) => {
-                answers.push(MavMessage::HEARTBEAT(fcu_link::heartbeat::heartbeat(fcu_core::supervisor::FlightState::Disarmed)));
+                answers.push(MavMessage::HEARTBEAT(fcu_link::heartbeat::heartbeat(
+                    fcu_core::supervisor::FlightState::Disarmed,
+                    fcu_link::VerticalMode::Manual,
+                )));
             }
             MavMessage::PARAM_REQUEST_LIST(_) => {
                 downloads += 1;

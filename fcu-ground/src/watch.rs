@@ -1,4 +1,5 @@
-//! `watch`: the board's state, attitude, radio, motors and battery on one screen, redrawn in
+//! `watch`: the board's state and vertical mode, attitude, height, radio, motors and battery on
+//! one screen, redrawn in
 //! place (plain ANSI: cursor home, clear to the end) on a terminal, or printed as a block once a
 //! second when the output is not a terminal (a log, a test).
 
@@ -6,6 +7,7 @@ use std::collections::VecDeque;
 use std::fmt::Write as _;
 
 use fcu_core::supervisor::FlightState;
+use fcu_link::VerticalMode;
 use mavlink::dialects::common::{MavMessage, MavModeFlag, MavSeverity, MavSysStatusSensor};
 
 /// STATUSTEXT lines kept on screen.
@@ -20,6 +22,12 @@ const STALE_S: f64 = 3.0;
 pub struct View {
     /// (armed, flight state, when) of the latest HEARTBEAT.
     heartbeat: Option<(bool, FlightState, f64)>,
+    /// The vertical mode the latest HEARTBEAT says (None: it says none, another autopilot).
+    vertical: Option<VerticalMode>,
+    /// From VFR_HUD: height above take-off, m, and climb, m/s (NaN: not known), throttle, %.
+    height: Option<(f32, f32, u16)>,
+    /// From SCALED_PRESSURE: pressure, hPa, and temperature, °C.
+    pressure: Option<(f32, f32)>,
     /// Roll, pitch, yaw, degrees.
     attitude_deg: Option<[f64; 3]>,
     /// Channel widths, µs (None: no pulses on it).
@@ -53,6 +61,13 @@ impl View {
             MavMessage::HEARTBEAT(h) => {
                 let armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
                 self.heartbeat = Some((armed, fcu_link::heartbeat::flight_state(h), now_s));
+                self.vertical = fcu_link::heartbeat::vertical_mode(h);
+            }
+            MavMessage::VFR_HUD(v) => {
+                self.height = Some((v.alt, v.climb, v.throttle));
+            }
+            MavMessage::SCALED_PRESSURE(p) => {
+                self.pressure = Some((p.press_abs, f32::from(p.temperature) / 100.0));
             }
             MavMessage::ATTITUDE(a) => {
                 self.attitude_deg = Some([a.roll, a.pitch, a.yaw].map(|r| f64::from(r).to_degrees()));
@@ -111,6 +126,12 @@ impl View {
             Some((armed, state, at)) => {
                 let armed = if armed { "ARMED" } else { "disarmed" };
                 let _ = write!(out, "state      {armed:<9} flight state {}", state.name());
+                match self.vertical {
+                    Some(mode) => {
+                        let _ = write!(out, "   mode {}", mode.name());
+                    }
+                    None => out.push_str("   mode not said"),
+                }
                 let age = now_s - at;
                 if age > STALE_S {
                     let _ = write!(out, "   NO HEARTBEAT FOR {age:.0} s");
@@ -129,6 +150,21 @@ impl View {
                 let _ = writeln!(out, "attitude   {WAITING}");
             }
         }
+        match self.height {
+            Some((alt, climb, throttle)) if alt.is_finite() && climb.is_finite() => {
+                let _ = write!(out, "height     {alt:+7.2} m   climb {climb:+6.2} m/s   throttle {throttle:3} %");
+            }
+            Some((_, _, throttle)) => {
+                let _ = write!(out, "height     not known (no barometer estimate)   throttle {throttle:3} %");
+            }
+            None => {
+                let _ = write!(out, "height     {WAITING}");
+            }
+        }
+        if let Some((hpa, c)) = self.pressure {
+            let _ = write!(out, "   baro {hpa:.2} hPa {c:.1} °C");
+        }
+        out.push('\n');
     }
 
     /// The radio's channels.
@@ -204,8 +240,11 @@ pub fn redraw(screen: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_messages::heartbeat;
-    use mavlink::dialects::common::{ATTITUDE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA};
+    use crate::test_messages::{heartbeat, heartbeat_in};
+    use mavlink::dialects::common::{
+        ATTITUDE_DATA, HEARTBEAT_DATA, RC_CHANNELS_DATA, SCALED_PRESSURE_DATA, SERVO_OUTPUT_RAW_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
+        VFR_HUD_DATA,
+    };
 
     fn text(s: &str) -> MavMessage {
         MavMessage::STATUSTEXT(STATUSTEXT_DATA { severity: MavSeverity::MAV_SEVERITY_WARNING, text: s.into() })
@@ -250,7 +289,7 @@ mod tests {
         );
         v.on_message(&text("RC1_MIN: below the minimum"), 1.5);
         let s = v.render("t", 2.0);
-        assert!(s.contains("state      ARMED     flight state armed"), "{s}");
+        assert!(s.contains("state      ARMED     flight state armed   mode manual throttle"), "{s}");
         assert!(s.contains("roll    +5.7°   pitch   -11.5°   yaw  +171.9°"), "{s}");
         assert!(s.contains(" ch1 1500 ch2 1499 ch3 1100 ch4  ---"), "{s}");
         assert!(s.contains("m1 1200  m2 1300  m3 1400  m4 1500"), "{s}");
@@ -260,6 +299,30 @@ mod tests {
         assert!(!s.contains("NO HEARTBEAT"), "{s}");
         // A board gone quiet is called out.
         assert!(v.render("t", 10.0).contains("NO HEARTBEAT FOR 9 s"));
+    }
+
+    #[test]
+    fn the_screen_shows_the_height_climb_and_vertical_mode() {
+        let mut v = View::default();
+        assert!(v.render("t", 0.0).contains("height     (nothing received yet)"));
+        v.on_message(&heartbeat_in(FlightState::Armed, VerticalMode::AltitudeHold), 1.0);
+        let hud = VFR_HUD_DATA { alt: 1.25, climb: -0.5, throttle: 42, ..VFR_HUD_DATA::default() };
+        v.on_message(&MavMessage::VFR_HUD(hud.clone()), 1.0);
+        v.on_message(
+            &MavMessage::SCALED_PRESSURE(SCALED_PRESSURE_DATA { press_abs: 1001.5, temperature: 2450, ..SCALED_PRESSURE_DATA::default() }),
+            1.0,
+        );
+        let s = v.render("t", 1.5);
+        assert!(s.contains("flight state armed   mode altitude hold"), "{s}");
+        assert!(s.contains("height       +1.25 m   climb  -0.50 m/s   throttle  42 %   baro 1001.50 hPa 24.5 °C"), "{s}");
+        // The failsafe's descent, an unknown height, and another autopilot's heartbeat.
+        v.on_message(&heartbeat_in(FlightState::FailsafeLevel, VerticalMode::FailsafeDescent), 2.0);
+        v.on_message(&MavMessage::VFR_HUD(VFR_HUD_DATA { alt: f32::NAN, climb: f32::NAN, ..hud }), 2.0);
+        let s = v.render("t", 2.5);
+        assert!(s.contains("mode failsafe descent"), "{s}");
+        assert!(s.contains("height     not known (no barometer estimate)   throttle  42 %"), "{s}");
+        v.on_message(&MavMessage::HEARTBEAT(HEARTBEAT_DATA { custom_mode: 0x0003_0000, ..HEARTBEAT_DATA::default() }), 3.0);
+        assert!(v.render("t", 3.5).contains("mode not said"));
     }
 
     #[test]

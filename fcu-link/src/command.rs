@@ -11,6 +11,7 @@
 //! | PREFLIGHT_STORAGE | param1 = 1 save, 2 reset to defaults |
 //! | PREFLIGHT_REBOOT_SHUTDOWN | param1 = 1 reboot; the host reboots when [`crate::Link::reboot_ready`] |
 //! | DO_MOTOR_TEST | one motor; the flight controller decides, caps and stops it ([`crate::motor_test`]) |
+//! | DO_SET_MODE | param1 with `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`, param2 a custom mode naming a [`VerticalMode`] a ground station may ask for: 0 manual (ArduCopter's STABILIZE), 2 altitude hold (ALT_HOLD); [`Request::SetMode`]; the PARAM_VALUEs of what it set after the ACK. param3 (a sub-mode) is ignored |
 //! | REQUEST_MESSAGE | AUTOPILOT_VERSION (param1 = 148) after the ACK; any other message UNSUPPORTED |
 //! | REQUEST_AUTOPILOT_CAPABILITIES | AUTOPILOT_VERSION after the ACK |
 //!
@@ -21,14 +22,21 @@
 //! vehicle is TEMPORARILY_REJECTED when the flight state of the moment refuses it
 //! ([`crate::Refused::for_now`]: armed, the throttle up), DENIED otherwise, both with a
 //! STATUSTEXT naming the rule; a parameter the link cannot decode is DENIED with its text.
+//!
+//! SET_MODE (message 11) is taken as DO_SET_MODE with its `base_mode` and `custom_mode`, and
+//! answered the same way, with a COMMAND_ACK whose command is 11, as ArduPilot answers it
+//! (SET_MODE has no target component: any of ours). A set-mode without the custom-mode flag
+//! (a base mode alone: manual, stabilize, armed...) and a custom mode naming no mode a ground
+//! station may ask for (anything but 0 and 2, the failsafe's descent 9 included) are DENIED
+//! with a STATUSTEXT naming the modes there are.
 
-use mavlink::dialects::common::{MavCmd, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA};
+use mavlink::dialects::common::{MavCmd, MavModeFlag, MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA};
 use mavlink::MessageData;
 
 use crate::link::{Core, Room};
 use crate::reader::Frame;
 use crate::text::{Severity, Text};
-use crate::vehicle::{Refused, Request, Vehicle};
+use crate::vehicle::{AltMode, ParamMask, Refused, Request, Vehicle, VehicleState, VerticalMode};
 
 /// MAVLink's value of COMPONENT_ARM_DISARM's param2 that forces a disarm in flight.
 pub const FORCE_DISARM: f32 = 21196.0;
@@ -43,6 +51,17 @@ pub const PREFLIGHT_STORAGE: u16 = MavCmd::MAV_CMD_PREFLIGHT_STORAGE as u16;
 pub const PREFLIGHT_REBOOT_SHUTDOWN: u16 = MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN as u16;
 /// `MAV_CMD_DO_MOTOR_TEST`.
 pub const DO_MOTOR_TEST: u16 = MavCmd::MAV_CMD_DO_MOTOR_TEST as u16;
+/// `MAV_CMD_DO_SET_MODE`.
+pub const DO_SET_MODE: u16 = MavCmd::MAV_CMD_DO_SET_MODE as u16;
+/// SET_MODE's message id. The dialect marks the message deprecated (MAVLink prefers
+/// DO_SET_MODE), but ground stations still send it.
+#[allow(deprecated)]
+pub const SET_MODE_ID: u32 = mavlink::dialects::common::SET_MODE_DATA::ID;
+/// SET_MODE's payload length.
+#[allow(deprecated)]
+const SET_MODE_LEN: usize = mavlink::dialects::common::SET_MODE_DATA::ENCODED_LEN;
+/// The command number a SET_MODE is answered with: its message id (11, no `MAV_CMD`).
+pub const SET_MODE_ACK: u16 = SET_MODE_ID as u16;
 /// `MAV_CMD_REQUEST_MESSAGE`.
 pub const REQUEST_MESSAGE: u16 = MavCmd::MAV_CMD_REQUEST_MESSAGE as u16;
 /// `MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES`.
@@ -112,11 +131,41 @@ impl Command {
             target_component: p[COMMAND_AT + 3],
         })
     }
+
+    /// A SET_MODE frame as the DO_SET_MODE it asks for, numbered [`SET_MODE_ACK`]: param1 its
+    /// `base_mode`, param2 its `custom_mode`, addressed to any component of its target system.
+    /// Read by hand as [`Command::decode`] is (`custom_mode` u32, `target_system`,
+    /// `base_mode`; zero-padded): the crate's `deser` would refuse a base mode with bits its
+    /// `MavModeFlag` does not list, which must get a COMMAND_ACK too.
+    pub fn decode_set_mode(frame: &Frame<'_>) -> Option<Self> {
+        if frame.message_id != SET_MODE_ID {
+            return None;
+        }
+        let mut p = [0u8; SET_MODE_LEN];
+        for (dst, &src) in p.iter_mut().zip(frame.payload) {
+            *dst = src;
+        }
+        let [c0, c1, c2, c3, target_system, base_mode] = p;
+        let mut params = [0.0; 7];
+        params[0] = f32::from(base_mode);
+        // Exact for every mode number there is; a larger one rounds to another that is no mode
+        // either.
+        params[1] = u32::from_le_bytes([c0, c1, c2, c3]) as f32;
+        Some(Self {
+            id: SET_MODE_ACK,
+            params,
+            system_id: frame.system_id,
+            component_id: frame.component_id,
+            target_system,
+            target_component: 0,
+        })
+    }
 }
 
 /// What follows an accepted command's ACK.
 pub(crate) enum Then {
-    Nothing,
+    /// The PARAM_VALUEs of the parameters the command set (none: nothing follows).
+    SendParams(ParamMask),
     SendVersion,
 }
 
@@ -149,7 +198,31 @@ pub(crate) fn refusal(what: &'static str, refused: Refused) -> Refusal {
 
 /// Passes a request on to the vehicle and answers with its verdict.
 fn ask<V: Vehicle>(vehicle: &mut V, request: Request, what: &'static str) -> Result<Then, Refusal> {
-    vehicle.request(request).map(|()| Then::Nothing).map_err(|refused| refusal(what, refused))
+    vehicle.request(request).map(Then::SendParams).map_err(|refused| refusal(what, refused))
+}
+
+/// The text of a set-mode that names no mode a ground station may ask for.
+const MODES_THERE_ARE: &str = "0 (STABILIZE) or 2 (ALT_HOLD) only";
+
+/// The mode a set-mode's `base_mode` and `custom_mode` name, if a ground station may ask for
+/// it (see the module docs).
+pub fn mode_asked(base_mode: f32, custom_mode: f32) -> Result<AltMode, &'static str> {
+    // Both arrive as floats: a whole number in range converts back unchanged (NaN never does).
+    let base = base_mode as u8;
+    if f32::from(base) != base_mode || base & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() == 0 {
+        return Err(MODES_THERE_ARE);
+    }
+    let number = custom_mode as u32;
+    if number as f32 != custom_mode {
+        return Err(MODES_THERE_ARE);
+    }
+    VerticalMode::from_number(number).and_then(VerticalMode::alt_mode).ok_or(MODES_THERE_ARE)
+}
+
+fn set_mode<V: Vehicle>(command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
+    let [base_mode, custom_mode, ..] = command.params;
+    let mode = mode_asked(base_mode, custom_mode).map_err(|rule| denied("Mode refused", rule))?;
+    ask(vehicle, Request::SetMode(mode), "Mode refused")
 }
 
 impl<const TX: usize> Core<TX> {
@@ -167,18 +240,35 @@ impl<const TX: usize> Core<TX> {
                 outcome
             }
             DO_MOTOR_TEST => self.start_motor_test(command, vehicle),
+            DO_SET_MODE => set_mode(command, vehicle),
             REQUEST_MESSAGE if command.params[0] == AUTOPILOT_VERSION_ID as f32 => Ok(Then::SendVersion),
             REQUEST_AUTOPILOT_CAPABILITIES if command.params[0] == 1.0 => Ok(Then::SendVersion),
             _ => Err(unsupported()),
         };
+        self.answer(command, outcome, &state, vehicle);
+    }
+
+    /// A SET_MODE ([`Command::decode_set_mode`]): decided and answered as DO_SET_MODE.
+    pub(crate) fn set_mode_message<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) {
+        let state = vehicle.state();
+        let outcome = set_mode(command, vehicle);
+        self.answer(command, outcome, &state, vehicle);
+    }
+
+    /// The ACK of a command decided, what follows it, or the text of its refusal.
+    fn answer<V: Vehicle>(&mut self, command: &Command, outcome: Result<Then, Refusal>, state: &VehicleState, vehicle: &mut V) {
         match outcome {
             Ok(then) => {
                 if command.id != DO_MOTOR_TEST {
-                    self.stop_motor_test(&state, vehicle, "another command");
+                    self.stop_motor_test(state, vehicle, "another command");
                 }
                 self.ack(command, MavResult::MAV_RESULT_ACCEPTED);
-                if let Then::SendVersion = then {
-                    self.autopilot_version();
+                match then {
+                    Then::SendVersion => self.autopilot_version(),
+                    Then::SendParams(params) => {
+                        self.params_owed = self.params_owed.union(params);
+                        self.send_owed_params(vehicle);
+                    }
                 }
             }
             Err(refusal) => {

@@ -1,9 +1,8 @@
 //! Answers that tell a ground station what this board does not have, so that it stops asking:
 //! no mission (MISSION_COUNT 0) and no file transfer (an FTP NAK).
 
-use mavlink::dialects::common::{FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA, MISSION_REQUEST_LIST_DATA};
+use mavlink::dialects::common::{FILE_TRANSFER_PROTOCOL_DATA, MISSION_COUNT_DATA};
 
-use crate::frame;
 use crate::link::{bump, for_us, Core, Room};
 use crate::reader::Frame;
 
@@ -21,34 +20,29 @@ impl<const TX: usize> Core<TX> {
     /// MISSION_COUNT 0, of the mission type asked (fence and rally too: QGroundControl asks
     /// for all three while connecting).
     pub(crate) fn mission_request_list(&mut self, frame: &Frame<'_>) {
-        // mission_type is an extension field, read raw (any value is echoed).
-        let Some((m, [mission_type])) = frame::decode_with_raw::<MISSION_REQUEST_LIST_DATA, 1>(frame.payload, [(REQUEST_TYPE_AT, 1, 0)])
-        else {
-            bump(&mut self.stats.bad_payload);
-            return;
-        };
-        if !for_us(m.target_system, m.target_component) {
+        // target_system, target_component, then mission_type, an extension field read raw (any
+        // value is echoed).
+        if !for_us(frame.byte(0), frame.byte(1)) {
             bump(&mut self.stats.not_for_us);
             return;
         }
+        let mission_type = frame.byte(REQUEST_TYPE_AT);
         let count = MISSION_COUNT_DATA { count: 0, target_system: frame.system_id, target_component: frame.component_id };
         // mission_type is an extension field (see `reader::handled`), written raw.
-        self.send_patched(&count, &[(COUNT_TYPE_AT, mission_type as u8)], Room::Answer);
+        self.send_patched(&count, &[(COUNT_TYPE_AT, mission_type)], Room::Answer);
     }
 
     /// Any FTP request gets a NAK with `UnknownCommand`.
     pub(crate) fn file_transfer(&mut self, frame: &Frame<'_>) {
-        let Some(m) = frame::decode::<FILE_TRANSFER_PROTOCOL_DATA>(frame.payload) else {
-            bump(&mut self.stats.bad_payload);
-            return;
-        };
-        if m.target_system != 0 && m.target_system != crate::SYSTEM_ID {
+        // target_network, target_system, target_component, then the FTP payload, read as
+        // bytes: seq u16, session, opcode, size, req_opcode, burst_complete, padding, offset
+        // u32, data.
+        let target_system = frame.byte(1);
+        if target_system != 0 && target_system != crate::SYSTEM_ID {
             bump(&mut self.stats.not_for_us);
             return;
         }
-        // The FTP header: seq u16, session, opcode, size, req_opcode, burst_complete, padding,
-        // offset u32, then data.
-        let [seq_lo, seq_hi, session, opcode, ..] = m.payload;
+        let [seq_lo, seq_hi, session, opcode] = [3, 4, 5, 6].map(|at| frame.byte(at));
         if opcode == FTP_ACK || opcode == FTP_NAK {
             return;
         }

@@ -1,12 +1,11 @@
-//! One message in and out: MAVLink 2 frames from the `mavlink` crate's `*_DATA` structs, and
-//! those structs from a checked frame's payload.
+//! One message out: MAVLink 2 frames from the `mavlink` crate's `*_DATA` structs.
 //!
 //! Going per message keeps the dialect's `MavMessage` enum (and with it every message of the
-//! common dialect) out of the image. Two things the crate does not do for us:
-//! - its decoder refuses an enum field whose value the dialect does not list, where the link
-//!   must still answer (a PARAM_SET of another type gets its echo), so such fields are read raw
-//!   and swapped for a listed value before decoding ([`decode_with_raw`]);
-//! - its structs carry no extension fields (see [`crate::reader::HANDLED`]) and cannot hold a
+//! common dialect) out of the image. What the link receives it reads as bytes at the fields'
+//! offsets ([`crate::reader::Frame::byte`], [`crate::command::Command::decode`]): the crate's
+//! decoder is a copy of code for each message, and refuses an enum field whose value the
+//! dialect does not list, where the link must still answer (a PARAM_SET of another type gets
+//! its echo). Its structs carry no extension fields (see [`crate::reader::HANDLED`]) and cannot hold a
 //!   command number the dialect does not list, so a payload can be patched before the CRC is
 //!   taken ([`encode_patched`]).
 
@@ -103,44 +102,4 @@ fn payload_len(payload: &[u8; MAX_PAYLOAD], full: usize) -> usize {
 /// The length of the frame [`encode_payload`] makes of `payload` (patches written in).
 pub fn frame_len(header: Header, payload: &[u8; MAX_PAYLOAD]) -> usize {
     V2_HEADER + payload_len(payload, header.encoded_len) + 2
-}
-
-/// Decodes a payload, first reading the raw value of each listed enum field (`(offset,
-/// width)`, little-endian, zero where the payload was truncated) and writing in its place a
-/// value the dialect lists (`stand_in`), so that an unlisted value does not fail the decode.
-/// Returns the message and the raw values in the order of `fields`.
-pub fn decode_with_raw<D: MessageData, const F: usize>(payload: &[u8], fields: [(usize, usize, u32); F]) -> Option<(D, [u32; F])> {
-    let mut padded = [0u8; MAX_PAYLOAD];
-    let mut raw = [0u32; F];
-    let len = pad_with_raw(payload, D::ENCODED_LEN, &fields, &mut raw, &mut padded)?;
-    let message = D::deser(MavlinkVersion::V2, padded.get(..len)?).ok()?;
-    Some((message, raw))
-}
-
-/// The part of [`decode_with_raw`] that does not depend on the message: not generic, one
-/// copy for every message decoded so. Returns the length to decode.
-fn pad_with_raw(
-    payload: &[u8],
-    encoded_len: usize,
-    fields: &[(usize, usize, u32)],
-    raw: &mut [u32],
-    padded: &mut [u8; MAX_PAYLOAD],
-) -> Option<usize> {
-    let n = payload.len().min(MAX_PAYLOAD);
-    if let (Some(dst), Some(src)) = (padded.get_mut(..n), payload.get(..n)) {
-        dst.copy_from_slice(src);
-    }
-    for (value, &(at, width, stand_in)) in raw.iter_mut().zip(fields.iter()) {
-        let field = padded.get_mut(at..at + width)?;
-        let mut le = [0u8; 4];
-        le.get_mut(..width)?.copy_from_slice(field);
-        *value = u32::from_le_bytes(le);
-        field.copy_from_slice(stand_in.to_le_bytes().get(..width)?);
-    }
-    Some(payload.len().max(encoded_len).min(MAX_PAYLOAD))
-}
-
-/// Decodes a payload whose enum fields are all checked by the crate.
-pub fn decode<D: MessageData>(payload: &[u8]) -> Option<D> {
-    D::deser(MavlinkVersion::V2, payload).ok()
 }

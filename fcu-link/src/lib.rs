@@ -22,18 +22,19 @@
 //!   the MAVLink 2 start byte; until a read begins with a start byte it keeps looking, so a
 //!   connection that opens mid-frame switches at a later read. `MAVLINK20=1` in its environment
 //!   starts it in MAVLink 2 outright.
-//! - Each message is serialized and parsed on its own with the `mavlink` crate's `*_DATA`
-//!   structs and their extra CRC ([`frame`]); the dialect's `MavMessage` enum, which would
-//!   link every message of the common dialect, is never built.
+//! - Each message is serialized on its own with the `mavlink` crate's `*_DATA` structs and
+//!   their extra CRC ([`frame`]); what is received is checked with the crate's extra CRCs and
+//!   read as bytes at its fields' offsets. The dialect's `MavMessage` enum, which would link
+//!   every message of the common dialect, is never built.
 //! - Sent, handled and refused: see [`Link`], the rules of the commands in [`command`].
 //! - Rates and the byte budget at 115200 baud: [`Rates`].
 //!
 //! # What it costs in flash
 //!
-//! In the firmware's image built with the link, `scripts/size-by-part` counts about 14 KB for
+//! In the firmware's image built with the link, `scripts/size-by-part` counts about 15 KB for
 //! the ground-station link (docs/ground-station.md has the table): this crate, fcu-gcs's
 //! station and link task with what they inline of fcu-core's parameter table (the save plan, a
-//! set and its checks), the firmware's link task, its receive ring and its flash store. What keeps it there: each message is serialized and parsed by its own `*_DATA`
+//! set and its checks), the firmware's link task, its receive ring and its flash store. What keeps it there: each message is serialized by its own `*_DATA`
 //! struct, over one non-generic copy of everything that does not depend on the message
 //! (framing, queueing, padding a payload: [`frame`]); the checksum is computed without a
 //! table ([`crc`]); names and texts are bytes, so no UTF-8 check is linked. Parsing and
@@ -82,7 +83,7 @@ pub use link::{Link, LinkConfig, LinkStats, STATION_GONE_MS, TELEMETRY_RESERVE};
 pub use rates::Rates;
 pub use reader::{Frame, FrameReader, ReaderStats, Version};
 pub use text::Severity;
-pub use vehicle::{Attitude, Battery, Health, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
+pub use vehicle::{AltMode, Altitude, Attitude, Battery, Health, Param, ParamMask, Refused, Request, Vehicle, VehicleState, VerticalMode};
 
 /// Our MAVLink system id.
 pub const SYSTEM_ID: u8 = 1;

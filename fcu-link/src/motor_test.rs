@@ -49,9 +49,9 @@ fn decode(command: &Command) -> Result<Request, Refusal> {
 impl<const TX: usize> Core<TX> {
     pub(crate) fn start_motor_test<V: Vehicle>(&mut self, command: &Command, vehicle: &mut V) -> Result<Then, Refusal> {
         let request = decode(command)?;
-        vehicle.request(request).map_err(|refused| refusal(WHAT, refused))?;
+        let params = vehicle.request(request).map_err(|refused| refusal(WHAT, refused))?;
         self.motor_test_silence_stop = false;
-        Ok(Then::Nothing)
+        Ok(Then::SendParams(params))
     }
 
     /// Ends a running test for `reason` (nothing when none runs).

@@ -1,10 +1,10 @@
 //! The parameter protocol: download, read, set.
 
-use mavlink::dialects::common::{MavParamType, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, PARAM_VALUE_DATA};
+use mavlink::dialects::common::{MavParamType, PARAM_VALUE_DATA};
 use mavlink::types::CharArray;
 
-use crate::frame;
 use crate::link::{bump, for_us, Core, Room};
+use crate::reader::Frame;
 use crate::text::{Severity, Text};
 use crate::vehicle::Vehicle;
 
@@ -13,12 +13,19 @@ const PARAM_SET_TYPE_AT: usize = 22;
 /// A PARAM_VALUE frame at its longest.
 const PARAM_VALUE_FRAME: usize = 12 + PARAM_VALUE_DATA::ENCODED_LEN;
 
-/// A name as PARAM_REQUEST_READ and PARAM_SET carry it, up to its first NUL. Bytes, not a
-/// `str`: the link never needs the UTF-8 check (see [`crate::Link::send_text`]).
-fn name_in(id: &CharArray<16>) -> &[u8] {
-    let bytes: &[u8] = id.as_slice();
+/// The name a PARAM_REQUEST_READ or PARAM_SET carries at `at` (16 bytes, NUL-padded; MAVLink 2
+/// may have dropped trailing zeros), up to its first NUL. Bytes, not a `str`: the link never
+/// needs the UTF-8 check (see [`crate::Link::send_text`]).
+fn name_at(payload: &[u8], at: usize) -> &[u8] {
+    let bytes = payload.get(at..).unwrap_or_default();
+    let bytes = bytes.get(..16).unwrap_or(bytes);
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
     bytes.get(..end).unwrap_or_default()
+}
+
+/// The little-endian word at `at`, zero-padded past the bytes received.
+fn word_at(frame: &Frame<'_>, at: usize) -> [u8; 4] {
+    [frame.byte(at), frame.byte(at + 1), frame.byte(at + 2), frame.byte(at + 3)]
 }
 
 /// A name as PARAM_VALUE carries it: 16 bytes, NUL-padded, no NUL when 16 long.
@@ -95,13 +102,16 @@ impl<const TX: usize> Core<TX> {
 
     /// PARAM_REQUEST_READ: by index, or by name when the index is -1 (MAVLink's rule; any other
     /// negative index is no parameter's).
-    pub(crate) fn param_request_read<V: Vehicle>(&mut self, m: &PARAM_REQUEST_READ_DATA, vehicle: &V) {
-        if !for_us(m.target_system, m.target_component) {
+    pub(crate) fn param_request_read<V: Vehicle>(&mut self, frame: &Frame<'_>, vehicle: &V) {
+        // param_index (i16), target_system, target_component, param_id: read as bytes rather
+        // than through the crate's generated decoder (a copy of code for each message).
+        if !for_us(frame.byte(2), frame.byte(3)) {
             bump(&mut self.stats.not_for_us);
             return;
         }
-        let index = match m.param_index {
-            -1 => vehicle.param_index(name_in(&m.param_id)),
+        let param_index = i16::from_le_bytes([frame.byte(0), frame.byte(1)]);
+        let index = match param_index {
+            -1 => vehicle.param_index(name_at(frame.payload, 4)),
             index => match u16::try_from(index) {
                 Ok(index) => Some(index),
                 Err(_) => {
@@ -123,17 +133,16 @@ impl<const TX: usize> Core<TX> {
     /// sends the value of every other parameter it changed, in index order. What the queue
     /// has no room for is owed and sent by the next ticks, never lost: a ground station that
     /// misses one keeps a table that is not the board's (and may save it).
-    pub(crate) fn param_set<V: Vehicle>(&mut self, payload: &[u8], vehicle: &mut V) {
-        let real32 = MavParamType::MAV_PARAM_TYPE_REAL32 as u32;
-        let Some((m, [param_type])) = frame::decode_with_raw::<PARAM_SET_DATA, 1>(payload, [(PARAM_SET_TYPE_AT, 1, real32)]) else {
-            bump(&mut self.stats.bad_payload);
-            return;
-        };
-        if !for_us(m.target_system, m.target_component) {
+    pub(crate) fn param_set<V: Vehicle>(&mut self, frame: &Frame<'_>, vehicle: &mut V) {
+        // param_value (f32), target_system, target_component, param_id, param_type, read as
+        // bytes (the type raw: any value gets an answer).
+        if !for_us(frame.byte(4), frame.byte(5)) {
             bump(&mut self.stats.not_for_us);
             return;
         }
-        let name = name_in(&m.param_id);
+        let param_value = f32::from_le_bytes(word_at(frame, 0));
+        let param_type = frame.byte(PARAM_SET_TYPE_AT);
+        let name = name_at(frame.payload, 6);
         let Some(index) = vehicle.param_index(name) else {
             // Echoed only when it is ASCII: a STATUSTEXT is text, and no parameter's name is
             // anything else.
@@ -142,12 +151,12 @@ impl<const TX: usize> Core<TX> {
             self.text(Severity::Warning, text, Room::Answer);
             return;
         };
-        let outcome = if param_type != real32 {
+        let outcome = if param_type != MavParamType::MAV_PARAM_TYPE_REAL32 as u8 {
             Err("type must be REAL32")
-        } else if !m.param_value.is_finite() {
+        } else if !param_value.is_finite() {
             Err("value must be finite")
         } else {
-            vehicle.set_param(index, m.param_value)
+            vehicle.set_param(index, param_value)
         };
         self.param_value_or_owe(index, vehicle);
         match outcome {
@@ -186,5 +195,28 @@ mod tests {
         let read = PARAM_REQUEST_READ_DATA { param_index: -1, target_system: 1, target_component: 1, param_id: name16("RC1_MIN") };
         link.receive(&v2(&read), 2, &mut mock);
         assert_eq!(param_values(&drain(&mut link)), [("RC1_MIN".to_string(), 1000.0, 1, 4)]);
+    }
+
+    #[test]
+    fn requests_read_as_bytes_take_what_mavlink_2_truncated_as_zeros() {
+        let mut link: TestLink = Link::new(LinkConfig::DEFAULT);
+        let mut mock = Mock::new();
+        link.tick(0, &mut mock);
+        drain(&mut link);
+        // Index 0 to every system, no name: all zeros, sent as one byte.
+        let read = PARAM_REQUEST_READ_DATA { param_index: 0, target_system: 0, target_component: 0, param_id: name16("") };
+        let frame = v2(&read);
+        assert_eq!(frame[1], 1, "the payload truncated to its first byte");
+        link.receive(&frame, 1, &mut mock);
+        assert_eq!(param_values(&drain(&mut link)), [("RCMAP_ROLL".to_string(), 1.0, 0, 4)]);
+        // A name of 16 bytes has no NUL; one shorter ends at its NUL.
+        let mut set = param_set("RATE_ROLL_P_GAIN", 0.75);
+        link.receive(&v2(&set), 2, &mut mock);
+        assert_eq!(param_values(&drain(&mut link)), [("RATE_ROLL_P_GAIN".to_string(), 0.75, 3, 4)]);
+        set.param_id = name16("RC1_MIN");
+        set.param_value = 1100.0;
+        link.receive(&v2(&set), 3, &mut mock);
+        assert_eq!(param_values(&drain(&mut link)), [("RC1_MIN".to_string(), 1100.0, 1, 4)]);
+        assert_eq!(link.stats().bad_payload, 0);
     }
 }

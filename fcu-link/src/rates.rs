@@ -12,16 +12,26 @@
 //! | BATTERY_STATUS | 48 | 1 Hz | 48 |
 //! | RC_CHANNELS | 54 | 10 Hz | 540 |
 //! | SERVO_OUTPUT_RAW | 33 | 10 Hz | 330 |
-//! | telemetry | | | 1,982 (17 %) |
+//! | VFR_HUD | 32 | 10 Hz | 320 |
+//! | ALTITUDE | 44 | 5 Hz | 220 |
+//! | SCALED_PRESSURE | 26 | 2 Hz | 52 |
+//! | telemetry | | | 2,574 (22 %) |
 //! | PARAM_VALUE during a download | 37 | 100 Hz | 3,700 |
-//! | all | | | 5,682 (49 %) |
+//! | all | | | 6,274 (54 %) |
+//!
+//! The height streams are chosen as the others: VFR_HUD, which QGroundControl's instruments and
+//! MAVProxy's console show (height, climb, throttle, heading), as often as the radio and the
+//! motors, quick enough for a climb to read smoothly; ALTITUDE, for logs and plots, at half
+//! that (the height estimate changes slowly); SCALED_PRESSURE, the raw barometer, twice a
+//! second, the rate of the raw sensors' health a ground station checks.
 //!
 //! which leaves half the line for answers, STATUSTEXTs and a ground station asking twice.
 //! `budget_bytes_per_s` computes the same from the frame lengths the crate declares, and a test
 //! holds the defaults under 60 % of the line.
 
 use mavlink::dialects::common::{
-    ATTITUDE_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    ALTITUDE_DATA, ATTITUDE_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, RC_CHANNELS_DATA, SCALED_PRESSURE_DATA,
+    SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 use mavlink::MessageData;
 
@@ -44,6 +54,13 @@ pub struct Rates {
     pub rc_channels_ms: u16,
     /// SERVO_OUTPUT_RAW period (default 100 ms, 10 Hz).
     pub servo_output_ms: u16,
+    /// VFR_HUD period (default 100 ms, 10 Hz).
+    pub vfr_hud_ms: u16,
+    /// ALTITUDE period (default 200 ms, 5 Hz).
+    pub altitude_ms: u16,
+    /// SCALED_PRESSURE period (default 500 ms, 2 Hz; none before the barometer's first
+    /// sample).
+    pub scaled_pressure_ms: u16,
     /// Gap between two PARAM_VALUEs of a parameter download (default 10 ms). A download also
     /// waits while the transmit queue is short of room, so it never crowds out telemetry.
     pub param_ms: u16,
@@ -58,6 +75,9 @@ impl Rates {
         battery_ms: 1000,
         rc_channels_ms: 100,
         servo_output_ms: 100,
+        vfr_hud_ms: 100,
+        altitude_ms: 200,
+        scaled_pressure_ms: 500,
         param_ms: 10,
     };
 
@@ -77,6 +97,9 @@ impl Rates {
             + rate::<BATTERY_STATUS_DATA>(self.battery_ms)
             + rate::<RC_CHANNELS_DATA>(self.rc_channels_ms)
             + rate::<SERVO_OUTPUT_RAW_DATA>(self.servo_output_ms)
+            + rate::<VFR_HUD_DATA>(self.vfr_hud_ms)
+            + rate::<ALTITUDE_DATA>(self.altitude_ms)
+            + rate::<SCALED_PRESSURE_DATA>(self.scaled_pressure_ms)
             + rate::<PARAM_VALUE_DATA>(self.param_ms)
     }
 }

@@ -53,7 +53,9 @@ const fn handled<D: MessageData>(extension_bytes: u8) -> Handled {
 
 /// The messages whose frames are checked and kept. HEARTBEAT is kept (not decoded) because a
 /// ground station's heartbeats are what tells the link it is still there.
-pub const HANDLED: [Handled; 8] = [
+// SET_MODE: marked deprecated by the dialect (see `command::SET_MODE_ID`).
+#[allow(deprecated)]
+pub const HANDLED: [Handled; 9] = [
     handled::<HEARTBEAT_DATA>(0),
     handled::<PARAM_REQUEST_READ_DATA>(0),
     handled::<PARAM_REQUEST_LIST_DATA>(0),
@@ -63,6 +65,7 @@ pub const HANDLED: [Handled; 8] = [
     handled::<COMMAND_INT_DATA>(0),
     handled::<COMMAND_LONG_DATA>(0),
     handled::<FILE_TRANSFER_PROTOCOL_DATA>(0),
+    handled::<mavlink::dialects::common::SET_MODE_DATA>(0),
 ];
 
 /// The handled message with this id.
@@ -94,6 +97,17 @@ pub struct Frame<'a> {
     pub message_id: u32,
     /// Payload as received (MAVLink 2 payloads may be truncated).
     pub payload: &'a [u8],
+}
+
+impl Frame<'_> {
+    /// Payload byte `at`, 0 past the bytes received (MAVLink 2 drops a payload's trailing
+    /// zeros). For messages whose fields the link reads as bytes: no decode through the
+    /// crate's generated code, which is a copy of code for each message. Out of line: a call
+    /// is shorter than its bounds check at each of its twenty uses.
+    #[inline(never)]
+    pub fn byte(&self, at: usize) -> u8 {
+        self.payload.get(at).copied().unwrap_or(0)
+    }
 }
 
 /// Why frames were dropped, and how many were kept. Counters saturate.

@@ -1,8 +1,23 @@
 //! The periodic messages, from one [`VehicleState`] snapshot per tick.
+//!
+//! The height streams, from [`crate::Altitude`]:
+//! - VFR_HUD: `alt` the height above the take-off point, m (not above sea level: the board
+//!   has no GPS and no sea-level pressure), `climb` m/s upward, both NaN while the estimate
+//!   may not be flown on; `heading` the yaw in degrees 0..359, clockwise (relative to the
+//!   heading at boot: there is no magnetometer in use); `throttle` the motors' mean output,
+//!   percent; `airspeed` and `groundspeed` 0 (not measured).
+//! - ALTITUDE: `altitude_relative` and `altitude_local` the same height (the local frame's
+//!   origin is the take-off point), NaN while unknown; `altitude_monotonic` and
+//!   `altitude_amsl` NaN (no altitude kept since boot, no sea-level reference),
+//!   `altitude_terrain` -1001 and `bottom_clearance` -1, the spec's "unknown" and "no
+//!   measurement".
+//! - SCALED_PRESSURE: `press_abs` the barometer's last healthy sample, hPa, `temperature` its
+//!   temperature, cdegC, `press_diff` 0 (no differential sensor). Not sent before the first
+//!   sample: a ground station sees no pressure rather than a zero it could take for one.
 
 use mavlink::dialects::common::{
-    MavBatteryFunction, MavBatteryType, MavProtocolCapability, MavSysStatusSensor, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
-    BATTERY_STATUS_DATA, RC_CHANNELS_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    MavBatteryFunction, MavBatteryType, MavProtocolCapability, MavSysStatusSensor, ALTITUDE_DATA, ATTITUDE_DATA, AUTOPILOT_VERSION_DATA,
+    BATTERY_STATUS_DATA, RC_CHANNELS_DATA, SCALED_PRESSURE_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA, VFR_HUD_DATA,
 };
 
 use crate::link::{Core, Room};
@@ -10,6 +25,13 @@ use crate::vehicle::VehicleState;
 
 /// RC_CHANNELS' value for a channel that is not there.
 const NO_CHANNEL: u16 = u16::MAX;
+
+/// BATTERY_STATUS' cell voltages, none there. Copied from flash rather than filled: a fill
+/// with a value other than zero would link `__aeabi_memset` (220 B) for this one array.
+static NO_CELLS: [u16; 10] = [u16::MAX; 10];
+
+/// ALTITUDE's `altitude_terrain` when unknown: the spec reads anything below -1000 m so.
+const TERRAIN_UNKNOWN_M: f32 = -1001.0;
 
 fn sensors_present() -> MavSysStatusSensor {
     MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -48,6 +70,18 @@ impl<const TX: usize> Core<TX> {
         if self.schedule.servo_output.ready(now, rates.servo_output_ms) && self.servo_output(state) {
             self.schedule.servo_output.sent(now, rates.servo_output_ms);
         }
+        if self.schedule.vfr_hud.ready(now, rates.vfr_hud_ms) && self.vfr_hud(state) {
+            self.schedule.vfr_hud.sent(now, rates.vfr_hud_ms);
+        }
+        if self.schedule.altitude.ready(now, rates.altitude_ms) && self.altitude(state) {
+            self.schedule.altitude.sent(now, rates.altitude_ms);
+        }
+        // Before the barometer's first sample there is nothing to say: the stream waits.
+        if let Some(pressure_pa) = state.altitude.pressure_pa {
+            if self.schedule.scaled_pressure.ready(now, rates.scaled_pressure_ms) && self.scaled_pressure(pressure_pa, state) {
+                self.schedule.scaled_pressure.sent(now, rates.scaled_pressure_ms);
+            }
+        }
     }
 
     fn send_telemetry<D: mavlink::MessageData>(&mut self, data: &D) -> bool {
@@ -55,7 +89,7 @@ impl<const TX: usize> Core<TX> {
     }
 
     fn heartbeat(&mut self, state: &VehicleState) -> bool {
-        self.send_telemetry(&crate::heartbeat::heartbeat(state.state))
+        self.send_telemetry(&crate::heartbeat::heartbeat(state.state, state.altitude.mode))
     }
 
     fn attitude(&mut self, state: &VehicleState) -> bool {
@@ -108,7 +142,7 @@ impl<const TX: usize> Core<TX> {
     fn battery_status(&mut self, state: &VehicleState) -> bool {
         // Without cell voltages, the first cell carries the whole battery's and the others are
         // "not there".
-        let mut voltages = [u16::MAX; 10];
+        let mut voltages = NO_CELLS;
         voltages[0] = state.battery.voltage_mv;
         self.send_telemetry(&BATTERY_STATUS_DATA {
             current_consumed: -1,
@@ -169,6 +203,48 @@ impl<const TX: usize> Core<TX> {
             servo7_raw: 0,
             servo8_raw: 0,
             port: 0,
+        })
+    }
+
+    fn vfr_hud(&mut self, state: &VehicleState) -> bool {
+        let a = state.altitude;
+        // MAVLink's heading is clockwise from north in whole degrees, 0..359: the nearest one,
+        // as floor(x + 0.5) from a truncating cast (no float rounding in no_std; NaN reads 0).
+        let half_up = state.attitude.yaw_rad.to_degrees() + 0.5;
+        let truncated = half_up as i32;
+        let heading_deg = truncated - i32::from(truncated as f32 > half_up);
+        let [m1, m2, m3, m4] = state.motor_outputs_us.map(u32::from);
+        let mean_us = (m1 + m2 + m3 + m4) / 4;
+        self.send_telemetry(&VFR_HUD_DATA {
+            airspeed: 0.0,
+            groundspeed: 0.0,
+            alt: a.height_m.unwrap_or(f32::NAN),
+            climb: a.climb_m_s.unwrap_or(f32::NAN),
+            heading: heading_deg.rem_euclid(360) as i16,
+            throttle: (mean_us.clamp(1000, 2000) - 1000) as u16 / 10,
+        })
+    }
+
+    fn altitude(&mut self, state: &VehicleState) -> bool {
+        let height_m = state.altitude.height_m.unwrap_or(f32::NAN);
+        self.send_telemetry(&ALTITUDE_DATA {
+            time_usec: u64::from(self.now_ms) * 1000,
+            altitude_monotonic: f32::NAN,
+            altitude_amsl: f32::NAN,
+            altitude_local: height_m,
+            altitude_relative: height_m,
+            altitude_terrain: TERRAIN_UNKNOWN_M,
+            bottom_clearance: -1.0,
+        })
+    }
+
+    fn scaled_pressure(&mut self, pressure_pa: f32, state: &VehicleState) -> bool {
+        self.send_telemetry(&SCALED_PRESSURE_DATA {
+            time_boot_ms: self.now_ms,
+            press_abs: pressure_pa / 100.0,
+            press_diff: 0.0,
+            // Saturating: the LPS22HB reads -40..85 °C.
+            temperature: (state.altitude.temperature_c * 100.0) as i16,
         })
     }
 

@@ -8,6 +8,7 @@
 //! of [`fcu_core::gcs`]): the link answers it TEMPORARILY_REJECTED when the flight state of
 //! the moment refuses it, DENIED otherwise, and names the rule in a STATUSTEXT.
 
+pub use fcu_core::altitude::AltMode;
 pub use fcu_core::gcs::Refused;
 use fcu_core::supervisor::FlightState;
 
@@ -56,6 +57,75 @@ pub struct Health {
     pub prearm: bool,
 }
 
+/// The vertical mode: what HEARTBEAT says ([`crate::heartbeat`]) and a ground station's set-mode
+/// asks for ([`Request::SetMode`]). Its numbers are ArduCopter's flight modes of the same
+/// meaning (the attitude is always self-levelling here): a quadrotor's mode names in MAVProxy
+/// and pymavlink are ArduCopter's, so `mode ALT_HOLD` and `set_mode('STABILIZE')` send them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VerticalMode {
+    /// The throttle stick sets the thrust (ArduCopter's STABILIZE, 0).
+    #[default]
+    Manual,
+    /// Altitude hold (ArduCopter's ALT_HOLD, 2).
+    AltitudeHold,
+    /// The link-loss failsafe descends on the height estimate (ArduCopter's LAND, 9): shown,
+    /// never asked for.
+    FailsafeDescent,
+}
+
+impl VerticalMode {
+    /// Every mode, for tests and tables.
+    pub const ALL: [VerticalMode; 3] = [VerticalMode::Manual, VerticalMode::AltitudeHold, VerticalMode::FailsafeDescent];
+
+    /// Its number (ArduCopter's mode of the same meaning).
+    pub const fn number(self) -> u8 {
+        match self {
+            VerticalMode::Manual => 0,
+            VerticalMode::AltitudeHold => 2,
+            VerticalMode::FailsafeDescent => 9,
+        }
+    }
+
+    /// The mode numbered `number`, if any.
+    pub fn from_number(number: u32) -> Option<VerticalMode> {
+        VerticalMode::ALL.into_iter().find(|m| u32::from(m.number()) == number)
+    }
+
+    /// A ground station's name for it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            VerticalMode::Manual => "manual throttle",
+            VerticalMode::AltitudeHold => "altitude hold",
+            VerticalMode::FailsafeDescent => "failsafe descent",
+        }
+    }
+
+    /// The pilot's choice this mode is, if a ground station may ask for it.
+    pub const fn alt_mode(self) -> Option<AltMode> {
+        match self {
+            VerticalMode::Manual => Some(AltMode::Manual),
+            VerticalMode::AltitudeHold => Some(AltMode::Hold),
+            VerticalMode::FailsafeDescent => None,
+        }
+    }
+}
+
+/// Height and pressure, as far as they are known.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Altitude {
+    /// Above the take-off point, m; `None` while the estimate may not be flown on (no
+    /// barometer sample yet, or the barometer faulted).
+    pub height_m: Option<f32>,
+    /// Upward, m/s (with the height: `None` together).
+    pub climb_m_s: Option<f32>,
+    /// The barometer's last healthy sample, Pa; `None` before the first.
+    pub pressure_pa: Option<f32>,
+    /// The barometer's temperature with that sample, °C.
+    pub temperature_c: f32,
+    /// The vertical mode in force.
+    pub mode: VerticalMode,
+}
+
 /// A snapshot of the vehicle for one telemetry tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VehicleState {
@@ -78,6 +148,8 @@ pub struct VehicleState {
     pub load_permille: u16,
     /// A motor test runs, as the flight controller reports it (it decides when one stops).
     pub motor_test: bool,
+    /// For VFR_HUD, ALTITUDE, SCALED_PRESSURE and HEARTBEAT's vertical mode.
+    pub altitude: Altitude,
 }
 
 /// One parameter: name (at most 16 characters, upper case) and value in force.
@@ -185,6 +257,11 @@ pub enum Request {
     },
     /// Stop the motor test now (another command came, or the link fell silent).
     StopMotorTest,
+    /// A set-mode (SET_MODE, or COMMAND_LONG/INT DO_SET_MODE) naming a mode a ground station
+    /// may ask for ([`VerticalMode::Manual`] or [`VerticalMode::AltitudeHold`], the
+    /// pilot's choices of [`AltMode`]). The vehicle carries it out as a parameter set, and
+    /// answers with the parameters it set, for the link to send their PARAM_VALUEs.
+    SetMode(AltMode),
 }
 
 /// The host application's side of the link (see the module docs).
@@ -213,6 +290,8 @@ pub trait Vehicle {
     fn set_param(&mut self, index: u16, value: f32) -> Result<ParamMask, &'static str>;
 
     /// Carries out a request, or refuses it with fcu-core's verdict (the rule, and whether the
-    /// flight state of the moment refuses it).
-    fn request(&mut self, request: Request) -> Result<(), Refused>;
+    /// flight state of the moment refuses it). `Ok` carries the parameters the request set
+    /// (a set-mode's), whose values the link then sends as PARAM_VALUEs in index order: the
+    /// ground station's copy of the table stays the board's.
+    fn request(&mut self, request: Request) -> Result<ParamMask, Refused>;
 }

@@ -70,6 +70,7 @@ fn heartbeat_says_who_we_are_and_whether_armed() {
         assert_eq!(hb.system_status, expected);
         assert_eq!(hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED), armed);
         assert_eq!(fcu_link::heartbeat::flight_state(&hb), state, "read back exactly");
+        assert_eq!(fcu_link::heartbeat::vertical_mode(&hb), Some(mock.state.altitude.mode), "read back exactly");
     }
 }
 
@@ -90,7 +91,10 @@ fn telemetry_runs_at_its_rates() {
     assert_eq!(counts.get("BATTERY_STATUS"), Some(&2));
     assert_eq!(counts.get("RC_CHANNELS"), Some(&20));
     assert_eq!(counts.get("SERVO_OUTPUT_RAW"), Some(&20));
-    assert_eq!(counts.len(), 6, "{counts:?}");
+    assert_eq!(counts.get("VFR_HUD"), Some(&20));
+    assert_eq!(counts.get("ALTITUDE"), Some(&10));
+    assert_eq!(counts.get("SCALED_PRESSURE"), Some(&4));
+    assert_eq!(counts.len(), 9, "{counts:?}");
 }
 
 #[test]
@@ -121,7 +125,7 @@ fn default_rates_leave_most_of_115200_baud_free() {
     let budget = Rates::DEFAULT.budget_bytes_per_s();
     assert!(budget * 10 < fcu_link::rates::UART_BYTES_PER_S * 6, "{budget} B/s");
     // The table in the rates module's docs.
-    assert_eq!(budget, 21 + 1000 + 43 + 48 + 540 + 330 + 3700);
+    assert_eq!(budget, 21 + 1000 + 43 + 48 + 540 + 330 + 320 + 220 + 52 + 3700);
 }
 
 #[test]
@@ -231,6 +235,9 @@ fn param_request_list_sends_every_param_value_paced() {
         battery_ms: 0,
         rc_channels_ms: 0,
         servo_output_ms: 0,
+        vfr_hud_ms: 0,
+        altitude_ms: 0,
+        scaled_pressure_ms: 0,
         param_ms: 10,
     });
     let mut got = Vec::new();
@@ -258,6 +265,9 @@ fn a_download_waits_for_room_instead_of_dropping() {
             battery_ms: 0,
             rc_channels_ms: 0,
             servo_output_ms: 0,
+            vfr_hud_ms: 0,
+            altitude_ms: 0,
+            scaled_pressure_ms: 0,
             heartbeat_ms: 60_000,
             param_ms: 1,
         },

@@ -452,6 +452,16 @@ impl From<TakeError> for ApplyError {
     }
 }
 
+/// What a change from `old` to `new` reaches, by the table alone: [`ChangeKind::GroundOnly`]
+/// when a parameter the table marks as not changeable in flight differs (bit for bit),
+/// [`ChangeKind::InFlight`] otherwise. [`check_change`] gives it after its checks; a caller
+/// whose `new` comes from `old` through the table's own setters ([`set`], [`with_values`]) has
+/// those by construction, and need not link `check_change`'s field-by-field comparison of two
+/// configurations (about 2 KB of flash on the board).
+pub fn change_kind(old: &Config, new: &Config) -> ChangeKind {
+    TABLE.iter().filter(|p| p.get(new).to_bits() != p.get(old).to_bits()).fold(ChangeKind::InFlight, |kind, p| kind.max(p.applies.kind()))
+}
+
 /// Whether `new` may replace `old` at run time, with changes restricted or not
 /// ([`FlightController::changes_restricted`]), and what it reaches: the change to hand to the
 /// flight controller ([`FlightController::take_change`], or each half's `take_config`).
@@ -465,12 +475,9 @@ impl From<TakeError> for ApplyError {
 pub fn check_change(old: &Config, new: &Config, changes_restricted: bool) -> Result<ConfigChange, ApplyError> {
     new.validate().map_err(ApplyError::Invalid)?;
     let mut reached = *old;
-    let mut kind = ChangeKind::InFlight;
+    let kind = change_kind(old, new);
     for p in TABLE.iter() {
         let v = p.get(new);
-        if v.to_bits() != p.get(old).to_bits() {
-            kind = kind.max(p.applies.kind());
-        }
         // Against what the sets so far made: a radio map entry moves the one it swaps with.
         if v.to_bits() != p.get(&reached).to_bits() {
             p.field.set(&mut reached, v).map_err(|_| ApplyError::NeedsRestart)?;

@@ -2,20 +2,21 @@
 //! no panic, every frame sent out is well formed, and nothing changes without a frame that
 //! asks for it: each parameter set must match a PARAM_SET frame with a good CRC somewhere in
 //! the bytes given to the link (found by a scan independent of the reader), and the vehicle
-//! gets a request only when those bytes hold a COMMAND_LONG or COMMAND_INT with a good CRC.
+//! gets a request only when those bytes hold a COMMAND_LONG, COMMAND_INT or SET_MODE with a
+//! good CRC.
 //!
 //! Input: byte 0 the vehicle's state (bit 0 armed, bit 1 refuses every request, bit 2 refuses
 //! it for now, bit 3 a motor test runs), then
 //! chunks, each followed by one tick, and a chunk starts with a byte `k`:
 //! - `k < 0xC0`: the next `(k & 63) + 1` bytes go to the link as they are; the tick comes
 //!   `(k >> 6) · 500 + 7` ms later;
-//! - `k >= 0xC0`: a byte `m` picks one of the handled messages (`m % 8`) and the version (bit 7:
+//! - `k >= 0xC0`: a byte `m` picks one of the handled messages (`(m & 127) % 9`) and the version (bit 7:
 //!   MAVLink 1), and the next `(k & 63) + 1` bytes are wrapped as its payload in a frame with a
 //!   good CRC (so that the handler, not only the reader, sees arbitrary payloads); 7 ms later.
 #![no_main]
 
 use fcu_core::supervisor::FlightState;
-use fcu_link::{command, Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
+use fcu_link::{command, Altitude, Attitude, Battery, Health, Link, LinkConfig, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
 use libfuzzer_sys::fuzz_target;
 use mavlink::dialects::common::{MavResult, COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA, PARAM_SET_DATA};
 use mavlink::MessageData;
@@ -41,6 +42,7 @@ impl Vehicle for Mock {
             health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
             load_permille: 0,
             motor_test: self.flags & 8 != 0,
+            altitude: Altitude::default(),
         }
     }
     fn param_count(&self) -> u16 {
@@ -70,10 +72,17 @@ impl Vehicle for Mock {
         }
         Ok(others)
     }
-    fn request(&mut self, request: Request) -> Result<(), Refused> {
+    fn request(&mut self, request: Request) -> Result<ParamMask, Refused> {
         self.requests.push(request);
         match self.flags & 6 {
-            0 => Ok(()),
+            // A set-mode reports parameter 3 as set (the station's is ALT_MODE), so that the
+            // echo after its ACK is fuzzed too.
+            0 if matches!(request, Request::SetMode(_)) => {
+                let mut set = ParamMask::EMPTY;
+                set.insert(3);
+                Ok(set)
+            }
+            0 => Ok(ParamMask::EMPTY),
             2 => Err(Refused::denied("fuzz")),
             _ => Err(Refused::for_now("fuzz")),
         }
@@ -104,10 +113,10 @@ fn good_frames(data: &[u8], wanted: &[(u32, u8)]) -> Vec<(u32, Vec<u8>)> {
     found
 }
 
-/// `payload` in a frame with a good CRC for the handled message `m % 8`, MAVLink 1 when bit 7
+/// `payload` in a frame with a good CRC for the handled message `(m & 127) % 9`, MAVLink 1 when bit 7
 /// of `m` is set.
 fn wrap(m: u8, payload: &[u8]) -> Vec<u8> {
-    let handled = &fcu_link::reader::HANDLED[usize::from(m % 8)];
+    let handled = &fcu_link::reader::HANDLED[usize::from(m & 0x7F) % fcu_link::reader::HANDLED.len()];
     let mut f = if m & 0x80 != 0 {
         vec![0xFE, payload.len() as u8, 0, 255, 190, handled.id as u8]
     } else {
@@ -182,6 +191,8 @@ fuzz_target!(|data: &[u8]| {
             command::PREFLIGHT_STORAGE,
             command::PREFLIGHT_REBOOT_SHUTDOWN,
             command::DO_MOTOR_TEST,
+            command::DO_SET_MODE,
+            command::SET_MODE_ACK,
         ];
         let accepted = MavResult::MAV_RESULT_ACCEPTED as u8;
         assert!(
@@ -211,9 +222,14 @@ fuzz_target!(|data: &[u8]| {
         assert!(!mock.requests.contains(&Request::StopMotorTest), "a motor test stopped while none ran");
     }
     if !asked.is_empty() {
+        let set_mode = fcu_link::reader::handled_message(command::SET_MODE_ID).map_or(0, |h| h.extra_crc);
         let commands = good_frames(
             body,
-            &[(COMMAND_LONG_DATA::ID, COMMAND_LONG_DATA::EXTRA_CRC), (COMMAND_INT_DATA::ID, COMMAND_INT_DATA::EXTRA_CRC)],
+            &[
+                (COMMAND_LONG_DATA::ID, COMMAND_LONG_DATA::EXTRA_CRC),
+                (COMMAND_INT_DATA::ID, COMMAND_INT_DATA::EXTRA_CRC),
+                (command::SET_MODE_ID, set_mode),
+            ],
         );
         assert!(!commands.is_empty(), "{asked:?} without a command frame");
     }

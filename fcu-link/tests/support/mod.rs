@@ -4,7 +4,9 @@
 #![allow(dead_code)]
 
 use fcu_core::supervisor::FlightState;
-use fcu_link::{Attitude, Battery, Health, Link, Param, ParamMask, Refused, Request, Vehicle, VehicleState};
+use fcu_link::{
+    AltMode, Altitude, Attitude, Battery, Health, Link, Param, ParamMask, Refused, Request, Vehicle, VehicleState, VerticalMode,
+};
 use mavlink::dialects::common::{self as common, MavMessage};
 use mavlink::{MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavHeader, Message, MessageData};
 
@@ -25,6 +27,8 @@ pub struct Mock {
     pub requests: Vec<Request>,
     /// The verdict the mock gives every request (it knows no rule of its own).
     pub refuse_requests: Option<Refused>,
+    /// The parameter an accepted set-mode reports as set (the station's is ALT_MODE).
+    pub mode_param: Option<u16>,
 }
 
 impl Mock {
@@ -47,6 +51,13 @@ impl Mock {
                 health: Health { imu: true, radio: true, estimator: true, battery: true, prearm: true },
                 load_permille: 420,
                 motor_test: false,
+                altitude: Altitude {
+                    height_m: Some(1.25),
+                    climb_m_s: Some(-0.5),
+                    pressure_pa: Some(101_000.0),
+                    temperature_c: 24.5,
+                    mode: VerticalMode::AltitudeHold,
+                },
             },
             params: vec![
                 MockParam { name: "RCMAP_ROLL", value: 1.0, min: 1.0, max: 8.0 },
@@ -58,6 +69,7 @@ impl Mock {
             sets: Vec::new(),
             requests: Vec::new(),
             refuse_requests: None,
+            mode_param: None,
         }
     }
 
@@ -90,18 +102,25 @@ impl Vehicle for Mock {
         // The mock's parameters are independent: a set changes no other.
         Ok(ParamMask::EMPTY)
     }
-    fn request(&mut self, request: Request) -> Result<(), Refused> {
+    fn request(&mut self, request: Request) -> Result<ParamMask, Refused> {
         self.requests.push(request);
         if let Some(refused) = self.refuse_requests {
             return Err(refused);
         }
         // A test runs from an accepted start until a stop (a vehicle would also end it itself).
+        let mut set = ParamMask::EMPTY;
         match request {
             Request::MotorTest { .. } => self.state.motor_test = true,
             Request::StopMotorTest => self.state.motor_test = false,
+            Request::SetMode(mode) => {
+                self.state.altitude.mode = if mode == AltMode::Hold { VerticalMode::AltitudeHold } else { VerticalMode::Manual };
+                if let Some(index) = self.mode_param {
+                    set.insert(index);
+                }
+            }
             _ => {}
         }
-        Ok(())
+        Ok(set)
     }
 }
 

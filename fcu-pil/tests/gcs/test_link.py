@@ -3,6 +3,7 @@
 Run by `scripts/gcs-tests` (CI), which builds fcu-pil and the firmware first.
 """
 
+import math
 import os
 import tempfile
 import time
@@ -506,6 +507,101 @@ class TwoGroundStations(unittest.TestCase):
                 self.assertIsNotNone(board.heartbeat(5.0))
             finally:
                 second.close()
+
+
+class HeightAndMode(unittest.TestCase):
+    """What a ground station sees of the height (VFR_HUD, ALTITUDE, SCALED_PRESSURE) and the
+    vertical mode (HEARTBEAT), and the set-mode pymavlink sends."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.board = ServedBoard()
+        if cls.board.heartbeat() is None:
+            out = cls.board.serve_output()
+            cls.board.close()
+            raise AssertionError(f"no HEARTBEAT from system 1 within 30 s; serve said:\n{out}")
+        # A board whose table has no ALT_MODE refuses every set-mode by name.
+        cls.has_alt_mode = cls.board.param_read("ALT_MODE") is not None
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.board.close()
+
+    def vertical_mode(self, timeout=30.0):
+        hb = self.board.heartbeat(timeout)
+        self.assertIsNotNone(hb)
+        self.assertEqual(hb.custom_mode >> 16, 0, "bits 16-31 zero")
+        self.assertIn(hb.custom_mode & 0xFF, range(1, 8), "the flight state in bits 0-7")
+        self.assertEqual(hb.base_mode & MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0)
+        return (hb.custom_mode >> 8) & 0xFF
+
+    def test_the_height_streams_at_their_rates_with_nothing_made_up(self):
+        counts, huds, alts, pressures = {}, [], [], []
+        start = time.time()
+        while time.time() - start < 2.0:
+            m = self.board.conn.recv_match(blocking=True, timeout=0.5)
+            if m is None:
+                continue
+            counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+            {"VFR_HUD": huds, "ALTITUDE": alts, "SCALED_PRESSURE": pressures}.get(m.get_type(), []).append(m)
+        self.assertGreaterEqual(counts.get("VFR_HUD", 0), 15, counts)
+        self.assertGreaterEqual(counts.get("ALTITUDE", 0), 7, counts)
+        for h in huds:
+            # On the bench: disarmed, motors off; the height unknown (NaN) or near the take-off point.
+            self.assertEqual(h.throttle, 0)
+            self.assertIn(h.heading, range(0, 360))
+            self.assertTrue(math.isnan(h.alt) or abs(h.alt) < 5.0, h)
+            self.assertTrue(math.isnan(h.climb) or abs(h.climb) < 2.0, h)
+        for a in alts:
+            self.assertTrue(math.isnan(a.altitude_relative) or abs(a.altitude_relative) < 5.0, a)
+            self.assertTrue(math.isnan(a.altitude_amsl) and math.isnan(a.altitude_monotonic), a)
+            self.assertTrue(a.altitude_relative == a.altitude_local or math.isnan(a.altitude_local), a)
+        # SCALED_PRESSURE only once the barometer has a sample: never a made-up zero.
+        for p in pressures:
+            self.assertTrue(300.0 < p.press_abs < 1100.0, p)
+            self.assertTrue(-4000 < p.temperature < 8500, p)
+
+    def test_pymavlink_set_mode_alt_hold_then_stabilize(self):
+        conn = self.board.conn
+        self.assertEqual(conn.mode_mapping()["ALT_HOLD"], 2, "a quadrotor's modes are ArduCopter's in pymavlink")
+        for name, number, value in [("ALT_HOLD", 2, 1.0), ("STABILIZE", 0, 0.0)]:
+            self.board.texts(0.2)
+            conn.set_mode(name)
+            ack = self.board.recv("COMMAND_ACK", 5.0, lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE)
+            self.assertIsNotNone(ack, f"no ACK of set_mode({name!r})")
+            if not self.has_alt_mode:
+                self.assertEqual(ack.result, MAV.MAV_RESULT_DENIED)
+                self.assertIn("Mode refused: no altitude hold on this board", self.board.texts())
+                self.assertEqual(self.vertical_mode(), 0, "manual, as the board flies")
+                continue
+            self.assertEqual(ack.result, MAV.MAV_RESULT_ACCEPTED)
+            echo = self.board.recv("PARAM_VALUE", 5.0, lambda m: m.param_id == "ALT_MODE")
+            self.assertIsNotNone(echo, "the set-mode's ALT_MODE not echoed")
+            self.assertEqual(echo.param_value, value)
+            deadline = time.time() + 5.0
+            while self.vertical_mode() != number and time.time() < deadline:
+                pass
+            self.assertEqual(self.vertical_mode(), number, f"HEARTBEAT after set_mode({name!r})")
+
+    def test_set_mode_message_is_acked_with_its_id_and_a_mode_the_board_lacks_denied(self):
+        self.board.texts(0.2)
+        # SET_MODE (message 11), as older ground stations send it: manual.
+        self.board.conn.mav.set_mode_send(1, MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0)
+        ack = self.board.recv("COMMAND_ACK", 5.0, lambda m: m.command == 11)
+        self.assertIsNotNone(ack, "no ACK of SET_MODE")
+        expected = MAV.MAV_RESULT_ACCEPTED if self.has_alt_mode else MAV.MAV_RESULT_DENIED
+        self.assertEqual(ack.result, expected)
+        # ArduCopter's AUTO (3) and LAND (9) are no modes of this board.
+        for number in (3, 9):
+            self.board.texts(0.2)
+            self.board.conn.set_mode(number)
+            ack = self.board.recv("COMMAND_ACK", 5.0, lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE)
+            self.assertIsNotNone(ack)
+            self.assertEqual(ack.result, MAV.MAV_RESULT_DENIED)
+            self.assertIn("Mode refused: 0 (STABILIZE) or 2 (ALT_HOLD) only", self.board.texts())
+        # Addressed to another system: no answer at all.
+        self.board.conn.mav.set_mode_send(7, MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)
+        self.assertIsNone(self.board.recv("COMMAND_ACK", 1.5, lambda m: m.command == 11))
 
 
 if __name__ == "__main__":

@@ -34,6 +34,25 @@ class MavProxy(unittest.TestCase):
             # The board has no geofence, and MAVProxy must not announce a breach of one.
             self.assertNotIn("fence breach", out)
 
+    def test_mavproxy_mode_command_sets_the_vertical_mode_or_is_refused_by_name(self):
+        with ServedBoard() as board:
+            self.assertIsNotNone(board.heartbeat())
+            has_alt_mode = board.param_read("ALT_MODE") is not None
+            board.conn.close()
+            board.conn = None
+            script = "sleep 8; echo 'mode ALT_HOLD'; sleep 3; echo 'mode STABILIZE'; sleep 3; echo exit"
+            with tempfile.TemporaryDirectory() as logs:
+                out = subprocess.run(
+                    f"({script}) | mavproxy.py --master tcp:127.0.0.1:{board.port} --state-basedir {logs}",
+                    shell=True, capture_output=True, text=True, timeout=60, cwd=logs,
+                ).stdout
+            if has_alt_mode:
+                self.assertEqual(out.count("Got COMMAND_ACK: DO_SET_MODE: ACCEPTED"), 2, out)
+            else:
+                self.assertEqual(out.count("Got COMMAND_ACK: DO_SET_MODE: DENIED"), 2, out)
+                self.assertIn("Mode refused: no altitude hold on this board", out)
+            self.assertNotIn("Unknown mode", out)
+
 
 if __name__ == "__main__":
     unittest.main()

@@ -29,7 +29,8 @@ pub const TICK_US: u32 = 1250;
 pub const UART_BYTES_PER_TICK: f64 = 11.52 * 1.25;
 /// The firmware's UART transmit queue, bytes.
 pub const UART_QUEUE_BYTES: usize = 1024;
-/// What the link task moves from the link to the UART per period at most.
+/// The link task's buffer between the link and the UART: it moves chunks of this each period
+/// until the UART queue is full or the link has nothing left.
 pub const UART_CHUNK_BYTES: usize = 128;
 /// The firmware's receive ring (DMA), bytes: what arrives while nothing reads it beyond that
 /// overwrites the oldest.
@@ -463,10 +464,20 @@ impl Bench {
         if let Some(g) = to.gcs {
             b.to_control.gcs = Some(b.to_control.gcs.map_or(g, |older| older.then(g)));
         }
-        let room = UART_QUEUE_BYTES.saturating_sub(b.uart_queued).min(UART_CHUNK_BYTES);
-        let mut out = [0u8; UART_CHUNK_BYTES];
-        let n = b.task.poll_tx(&mut out[..room]);
-        b.uart_queued += n;
+        // As the firmware's link task: everything the UART queue has room for, a chunk at a time.
+        let mut moved = Vec::new();
+        loop {
+            let room = UART_QUEUE_BYTES.saturating_sub(b.uart_queued).min(UART_CHUNK_BYTES);
+            let mut out = [0u8; UART_CHUNK_BYTES];
+            let n = b.task.poll_tx(&mut out[..room]);
+            if n == 0 {
+                break;
+            }
+            b.uart_queued += n;
+            moved.extend_from_slice(&out[..n]);
+        }
+        let out = moved;
+        let n = out.len();
         for &byte in &out[..n] {
             self.downlink_hash = (self.downlink_hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01B3);
         }
