@@ -46,14 +46,15 @@ impl HoldConfig {
     /// For the STEVAL-FCU001V1 on its 8520 motors (65 g, 4 × 0.33 N): it hovers at a duty of
     /// about 0.4, some 530 stick counts (132.5 µs of throttle) through the throttle map; a stick
     /// count is then 0.0036 m/s² of lift, so 1 m/s² is some 280 counts.
-    /// - climb 1 m/s, failsafe descent 0.5 m/s (a room's height in some 5 s);
+    /// - climb 1 m/s, failsafe descent 0.4 m/s (a room's height in some 6 s, and a touchdown
+    ///   well under 0.5 m/s on an airframe 30 % off the nominal);
     /// - dead band ±360 counts (±90 µs, a tenth of the travel each side of centre);
     /// - height loop 1.5/s; climb-rate loop 700 counts per m/s (2.5 m/s² per m/s, some 2.5 rad/s,
     ///   a decade under the attitude loops and well inside the motors' 70 ms lag) with the
     ///   integral's zero at 0.5 rad/s (350 counts per m).
     pub const DEFAULT: HoldConfig = HoldConfig {
         climb_rate_max_m_s: 1.0,
-        fs_descent_rate_m_s: 0.5,
+        fs_descent_rate_m_s: 0.4,
         deadband: StickCounts(360),
         pos_p: 1.5,
         vel_p: 1100.0,
@@ -116,7 +117,7 @@ pub const LAND_SPEED_M_S: f32 = 0.2;
 /// lowest throttle that keeps its motors turning (an airframe lighter than the throttle map's
 /// floor) looks landed by the first three, anywhere. The margin is the estimate's drift over a
 /// flight and the props' wash near the floor, twice over.
-pub const LAND_TIME_S: f32 = 1.0;
+pub const LAND_TIME_S: f32 = 0.5;
 pub const LAND_HEIGHT_M: f32 = 0.75;
 /// The failsafe holds the height this long before it descends, s (the level stage of the
 /// manual failsafe, in which a brief loss comes back).
@@ -130,6 +131,12 @@ pub const FS_CAP_SPARE_S: f32 = 3.0;
 pub const BARO_RECOVERY_S: f32 = 1.0;
 /// The take-off ramp: from the bottom to the hover throttle in this long, s.
 pub const TAKEOFF_RAMP_S: f32 = 1.0;
+/// The hold's throttle is averaged over this for a hand-over, s.
+pub const CARRY_AVERAGE_S: f32 = 0.5;
+/// The climb rate the hold flies on is low-passed with this time constant, s: the
+/// barometer's noise reaches the estimate's climb rate above 1 Hz, and through the climb-rate
+/// loop's gain it would shake the throttle (and the motors) there.
+pub const CLIMB_FILTER_S: f32 = 0.16;
 
 /// What the control tick and the supervisor take from the vertical half.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -191,8 +198,15 @@ pub struct Vertical {
     integral: f32,
     /// The hold's last throttle, stick counts.
     out: f32,
+    /// Its average over the last [`CARRY_AVERAGE_S`]: the thrust it was giving, which a
+    /// hand-over carries (the last output alone is a noisy sample of it).
+    out_average: f32,
+    /// The climb rate the hold's loop flies on: the estimate's, low-passed at
+    /// [`CLIMB_FILTER_S`], m/s.
+    climb_filtered: f32,
     /// Left the hold: the throttle it gave, kept until the stick crosses it (and from which
-    /// side the stick started).
+    /// side the stick started: below it, it takes over as soon as it reaches the carried
+    /// throttle).
     carry: Option<(f32, bool)>,
     /// Steps in the failsafe.
     failsafe_steps: u32,
@@ -226,6 +240,8 @@ impl Vertical {
             hover: f32::from(cfg.hold.hover_throttle.0),
             integral: 0.0,
             out: 0.0,
+            out_average: 0.0,
+            climb_filtered: 0.0,
             carry: None,
             failsafe_steps: 0,
             stick_centred: false,
@@ -303,6 +319,7 @@ impl Vertical {
             self.land_steps = 0;
         }
         self.was_enabled = i.motors_enabled;
+        let was_failsafe = self.failsafe_steps > 0;
         self.failsafe_steps = if i.failsafe { self.failsafe_steps.saturating_add(1) } else { 0 };
 
         // 3. The estimate, on the ground state of the last step and the throttle flown.
@@ -338,12 +355,18 @@ impl Vertical {
             }
             let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
             let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
+            self.out_average += self.dt_s / (CARRY_AVERAGE_S + self.dt_s) * (t - self.out_average);
             landed = !self.airborne && rate <= 0.0;
             Some(t)
         } else {
             if self.engaged.take().is_some() {
-                let from_below = f32::from(i.command.0) < self.out;
-                self.carry = Some((self.out, from_below));
+                // The link back after the failsafe's descent: the stick the pilot holds is
+                // live again, and a stick above the thrust carried (the pilot climbing) takes
+                // over at once; below it, as it comes up to it. Otherwise (a mode change, a
+                // barometer fault) from whichever side the live stick is.
+                let c = self.out_average;
+                let from_below = was_failsafe || f32::from(i.command.0) < c;
+                self.carry = Some((c, from_below));
             }
             let carried = self.carry.and_then(|(c, from_below)| {
                 let crossed = if from_below { f32::from(i.command.0) >= c } else { f32::from(i.command.0) <= c };
@@ -415,6 +438,7 @@ impl Vertical {
             self.engaged = Some(height_m);
             self.carry = None;
             self.integral = 0.0;
+            self.climb_filtered = climb_m_s;
             // Motors turning above the throttle cut when the hold takes over (the failsafe, a
             // mode change): flying, or about to, whatever the ground state thought; the hold
             // never takes a drone it might be flying for one on the floor.
@@ -428,8 +452,14 @@ impl Vertical {
             } else {
                 self.out = 0.0;
             }
+            self.out_average = self.out;
         }
         let dt = self.dt_s;
+        self.climb_filtered += dt / (CLIMB_FILTER_S + dt) * (climb_m_s - self.climb_filtered);
+        if !self.climb_filtered.is_finite() {
+            self.climb_filtered = 0.0;
+        }
+        let climb_m_s = self.climb_filtered;
         if !self.airborne {
             self.engaged = Some(height_m);
             if rate > 0.0 {

@@ -154,6 +154,17 @@ impl AltitudeConfig {
 /// overshoot on the first sample after an outage.
 const MAX_CORRECTION_DT_S: f32 = 0.05;
 
+/// After a lift-off the estimate is the accelerometer's alone (the bias learned on the floor,
+/// the floor's height known) for at least this long, s…
+pub const LIFTOFF_INERTIAL_MIN_S: f32 = 1.0;
+/// …until it is this high, out of ground effect, m, and climbing or sinking slower than
+/// [`LIFTOFF_SETTLED_M_S`]; then the barometer is re-referenced to agree with it. After
+/// [`LIFTOFF_INERTIAL_MAX_S`] it is re-referenced wherever the drone is (the accelerometer's
+/// drift would grow past what it corrects).
+pub const LIFTOFF_CLEAR_M: f32 = 0.5;
+pub const LIFTOFF_SETTLED_M_S: f32 = 0.3;
+pub const LIFTOFF_INERTIAL_MAX_S: f32 = 4.0;
+
 /// What the estimate says.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AltitudeEstimate {
@@ -184,6 +195,13 @@ pub struct AltitudeEstimator {
     gated_in_a_row: u16,
     /// The last step's `on_ground`, to see the lift-off.
     on_ground: bool,
+    /// Steps since the lift-off while the estimate is the accelerometer's alone (0: not).
+    inertial_steps: u32,
+    /// Over those steps: the height estimate less the barometer's, averaged as the take-off
+    /// level's pressure is (NaN before the first sample), m.
+    inertial_less_baro_m: f32,
+    /// Added to the barometer's height: the re-reference at the end of those steps, m.
+    baro_offset_m: f32,
 }
 
 impl AltitudeEstimator {
@@ -199,6 +217,9 @@ impl AltitudeEstimator {
             steps_since_baro: 0,
             gated_in_a_row: 0,
             on_ground: false,
+            inertial_steps: 0,
+            inertial_less_baro_m: f32::NAN,
+            baro_offset_m: 0.0,
         }
     }
 
@@ -219,7 +240,7 @@ impl AltitudeEstimator {
     /// re-zeroed), with the thrust's compensation, m; NaN before a reference.
     pub fn baro_height_m(&self, pressure_pa: f32, thrust: f32) -> f32 {
         let thrust = if thrust.is_finite() { crate::math::limit(thrust, 0.0, 1.0) } else { 0.0 };
-        self.reference_pa.map_or(f32::NAN, |r| baro_height_m(pressure_pa - self.cfg.thrust_scale_pa * thrust, r))
+        self.reference_pa.map_or(f32::NAN, |r| baro_height_m(pressure_pa - self.cfg.thrust_scale_pa * thrust, r) + self.baro_offset_m)
     }
 
     /// Found flying at `height_m` (the barometer's, well above the take-off level) while it was
@@ -230,6 +251,7 @@ impl AltitudeEstimator {
             self.height_m = height_m;
         }
         self.on_ground = false;
+        self.inertial_steps = 0;
     }
 
     pub fn estimate(&self) -> AltitudeEstimate {
@@ -252,6 +274,8 @@ impl AltitudeEstimator {
         self.height_m = 0.0;
         self.speed_m_s = 0.0;
         self.gated_in_a_row = 0;
+        self.baro_offset_m = 0.0;
+        self.inertial_steps = 0;
         true
     }
 
@@ -278,11 +302,17 @@ impl AltitudeEstimator {
         let sample = pressure.and_then(|p| self.track(p).map(|dt_b| (p, dt_b)));
         if on_ground {
             self.apply(-self.height_m, dt);
+            self.inertial_steps = 0;
         } else {
             if self.on_ground {
                 self.reference_pa = self.reference_pa.map(|_| self.average_pa);
+                self.baro_offset_m = 0.0;
+                self.inertial_steps = 1;
+                self.inertial_less_baro_m = f32::NAN;
             }
-            if let Some((p, dt_b)) = sample {
+            if self.inertial_steps > 0 {
+                self.inertial(sample);
+            } else if let Some((p, dt_b)) = sample {
                 self.correct(p, dt_b, thrust);
             }
         }
@@ -312,11 +342,44 @@ impl AltitudeEstimator {
         Some(dt_b)
     }
 
+    /// The first seconds after a lift-off: the barometer's height is off the true height by
+    /// the props' wash at the thrust flown and by ground effect (which fades on the way up),
+    /// some tenths of a metre either way on this airframe, while the accelerometer, its bias
+    /// learned against the floor, drifts by `½·b·t²`, a centimetre or two in those seconds.
+    /// So the estimate flies on the accelerometer alone (never below the floor), and once the
+    /// drone is clear of the floor and settled, the barometer's height is offset to agree
+    /// with it: the wash at the hover's thrust and what is left of ground effect taken out
+    /// together. The thrust compensation parameter then covers changes of thrust.
+    fn inertial(&mut self, sample: Option<(f32, f32)>) {
+        if self.height_m < 0.0 {
+            self.height_m = 0.0;
+            self.speed_m_s = self.speed_m_s.max(0.0);
+        }
+        if let Some((p, dt_b)) = sample {
+            let diff = self.height_m - self.reference_pa.map_or(f32::NAN, |r| baro_height_m(p, r));
+            if diff.is_finite() {
+                let alpha = dt_b / (self.cfg.zero_average_s + dt_b);
+                let avg = self.inertial_less_baro_m;
+                self.inertial_less_baro_m = if avg.is_finite() { avg + alpha * (diff - avg) } else { diff };
+            }
+        }
+        let t_s = self.inertial_steps as f32 * self.cfg.step_dt_s;
+        let settled = t_s >= LIFTOFF_INERTIAL_MIN_S && self.height_m >= LIFTOFF_CLEAR_M && self.speed_m_s.abs() < LIFTOFF_SETTLED_M_S;
+        if settled || t_s >= LIFTOFF_INERTIAL_MAX_S {
+            if self.inertial_less_baro_m.is_finite() {
+                self.baro_offset_m = self.inertial_less_baro_m;
+            }
+            self.inertial_steps = 0;
+        } else {
+            self.inertial_steps += 1;
+        }
+    }
+
     fn correct(&mut self, pressure_pa: f32, dt_b: f32, thrust: f32) {
         let Some(reference) = self.reference_pa else {
             return;
         };
-        let baro_height = baro_height_m(pressure_pa, reference);
+        let baro_height = baro_height_m(pressure_pa, reference) + self.baro_offset_m;
         let innovation = baro_height - self.height_m;
         // NaN (a reference of absurd numbers) counts as outside.
         let inside_gate = innovation.abs() <= self.cfg.innovation_gate_m;
