@@ -56,7 +56,7 @@ impl HoldConfig {
         climb_rate_max_m_s: 1.0,
         fs_descent_rate_m_s: 0.4,
         deadband: StickCounts(360),
-        pos_p: 1.5,
+        pos_p: 1.0,
         vel_p: 1100.0,
         vel_i: 1100.0,
         hover_throttle: StickCounts(530),
@@ -133,10 +133,6 @@ pub const BARO_RECOVERY_S: f32 = 1.0;
 pub const TAKEOFF_RAMP_S: f32 = 1.0;
 /// The hold's throttle is averaged over this for a hand-over, s.
 pub const CARRY_AVERAGE_S: f32 = 0.5;
-/// The climb rate the hold flies on is low-passed with this time constant, s: the
-/// barometer's noise reaches the estimate's climb rate above 1 Hz, and through the climb-rate
-/// loop's gain it would shake the throttle (and the motors) there.
-pub const CLIMB_FILTER_S: f32 = 0.16;
 
 /// What the control tick and the supervisor take from the vertical half.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -201,9 +197,6 @@ pub struct Vertical {
     /// Its average over the last [`CARRY_AVERAGE_S`]: the thrust it was giving, which a
     /// hand-over carries (the last output alone is a noisy sample of it).
     out_average: f32,
-    /// The climb rate the hold's loop flies on: the estimate's, low-passed at
-    /// [`CLIMB_FILTER_S`], m/s.
-    climb_filtered: f32,
     /// Left the hold: the throttle it gave, kept until the stick crosses it (and from which
     /// side the stick started: below it, it takes over as soon as it reaches the carried
     /// throttle).
@@ -241,7 +234,6 @@ impl Vertical {
             integral: 0.0,
             out: 0.0,
             out_average: 0.0,
-            climb_filtered: 0.0,
             carry: None,
             failsafe_steps: 0,
             stick_centred: false,
@@ -438,7 +430,6 @@ impl Vertical {
             self.engaged = Some(height_m);
             self.carry = None;
             self.integral = 0.0;
-            self.climb_filtered = climb_m_s;
             // Motors turning above the throttle cut when the hold takes over (the failsafe, a
             // mode change): flying, or about to, whatever the ground state thought; the hold
             // never takes a drone it might be flying for one on the floor.
@@ -455,11 +446,6 @@ impl Vertical {
             self.out_average = self.out;
         }
         let dt = self.dt_s;
-        self.climb_filtered += dt / (CLIMB_FILTER_S + dt) * (climb_m_s - self.climb_filtered);
-        if !self.climb_filtered.is_finite() {
-            self.climb_filtered = 0.0;
-        }
-        let climb_m_s = self.climb_filtered;
         if !self.airborne {
             self.engaged = Some(height_m);
             if rate > 0.0 {

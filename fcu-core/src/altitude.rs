@@ -137,7 +137,7 @@ impl AltitudeConfig {
     /// - bias up to 1 m/s² (0.1 g, more than the LSM6DSL's ±40 mg offset after calibration).
     pub const DEFAULT: AltitudeConfig = AltitudeConfig {
         step_dt_s: 1.0 / 160.0,
-        time_constant_s: 1.5,
+        time_constant_s: 4.0,
         thrust_scale_pa: 0.0,
         ground_effect_height_m: 0.3,
         ground_effect_min_thrust: 0.1,
@@ -155,15 +155,19 @@ impl AltitudeConfig {
 const MAX_CORRECTION_DT_S: f32 = 0.05;
 
 /// After a lift-off the estimate is the accelerometer's alone (the bias learned on the floor,
-/// the floor's height known) for at least this long, s…
+/// the floor's height known) for at least this long off the floor (above
+/// [`LIFTOFF_OFF_FLOOR_M`]), s…
 pub const LIFTOFF_INERTIAL_MIN_S: f32 = 1.0;
+pub const LIFTOFF_OFF_FLOOR_M: f32 = 0.1;
 /// …until it is this high, out of ground effect, m, and climbing or sinking slower than
 /// [`LIFTOFF_SETTLED_M_S`]; then the barometer is re-referenced to agree with it. After
-/// [`LIFTOFF_INERTIAL_MAX_S`] it is re-referenced wherever the drone is (the accelerometer's
-/// drift would grow past what it corrects).
-pub const LIFTOFF_CLEAR_M: f32 = 0.5;
+/// [`LIFTOFF_INERTIAL_MAX_S`] off the floor, or [`LIFTOFF_INERTIAL_LIMIT_S`] in all (a
+/// lift-off declared on a throttle that does not lift this airframe), it is re-referenced
+/// wherever the drone is: the accelerometer's drift would grow past what it corrects.
+pub const LIFTOFF_CLEAR_M: f32 = 0.6;
 pub const LIFTOFF_SETTLED_M_S: f32 = 0.3;
 pub const LIFTOFF_INERTIAL_MAX_S: f32 = 4.0;
+pub const LIFTOFF_INERTIAL_LIMIT_S: f32 = 10.0;
 
 /// What the estimate says.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -195,8 +199,10 @@ pub struct AltitudeEstimator {
     gated_in_a_row: u16,
     /// The last step's `on_ground`, to see the lift-off.
     on_ground: bool,
-    /// Steps since the lift-off while the estimate is the accelerometer's alone (0: not).
+    /// Steps since the lift-off while the estimate is the accelerometer's alone (0: not), and
+    /// of those, the steps off the floor.
     inertial_steps: u32,
+    off_floor_steps: u32,
     /// Over those steps: the height estimate less the barometer's, averaged as the take-off
     /// level's pressure is (NaN before the first sample), m.
     inertial_less_baro_m: f32,
@@ -218,6 +224,7 @@ impl AltitudeEstimator {
             gated_in_a_row: 0,
             on_ground: false,
             inertial_steps: 0,
+            off_floor_steps: 0,
             inertial_less_baro_m: f32::NAN,
             baro_offset_m: 0.0,
         }
@@ -308,6 +315,7 @@ impl AltitudeEstimator {
                 self.reference_pa = self.reference_pa.map(|_| self.average_pa);
                 self.baro_offset_m = 0.0;
                 self.inertial_steps = 1;
+                self.off_floor_steps = 0;
                 self.inertial_less_baro_m = f32::NAN;
             }
             if self.inertial_steps > 0 {
@@ -363,9 +371,13 @@ impl AltitudeEstimator {
                 self.inertial_less_baro_m = if avg.is_finite() { avg + alpha * (diff - avg) } else { diff };
             }
         }
-        let t_s = self.inertial_steps as f32 * self.cfg.step_dt_s;
-        let settled = t_s >= LIFTOFF_INERTIAL_MIN_S && self.height_m >= LIFTOFF_CLEAR_M && self.speed_m_s.abs() < LIFTOFF_SETTLED_M_S;
-        if settled || t_s >= LIFTOFF_INERTIAL_MAX_S {
+        if self.height_m >= LIFTOFF_OFF_FLOOR_M {
+            self.off_floor_steps += 1;
+        }
+        let dt = self.cfg.step_dt_s;
+        let (t_s, off_s) = (self.inertial_steps as f32 * dt, self.off_floor_steps as f32 * dt);
+        let settled = off_s >= LIFTOFF_INERTIAL_MIN_S && self.height_m >= LIFTOFF_CLEAR_M;
+        if settled || off_s >= LIFTOFF_INERTIAL_MAX_S || t_s >= LIFTOFF_INERTIAL_LIMIT_S {
             if self.inertial_less_baro_m.is_finite() {
                 self.baro_offset_m = self.inertial_less_baro_m;
             }
