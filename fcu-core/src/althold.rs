@@ -118,6 +118,12 @@ pub const LAND_SPEED_M_S: f32 = 0.2;
 /// floor) looks landed by the first three, anywhere. The margin is the estimate's drift over a
 /// flight and the props' wash near the floor, twice over.
 pub const LAND_TIME_S: f32 = 0.5;
+/// …and with the vertical acceleration (the accelerometer's, its bias off, low-passed over
+/// [`LAND_ACCEL_FILTER_S`]) within this, m/s²: on the floor nothing moves whatever the
+/// throttle, while in the air a throttle under the hover's sinks the drone at once; a gust
+/// that holds it still can fool the rule only for as long as it holds it exactly.
+pub const LAND_ACCEL_M_S2: f32 = 0.5;
+pub const LAND_ACCEL_FILTER_S: f32 = 0.1;
 pub const LAND_HEIGHT_M: f32 = 0.75;
 /// The failsafe holds the height this long before it descends, s (the level stage of the
 /// manual failsafe, in which a brief loss comes back).
@@ -182,6 +188,8 @@ pub struct Vertical {
     airborne: bool,
     /// Steps the landing conditions have held.
     land_steps: u32,
+    /// The vertical acceleration, low-passed, m/s² (for the landing).
+    accel_filtered_m_s2: f32,
     /// Steps since the last barometer fault (saturating).
     since_fault_steps: u32,
     last_fault: Option<BaroFault>,
@@ -225,6 +233,7 @@ impl Vertical {
             was_enabled: false,
             airborne: false,
             land_steps: 0,
+            accel_filtered_m_s2: 0.0,
             since_fault_steps: 0,
             last_fault: None,
             pressure_pa: None,
@@ -331,6 +340,10 @@ impl Vertical {
         let on_ground = !i.motors_enabled || !self.airborne;
         let est = self.estimator.update(accel_up, pressure, thrust, on_ground);
         let healthy = self.healthy();
+        let accel = accel_up - est.accel_bias_m_s2;
+        if accel.is_finite() {
+            self.accel_filtered_m_s2 += self.dt_s / (LAND_ACCEL_FILTER_S + self.dt_s) * (accel - self.accel_filtered_m_s2);
+        }
 
         // 4. The hold, or the stick (with what the hold gave carried until the stick crosses it).
         let hold_wanted = healthy && i.motors_enabled && (self.cfg.mode == AltMode::Hold || i.failsafe);
@@ -491,8 +504,7 @@ impl Vertical {
         }
         // Landing: asked down, the throttle well under the hover, the height still.
         let holding = self.hover + self.integral;
-        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && climb_m_s.abs() < LAND_SPEED_M_S && height_m < LAND_HEIGHT_M
-        {
+        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && self.still(climb_m_s, height_m) {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
@@ -518,7 +530,7 @@ impl Vertical {
             self.land_steps = 0;
             return;
         }
-        if flown < LAND_FRACTION * self.hover && climb_m_s.abs() < LAND_SPEED_M_S && est.height_m < LAND_HEIGHT_M {
+        if flown < LAND_FRACTION * self.hover && self.still(climb_m_s, est.height_m) {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
@@ -527,6 +539,11 @@ impl Vertical {
             self.airborne = false;
             self.land_steps = 0;
         }
+    }
+
+    /// Near the take-off level and not moving: the estimate's climb rate and the accelerometer.
+    fn still(&self, climb_m_s: f32, height_m: f32) -> bool {
+        climb_m_s.abs() < LAND_SPEED_M_S && self.accel_filtered_m_s2.abs() < LAND_ACCEL_M_S2 && height_m < LAND_HEIGHT_M
     }
 
     /// The failsafe descent's time cap from `height_m`, control ticks.

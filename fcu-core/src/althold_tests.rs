@@ -29,6 +29,8 @@ struct Plant {
     thrust_n: f32,
     /// The specific force along the vertical (the accelerometer), m/s².
     specific_force: f32,
+    /// An updraught's push, N.
+    updraught_n: f32,
 }
 
 impl Plant {
@@ -48,7 +50,7 @@ impl Plant {
 
     fn step(&mut self, throttle: f32, running: bool, dt: f32) {
         self.thrust_n += (Self::thrust_for(throttle, running) - self.thrust_n) * dt / 0.05;
-        let force = self.thrust_n - Self::DRAG_N_PER_M_S * self.v_m_s;
+        let force = self.thrust_n + self.updraught_n - Self::DRAG_N_PER_M_S * self.v_m_s;
         let mut a = force / self.mass_kg - Self::G;
         if self.z_m <= 0.0 && a <= 0.0 && self.v_m_s <= 0.0 {
             // On the floor: it pushes back.
@@ -114,7 +116,7 @@ impl Rig {
             decision: crate::supervisor::ReferenceLatch::default().decide(false, None, false),
             cmd: VerticalCommand::default(),
             status: AltitudeStatus::default(),
-            plant: Plant { mass_kg: Plant::NOMINAL_KG, z_m: 0.0, v_m_s: 0.0, thrust_n: 0.0, specific_force: Plant::G },
+            plant: Plant { mass_kg: Plant::NOMINAL_KG, z_m: 0.0, v_m_s: 0.0, thrust_n: 0.0, specific_force: Plant::G, updraught_n: 0.0 },
             noise: Noise(11),
             tick: 0,
             steps: 0,
@@ -674,4 +676,44 @@ fn an_airframe_heavier_than_the_hover_setting_takes_off_holds_and_lands_in_hold(
     r.run(Rig::thr(0), 12.0);
     assert_eq!(r.plant.z_m, 0.0);
     assert_eq!(r.decision.state, FlightState::Disarmed);
+}
+
+/// The landing is seen in half a second of stillness with the throttle low while asked down:
+/// an updraught that holds the failsafe's descent still near the floor for less than that is
+/// no landing (the motors would stop in the air), on the nominal airframe and on a light one
+/// that hovers under three quarters of the hover setting.
+#[test]
+fn a_gust_that_stops_the_descent_near_the_floor_is_no_landing() {
+    for mass in [1.0, 0.9] {
+        let mut r = flying_manually(mass, 1.2);
+        r.link = false;
+        r.sticks = Rig::thr(0);
+        let (mut t, mut gust_at, mut still_s) = (0.0, None::<f32>, 0.0);
+        let (mut landed_above, mut off_at) = (None, None);
+        for _ in 0..(15.0 / STEP_S) as u32 {
+            t += STEP_S;
+            if gust_at.is_none() && r.status.failsafe_descent && r.plant.z_m < 0.4 {
+                gust_at = Some(t);
+            }
+            let gust = gust_at.is_some_and(|g| t - g < 0.4);
+            // Whatever stops the descent within some 50 ms and holds it still, whatever the
+            // thrust: the hold's throttle goes low, asked down, the height still.
+            let p = &r.plant;
+            let push = p.mass_kg * Plant::G - p.thrust_n + Plant::DRAG_N_PER_M_S * p.v_m_s - p.mass_kg * p.v_m_s / 0.05;
+            r.plant.updraught_n = if gust { push } else { 0.0 };
+            r.step();
+            if gust && r.plant.v_m_s.abs() < 0.1 {
+                still_s += STEP_S;
+            }
+            if r.cmd.landed && r.plant.z_m > 0.02 && landed_above.is_none() {
+                landed_above = Some(r.plant.z_m);
+            }
+            if off_at.is_none() && !r.decision.motors_enabled {
+                off_at = Some(r.plant.z_m);
+            }
+        }
+        assert!(gust_at.is_some() && still_s > 0.2, "mass {mass}: the gust held it still {still_s} s");
+        assert_eq!(landed_above, None, "mass {mass}: landed at {landed_above:?} m");
+        assert_eq!(off_at, Some(0.0), "mass {mass}: motors off at {off_at:?} m");
+    }
 }
