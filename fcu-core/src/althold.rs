@@ -49,9 +49,10 @@ impl HoldConfig {
     /// - climb 1 m/s, failsafe descent 0.4 m/s (a room's height in some 6 s, and a touchdown
     ///   well under 0.5 m/s on an airframe 30 % off the nominal);
     /// - dead band ±360 counts (±90 µs, a tenth of the travel each side of centre);
-    /// - height loop 1.5/s; climb-rate loop 700 counts per m/s (2.5 m/s² per m/s, some 2.5 rad/s,
-    ///   a decade under the attitude loops and well inside the motors' 70 ms lag) with the
-    ///   integral's zero at 0.5 rad/s (350 counts per m).
+    /// - height loop 1/s (at 1.5/s the barometer's noise through the height error shook the
+    ///   throttle in the 1–5 Hz band more than a pilot's hand does); climb-rate loop 1100 counts
+    ///   per m/s (some 4 rad/s, a decade under the attitude loops) with the integral's zero at
+    ///   1 rad/s (1100 counts per m).
     pub const DEFAULT: HoldConfig = HoldConfig {
         climb_rate_max_m_s: 1.0,
         fs_descent_rate_m_s: 0.4,

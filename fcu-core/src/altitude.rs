@@ -128,9 +128,11 @@ pub struct AltitudeConfig {
 
 impl AltitudeConfig {
     /// The defaults at the 160 Hz outer step:
-    /// - τ = 1.5 s: the barometer's 6 cm of noise per sample averaged to about a centimetre,
-    ///   gusts' pressure transients (a few tenths of a second) mostly left to the accelerometer;
-    ///   the accelerometer bias learned within some 10 s;
+    /// - τ = 4 s: the barometer's 6 cm of noise per sample averaged to under a centimetre and
+    ///   kept out of the hold's throttle (at 1.5 s it moved the throttle three times as much as
+    ///   a pilot's hand in the 1–5 Hz band), gusts' pressure transients left to the
+    ///   accelerometer; the accelerometer bias learned in flight within some 30 s (on the floor
+    ///   before the take-off against the floor);
     /// - ground effect: within 0.3 m of the floor (some four rotor diameters) with the motors
     ///   over 10 %, a reading up to 0.5 m low is ignored (the wash's overpressure on a drone
     ///   this size, a few pascals, is some tenths of a metre);
