@@ -15,7 +15,8 @@
 //!   asks for a climb, when it ramps the throttle up to the hover's;
 //! - it is airborne once the collective reaches [`LIFTOFF_FRACTION`] of the hover throttle;
 //! - it has landed when, descending, the collective has stayed below [`LAND_FRACTION`] of the
-//!   hover throttle with the height estimate still ([`LAND_SPEED_M_S`]) for [`LAND_TIME_S`].
+//!   hover throttle with the height estimate still ([`LAND_SPEED_M_S`]) and the accelerometer
+//!   too ([`LAND_ACCEL_M_S2`]) for [`LAND_TIME_S`].
 
 use crate::altitude::{vertical_accel_m_s2, AltMode, AltitudeConfig, AltitudeEstimate, AltitudeEstimator, AltitudeStatus};
 use crate::baro::{BaroFault, BaroHealthConfig, BaroMonitor, RawBaro};
