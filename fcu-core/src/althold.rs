@@ -15,7 +15,8 @@
 //!   asks for a climb, when it ramps the throttle up to the hover's;
 //! - it is airborne once the collective reaches [`LIFTOFF_FRACTION`] of the hover throttle;
 //! - it has landed when, descending, the collective has stayed below [`LAND_FRACTION`] of the
-//!   hover throttle with the height estimate still ([`LAND_SPEED_M_S`]) for [`LAND_TIME_S`].
+//!   hover throttle with the height estimate still ([`LAND_SPEED_M_S`]) and the accelerometer
+//!   too ([`LAND_ACCEL_M_S2`]) for [`LAND_TIME_S`].
 
 use crate::altitude::{vertical_accel_m_s2, AltMode, AltitudeConfig, AltitudeEstimate, AltitudeEstimator, AltitudeStatus};
 use crate::baro::{BaroFault, BaroHealthConfig, BaroMonitor, RawBaro};
@@ -46,16 +47,18 @@ impl HoldConfig {
     /// For the STEVAL-FCU001V1 on its 8520 motors (65 g, 4 × 0.33 N): it hovers at a duty of
     /// about 0.4, some 530 stick counts (132.5 µs of throttle) through the throttle map; a stick
     /// count is then 0.0036 m/s² of lift, so 1 m/s² is some 280 counts.
-    /// - climb 1 m/s, failsafe descent 0.5 m/s (a room's height in some 5 s);
+    /// - climb 1 m/s, failsafe descent 0.4 m/s (a room's height in some 6 s, and a touchdown
+    ///   well under 0.5 m/s on an airframe 30 % off the nominal);
     /// - dead band ±360 counts (±90 µs, a tenth of the travel each side of centre);
-    /// - height loop 1.5/s; climb-rate loop 700 counts per m/s (2.5 m/s² per m/s, some 2.5 rad/s,
-    ///   a decade under the attitude loops and well inside the motors' 70 ms lag) with the
-    ///   integral's zero at 0.5 rad/s (350 counts per m).
+    /// - height loop 1/s (at 1.5/s the barometer's noise through the height error shook the
+    ///   throttle in the 1–5 Hz band more than a pilot's hand does); climb-rate loop 1100 counts
+    ///   per m/s (some 4 rad/s, a decade under the attitude loops) with the integral's zero at
+    ///   1 rad/s (1100 counts per m).
     pub const DEFAULT: HoldConfig = HoldConfig {
         climb_rate_max_m_s: 1.0,
-        fs_descent_rate_m_s: 0.5,
+        fs_descent_rate_m_s: 0.4,
         deadband: StickCounts(360),
-        pos_p: 1.5,
+        pos_p: 1.0,
         vel_p: 1100.0,
         vel_i: 1100.0,
         hover_throttle: StickCounts(530),
@@ -116,7 +119,13 @@ pub const LAND_SPEED_M_S: f32 = 0.2;
 /// lowest throttle that keeps its motors turning (an airframe lighter than the throttle map's
 /// floor) looks landed by the first three, anywhere. The margin is the estimate's drift over a
 /// flight and the props' wash near the floor, twice over.
-pub const LAND_TIME_S: f32 = 1.0;
+pub const LAND_TIME_S: f32 = 0.5;
+/// …and with the vertical acceleration (the accelerometer's, its bias off, low-passed over
+/// [`LAND_ACCEL_FILTER_S`]) within this, m/s²: on the floor nothing moves whatever the
+/// throttle, while in the air a throttle under the hover's sinks the drone at once; a gust
+/// that holds it still can fool the rule only for as long as it holds it exactly.
+pub const LAND_ACCEL_M_S2: f32 = 0.5;
+pub const LAND_ACCEL_FILTER_S: f32 = 0.1;
 pub const LAND_HEIGHT_M: f32 = 0.75;
 /// The failsafe holds the height this long before it descends, s (the level stage of the
 /// manual failsafe, in which a brief loss comes back).
@@ -130,6 +139,8 @@ pub const FS_CAP_SPARE_S: f32 = 3.0;
 pub const BARO_RECOVERY_S: f32 = 1.0;
 /// The take-off ramp: from the bottom to the hover throttle in this long, s.
 pub const TAKEOFF_RAMP_S: f32 = 1.0;
+/// The hold's throttle is averaged over this for a hand-over, s.
+pub const CARRY_AVERAGE_S: f32 = 0.5;
 
 /// What the control tick and the supervisor take from the vertical half.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -179,6 +190,8 @@ pub struct Vertical {
     airborne: bool,
     /// Steps the landing conditions have held.
     land_steps: u32,
+    /// The vertical acceleration, low-passed, m/s² (for the landing).
+    accel_filtered_m_s2: f32,
     /// Steps since the last barometer fault (saturating).
     since_fault_steps: u32,
     last_fault: Option<BaroFault>,
@@ -191,8 +204,12 @@ pub struct Vertical {
     integral: f32,
     /// The hold's last throttle, stick counts.
     out: f32,
+    /// Its average over the last [`CARRY_AVERAGE_S`]: the thrust it was giving, which a
+    /// hand-over carries (the last output alone is a noisy sample of it).
+    out_average: f32,
     /// Left the hold: the throttle it gave, kept until the stick crosses it (and from which
-    /// side the stick started).
+    /// side the stick started: below it, it takes over as soon as it reaches the carried
+    /// throttle).
     carry: Option<(f32, bool)>,
     /// Steps in the failsafe.
     failsafe_steps: u32,
@@ -218,6 +235,7 @@ impl Vertical {
             was_enabled: false,
             airborne: false,
             land_steps: 0,
+            accel_filtered_m_s2: 0.0,
             since_fault_steps: 0,
             last_fault: None,
             pressure_pa: None,
@@ -226,6 +244,7 @@ impl Vertical {
             hover: f32::from(cfg.hold.hover_throttle.0),
             integral: 0.0,
             out: 0.0,
+            out_average: 0.0,
             carry: None,
             failsafe_steps: 0,
             stick_centred: false,
@@ -303,6 +322,7 @@ impl Vertical {
             self.land_steps = 0;
         }
         self.was_enabled = i.motors_enabled;
+        let was_failsafe = self.failsafe_steps > 0;
         self.failsafe_steps = if i.failsafe { self.failsafe_steps.saturating_add(1) } else { 0 };
 
         // 3. The estimate, on the ground state of the last step and the throttle flown.
@@ -322,6 +342,10 @@ impl Vertical {
         let on_ground = !i.motors_enabled || !self.airborne;
         let est = self.estimator.update(accel_up, pressure, thrust, on_ground);
         let healthy = self.healthy();
+        let accel = accel_up - est.accel_bias_m_s2;
+        if accel.is_finite() {
+            self.accel_filtered_m_s2 += self.dt_s / (LAND_ACCEL_FILTER_S + self.dt_s) * (accel - self.accel_filtered_m_s2);
+        }
 
         // 4. The hold, or the stick (with what the hold gave carried until the stick crosses it).
         let hold_wanted = healthy && i.motors_enabled && (self.cfg.mode == AltMode::Hold || i.failsafe);
@@ -338,12 +362,18 @@ impl Vertical {
             }
             let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
             let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
+            self.out_average += self.dt_s / (CARRY_AVERAGE_S + self.dt_s) * (t - self.out_average);
             landed = !self.airborne && rate <= 0.0;
             Some(t)
         } else {
             if self.engaged.take().is_some() {
-                let from_below = f32::from(i.command.0) < self.out;
-                self.carry = Some((self.out, from_below));
+                // The link back after the failsafe's descent: the stick the pilot holds is
+                // live again, and a stick above the thrust carried (the pilot climbing) takes
+                // over at once; below it, as it comes up to it. Otherwise (a mode change, a
+                // barometer fault) from whichever side the live stick is.
+                let c = self.out_average;
+                let from_below = was_failsafe || f32::from(i.command.0) < c;
+                self.carry = Some((c, from_below));
             }
             let carried = self.carry.and_then(|(c, from_below)| {
                 let crossed = if from_below { f32::from(i.command.0) >= c } else { f32::from(i.command.0) <= c };
@@ -428,6 +458,7 @@ impl Vertical {
             } else {
                 self.out = 0.0;
             }
+            self.out_average = self.out;
         }
         let dt = self.dt_s;
         if !self.airborne {
@@ -475,8 +506,7 @@ impl Vertical {
         }
         // Landing: asked down, the throttle well under the hover, the height still.
         let holding = self.hover + self.integral;
-        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && climb_m_s.abs() < LAND_SPEED_M_S && height_m < LAND_HEIGHT_M
-        {
+        if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && self.still(climb_m_s, height_m) {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
@@ -502,7 +532,7 @@ impl Vertical {
             self.land_steps = 0;
             return;
         }
-        if flown < LAND_FRACTION * self.hover && climb_m_s.abs() < LAND_SPEED_M_S && est.height_m < LAND_HEIGHT_M {
+        if flown < LAND_FRACTION * self.hover && self.still(climb_m_s, est.height_m) {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
@@ -511,6 +541,11 @@ impl Vertical {
             self.airborne = false;
             self.land_steps = 0;
         }
+    }
+
+    /// Near the take-off level and not moving: the estimate's climb rate and the accelerometer.
+    fn still(&self, climb_m_s: f32, height_m: f32) -> bool {
+        climb_m_s.abs() < LAND_SPEED_M_S && self.accel_filtered_m_s2.abs() < LAND_ACCEL_M_S2 && height_m < LAND_HEIGHT_M
     }
 
     /// The failsafe descent's time cap from `height_m`, control ticks.

@@ -27,6 +27,8 @@ pub const ISA_EXPONENT: f32 = 0.190_263;
 /// some 400 m of the reference level (`|x|` < 0.05) and 1 mm at 850 m (`|x|` = 0.1), far below
 /// f32's own rounding. A drone flies within a few hundred metres of its take-off level; the
 /// series costs a fraction of `powf`'s instructions and of its 900 bytes of flash.
+// One copy in flash: the estimator calls it from three places.
+#[inline(never)]
 pub fn baro_height_m(pressure_pa: f32, reference_pa: f32) -> f32 {
     if !(pressure_pa > 0.0 && reference_pa > 0.0) {
         return f32::NAN;
@@ -126,9 +128,11 @@ pub struct AltitudeConfig {
 
 impl AltitudeConfig {
     /// The defaults at the 160 Hz outer step:
-    /// - τ = 1.5 s: the barometer's 6 cm of noise per sample averaged to about a centimetre,
-    ///   gusts' pressure transients (a few tenths of a second) mostly left to the accelerometer;
-    ///   the accelerometer bias learned within some 10 s;
+    /// - τ = 4 s: the barometer's 6 cm of noise per sample averaged to under a centimetre and
+    ///   kept out of the hold's throttle (at 1.5 s it moved the throttle three times as much as
+    ///   a pilot's hand in the 1–5 Hz band), gusts' pressure transients left to the
+    ///   accelerometer; the accelerometer bias learned in flight within some 30 s (on the floor
+    ///   before the take-off against the floor);
     /// - ground effect: within 0.3 m of the floor (some four rotor diameters) with the motors
     ///   over 10 %, a reading up to 0.5 m low is ignored (the wash's overpressure on a drone
     ///   this size, a few pascals, is some tenths of a metre);
@@ -137,7 +141,7 @@ impl AltitudeConfig {
     /// - bias up to 1 m/s² (0.1 g, more than the LSM6DSL's ±40 mg offset after calibration).
     pub const DEFAULT: AltitudeConfig = AltitudeConfig {
         step_dt_s: 1.0 / 160.0,
-        time_constant_s: 1.5,
+        time_constant_s: 4.0,
         thrust_scale_pa: 0.0,
         ground_effect_height_m: 0.3,
         ground_effect_min_thrust: 0.1,
@@ -153,6 +157,19 @@ impl AltitudeConfig {
 /// longer gap is applied as if this long, so `k1·dt` stays well below 1 and the filter cannot
 /// overshoot on the first sample after an outage.
 const MAX_CORRECTION_DT_S: f32 = 0.05;
+
+/// After a lift-off the estimate is the accelerometer's alone (the bias learned on the floor,
+/// the floor's height known) until it has been above [`LIFTOFF_CLEAR_M`], clear of ground
+/// effect, for [`LIFTOFF_AVERAGE_S`] (twice the average's time constant), comparing it with
+/// the barometer there; then the barometer is re-referenced to agree with it. After
+/// [`LIFTOFF_INERTIAL_MAX_S`] above [`LIFTOFF_OFF_FLOOR_M`], or [`LIFTOFF_INERTIAL_LIMIT_S`] in
+/// all (a lift-off declared on a throttle that does not lift this airframe), it ends with what
+/// it has: the accelerometer's drift would grow past what it corrects.
+pub const LIFTOFF_CLEAR_M: f32 = 0.6;
+pub const LIFTOFF_AVERAGE_S: f32 = 1.0;
+pub const LIFTOFF_OFF_FLOOR_M: f32 = 0.1;
+pub const LIFTOFF_INERTIAL_MAX_S: f32 = 4.0;
+pub const LIFTOFF_INERTIAL_LIMIT_S: f32 = 10.0;
 
 /// What the estimate says.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -184,6 +201,16 @@ pub struct AltitudeEstimator {
     gated_in_a_row: u16,
     /// The last step's `on_ground`, to see the lift-off.
     on_ground: bool,
+    /// Steps since the lift-off while the estimate is the accelerometer's alone (0: not), and
+    /// of those, the steps off the floor and the steps clear of ground effect.
+    inertial_steps: u32,
+    off_floor_steps: u32,
+    clear_steps: u32,
+    /// Over those steps: the height estimate less the barometer's, averaged as the take-off
+    /// level's pressure is (NaN before the first sample), m.
+    inertial_less_baro_m: f32,
+    /// Added to the barometer's height: the re-reference at the end of those steps, m.
+    baro_offset_m: f32,
 }
 
 impl AltitudeEstimator {
@@ -199,6 +226,11 @@ impl AltitudeEstimator {
             steps_since_baro: 0,
             gated_in_a_row: 0,
             on_ground: false,
+            inertial_steps: 0,
+            off_floor_steps: 0,
+            clear_steps: 0,
+            inertial_less_baro_m: f32::NAN,
+            baro_offset_m: 0.0,
         }
     }
 
@@ -219,7 +251,7 @@ impl AltitudeEstimator {
     /// re-zeroed), with the thrust's compensation, m; NaN before a reference.
     pub fn baro_height_m(&self, pressure_pa: f32, thrust: f32) -> f32 {
         let thrust = if thrust.is_finite() { crate::math::limit(thrust, 0.0, 1.0) } else { 0.0 };
-        self.reference_pa.map_or(f32::NAN, |r| baro_height_m(pressure_pa - self.cfg.thrust_scale_pa * thrust, r))
+        self.reference_pa.map_or(f32::NAN, |r| baro_height_m(pressure_pa - self.cfg.thrust_scale_pa * thrust, r) + self.baro_offset_m)
     }
 
     /// Found flying at `height_m` (the barometer's, well above the take-off level) while it was
@@ -230,6 +262,7 @@ impl AltitudeEstimator {
             self.height_m = height_m;
         }
         self.on_ground = false;
+        self.inertial_steps = 0;
     }
 
     pub fn estimate(&self) -> AltitudeEstimate {
@@ -252,6 +285,8 @@ impl AltitudeEstimator {
         self.height_m = 0.0;
         self.speed_m_s = 0.0;
         self.gated_in_a_row = 0;
+        self.baro_offset_m = 0.0;
+        self.inertial_steps = 0;
         true
     }
 
@@ -278,11 +313,19 @@ impl AltitudeEstimator {
         let sample = pressure.and_then(|p| self.track(p).map(|dt_b| (p, dt_b)));
         if on_ground {
             self.apply(-self.height_m, dt);
+            self.inertial_steps = 0;
         } else {
             if self.on_ground {
                 self.reference_pa = self.reference_pa.map(|_| self.average_pa);
+                self.baro_offset_m = 0.0;
+                self.inertial_steps = 1;
+                self.off_floor_steps = 0;
+                self.clear_steps = 0;
+                self.inertial_less_baro_m = f32::NAN;
             }
-            if let Some((p, dt_b)) = sample {
+            if self.inertial_steps > 0 {
+                self.inertial(sample);
+            } else if let Some((p, dt_b)) = sample {
                 self.correct(p, dt_b, thrust);
             }
         }
@@ -312,11 +355,47 @@ impl AltitudeEstimator {
         Some(dt_b)
     }
 
+    /// The first seconds after a lift-off: the barometer's height is off the true height by
+    /// the props' wash at the thrust flown and by ground effect (which fades on the way up),
+    /// some tenths of a metre either way on this airframe, while the accelerometer, its bias
+    /// learned against the floor, drifts by `½·b·t²`, a centimetre or two in those seconds.
+    /// So the estimate flies on the accelerometer alone (never below the floor), and once the
+    /// drone is clear of the floor and settled, the barometer's height is offset to agree
+    /// with it: the wash at the hover's thrust and what is left of ground effect taken out
+    /// together. The thrust compensation parameter then covers changes of thrust.
+    fn inertial(&mut self, sample: Option<(f32, f32)>) {
+        if self.height_m < 0.0 {
+            self.height_m = 0.0;
+            self.speed_m_s = self.speed_m_s.max(0.0);
+        }
+        let clear = self.height_m >= LIFTOFF_CLEAR_M;
+        if let (Some((p, dt_b)), true) = (sample, clear) {
+            let diff = self.height_m - self.reference_pa.map_or(f32::NAN, |r| baro_height_m(p, r));
+            if diff.is_finite() {
+                let alpha = dt_b / (self.cfg.zero_average_s + dt_b);
+                let avg = self.inertial_less_baro_m;
+                self.inertial_less_baro_m = if avg.is_finite() { avg + alpha * (diff - avg) } else { diff };
+            }
+        }
+        self.off_floor_steps += u32::from(self.height_m >= LIFTOFF_OFF_FLOOR_M);
+        self.clear_steps += u32::from(clear);
+        let dt = self.cfg.step_dt_s;
+        let [t_s, off_s, clear_s] = [self.inertial_steps, self.off_floor_steps, self.clear_steps].map(|n| n as f32 * dt);
+        if clear_s >= LIFTOFF_AVERAGE_S || off_s >= LIFTOFF_INERTIAL_MAX_S || t_s >= LIFTOFF_INERTIAL_LIMIT_S {
+            if self.inertial_less_baro_m.is_finite() {
+                self.baro_offset_m = self.inertial_less_baro_m;
+            }
+            self.inertial_steps = 0;
+        } else {
+            self.inertial_steps += 1;
+        }
+    }
+
     fn correct(&mut self, pressure_pa: f32, dt_b: f32, thrust: f32) {
         let Some(reference) = self.reference_pa else {
             return;
         };
-        let baro_height = baro_height_m(pressure_pa, reference);
+        let baro_height = baro_height_m(pressure_pa, reference) + self.baro_offset_m;
         let innovation = baro_height - self.height_m;
         // NaN (a reference of absurd numbers) counts as outside.
         let inside_gate = innovation.abs() <= self.cfg.innovation_gate_m;
@@ -432,13 +511,14 @@ mod tests {
         let mut est = at_ground();
         let p = pressure_at(1.0);
         let mut at_5_tau = 0.0;
-        for step in 0..20 * STEPS_PER_S {
+        let tau = AltitudeConfig::DEFAULT.time_constant_s;
+        for step in 0..(12.0 * tau) as usize * STEPS_PER_S {
             let e = est.update(0.0, baro_due(step).then_some(p), 0.5, false);
-            if step == (7.5 * STEPS_PER_S as f32) as usize {
+            if step == (5.0 * tau * STEPS_PER_S as f32) as usize {
                 at_5_tau = e.height_m;
             }
         }
-        // Three poles at −1/τ: within a tenth after 5τ, settled after 20 s.
+        // Three poles at −1/τ: within a tenth after 5τ, settled after 12τ.
         assert!((at_5_tau - 1.0).abs() < 0.1, "after 5τ: {at_5_tau}");
         let e = est.estimate();
         assert!((e.height_m - 1.0).abs() < 0.005 && e.vertical_speed_m_s.abs() < 0.005, "{e:?}");
@@ -554,7 +634,7 @@ mod tests {
         assert!((rise - after_2_s(pressure_at(0.25), 0.0)).abs() < 0.1 && rise > 0.2, "{rise}");
         // Above the ground-effect height the barometer counts fully again.
         let mut est = at_ground();
-        for step in 0..20 * STEPS_PER_S {
+        for step in 0..(12.0 * AltitudeConfig::DEFAULT.time_constant_s) as usize * STEPS_PER_S {
             est.update(0.0, baro_due(step).then_some(pressure_at(1.0)), 0.5, false);
         }
         assert!((est.estimate().height_m - 1.0).abs() < 0.01, "{:?}", est.estimate());
@@ -594,6 +674,74 @@ mod tests {
         // Without the hint the wash reads as a jump on the floor and stays in the height.
         let (blind, blind_on_floor) = take_off(false);
         assert!(blind_on_floor > 0.3 && blind > 0.3, "{blind_on_floor} {blind}");
+    }
+
+    /// The simulator's barometer errors with the thrust: a prop wash of `wash_pa` at full
+    /// thrust (either sign) and a ground effect of `ground_pa` at full thrust on the floor,
+    /// fading within 0.1 m. Spin-up on the floor at 20 % thrust, a lift-off and a climb to 1 m
+    /// at the hover's 40 %, then 20 s of hover: the estimate's mean error over the hover, m,
+    /// and the barometer's own (referenced at the lift-off) for comparison.
+    fn hover_after_lift_off(wash_pa: f32, ground_pa: f32) -> (f32, f32) {
+        let mut est = at_ground();
+        let mut noise = Noise(5);
+        let reading = |h: f32, u: f32, n: f32| pressure_at(h) + wash_pa * u + ground_pa * u / (1.0 + (h / 0.1) * (h / 0.1)) + n;
+        for step in 0..2 * STEPS_PER_S {
+            est.update(noise.next(0.05), baro_due(step).then_some(reading(0.0, 0.2, noise.next(1.0))), 0.2, true);
+        }
+        let (mut h, mut v) = (0.0f32, 0.0f32);
+        let dt = 1.0 / STEPS_PER_S as f32;
+        let (mut est_error, mut baro_error, mut n) = (0.0, 0.0, 0.0);
+        for step in 0..24 * STEPS_PER_S {
+            // 1 m/s² for 0.5 s, 0.5 m/s for 1.5 s, −1 m/s² for 0.5 s: 1 m.
+            let a = match step * 2 / STEPS_PER_S {
+                0 => 1.0,
+                1..=3 => 0.0,
+                4 => -1.0,
+                _ => 0.0,
+            };
+            h += (v + 0.5 * a * dt) * dt;
+            v += a * dt;
+            let p = reading(h, 0.4, noise.next(1.0));
+            let e = est.update(a + noise.next(0.05), baro_due(step).then_some(p), 0.4, false);
+            if step >= 4 * STEPS_PER_S {
+                est_error += e.height_m - h;
+                baro_error += baro_height_m(p, est.reference_pa.unwrap_or(f32::NAN)) - h;
+                n += 1.0;
+            }
+        }
+        (est_error / n, baro_error / n)
+    }
+
+    #[test]
+    fn after_the_lift_off_the_barometer_is_re_referenced_to_the_accelerometers_height() {
+        for (wash, ground) in [(15.0, 10.0), (-15.0, 10.0), (3.0, 0.0), (-3.0, 2.0)] {
+            let (est, baro) = hover_after_lift_off(wash, ground);
+            // The wash at hover against the spin-up's and the ground effect in the lift-off's
+            // reference: tenths of a metre for the barometer alone; the estimate a centimetre.
+            assert!(est.abs() < 0.02, "wash {wash} Pa, ground {ground} Pa: estimate {est} m off (barometer {baro} m)");
+            if wash == 15.0 || wash == -15.0 {
+                assert!(baro.abs() > 0.05, "wash {wash} Pa: the barometer alone only {baro} m off");
+            }
+        }
+    }
+
+    #[test]
+    fn a_lift_off_declared_on_the_floor_keeps_the_height_at_the_floor() {
+        // The hold's take-off ramp says airborne at three quarters of its hover throttle; a
+        // heavy airframe is still on the floor there, while the wash grows with the ramp.
+        let mut est = at_ground();
+        for step in 0..STEPS_PER_S {
+            est.update(0.0, baro_due(step).then_some(P0), 0.1, true);
+        }
+        let mut noise = Noise(9);
+        let mut highest = 0.0f32;
+        for step in 0..3 * STEPS_PER_S {
+            let u = 0.1 + 0.3 * step as f32 / (3 * STEPS_PER_S) as f32;
+            let e = est.update(noise.next(0.05), baro_due(step).then_some(P0 - 12.0 * u), u, false);
+            highest = highest.max(e.height_m);
+        }
+        // The barometer alone would say 0.3 m.
+        assert!(highest < 0.03, "{highest}");
     }
 
     #[test]

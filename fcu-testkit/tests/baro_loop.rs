@@ -1,6 +1,6 @@
 //! The simulated LPS22HB in the loop: stepped with the plant (its height, collective thrust
-//! and the air's speed), read by the in-process core once per outer step as the firmware reads
-//! it (a read clears the data-ready flag), and stuck by a scenario's fault.
+//! and the air's speed), read by the in-process core on every second outer step (80 Hz) as the
+//! firmware reads it (a read clears the data-ready flag), and stuck by a scenario's fault.
 
 use fcu_core::imu::RawImu;
 use fcu_testkit::sim::baro_model::BaroModel;
@@ -73,10 +73,14 @@ fn the_core_reads_every_sample_of_the_part_and_its_pressure_follows_the_plants_h
     let sc = scenario::by_name("hover").unwrap_or_else(|| panic!("hover"));
     let (log, reads) = fly(&sc, 3);
     // 75 Hz from the first outer step (after the boot's calibration) to the end: every sample
-    // reaches the core (160 reads a second).
+    // reaches the core (80 reads a second).
     let (first_s, last_s) = (reads.first().map_or(0.0, |r| r.t_s), log.rows.last().map_or(0.0, |r| r.t_s));
     let rate_hz = reads.len() as f64 / (last_s - first_s);
     assert!((rate_hz - 75.0).abs() < 0.5, "{rate_hz} fresh samples a second");
+    // Read on every second outer step (the firmware's 80 Hz): the reads are whole 12.5 ms apart
+    // (read at 160 Hz, 6.25 ms steps, the part's 13.3 ms would leave 18.75 ms gaps).
+    let off_grid = reads.windows(2).map(|w| (w[1].t_s - w[0].t_s) * 80.0).filter(|n| (n - n.round()).abs() > 0.05).count();
+    assert_eq!(off_grid, 0, "reads off the 80 Hz grid");
     // The height the pressure says, from the mean on the floor before arming, against the
     // plant's: within the installation's errors (offset drift, prop wash up to 15 Pa at full
     // thrust, ground effect, noise: well under a metre) everywhere, and each sample apart.

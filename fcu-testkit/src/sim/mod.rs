@@ -172,13 +172,19 @@ pub trait FlightComputer {
 pub struct InProcess {
     fc: FlightController,
     decoder: fcu_core::rc::EdgeDecoder,
+    /// Outer steps run, to read the barometer on every [`BARO_READ_EVERY_OUTER_STEPS`]th.
+    outer_steps: u32,
 }
+
+/// The firmware reads the barometer on every second outer-job tick (80 Hz at the 160 Hz outer
+/// step, for the part's 75 Hz output): so does the simulator, so it flies what the board flies.
+pub const BARO_READ_EVERY_OUTER_STEPS: u32 = 2;
 
 impl InProcess {
     pub fn new(cfg: Config) -> Result<InProcess, SimError> {
         let fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
         let decoder = fc.edge_decoder();
-        Ok(InProcess { fc, decoder })
+        Ok(InProcess { fc, decoder, outer_steps: 0 })
     }
 
     pub fn controller(&self) -> &FlightController {
@@ -207,9 +213,13 @@ impl FlightComputer for InProcess {
         baro: &mut baro_model::BaroModel,
     ) -> Result<[u16; 4], SimError> {
         self.fc.set_battery_mv((battery_v * 1000.0).round().clamp(0.0, f64::from(u32::MAX)) as u32);
-        // The 6-byte burst as the firmware reads it, decoded by the core's own decoder.
+        // The 6-byte burst as the firmware reads it, decoded by the core's own decoder, on
+        // every second outer step (80 Hz for the part's 75 Hz), as the firmware's outer job
+        // reads it.
+        let steps = &mut self.outer_steps;
         let ticked = crate::harness::tick_reading_baro(&mut self.fc, &mut self.decoder, imu, edges.iter().map(|e| e.edge), || {
-            Some(fcu_core::baro::decode_burst(&baro.read_burst()))
+            *steps = steps.wrapping_add(1);
+            (*steps % BARO_READ_EVERY_OUTER_STEPS == 0).then(|| fcu_core::baro::decode_burst(&baro.read_burst()))
         });
         Ok(ticked.out.compare)
     }
