@@ -11,9 +11,11 @@
 //! later than they happen (plus TIM4's own preload, up to a PWM period): together the same
 //! loop delay as the in-process core, bounded by a tick either way.
 
+use fcu_core::baro::{COUNTS_PER_DEG_C, PA_PER_COUNT};
 use fcu_core::imu::RawImu;
 use fcu_core::supervisor::Blocker;
 use fcu_core::telemetry::{CalibrationReport, StatusFields};
+use fcu_testkit::sim::baro_model::BaroModel;
 use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
 
@@ -110,6 +112,9 @@ pub struct EmulatedBoard {
     /// The UART carries something other than the firmware's text lines (a binary protocol):
     /// its bytes are not parsed as lines.
     pub raw_uart: bool,
+    /// The simulator's barometer part has made a sample: from then on its words are the
+    /// pressure at the emulated LPS22HB ([`FlightComputer::step_with_baro`]).
+    sim_baro_sampled: bool,
 }
 
 impl EmulatedBoard {
@@ -165,6 +170,7 @@ impl EmulatedBoard {
             line_errors: Vec::new(),
             faults_expected: false,
             raw_uart: speaks_mavlink,
+            sim_baro_sampled: false,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -355,6 +361,34 @@ impl FlightComputer for EmulatedBoard {
             .map_err(|e| SimError::Computer(format!("barometer input at height {height_m} m: {e:?}")))
     }
 
+    /// The scenario's barometer part (its noise, offset, warm-up, prop wash, ground effect,
+    /// gust pressure and a freeze, sampled at its rate) sets the pressure and temperature at
+    /// the emulated LPS22HB, in place of [`FlightComputer::air`]'s ISA height: so the image
+    /// sees the air the in-process core sees, through the emulated part's own filter and
+    /// sampling on top (`docs/fcu-pil.md`). Before the part's first sample, the ISA height.
+    fn step_with_baro(
+        &mut self,
+        t_end_s: f64,
+        edges: &[TimedEdge],
+        imu: RawImu,
+        battery_v: f64,
+        baro: &mut BaroModel,
+    ) -> Result<[u16; 4], SimError> {
+        // Nothing else reads the simulated part in this flight: reading it (clearing its P_DA)
+        // only tells a new sample.
+        let raw = baro.read();
+        self.sim_baro_sampled |= raw.pressure_fresh();
+        if self.sim_baro_sampled {
+            let pressure_pa = f64::from(raw.pressure_counts) * f64::from(PA_PER_COUNT);
+            let temperature_c = f64::from(raw.temperature_counts) / f64::from(COUNTS_PER_DEG_C);
+            let part = &mut self.machine.board_mut().spi2.sensors_mut().lps22hb;
+            part.set_pressure_pa(pressure_pa)
+                .and_then(|()| part.set_temperature_c(temperature_c))
+                .map_err(|e| SimError::Computer(format!("barometer input {pressure_pa} Pa, {temperature_c} °C: {e:?}")))?;
+        }
+        self.step(t_end_s, edges, imu, battery_v)
+    }
+
     fn view(&self) -> ComputerView {
         self.view.clone()
     }
@@ -362,6 +396,9 @@ impl FlightComputer for EmulatedBoard {
 
 /// Re-dates the log's state columns from the STATUS lines' tick stamps: the line leaves the
 /// UART some milliseconds after the change, but says at which control tick it was taken.
+/// The vertical columns the line carries (who sets the thrust, the mode chosen, the hold's
+/// target to the millimetre, the barometer's fault) are filled from it the same way; the
+/// height estimate and its climb rate are on no line and stay empty.
 pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, StatusFields)]) {
     let tick_s = 1.0 / log.tick_hz;
     let mut changes: Vec<(f64, &StatusFields)> = statuses.iter().map(|(_, s)| (f64::from(s.tick) * tick_s, s)).collect();
@@ -383,8 +420,21 @@ pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, S
             row.calibrating = s.calibration.in_progress();
             calibrated |= s.calibration == CalibrationReport::Passed;
             row.calibrated = calibrated;
+            let v = &s.vertical;
+            row.vertical.mode = Some(v.mode);
+            row.vertical.mode_chosen = Some(v.chosen);
+            row.vertical.alt_target_m = v.target_m().map_or(f64::NAN, f64::from);
+            row.vertical.baro_fault = v.baro_fault;
         }
     }
+}
+
+/// `setup` with `scenario`'s parameter settings after its own (a name in both: the scenario's
+/// value, set last).
+pub fn with_scenario_settings(setup: &BoardSetup, scenario: &fcu_testkit::sim::scenario::Scenario) -> BoardSetup {
+    let mut setup = setup.clone();
+    setup.settings.extend(scenario.settings.iter().map(|&(name, value)| (name.to_string(), value)));
+    setup
 }
 
 /// A flight of the image, with what the harness saw.
@@ -421,7 +471,9 @@ pub fn fly(
     fly_with(elf, scenario, opts, &BoardSetup::default())
 }
 
-/// [`fly`] with the board set up as `setup` says.
+/// [`fly`] with the board set up as `setup` says. The scenario's parameter settings
+/// (`Scenario::settings`, such as `ALT_MODE` 1) are saved over `setup`'s before power-on, as
+/// the in-process flight configures its core with them.
 pub fn fly_with(
     elf: &std::path::Path,
     scenario: &fcu_testkit::sim::scenario::Scenario,
@@ -430,7 +482,8 @@ pub fn fly_with(
 ) -> Result<Flight, String> {
     let started = std::time::Instant::now();
     let image = Image::load(elf)?;
-    let mut board = EmulatedBoard::boot(image, setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
+    let setup = with_scenario_settings(setup, scenario);
+    let mut board = EmulatedBoard::boot(image, &setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
     if !board.flying() {
         return Err(format!("{} (within the boot timeout); its UART said:\n{}", board.boot_stall(), board.uart_text()));
     }
