@@ -112,6 +112,10 @@ pub struct EmulatedBoard {
     /// The UART carries something other than the firmware's text lines (a binary protocol):
     /// its bytes are not parsed as lines.
     pub raw_uart: bool,
+    /// Lines a reset cut short, with the time of the first byte after it (not parsed).
+    pub cut_lines: Vec<(Time, String)>,
+    /// When the last UART byte the harness split into lines left the UART.
+    last_uart_at: Option<Time>,
     /// The simulator's barometer part has made a sample: from then on its words are the
     /// pressure at the emulated LPS22HB ([`FlightComputer::step_with_baro`]).
     sim_baro_sampled: bool,
@@ -170,6 +174,8 @@ impl EmulatedBoard {
             line_errors: Vec::new(),
             faults_expected: false,
             raw_uart: speaks_mavlink,
+            cut_lines: Vec::new(),
+            last_uart_at: None,
             sim_baro_sampled: false,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
@@ -283,7 +289,16 @@ impl EmulatedBoard {
         if self.raw_uart {
             return;
         }
+        let resets: Vec<Time> = self.machine.state().resets.iter().map(|&(t, _)| t).collect();
         for (at, byte) in new {
+            // A reset (the watchdog's, after a fault) cuts the line being sent: its start is
+            // not the start of the next line, and not a malformed line of the image.
+            if resets.iter().any(|&r| self.last_uart_at.is_some_and(|last| last < r) && r <= at) {
+                if let Some(text) = self.splitter.cut() {
+                    self.cut_lines.push((at, text));
+                }
+            }
+            self.last_uart_at = Some(at);
             if let Some(text) = self.splitter.push(byte) {
                 match telemetry::parse(&text) {
                     Ok(line) => {
@@ -497,4 +512,55 @@ pub fn fly_with(
     let emulated_s = time_to_s(board.machine.now());
     let instructions = board.machine.state().instructions;
     Ok(Flight { log, uart_log, board, emulated_s, wall_s: started.elapsed().as_secs_f64(), instructions })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fcu_core::altitude::AltMode;
+    use fcu_core::baro::BaroFault;
+    use fcu_core::telemetry::{parse_status_line, VerticalMode};
+    use fcu_testkit::sim::{scenario, RunOptions, Vertical};
+
+    fn status(tick: u32, vertical: &str) -> (Time, StatusFields) {
+        let line = format!(
+            "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none {vertical} vbat=3.900V overruns=0 \
+             bus_errors=0 uart_dropped=0 rc_muted=0 tick={tick}"
+        );
+        (0, parse_status_line(&line).unwrap())
+    }
+
+    #[test]
+    fn status_lines_fill_the_vertical_columns_from_their_tick() {
+        let sc = scenario::by_name("althold-hover").unwrap();
+        let opts = RunOptions { duration_s: Some(0.02), ..RunOptions::default() };
+        let mut log = fcu_testkit::sim::run(&sc, fcu_testkit::Profile::Default, &opts).unwrap();
+        for r in &mut log.rows {
+            r.vertical = Vertical { climb_m_s: 0.0, ..Vertical::ABSENT };
+        }
+        let statuses =
+            [status(8, "vmode=hold alt_mode=1 target=1.250 baro=stuck"), status(0, "vmode=manual alt_mode=1 target=none baro=ok")];
+        retime_states(&mut log, &statuses);
+        for r in &log.rows {
+            let v = &r.vertical;
+            if r.t_s < 0.01 - 1e-9 {
+                assert_eq!((v.mode, v.mode_chosen, v.baro_fault), (Some(VerticalMode::Manual), Some(AltMode::Hold), None), "{}", r.t_s);
+                assert!(v.alt_target_m.is_nan());
+            } else {
+                assert_eq!((v.mode, v.baro_fault), (Some(VerticalMode::Hold), Some(BaroFault::Stuck)), "{}", r.t_s);
+                assert!((v.alt_target_m - 1.25).abs() < 1e-6, "{}", v.alt_target_m);
+            }
+            assert!(v.est_alt_m.is_nan(), "the estimate is on no line");
+        }
+    }
+
+    #[test]
+    fn the_scenarios_settings_are_saved_after_the_setups() {
+        let sc = scenario::by_name("althold-hover").unwrap();
+        let setup = BoardSetup { settings: vec![("ALT_MODE".into(), 0.0), ("CLIMB_RATE_MAX".into(), 0.5)], ..BoardSetup::default() };
+        let with = with_scenario_settings(&setup, &sc);
+        assert_eq!(with.settings.first(), Some(&("ALT_MODE".to_string(), 0.0)));
+        assert_eq!(with.settings.last(), Some(&("ALT_MODE".to_string(), 1.0)), "the scenario's value, set last");
+        assert_eq!(with_scenario_settings(&BoardSetup::default(), &scenario::by_name("hover").unwrap()).settings, []);
+    }
 }

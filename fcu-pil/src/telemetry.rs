@@ -82,6 +82,12 @@ impl LineSplitter {
             }
         }
     }
+
+    /// The board was reset: the line being sent was cut there, and what follows is another
+    /// line (the boot banner). Returns the cut part, if any.
+    pub fn cut(&mut self) -> Option<String> {
+        (!self.partial.is_empty()).then(|| String::from_utf8_lossy(&std::mem::take(&mut self.partial)).into_owned())
+    }
 }
 
 #[cfg(test)]
@@ -111,6 +117,16 @@ mod tests {
         assert!(e.contains("`armed=` disagrees with the state") && e.contains(line), "{e}");
         let e = parse("STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vmode=manual alt_mode=0 target=none baro=ok vbat=3.912V overruns=0").unwrap_err();
         assert!(e.contains("`bus_errors=` missing"), "{e}");
+    }
+
+    #[test]
+    fn a_line_cut_by_a_reset_is_not_joined_to_the_next() {
+        let mut sp = LineSplitter::default();
+        let pushed = |sp: &mut LineSplitter, text: &str| text.bytes().filter_map(|b| sp.push(b)).collect::<Vec<_>>();
+        assert!(pushed(&mut sp, "STATUS state=armed armed=1 b").is_empty());
+        assert_eq!(sp.cut().as_deref(), Some("STATUS state=armed armed=1 b"));
+        assert_eq!(sp.cut(), None);
+        assert_eq!(pushed(&mut sp, "STEVAL banner\n"), ["STEVAL banner"]);
     }
 
     #[test]

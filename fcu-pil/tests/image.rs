@@ -103,18 +103,25 @@ fn every_radio_channel_decodes_its_own_pulses_on_the_image() {
     }
 }
 
-/// Every criterion the in-process flight passes passes on the image too (one it fails is the
-/// core's to fix, and fcu-testkit's own scenario test fails it: here it is printed for both
-/// flights, whose metrics must still agree), with the same metrics within stated tolerances:
+/// Every criterion of the scenario passes on the image, with the same metrics as in-process
+/// within stated tolerances:
 /// hover RMS within 0.1°, yaw rate RMS error within 0.5 °/s, the first armed tick within 5 ms;
 /// for altitude hold the height RMS, its offset and the RMS about it within 3 cm, the height's
 /// drift within 5 cm, the touchdown speed within 0.1 m/s and the disarm after it within 0.5 s
 /// (missing on both only where the scenario does not measure it, or where the in-process
 /// flight fails a criterion: two flights that failed the same way).
+fn same_as_in_process(name: &str) {
+    same_as_in_process_but(name, &[]);
+}
+
+/// [`same_as_in_process`] for a scenario whose criteria starting with one of `core_fails` the
+/// in-process core fails today (a defect of the core, which fcu-testkit's own scenario test
+/// shows): those may fail on the image too, and are printed for both flights; their metrics
+/// must still agree. Any other criterion the in-process flight fails fails this test.
 /// The height tolerances allow for the barometers differing: the image's LPS22HB sees only
 /// the ISA pressure at the true height (`docs/fcu-pil.md`), the in-process core the simulator's
 /// barometer model with its noise and prop wash.
-fn same_as_in_process(name: &str) {
+fn same_as_in_process_but(name: &str, core_fails: &[&str]) {
     let sc = scenario(name);
     let opts = RunOptions { seed: 1, ..RunOptions::default() };
     let host = sim::run(&sc, Profile::Default, &opts).unwrap();
@@ -124,11 +131,23 @@ fn same_as_in_process(name: &str) {
     for (h, p) in metrics::check_all(&host, &sc).into_iter().zip(metrics::check_all(pil, &sc)) {
         assert_eq!(h.criterion, p.criterion);
         host_fails |= !h.passed;
-        if h.passed {
-            assert!(p.passed, "{name} on the image: {} — {}", p.criterion, p.detail);
-        } else {
-            eprintln!("{name}: {} fails in-process ({}); on the image: {} ({})", h.criterion, h.detail, verdict(p.passed), p.detail);
+        if core_fails.iter().any(|known| h.criterion.starts_with(known)) {
+            eprintln!(
+                "{name}: {} {} in-process ({}), {} on the image ({})",
+                h.criterion,
+                verdict(h.passed),
+                h.detail,
+                verdict(p.passed),
+                p.detail
+            );
+            continue;
         }
+        assert!(
+            h.passed,
+            "{name} in-process: {} — {} (the core's defect: fcu-testkit's scenario test fails it too)",
+            h.criterion, h.detail
+        );
+        assert!(p.passed, "{name} on the image: {} — {}", p.criterion, p.detail);
     }
     let (hm, pm) = (metrics::compute(&host, &sc), metrics::compute(pil, &sc));
     // A metric the in-process flight has must be there on the image too (and the other way
@@ -189,7 +208,10 @@ fn steps_fly_the_same_on_the_image() {
 
 #[test]
 fn link_short_flies_the_same_on_the_image() {
-    same_as_in_process("link-short");
+    // Issue 28, a defect of the core on this base: in ALT_MODE 0 the failsafe descends on the
+    // height estimate, and when the link is back the drone falls from about 1.1 m to the
+    // floor, armed (in-process: fcu-testkit's `short_link_loss_recovers` fails too).
+    same_as_in_process_but("link-short", &["altitude > 0.3 m"]);
 }
 
 #[test]
@@ -235,13 +257,16 @@ fn verdict(passed: bool) -> &'static str {
 /// report read from the STATUS lines.
 #[test]
 fn althold_hover_flies_on_the_image_as_in_process() {
-    same_as_in_process("althold-hover");
+    // Issue 28: the hold's RMS is 0.073 m in-process against its 0.05 m.
+    same_as_in_process_but("althold-hover", &["height RMS error"]);
 }
 
 /// The link-loss failsafe's descent on the height estimate, on the image.
 #[test]
 fn failsafe_descent_flies_on_the_image_as_in_process() {
-    same_as_in_process("failsafe-descent");
+    // Issue 28: in-process the touchdown is at 0.502 m/s (≤ 0.5) and the disarm 1.019 s after
+    // it (≤ 1 s).
+    same_as_in_process_but("failsafe-descent", &["touchdown after", "disarmed within"]);
 }
 
 /// Boot with a sensor that answers a wrong WHO_AM_I: no flight, the FATAL line repeats, the
@@ -413,12 +438,15 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
         !during.is_empty() && during.iter().all(|(_, s)| s.radio_mutes > 0),
         "the failsafe's status line does not count the muted pin: {during:?}"
     );
-    // ...and the radio is back after it.
-    let after: Vec<_> = statuses.iter().filter(|(t, _)| *t > 9.0).collect();
+    // ...and the radio is back after it: the failsafe ends, and no line after says it again
+    // (lines come on vertical changes too, the failsafe's descent among them).
+    // Measured: back at 9.24 s.
+    let back = statuses.iter().position(|(t, s)| *t > 8.2 && s.failsafe_stage().is_none() && s.armed());
+    let after = back.and_then(|i| statuses.get(i..)).unwrap_or_default();
     assert!(
-        !after.is_empty() && after.iter().all(|(_, s)| s.failsafe_stage().is_none() && s.armed()),
-        "the radio did not come back: {:?}",
-        after.first()
+        after.first().is_some_and(|(t, _)| *t < 10.0) && after.iter().all(|(_, s)| s.failsafe_stage().is_none() && s.armed()),
+        "the radio did not come back by 10 s: {:?}",
+        after.first().or(statuses.last())
     );
 }
 
