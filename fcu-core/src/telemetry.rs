@@ -5,9 +5,10 @@
 //! * the reference's TAB-separated debug line (`docs/reference.md#telemetry`): gELE, gAIL, gRUD,
 //!   gTHR as integers, motor 1 command, then pitch, roll, pitch target and roll target in
 //!   degrees (×57.3, as the reference), each with six decimals like C's `%f`, ending in LF;
-//! * a status line, printed on every change of flight state, naming the state, the arming
-//!   blockers, the calibration result, the failsafe stage and any fault, with the battery
-//!   voltage and the firmware's counters ([`StatusFields`]; written and read back in
+//! * a status line, printed on every change of flight state or of the vertical report, naming
+//!   the state, the arming blockers, the calibration result, the failsafe stage and any fault,
+//!   the vertical mode, the hold's target and the barometer's fault, with the battery voltage
+//!   and the firmware's counters ([`StatusFields`]; written and read back in
 //!   `status_line`).
 //!
 //! Formatting is fixed-point into a fixed byte buffer: no float formatting machinery, no heap.
@@ -22,8 +23,8 @@ use crate::supervisor::FlightState;
 mod status_line;
 
 pub use status_line::{
-    failsafe_name, fault_from_name, fault_name, parse_status_line, write_status_line, CalibrationReport, StatusFields, StatusKey,
-    StatusLineError, STATUS_LINE_MAX,
+    baro_fault_name, failsafe_name, fault_from_name, fault_name, parse_status_line, write_status_line, CalibrationReport, StatusFields,
+    StatusKey, StatusLineError, VerticalMode, VerticalReport, STATUS_LINE_MAX,
 };
 
 /// A line being built in a fixed buffer. Text that does not fit is dropped and the line is
@@ -360,13 +361,27 @@ pub const SNAPSHOT_EVERY_TICKS: u16 = 4;
 pub const DEBUG_LINE_EVERY_SNAPSHOTS: u16 = 8;
 
 /// Decides which lines a stream of status snapshots produces: the status line on every change
-/// of flight state, the debug line at a bounded rate.
+/// of flight state or of the vertical report (mode in force, mode chosen, the barometer's
+/// fault, a hold that starts or ends; the hold's target when it moved by more than
+/// [`TARGET_REPORT_STEP_MM`], at most every [`TARGET_REPORT_MIN_SNAPSHOTS`]), the debug line
+/// at a bounded rate.
 #[derive(Clone, Debug)]
 pub struct Reporter {
-    last_state: Option<FlightState>,
+    /// What the last status line said (`None` before the first).
+    last: Option<(FlightState, VerticalReport)>,
+    /// Snapshots since the last status line (saturating).
+    since_status: u16,
     debug_every: u16,
     since_debug: u16,
 }
+
+/// A hold's target that moves by this much or less since the last status line does not print
+/// another, mm: the height loop's own noise is smaller, a climb on the stick moves it faster.
+pub const TARGET_REPORT_STEP_MM: u32 = 10;
+/// Snapshots a moving target waits after the last status line (200 Hz / 50: 4 lines a second,
+/// some 0.9 kB/s of the UART's 11.5 kB/s): a stick climb moves it on every snapshot, and a
+/// line each time would overrun the UART queue.
+pub const TARGET_REPORT_MIN_SNAPSHOTS: u16 = 50;
 
 impl Reporter {
     /// The firmware's reporter: a debug line every [`DEBUG_LINE_EVERY_SNAPSHOTS`] snapshots.
@@ -376,18 +391,46 @@ impl Reporter {
 
     /// `debug_every`: snapshots per debug line (0 is taken as 1).
     pub const fn new(debug_every: u16) -> Self {
-        Reporter { last_state: None, debug_every: if debug_every == 0 { 1 } else { debug_every }, since_debug: 0 }
+        Reporter { last: None, since_status: 0, debug_every: if debug_every == 0 { 1 } else { debug_every }, since_debug: 0 }
     }
 
-    pub fn observe(&mut self, state: FlightState) -> Emit {
-        let status_line = self.last_state != Some(state);
-        self.last_state = Some(state);
+    pub fn observe(&mut self, status: &Status) -> Emit {
+        let now = (status.state, VerticalReport::of(&status.altitude));
+        self.since_status = self.since_status.saturating_add(1);
+        let status_line = match self.last {
+            None => true,
+            Some((state, v)) => {
+                state != now.0
+                    || vertical_changed(&v, &now.1)
+                    || (self.since_status >= TARGET_REPORT_MIN_SNAPSHOTS && target_moved(&v, &now.1))
+            }
+        };
+        if status_line {
+            self.last = Some(now);
+            self.since_status = 0;
+        }
         self.since_debug += 1;
         let debug_line = self.since_debug >= self.debug_every;
         if debug_line {
             self.since_debug = 0;
         }
         Emit { status_line, debug_line }
+    }
+}
+
+/// The vertical report says something new: another mode or fault, a target that comes or goes.
+fn vertical_changed(last: &VerticalReport, now: &VerticalReport) -> bool {
+    last.mode != now.mode
+        || last.chosen != now.chosen
+        || last.baro_fault != now.baro_fault
+        || last.target_mm.is_some() != now.target_mm.is_some()
+}
+
+/// The hold's target is more than [`TARGET_REPORT_STEP_MM`] from the one last printed.
+fn target_moved(last: &VerticalReport, now: &VerticalReport) -> bool {
+    match (last.target_mm, now.target_mm) {
+        (Some(a), Some(b)) => a.abs_diff(b) > TARGET_REPORT_STEP_MM,
+        _ => false,
     }
 }
 
@@ -529,11 +572,61 @@ mod tests {
             FlightState::Disarmed,
             FlightState::Arming,
         ];
+        let mut st = boot_status();
         let got: [(bool, bool); 6] = seq.map(|s| {
-            let e = r.observe(s);
+            st.state = s;
+            let e = r.observe(&st);
             (e.status_line, e.debug_line)
         });
         assert_eq!(got, [(true, false), (false, false), (true, true), (false, false), (false, false), (true, true)]);
+    }
+
+    #[test]
+    fn reporter_prints_status_when_the_vertical_report_changes() {
+        use crate::altitude::AltMode;
+        use crate::baro::BaroFault;
+        let mut r = Reporter::new(100);
+        let mut st = boot_status();
+        st.state = FlightState::Armed;
+        let mut status_line = |st: &Status| r.observe(st).status_line;
+        assert!(status_line(&st), "the first snapshot");
+        assert!(!status_line(&st), "nothing new");
+        st.altitude.mode = AltMode::Hold;
+        assert!(status_line(&st), "the mode chosen");
+        st.altitude.holding = true;
+        st.altitude.target_m = Some(1.0);
+        assert!(status_line(&st), "the hold takes over");
+        let wait = |status_line: &mut dyn FnMut(&Status) -> bool, st: &Status| {
+            for _ in 1..TARGET_REPORT_MIN_SNAPSHOTS {
+                assert!(!status_line(st));
+            }
+        };
+        st.altitude.target_m = Some(1.0099);
+        wait(&mut status_line, &st);
+        assert!(!status_line(&st), "the target within 1 cm of the one printed");
+        st.altitude.target_m = Some(0.995);
+        assert!(!status_line(&st));
+        st.altitude.target_m = Some(1.0111);
+        assert!(status_line(&st), "the target more than 1 cm from the one printed");
+        st.altitude.target_m = Some(1.5);
+        wait(&mut status_line, &st);
+        assert!(status_line(&st), "a target that moves waits its turn: {TARGET_REPORT_MIN_SNAPSHOTS} snapshots");
+        st.altitude.target_m = Some(1.509);
+        wait(&mut status_line, &st);
+        assert!(!status_line(&st), "measured from the last line's 1.5 m, not the first's");
+        st.altitude.failsafe_descent = true;
+        assert!(status_line(&st), "the failsafe descends");
+        st.altitude.baro_fault = Some(BaroFault::Stuck);
+        assert!(status_line(&st), "a barometer fault");
+        assert!(!status_line(&st));
+        st.altitude.baro_fault = None;
+        st.altitude.holding = false;
+        st.altitude.failsafe_descent = false;
+        st.altitude.target_m = None;
+        assert!(status_line(&st), "back to manual");
+        st.altitude.height_m = 3.0;
+        st.altitude.pressure_pa = Some(101_000.0);
+        assert!(!status_line(&st), "the estimate itself is not news for the status line");
     }
 
     fn boot_status() -> Status {

@@ -461,9 +461,10 @@ fn d12_the_debug_line_is_rate_limited_and_status_lines_follow_state_changes() {
     let mut r = Reporter::firmware();
     let snapshots_per_s = 800 / u32::from(fcu_core::telemetry::SNAPSHOT_EVERY_TICKS);
     let (mut debug, mut status) = (0, 0);
+    let mut st = FlightController::new(Config::default()).unwrap().status();
     for n in 0..snapshots_per_s {
-        let state = if n < snapshots_per_s / 2 { FlightState::Disarmed } else { FlightState::Armed };
-        let e = r.observe(state);
+        st.state = if n < snapshots_per_s / 2 { FlightState::Disarmed } else { FlightState::Armed };
+        let e = r.observe(&st);
         debug += u32::from(e.debug_line);
         status += u32::from(e.status_line);
     }

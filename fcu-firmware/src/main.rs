@@ -829,8 +829,8 @@ mod app {
         }
     }
 
-    /// Status snapshots → LED code and UART lines (status on every state change, debug line
-    /// at its rate).
+    /// Status snapshots → LED code and UART lines (status on every change of state or of the
+    /// vertical report, debug line at its rate: the core's `Reporter` decides).
     #[task(priority = 1, shared = [uart, led_pattern, battery_mv, radio_mutes, latest, mavlink_on], local = [reporter])]
     async fn report(mut cx: report::Context, snapshot: Snapshot) {
         let status = &snapshot.status;
@@ -841,7 +841,7 @@ mod app {
             return;
         }
 
-        let emit = cx.local.reporter.observe(status.state);
+        let emit = cx.local.reporter.observe(status);
         if emit.status_line {
             let battery_mv = cx.shared.battery_mv.lock(|mv| *mv);
             let radio_mutes = cx.shared.radio_mutes.lock(|n| *n);

@@ -50,52 +50,10 @@ pub struct LogRow {
     pub vertical: Vertical,
 }
 
-/// Who sets the collective thrust at a logged instant (the CSV's `vmode`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum VerticalMode {
-    /// The throttle stick (mode manual, or the hold chosen but not in force: on the floor
-    /// before take-off, no healthy height estimate).
-    Manual,
-    /// Altitude hold.
-    Hold,
-    /// The link-loss failsafe's descent on the height estimate.
-    Descent,
-}
-
-impl VerticalMode {
-    /// The mode in force that `status` reports.
-    pub fn of(status: &AltitudeStatus) -> VerticalMode {
-        if status.failsafe_descent {
-            VerticalMode::Descent
-        } else if status.holding {
-            VerticalMode::Hold
-        } else {
-            VerticalMode::Manual
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            VerticalMode::Manual => "manual",
-            VerticalMode::Hold => "hold",
-            VerticalMode::Descent => "descent",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<VerticalMode> {
-        [VerticalMode::Manual, VerticalMode::Hold, VerticalMode::Descent].into_iter().find(|m| m.name() == name)
-    }
-}
-
-/// A barometer fault's name in the CSV's `baro_fault` column.
-pub fn baro_fault_name(f: BaroFault) -> &'static str {
-    match f {
-        BaroFault::NoData => "no-data",
-        BaroFault::Stuck => "stuck",
-        BaroFault::OutOfRange => "out-of-range",
-        BaroFault::Spike => "spike",
-    }
-}
+/// Who sets the collective thrust at a logged instant (the CSV's `vmode`), and a barometer
+/// fault's name (the CSV's `baro_fault`): the core's words, the same as its STATUS line's, so
+/// a log recorded from the board's text lines and one of a simulated flight name them alike.
+pub use fcu_core::telemetry::{baro_fault_name, VerticalMode};
 
 /// The vertical columns of a row. NaN (or `None`) where the row has no value: a flight
 /// computer that reports no altitude, a recording without the simulator's truth. Those are

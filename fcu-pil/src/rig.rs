@@ -11,9 +11,11 @@
 //! later than they happen (plus TIM4's own preload, up to a PWM period): together the same
 //! loop delay as the in-process core, bounded by a tick either way.
 
+use fcu_core::baro::{COUNTS_PER_DEG_C, PA_PER_COUNT};
 use fcu_core::imu::RawImu;
 use fcu_core::supervisor::Blocker;
 use fcu_core::telemetry::{CalibrationReport, StatusFields};
+use fcu_testkit::sim::baro_model::BaroModel;
 use fcu_testkit::sim::radio_model::TimedEdge;
 use fcu_testkit::sim::{ComputerView, FlightComputer, SimError};
 
@@ -110,6 +112,13 @@ pub struct EmulatedBoard {
     /// The UART carries something other than the firmware's text lines (a binary protocol):
     /// its bytes are not parsed as lines.
     pub raw_uart: bool,
+    /// Lines a reset cut short, with the time of the first byte after it (not parsed).
+    pub cut_lines: Vec<(Time, String)>,
+    /// When the last UART byte the harness split into lines left the UART.
+    last_uart_at: Option<Time>,
+    /// The simulator's barometer part has made a sample: from then on its words are the
+    /// pressure at the emulated LPS22HB ([`FlightComputer::step_with_baro`]).
+    sim_baro_sampled: bool,
 }
 
 impl EmulatedBoard {
@@ -165,6 +174,9 @@ impl EmulatedBoard {
             line_errors: Vec::new(),
             faults_expected: false,
             raw_uart: speaks_mavlink,
+            cut_lines: Vec::new(),
+            last_uart_at: None,
+            sim_baro_sampled: false,
         };
         let timeout = time_from_s(setup.boot_timeout_s.unwrap_or(5.0));
         let slice = time_from_s(0.001);
@@ -277,7 +289,16 @@ impl EmulatedBoard {
         if self.raw_uart {
             return;
         }
+        let resets: Vec<Time> = self.machine.state().resets.iter().map(|&(t, _)| t).collect();
         for (at, byte) in new {
+            // A reset (the watchdog's, after a fault) cuts the line being sent: its start is
+            // not the start of the next line, and not a malformed line of the image.
+            if resets.iter().any(|&r| self.last_uart_at.is_some_and(|last| last < r) && r <= at) {
+                if let Some(text) = self.splitter.cut() {
+                    self.cut_lines.push((at, text));
+                }
+            }
+            self.last_uart_at = Some(at);
             if let Some(text) = self.splitter.push(byte) {
                 match telemetry::parse(&text) {
                     Ok(line) => {
@@ -355,6 +376,34 @@ impl FlightComputer for EmulatedBoard {
             .map_err(|e| SimError::Computer(format!("barometer input at height {height_m} m: {e:?}")))
     }
 
+    /// The scenario's barometer part (its noise, offset, warm-up, prop wash, ground effect,
+    /// gust pressure and a freeze, sampled at its rate) sets the pressure and temperature at
+    /// the emulated LPS22HB, in place of [`FlightComputer::air`]'s ISA height: so the image
+    /// sees the air the in-process core sees, through the emulated part's own filter and
+    /// sampling on top (`docs/fcu-pil.md`). Before the part's first sample, the ISA height.
+    fn step_with_baro(
+        &mut self,
+        t_end_s: f64,
+        edges: &[TimedEdge],
+        imu: RawImu,
+        battery_v: f64,
+        baro: &mut BaroModel,
+    ) -> Result<[u16; 4], SimError> {
+        // Nothing else reads the simulated part in this flight: reading it (clearing its P_DA)
+        // only tells a new sample.
+        let raw = baro.read();
+        self.sim_baro_sampled |= raw.pressure_fresh();
+        if self.sim_baro_sampled {
+            let pressure_pa = f64::from(raw.pressure_counts) * f64::from(PA_PER_COUNT);
+            let temperature_c = f64::from(raw.temperature_counts) / f64::from(COUNTS_PER_DEG_C);
+            let part = &mut self.machine.board_mut().spi2.sensors_mut().lps22hb;
+            part.set_pressure_pa(pressure_pa)
+                .and_then(|()| part.set_temperature_c(temperature_c))
+                .map_err(|e| SimError::Computer(format!("barometer input {pressure_pa} Pa, {temperature_c} °C: {e:?}")))?;
+        }
+        self.step(t_end_s, edges, imu, battery_v)
+    }
+
     fn view(&self) -> ComputerView {
         self.view.clone()
     }
@@ -362,6 +411,9 @@ impl FlightComputer for EmulatedBoard {
 
 /// Re-dates the log's state columns from the STATUS lines' tick stamps: the line leaves the
 /// UART some milliseconds after the change, but says at which control tick it was taken.
+/// The vertical columns the line carries (who sets the thrust, the mode chosen, the hold's
+/// target to the millimetre, the barometer's fault) are filled from it the same way; the
+/// height estimate and its climb rate are on no line and stay empty.
 pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, StatusFields)]) {
     let tick_s = 1.0 / log.tick_hz;
     let mut changes: Vec<(f64, &StatusFields)> = statuses.iter().map(|(_, s)| (f64::from(s.tick) * tick_s, s)).collect();
@@ -383,8 +435,21 @@ pub fn retime_states(log: &mut fcu_testkit::sim::FlightLog, statuses: &[(Time, S
             row.calibrating = s.calibration.in_progress();
             calibrated |= s.calibration == CalibrationReport::Passed;
             row.calibrated = calibrated;
+            let v = &s.vertical;
+            row.vertical.mode = Some(v.mode);
+            row.vertical.mode_chosen = Some(v.chosen);
+            row.vertical.alt_target_m = v.target_m().map_or(f64::NAN, f64::from);
+            row.vertical.baro_fault = v.baro_fault;
         }
     }
+}
+
+/// `setup` with `scenario`'s parameter settings after its own (a name in both: the scenario's
+/// value, set last).
+pub fn with_scenario_settings(setup: &BoardSetup, scenario: &fcu_testkit::sim::scenario::Scenario) -> BoardSetup {
+    let mut setup = setup.clone();
+    setup.settings.extend(scenario.settings.iter().map(|&(name, value)| (name.to_string(), value)));
+    setup
 }
 
 /// A flight of the image, with what the harness saw.
@@ -421,7 +486,9 @@ pub fn fly(
     fly_with(elf, scenario, opts, &BoardSetup::default())
 }
 
-/// [`fly`] with the board set up as `setup` says.
+/// [`fly`] with the board set up as `setup` says. The scenario's parameter settings
+/// (`Scenario::settings`, such as `ALT_MODE` 1) are saved over `setup`'s before power-on, as
+/// the in-process flight configures its core with them.
 pub fn fly_with(
     elf: &std::path::Path,
     scenario: &fcu_testkit::sim::scenario::Scenario,
@@ -430,7 +497,8 @@ pub fn fly_with(
 ) -> Result<Flight, String> {
     let started = std::time::Instant::now();
     let image = Image::load(elf)?;
-    let mut board = EmulatedBoard::boot(image, setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
+    let setup = with_scenario_settings(setup, scenario);
+    let mut board = EmulatedBoard::boot(image, &setup, imu_at_rest(opts.seed)).map_err(|e| format!("boot: {e}"))?;
     if !board.flying() {
         return Err(format!("{} (within the boot timeout); its UART said:\n{}", board.boot_stall(), board.uart_text()));
     }
@@ -444,4 +512,55 @@ pub fn fly_with(
     let emulated_s = time_to_s(board.machine.now());
     let instructions = board.machine.state().instructions;
     Ok(Flight { log, uart_log, board, emulated_s, wall_s: started.elapsed().as_secs_f64(), instructions })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fcu_core::altitude::AltMode;
+    use fcu_core::baro::BaroFault;
+    use fcu_core::telemetry::{parse_status_line, VerticalMode};
+    use fcu_testkit::sim::{scenario, RunOptions, Vertical};
+
+    fn status(tick: u32, vertical: &str) -> (Time, StatusFields) {
+        let line = format!(
+            "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none {vertical} vbat=3.900V overruns=0 \
+             bus_errors=0 uart_dropped=0 rc_muted=0 tick={tick}"
+        );
+        (0, parse_status_line(&line).unwrap())
+    }
+
+    #[test]
+    fn status_lines_fill_the_vertical_columns_from_their_tick() {
+        let sc = scenario::by_name("althold-hover").unwrap();
+        let opts = RunOptions { duration_s: Some(0.02), ..RunOptions::default() };
+        let mut log = fcu_testkit::sim::run(&sc, fcu_testkit::Profile::Default, &opts).unwrap();
+        for r in &mut log.rows {
+            r.vertical = Vertical { climb_m_s: 0.0, ..Vertical::ABSENT };
+        }
+        let statuses =
+            [status(8, "vmode=hold alt_mode=1 target=1.250 baro=stuck"), status(0, "vmode=manual alt_mode=1 target=none baro=ok")];
+        retime_states(&mut log, &statuses);
+        for r in &log.rows {
+            let v = &r.vertical;
+            if r.t_s < 0.01 - 1e-9 {
+                assert_eq!((v.mode, v.mode_chosen, v.baro_fault), (Some(VerticalMode::Manual), Some(AltMode::Hold), None), "{}", r.t_s);
+                assert!(v.alt_target_m.is_nan());
+            } else {
+                assert_eq!((v.mode, v.baro_fault), (Some(VerticalMode::Hold), Some(BaroFault::Stuck)), "{}", r.t_s);
+                assert!((v.alt_target_m - 1.25).abs() < 1e-6, "{}", v.alt_target_m);
+            }
+            assert!(v.est_alt_m.is_nan(), "the estimate is on no line");
+        }
+    }
+
+    #[test]
+    fn the_scenarios_settings_are_saved_after_the_setups() {
+        let sc = scenario::by_name("althold-hover").unwrap();
+        let setup = BoardSetup { settings: vec![("ALT_MODE".into(), 0.0), ("CLIMB_RATE_MAX".into(), 0.5)], ..BoardSetup::default() };
+        let with = with_scenario_settings(&setup, &sc);
+        assert_eq!(with.settings.first(), Some(&("ALT_MODE".to_string(), 0.0)));
+        assert_eq!(with.settings.last(), Some(&("ALT_MODE".to_string(), 1.0)), "the scenario's value, set last");
+        assert_eq!(with_scenario_settings(&BoardSetup::default(), &scenario::by_name("hover").unwrap()).settings, []);
+    }
 }

@@ -82,29 +82,51 @@ impl LineSplitter {
             }
         }
     }
+
+    /// The board was reset: the line being sent was cut there, and what follows is another
+    /// line (the boot banner). Returns the cut part, if any.
+    pub fn cut(&mut self) -> Option<String> {
+        (!self.partial.is_empty()).then(|| String::from_utf8_lossy(&std::mem::take(&mut self.partial)).into_owned())
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fcu_core::baro::BaroFault;
     use fcu_core::supervisor::FlightState;
+    use fcu_core::telemetry::VerticalMode;
 
     #[test]
     fn a_status_line_parses_with_its_counters_and_tick() {
-        let l = parse("STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.912V overruns=0 bus_errors=2 uart_dropped=0 rc_muted=1 tick=4000").unwrap();
+        let l = parse("STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vmode=hold alt_mode=1 target=1.250 baro=stuck vbat=3.912V overruns=0 bus_errors=2 uart_dropped=0 rc_muted=1 tick=4000").unwrap();
         let Line::Status(s) = l else { panic!("not a status line") };
         assert_eq!(s.state, FlightState::Armed);
         assert!(s.armed());
         assert_eq!((s.tick, s.bus_errors, s.radio_mutes, s.battery_mv), (4000, 2, 1, 3912));
+        assert_eq!(
+            (s.vertical.mode, s.vertical.target_mm, s.vertical.baro_fault),
+            (VerticalMode::Hold, Some(1250), Some(BaroFault::Stuck))
+        );
     }
 
     #[test]
     fn a_malformed_status_line_is_an_error_naming_the_field_and_quoting_the_line() {
-        let line = "STATUS state=disarmed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.912V overruns=0 bus_errors=0 uart_dropped=0 rc_muted=0 tick=1";
+        let line = "STATUS state=disarmed armed=1 blockers=none cal=passed failsafe=none fault=none vmode=manual alt_mode=0 target=none baro=ok vbat=3.912V overruns=0 bus_errors=0 uart_dropped=0 rc_muted=0 tick=1";
         let e = parse(line).unwrap_err();
         assert!(e.contains("`armed=` disagrees with the state") && e.contains(line), "{e}");
-        let e = parse("STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.912V overruns=0").unwrap_err();
+        let e = parse("STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vmode=manual alt_mode=0 target=none baro=ok vbat=3.912V overruns=0").unwrap_err();
         assert!(e.contains("`bus_errors=` missing"), "{e}");
+    }
+
+    #[test]
+    fn a_line_cut_by_a_reset_is_not_joined_to_the_next() {
+        let mut sp = LineSplitter::default();
+        let pushed = |sp: &mut LineSplitter, text: &str| text.bytes().filter_map(|b| sp.push(b)).collect::<Vec<_>>();
+        assert!(pushed(&mut sp, "STATUS state=armed armed=1 b").is_empty());
+        assert_eq!(sp.cut().as_deref(), Some("STATUS state=armed armed=1 b"));
+        assert_eq!(sp.cut(), None);
+        assert_eq!(pushed(&mut sp, "STEVAL banner\n"), ["STEVAL banner"]);
     }
 
     #[test]

@@ -103,17 +103,51 @@ fn every_radio_channel_decodes_its_own_pulses_on_the_image() {
     }
 }
 
-/// Every scenario the host passes passes on the image too, with the same metrics within
-/// stated tolerances: hover RMS within 0.1°, yaw rate RMS error within 0.5 °/s, the first
-/// armed tick within 5 ms.
+/// Every criterion of the scenario passes on the image, with the same metrics as in-process
+/// within stated tolerances:
+/// hover RMS within 0.1°, yaw rate RMS error within 0.5 °/s, the first armed tick within 5 ms;
+/// for altitude hold the height RMS, its offset and the RMS about it within 3 cm, the height's
+/// drift within 5 cm, the touchdown speed within 0.1 m/s and the disarm after it within 0.5 s
+/// (missing on both only where the scenario does not measure it, or where the in-process
+/// flight fails a criterion: two flights that failed the same way).
 fn same_as_in_process(name: &str) {
+    same_as_in_process_but(name, &[]);
+}
+
+/// [`same_as_in_process`] for a scenario whose criteria starting with one of `core_fails` the
+/// in-process core fails today (a defect of the core, which fcu-testkit's own scenario test
+/// shows): those may fail on the image too, and are printed for both flights; their metrics
+/// must still agree. Any other criterion the in-process flight fails fails this test.
+/// The height tolerances allow for the barometers differing: the image's LPS22HB sees only
+/// the ISA pressure at the true height (`docs/fcu-pil.md`), the in-process core the simulator's
+/// barometer model with its noise and prop wash.
+fn same_as_in_process_but(name: &str, core_fails: &[&str]) {
     let sc = scenario(name);
     let opts = RunOptions { seed: 1, ..RunOptions::default() };
     let host = sim::run(&sc, Profile::Default, &opts).unwrap();
     let flight = rig::fly(elf(), &sc, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
     let pil = &flight.log;
-    for v in metrics::check_all(pil, &sc) {
-        assert!(v.passed, "{name} on the image: {} — {}", v.criterion, v.detail);
+    let mut host_fails = false;
+    for (h, p) in metrics::check_all(&host, &sc).into_iter().zip(metrics::check_all(pil, &sc)) {
+        assert_eq!(h.criterion, p.criterion);
+        host_fails |= !h.passed;
+        if core_fails.iter().any(|known| h.criterion.starts_with(known)) {
+            eprintln!(
+                "{name}: {} {} in-process ({}), {} on the image ({})",
+                h.criterion,
+                verdict(h.passed),
+                h.detail,
+                verdict(p.passed),
+                p.detail
+            );
+            continue;
+        }
+        assert!(
+            h.passed,
+            "{name} in-process: {} — {} (the core's defect: fcu-testkit's scenario test fails it too)",
+            h.criterion, h.detail
+        );
+        assert!(p.passed, "{name} on the image: {} — {}", p.criterion, p.detail);
     }
     let (hm, pm) = (metrics::compute(&host, &sc), metrics::compute(pil, &sc));
     // A metric the in-process flight has must be there on the image too (and the other way
@@ -132,6 +166,27 @@ fn same_as_in_process(name: &str) {
         }
         (None, None) if sc.yaw_window_s.is_none() => {}
         (h, p) => panic!("{name}: yaw rate RMS error {p:?} on the image, {h:?} in-process"),
+    }
+    let height_metrics = [
+        ("height RMS (m)", hm.height_rms_m, pm.height_rms_m, 0.03, sc.hold_window_s.is_some()),
+        ("height offset (m)", hm.height_offset_m, pm.height_offset_m, 0.03, sc.hold_window_s.is_some()),
+        ("height RMS about the offset (m)", hm.height_rms_about_offset_m, pm.height_rms_about_offset_m, 0.03, sc.hold_window_s.is_some()),
+        ("height drift (m)", hm.height_drift_m, pm.height_drift_m, 0.05, sc.hold_window_s.is_some()),
+        ("touchdown speed (m/s)", hm.touchdown_speed_m_s, pm.touchdown_speed_m_s, 0.1, sc.landing_s.is_some()),
+        ("disarmed after touchdown (s)", hm.disarmed_after_touchdown_s, pm.disarmed_after_touchdown_s, 0.5, sc.landing_s.is_some()),
+    ];
+    for (what, h, p, tolerance, measured) in height_metrics {
+        match (h, p) {
+            (Some(h), Some(p)) => {
+                eprintln!("{name}: {what} {p:.3} on the image, {h:.3} in-process");
+                assert!((h - p).abs() <= tolerance, "{name}: {what} {p:.3} on the image, {h:.3} in-process (tolerance {tolerance})");
+            }
+            (None, None) if !measured => {}
+            // Missing on both where the in-process flight fails a criterion: the two failed
+            // the same way (printed above).
+            (None, None) if host_fails => eprintln!("{name}: no {what} on the image nor in-process"),
+            (h, p) => panic!("{name}: {what} {p:?} on the image, {h:?} in-process"),
+        }
     }
     // Every scenario flown here arms.
     match (first_armed_s(&host), first_armed_s(pil)) {
@@ -153,7 +208,10 @@ fn steps_fly_the_same_on_the_image() {
 
 #[test]
 fn link_short_flies_the_same_on_the_image() {
-    same_as_in_process("link-short");
+    // Issue 28, a defect of the core on this base: in ALT_MODE 0 the failsafe descends on the
+    // height estimate, and when the link is back the drone falls from about 1.1 m to the
+    // floor, armed (in-process: fcu-testkit's `short_link_loss_recovers` fails too).
+    same_as_in_process_but("link-short", &["altitude > 0.3 m"]);
 }
 
 #[test]
@@ -185,6 +243,30 @@ fn a_gust_flies_the_same_on_the_image() {
 #[test]
 fn a_weak_motor_flies_the_same_on_the_image() {
     same_as_in_process("weak-motor");
+}
+
+fn verdict(passed: bool) -> &'static str {
+    if passed {
+        "passes"
+    } else {
+        "fails"
+    }
+}
+
+/// Altitude hold on the image (issue 28): `ALT_MODE` 1 saved before power-on, the vertical
+/// report read from the STATUS lines.
+#[test]
+fn althold_hover_flies_on_the_image_as_in_process() {
+    // Issue 28: the hold's RMS is 0.073 m in-process against its 0.05 m.
+    same_as_in_process_but("althold-hover", &["height RMS error"]);
+}
+
+/// The link-loss failsafe's descent on the height estimate, on the image.
+#[test]
+fn failsafe_descent_flies_on_the_image_as_in_process() {
+    // Issue 28: in-process the touchdown is at 0.502 m/s (≤ 0.5) and the disarm 1.019 s after
+    // it (≤ 1 s).
+    same_as_in_process_but("failsafe-descent", &["touchdown after", "disarmed within"]);
 }
 
 /// Boot with a sensor that answers a wrong WHO_AM_I: no flight, the FATAL line repeats, the
@@ -356,12 +438,15 @@ fn an_edge_storm_on_a_radio_pin_is_a_lost_link_not_a_stalled_board() {
         !during.is_empty() && during.iter().all(|(_, s)| s.radio_mutes > 0),
         "the failsafe's status line does not count the muted pin: {during:?}"
     );
-    // ...and the radio is back after it.
-    let after: Vec<_> = statuses.iter().filter(|(t, _)| *t > 9.0).collect();
+    // ...and the radio is back after it: the failsafe ends, and no line after says it again
+    // (lines come on vertical changes too, the failsafe's descent among them).
+    // Measured: back at 9.24 s.
+    let back = statuses.iter().position(|(t, s)| *t > 8.2 && s.failsafe_stage().is_none() && s.armed());
+    let after = back.and_then(|i| statuses.get(i..)).unwrap_or_default();
     assert!(
-        !after.is_empty() && after.iter().all(|(_, s)| s.failsafe_stage().is_none() && s.armed()),
-        "the radio did not come back: {:?}",
-        after.first()
+        after.first().is_some_and(|(t, _)| *t < 10.0) && after.iter().all(|(_, s)| s.failsafe_stage().is_none() && s.armed()),
+        "the radio did not come back by 10 s: {:?}",
+        after.first().or(statuses.last())
     );
 }
 
@@ -749,7 +834,6 @@ impl FlightComputer for CoreBaroWatch {
 /// plant's height). Checked on a local merge with s9-alt's core (19 of 19 looks, 0.34 Pa at
 /// most during the climb); on the core before it, which reports no pressure, no look finds one.
 #[test]
-#[ignore = "needs fcu-core's altitude wiring (s9-alt fills Status::altitude) and an image within its flash region"]
 fn the_barometer_bursts_reach_the_cores_altitude_report_on_the_image() {
     let sc = scenario("hover");
     let opts = RunOptions { seed: 1, duration_s: Some(12.0), ..RunOptions::default() };

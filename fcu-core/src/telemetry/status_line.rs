@@ -4,19 +4,22 @@
 //! the fields it was written from).
 //!
 //! `STATUS state=… armed=0|1 blockers=a,b|none cal=… failsafe=none|stage1|stage2 fault=…
+//! vmode=manual|hold|descent alt_mode=0|1 target=1.234|none baro=ok|no-data|stuck|out-of-range|spike
 //! vbat=3.912V overruns=N bus_errors=N uart_dropped=N rc_muted=N tick=N`, one space between
 //! fields, ending in LF.
 
 use core::fmt;
 
 use super::LineBuf;
+use crate::altitude::{AltMode, AltitudeStatus};
+use crate::baro::BaroFault;
 use crate::flight::Status;
 use crate::imu::{CalibrationOutcome, CalibrationPhase, SensorFault};
 use crate::supervisor::{Blocker, Blockers, FlightState};
 
-/// Longest status line: with the longest state, calibration and fault words, every blocker
-/// and every number at its 32-bit maximum it is 389 bytes.
-pub const STATUS_LINE_MAX: usize = 395;
+/// Longest status line: with the longest state, calibration, fault and vertical words, every
+/// blocker and every number at its 32-bit extreme it is 452 bytes.
+pub const STATUS_LINE_MAX: usize = 458;
 
 /// The word a status line starts with.
 const TAG: &str = "STATUS";
@@ -30,6 +33,9 @@ pub struct StatusFields {
     pub blockers: Blockers,
     pub calibration: CalibrationReport,
     pub fault: Option<SensorFault>,
+    /// The vertical report: who sets the collective thrust, the mode the pilot chose
+    /// (`ALT_MODE`), the hold's target and the barometer's fault.
+    pub vertical: VerticalReport,
     pub battery_mv: u32,
     /// Outer steps that could not start because the previous one was still running.
     pub outer_overruns: u32,
@@ -54,6 +60,7 @@ impl StatusFields {
             blockers: status.blockers,
             calibration: CalibrationReport::of(status.calibration),
             fault: status.fault,
+            vertical: VerticalReport::of(&status.altitude),
             battery_mv: 0,
             outer_overruns: 0,
             bus_errors: 0,
@@ -76,6 +83,102 @@ impl StatusFields {
             _ => None,
         }
     }
+}
+
+/// Who sets the collective thrust (`vmode=`, and the flight log's `vmode` column): the one
+/// rule for the core's [`AltitudeStatus`], which fcu-log uses too.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VerticalMode {
+    /// The throttle stick (mode manual, or the hold chosen but not in force: on the floor
+    /// before take-off, no healthy height estimate).
+    Manual,
+    /// Altitude hold.
+    Hold,
+    /// The link-loss failsafe's descent on the height estimate.
+    Descent,
+}
+
+impl VerticalMode {
+    /// Every mode, in declaration order.
+    pub const ALL: [VerticalMode; 3] = [VerticalMode::Manual, VerticalMode::Hold, VerticalMode::Descent];
+
+    /// The mode in force that `status` reports.
+    pub fn of(status: &AltitudeStatus) -> VerticalMode {
+        if status.failsafe_descent {
+            VerticalMode::Descent
+        } else if status.holding {
+            VerticalMode::Hold
+        } else {
+            VerticalMode::Manual
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            VerticalMode::Manual => "manual",
+            VerticalMode::Hold => "hold",
+            VerticalMode::Descent => "descent",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<VerticalMode> {
+        VerticalMode::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// Every barometer fault, in declaration order.
+const BARO_FAULTS: [BaroFault; 4] = [BaroFault::NoData, BaroFault::Stuck, BaroFault::OutOfRange, BaroFault::Spike];
+
+/// A barometer fault's name (`baro=` on the status line, the flight log's `baro_fault`).
+pub fn baro_fault_name(f: BaroFault) -> &'static str {
+    match f {
+        BaroFault::NoData => "no-data",
+        BaroFault::Stuck => "stuck",
+        BaroFault::OutOfRange => "out-of-range",
+        BaroFault::Spike => "spike",
+    }
+}
+
+/// `baro=`: `ok`, or the fault's name.
+fn baro_word(f: Option<BaroFault>) -> &'static str {
+    f.map_or("ok", baro_fault_name)
+}
+
+/// The vertical half as the status line says it: integers only (the target in millimetres),
+/// so a line parses back to exactly what it was written from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VerticalReport {
+    pub mode: VerticalMode,
+    /// `ALT_MODE`, whether or not it is in force.
+    pub chosen: AltMode,
+    /// The height the hold holds or moves to, mm (`None` when not holding).
+    pub target_mm: Option<i32>,
+    pub baro_fault: Option<BaroFault>,
+}
+
+impl VerticalReport {
+    /// What the core's report says (the target rounded to the millimetre).
+    pub fn of(a: &AltitudeStatus) -> VerticalReport {
+        VerticalReport { mode: VerticalMode::of(a), chosen: a.mode, target_mm: a.target_m.map(metres_to_mm), baro_fault: a.baro_fault }
+    }
+
+    /// The target in metres.
+    pub fn target_m(&self) -> Option<f32> {
+        self.target_mm.map(|mm| mm as f32 / 1000.0)
+    }
+}
+
+impl Default for VerticalReport {
+    /// What a core without altitude hold reports: manual, nothing held, the barometer fine.
+    fn default() -> Self {
+        VerticalReport::of(&AltitudeStatus::default())
+    }
+}
+
+/// Metres to whole millimetres, rounded half away from zero (saturating; NaN is 0).
+fn metres_to_mm(m: f32) -> i32 {
+    let mm = m * 1000.0;
+    (if mm < 0.0 { mm - 0.5 } else { mm + 0.5 }) as i32
 }
 
 /// The calibration as the status line words it: the calibrator's phase, with the last outcome
@@ -174,6 +277,10 @@ pub enum StatusKey {
     Calibration,
     Failsafe,
     Fault,
+    VerticalMode,
+    AltMode,
+    Target,
+    Baro,
     Battery,
     OuterOverruns,
     BusErrors,
@@ -193,6 +300,10 @@ impl StatusKey {
             StatusKey::Calibration => " cal=",
             StatusKey::Failsafe => " failsafe=",
             StatusKey::Fault => " fault=",
+            StatusKey::VerticalMode => " vmode=",
+            StatusKey::AltMode => " alt_mode=",
+            StatusKey::Target => " target=",
+            StatusKey::Baro => " baro=",
             StatusKey::Battery => " vbat=",
             StatusKey::OuterOverruns => " overruns=",
             StatusKey::BusErrors => " bus_errors=",
@@ -242,8 +353,23 @@ fn push_key<const N: usize>(out: &mut LineBuf<N>, key: StatusKey) {
     out.push_str(key.opening());
 }
 
-/// Prints the status line (blockers in [`Blocker::ALL`] order, the voltage in volts with
-/// three decimals).
+/// Whole thousandths as `W.ttt` (the voltage in volts, the target in metres: fixed point,
+/// no float formatting).
+fn push_thousandths<const N: usize>(out: &mut LineBuf<N>, v: u32) {
+    out.push_uint(v / 1000);
+    out.push_str(".");
+    let frac = v % 1000;
+    if frac < 100 {
+        out.push_str("0");
+    }
+    if frac < 10 {
+        out.push_str("0");
+    }
+    out.push_uint(frac);
+}
+
+/// Prints the status line (blockers in [`Blocker::ALL`] order, the voltage in volts and the
+/// target in metres with three decimals).
 pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields) {
     out.clear();
     out.push_str(TAG);
@@ -269,17 +395,25 @@ pub fn write_status_line<const N: usize>(out: &mut LineBuf<N>, f: &StatusFields)
     out.push_str(failsafe_name(f.state));
     push_key(out, StatusKey::Fault);
     out.push_str(fault_name(f.fault));
+    let v = &f.vertical;
+    push_key(out, StatusKey::VerticalMode);
+    out.push_str(v.mode.name());
+    push_key(out, StatusKey::AltMode);
+    out.push_str(alt_mode_word(v.chosen));
+    push_key(out, StatusKey::Target);
+    match v.target_mm {
+        Some(mm) => {
+            if mm < 0 {
+                out.push_str("-");
+            }
+            push_thousandths(out, mm.unsigned_abs());
+        }
+        None => out.push_str("none"),
+    }
+    push_key(out, StatusKey::Baro);
+    out.push_str(baro_word(v.baro_fault));
     push_key(out, StatusKey::Battery);
-    out.push_uint(f.battery_mv / 1000);
-    out.push_str(".");
-    let mv = f.battery_mv % 1000;
-    if mv < 100 {
-        out.push_str("0");
-    }
-    if mv < 10 {
-        out.push_str("0");
-    }
-    out.push_uint(mv);
+    push_thousandths(out, f.battery_mv);
     out.push_str("V");
     push_key(out, StatusKey::OuterOverruns);
     out.push_uint(f.outer_overruns);
@@ -317,6 +451,22 @@ pub fn parse_status_line(line: &str) -> Result<StatusFields, StatusLineError> {
         return Err(BadValue(StatusKey::Failsafe));
     }
     let fault = fault_from_name(value(StatusKey::Fault)?).ok_or(BadValue(StatusKey::Fault))?;
+    let mode = VerticalMode::from_name(value(StatusKey::VerticalMode)?).ok_or(BadValue(StatusKey::VerticalMode))?;
+    let chosen = match value(StatusKey::AltMode)? {
+        "0" => AltMode::Manual,
+        "1" => AltMode::Hold,
+        _ => return Err(BadValue(StatusKey::AltMode)),
+    };
+    let target_mm = match value(StatusKey::Target)? {
+        "none" => None,
+        text => Some(parse_millimetres(text).ok_or(BadValue(StatusKey::Target))?),
+    };
+    let baro = value(StatusKey::Baro)?;
+    let baro_fault = match baro {
+        "ok" => None,
+        name => Some(BARO_FAULTS.into_iter().find(|&b| baro_fault_name(b) == name).ok_or(BadValue(StatusKey::Baro))?),
+    };
+    let vertical = VerticalReport { mode, chosen, target_mm, baro_fault };
     let battery_mv = parse_millivolts(value(StatusKey::Battery)?).ok_or(BadValue(StatusKey::Battery))?;
     let mut count = |key: StatusKey| value(key).and_then(|v| parse_count(v).ok_or(BadValue(key)));
     let outer_overruns = count(StatusKey::OuterOverruns)?;
@@ -333,7 +483,51 @@ pub fn parse_status_line(line: &str) -> Result<StatusFields, StatusLineError> {
     if failsafe != failsafe_name(state) {
         return Err(Disagrees(StatusKey::Failsafe));
     }
-    Ok(StatusFields { state, blockers, calibration, fault, battery_mv, outer_overruns, bus_errors, uart_dropped_bytes, radio_mutes, tick })
+    Ok(StatusFields {
+        state,
+        blockers,
+        calibration,
+        fault,
+        vertical,
+        battery_mv,
+        outer_overruns,
+        bus_errors,
+        uart_dropped_bytes,
+        radio_mutes,
+        tick,
+    })
+}
+
+/// `alt_mode=`: the parameter's value.
+fn alt_mode_word(m: AltMode) -> &'static str {
+    match m {
+        AltMode::Manual => "0",
+        AltMode::Hold => "1",
+    }
+}
+
+/// `W.ttt` or `-W.ttt` metres (exactly three decimals, no `-0.000`) in millimetres that fit
+/// an `i32`.
+fn parse_millimetres(text: &str) -> Option<i32> {
+    let (negative, magnitude) = match text.strip_prefix('-') {
+        Some(m) => (true, m),
+        None => (false, text),
+    };
+    let mm = i64::from(parse_thousandths(magnitude)?);
+    match (negative, mm) {
+        (true, 0) => None,
+        (true, mm) => i32::try_from(-mm).ok(),
+        (false, mm) => i32::try_from(mm).ok(),
+    }
+}
+
+/// `W.ttt` (whole units, exactly three decimals) in thousandths that fit 32 bits.
+fn parse_thousandths(text: &str) -> Option<u32> {
+    let (whole, thousandths) = text.split_once('.')?;
+    if thousandths.len() != 3 {
+        return None;
+    }
+    parse_count(whole)?.checked_mul(1000)?.checked_add(parse_count(thousandths)?)
 }
 
 /// `none`, or blocker names separated by commas, each once.
@@ -365,11 +559,7 @@ fn parse_count(text: &str) -> Option<u32> {
 
 /// `V.mmmV` (whole volts, exactly three decimals) in millivolts.
 fn parse_millivolts(text: &str) -> Option<u32> {
-    let (volts, millis) = text.strip_suffix('V')?.split_once('.')?;
-    if millis.len() != 3 {
-        return None;
-    }
-    parse_count(volts)?.checked_mul(1000)?.checked_add(parse_count(millis)?)
+    parse_thousandths(text.strip_suffix('V')?)
 }
 
 #[cfg(test)]
@@ -391,6 +581,7 @@ mod tests {
             blockers,
             calibration: CalibrationReport::Running,
             fault: None,
+            vertical: VerticalReport::default(),
             battery_mv: 4005,
             outer_overruns: 2,
             bus_errors: 3,
@@ -401,7 +592,7 @@ mod tests {
     }
 
     const LINE: &str = "STATUS state=disarmed armed=0 blockers=not-calibrated,link-not-good cal=running failsafe=none fault=none \
-                        vbat=4.005V overruns=2 bus_errors=3 uart_dropped=4 rc_muted=5 tick=1234\n";
+                        vmode=manual alt_mode=0 target=none baro=ok vbat=4.005V overruns=2 bus_errors=3 uart_dropped=4 rc_muted=5 tick=1234\n";
 
     #[test]
     fn the_line_names_state_blockers_and_counters() {
@@ -423,8 +614,8 @@ mod tests {
             tick: 0,
             ..fields()
         };
-        let line = "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vbat=3.700V overruns=0 \
-                    bus_errors=0 uart_dropped=0 rc_muted=0 tick=0\n";
+        let line = "STATUS state=armed armed=1 blockers=none cal=passed failsafe=none fault=none vmode=manual alt_mode=0 \
+                    target=none baro=ok vbat=3.700V overruns=0 bus_errors=0 uart_dropped=0 rc_muted=0 tick=0\n";
         assert_eq!(written(&f).as_str(), line);
         assert_eq!(parse_status_line(line.trim_end()), Ok(f), "without its LF too");
     }
@@ -433,10 +624,46 @@ mod tests {
     fn failsafe_and_fault_have_their_words() {
         let f = StatusFields { state: FlightState::FailsafeOff, fault: Some(SensorFault::Stuck), battery_mv: 50, ..fields() };
         let b = written(&f);
-        assert!(b.as_str().contains(" failsafe=stage2 fault=stuck vbat=0.050V "), "{}", b.as_str());
+        assert!(
+            b.as_str().contains(" failsafe=stage2 fault=stuck vmode=manual alt_mode=0 target=none baro=ok vbat=0.050V "),
+            "{}",
+            b.as_str()
+        );
         assert_eq!(failsafe_name(FlightState::FailsafeLevel), "stage1");
         assert_eq!(CalibrationReport::of(CalibrationPhase::Averaging { restarts: 3 }), CalibrationReport::Running);
         assert_eq!(CalibrationReport::of(CalibrationPhase::Idle { last: Some(CalibrationOutcome::FailedMotion) }).name(), "failed-motion");
+    }
+
+    #[test]
+    fn the_vertical_report_has_its_words_and_the_target_its_millimetres() {
+        let mut a = AltitudeStatus { mode: AltMode::Hold, holding: true, target_m: Some(1.2345), ..AltitudeStatus::default() };
+        let f = StatusFields { vertical: VerticalReport::of(&a), ..fields() };
+        assert!(written(&f).as_str().contains(" fault=none vmode=hold alt_mode=1 target=1.235 baro=ok vbat="), "{}", written(&f).as_str());
+        assert_eq!(parse_status_line(written(&f).as_str()), Ok(f));
+        assert_eq!(f.vertical.target_m(), Some(1.235));
+        a.failsafe_descent = true;
+        a.target_m = Some(-0.0504);
+        a.baro_fault = Some(BaroFault::NoData);
+        let f = StatusFields { vertical: VerticalReport::of(&a), ..fields() };
+        assert!(written(&f).as_str().contains(" vmode=descent alt_mode=1 target=-0.050 baro=no-data "), "{}", written(&f).as_str());
+        assert_eq!(parse_status_line(written(&f).as_str()), Ok(f));
+        a.holding = false;
+        a.failsafe_descent = false;
+        a.target_m = Some(-0.0004);
+        a.baro_fault = Some(BaroFault::Spike);
+        let f = StatusFields { vertical: VerticalReport::of(&a), ..fields() };
+        assert!(
+            written(&f).as_str().contains(" vmode=manual alt_mode=1 target=0.000 baro=spike "),
+            "no `-0.000`: {}",
+            written(&f).as_str()
+        );
+        assert_eq!(
+            VerticalMode::of(&AltitudeStatus { mode: AltMode::Hold, ..AltitudeStatus::default() }),
+            VerticalMode::Manual,
+            "chosen, not in force"
+        );
+        assert_eq!(baro_fault_name(BaroFault::OutOfRange), "out-of-range");
+        assert_eq!(baro_fault_name(BaroFault::Stuck), "stuck");
     }
 
     #[test]
@@ -446,6 +673,12 @@ mod tests {
             blockers.insert(b);
         }
         let mut longest = 0;
+        let longest_vertical = VerticalReport {
+            mode: VerticalMode::Descent,
+            chosen: AltMode::Hold,
+            target_mm: Some(i32::MIN),
+            baro_fault: Some(BaroFault::OutOfRange),
+        };
         for state in FlightState::ALL {
             for calibration in CalibrationReport::ALL {
                 for fault in FAULTS {
@@ -454,6 +687,7 @@ mod tests {
                         blockers,
                         calibration,
                         fault,
+                        vertical: longest_vertical,
                         battery_mv: u32::MAX,
                         outer_overruns: u32::MAX,
                         bus_errors: u32::MAX,
@@ -468,7 +702,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(longest, 389);
+        assert_eq!(longest, 452);
         let b = written(&StatusFields { blockers, ..fields() });
         assert!(b.as_str().contains(
             " blockers=not-calibrated,calibrating,link-not-good,throttle-not-low,not-level,failsafe,sensor-fault,boot-settling,gesture-not-released,motor-test,radio-calibration,saving,reboot-pending "
@@ -491,7 +725,7 @@ mod tests {
         assert_eq!(
             b.as_str(),
             "STATUS state=calibrating armed=0 blockers=none cal=settling failsafe=none \
-             fault=none vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 rc_muted=4 tick=4294967295\n"
+             fault=none vmode=manual alt_mode=0 target=none baro=ok vbat=3.950V overruns=1 bus_errors=2 uart_dropped=3 rc_muted=4 tick=4294967295\n"
         );
         assert_eq!(parse_status_line(b.as_str()), Ok(f));
     }
@@ -506,6 +740,9 @@ mod tests {
         }
         for f in FAULTS {
             assert_eq!(fault_from_name(fault_name(f)), Some(f));
+        }
+        for m in VerticalMode::ALL {
+            assert_eq!(VerticalMode::from_name(m.name()), Some(m));
         }
         assert_eq!(FlightState::from_name("landed"), None);
         assert_eq!(FlightState::from_name("Armed"), None);
@@ -543,6 +780,14 @@ mod tests {
         assert_eq!(edited("overruns=2", "overruns=-2"), Err(BadValue(StatusKey::OuterOverruns)));
         assert_eq!(edited("rc_muted=5", "rc_muted=4294967296"), Err(BadValue(StatusKey::RadioMutes)));
         assert_eq!(edited("tick=1234", "tick="), Err(BadValue(StatusKey::Tick)));
+        assert_eq!(edited("vmode=manual", "vmode=auto"), Err(BadValue(StatusKey::VerticalMode)));
+        assert_eq!(edited("alt_mode=0", "alt_mode=2"), Err(BadValue(StatusKey::AltMode)));
+        assert_eq!(edited("target=none", "target=1.5"), Err(BadValue(StatusKey::Target)));
+        assert_eq!(edited("target=none", "target=-0.000"), Err(BadValue(StatusKey::Target)));
+        assert_eq!(edited("target=none", "target=2147483.648"), Err(BadValue(StatusKey::Target)));
+        assert_eq!(edited("target=none", "target=--1.000"), Err(BadValue(StatusKey::Target)));
+        assert_eq!(edited("baro=ok", "baro=none"), Err(BadValue(StatusKey::Baro)));
+        assert_eq!(edited(" alt_mode=0", ""), Err(Missing(StatusKey::AltMode)));
         assert_eq!(edited(" bus_errors=3", ""), Err(Missing(StatusKey::BusErrors)));
         assert_eq!(edited("cal=running failsafe=none", "failsafe=none cal=running"), Err(Missing(StatusKey::Calibration)));
         assert_eq!(edited(" tick=1234", ""), Err(Missing(StatusKey::Tick)));
@@ -557,6 +802,10 @@ mod tests {
             blocker_bits in 0u16..(1 << Blocker::ALL.len()),
             calibration in 0..CalibrationReport::ALL.len(),
             fault in 0..FAULTS.len(),
+            vmode in 0..VerticalMode::ALL.len(),
+            hold: bool,
+            target_mm: Option<i32>,
+            baro_fault in 0..=BARO_FAULTS.len(),
             battery_mv: u32,
             counters: [u32; 5],
         ) {
@@ -566,6 +815,12 @@ mod tests {
                 blockers: Blockers(blocker_bits),
                 calibration: CalibrationReport::ALL[calibration],
                 fault: FAULTS[fault],
+                vertical: VerticalReport {
+                    mode: VerticalMode::ALL[vmode],
+                    chosen: if hold { AltMode::Hold } else { AltMode::Manual },
+                    target_mm,
+                    baro_fault: BARO_FAULTS.get(baro_fault).copied(),
+                },
                 battery_mv,
                 outer_overruns,
                 bus_errors,
