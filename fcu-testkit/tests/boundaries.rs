@@ -346,3 +346,84 @@ fn an_earlier_set_whose_answer_was_dropped_keeps_its_swap() {
         ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().map(|n| parameters::value(b.config(), index(n))).collect();
     assert_eq!(map, [Some(4.0), Some(2.0), Some(1.0), Some(3.0)]);
 }
+
+/// The RCMAP channels, in table order, as the board has them.
+fn rc_map(b: &Bench) -> Vec<Option<f32>> {
+    ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().map(|n| parameters::value(b.config(), index(n))).collect()
+}
+
+/// Found by the fuzzer (its checker, not the board): under a flood, RCMAP_YAW 2 (a swap with
+/// PITCH), then RCMAP_YAW 1 (a swap with ROLL, which gets YAW's 2). The transmit queue had no
+/// room, so both sets' answers were owed and went out in index order with the values in force:
+/// ROLL = 2 first, a value neither set alone makes. The checker tried each pending set alone
+/// and took the report for a value nobody accepted; the board takes the sets in order.
+#[test]
+fn two_swaps_of_one_channel_are_reported_before_either_answer() {
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_YAW", 2.0),
+        set("RCMAP_YAW", 1.0),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1500 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(2.0), Some(4.0), Some(3.0), Some(1.0)]);
+}
+
+/// The same model for sets of different channels: RCMAP_PITCH 4 (a swap with YAW), then
+/// RCMAP_ROLL 4 (a swap with PITCH, which gets ROLL's 1), answered late under a flood. ROLL's
+/// answer and PITCH = 1 are seen before PITCH's own: the board took PITCH's set first.
+#[test]
+fn an_earlier_set_of_another_channel_is_taken_before_the_one_answered() {
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_PITCH", 4.0),
+        set("RCMAP_ROLL", 4.0),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1500 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(4.0), Some(1.0), Some(3.0), Some(2.0)]);
+}
+
+/// An RCMAP set that arrives while armed is refused (its echo carries the value in force, which
+/// the table would not refuse disarmed); it is not taken when a later set of the same channel is
+/// answered disarmed. The checker takes a set by the rules in force when the board received it.
+#[test]
+fn an_rcmap_set_refused_while_armed_is_not_taken_by_a_later_answer() {
+    let mut ops = gesture(Pilot::Arm).to_vec();
+    ops.extend([set("RCMAP_ROLL", 2.0), Op::Wait { ms: 300 }]);
+    ops.extend(gesture(Pilot::Disarm));
+    ops.extend([Op::Wait { ms: 200 }, set("RCMAP_ROLL", 3.0), Op::Wait { ms: 500 }]);
+    let b = bench(ops);
+    assert!(b.counts.arms >= 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(3.0), Some(2.0), Some(1.0), Some(4.0)]);
+}
+
+/// A set taken before a reset of the parameters is wiped by it: its answer, owed under a flood
+/// and sent after the reset with the value then in force (the default), leaves no set of it
+/// pending for a later answer to take again.
+#[test]
+fn a_set_taken_before_a_reset_is_not_taken_again_after_it() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false });
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_ROLL", 2.0),
+        reset,
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1000 },
+        set("RCMAP_YAW", 3.0),
+        Op::Wait { ms: 300 },
+        Op::Send(GcsFrame::ParamRead { index: 0, name: [0; 16] }),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(4.0), Some(3.0)]);
+}

@@ -451,6 +451,9 @@ impl Bench {
         let now_ms = b.now_ms();
         b.task.observe(now_ms, &observed);
         let rx: Vec<u8> = b.rx.drain(..).collect();
+        // The station takes or refuses a set by the status it observed just now.
+        self.checker.on_received(self.uplink_delivered, self.boot.status.state.changes_restricted());
+        let b = &mut self.boot;
         b.task.receive(now_ms, &rx);
         b.mavlink_on = b.mavlink_on || b.task.speaks_mavlink_from_boot() || b.task.heard();
         if !b.mavlink_on {

@@ -4,9 +4,11 @@
 //! The ground station's view of the parameters (`model`) starts from what the board loaded and
 //! changes only by what the board confirmed: a PARAM_VALUE carrying a value a PARAM_SET asked
 //! for (applied to the model with fcu-core's table rules, so a set that moves another
-//! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. An
-//! answer the transmit queue dropped is caught up with when the value shows up later (a report,
-//! a save, a load).
+//! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. The
+//! board takes sets in the order they came, by the rules in force when its link task received
+//! them (armed or not): a set confirmed means the sets before it were taken or refused first. An
+//! answer the transmit queue dropped, or owed and folded into a later one, is caught up with
+//! when the value shows up later (a report, a save, a load).
 
 use std::collections::VecDeque;
 
@@ -87,6 +89,31 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
     }
 }
 
+/// A PARAM_SET the ground station sent and has not seen confirmed yet.
+#[derive(Clone, Copy, Debug)]
+struct PendingSet {
+    index: usize,
+    value: f32,
+    /// Where its frame starts and ends in the bytes sent.
+    start: u64,
+    end: u64,
+    /// Whether changes were restricted (armed) when the board's link task received the whole
+    /// frame; `None` while it has not.
+    restricted: Option<bool>,
+}
+
+impl PendingSet {
+    /// `cfg` as the board leaves it taking this set, or `None` when the table refuses it.
+    fn taken(&self, cfg: &Config) -> Option<Config> {
+        let mut next = *cfg;
+        parameters::set(&mut next, self.index, self.value, self.restricted.unwrap_or(false)).ok().map(|_| next)
+    }
+
+    fn asks(&self, i: usize, value: f32) -> bool {
+        self.index == i && self.value.to_bits() == value.to_bits()
+    }
+}
+
 /// Keeps at most this many violations of each invariant.
 const KEEP: usize = 4;
 
@@ -94,9 +121,8 @@ const KEEP: usize = 4;
 pub struct Checker {
     defaults: &'static Config,
     model: Config,
-    /// PARAM_SETs sent and not confirmed yet: (index, value, where the frame starts in the
-    /// bytes sent).
-    pending_sets: Vec<(usize, f32, u64)>,
+    /// PARAM_SETs sent and not confirmed yet, in the order sent.
+    pending_sets: Vec<PendingSet>,
     /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, where they
     /// start, and whether a reset among them was already seen done (in a save ahead of its
     /// acknowledgement).
@@ -179,7 +205,7 @@ impl Checker {
         match *frame {
             GcsFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
-                    self.pending_sets.push((i, value, at));
+                    self.pending_sets.push(PendingSet { index: i, value, start: at, end: self.sent_bytes, restricted: None });
                 }
             }
             GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
@@ -187,57 +213,64 @@ impl Checker {
         }
     }
 
-    /// The board confirmed parameter `i` at `value`, a PARAM_SET having asked for it; `ahead`
-    /// when that showed in a save or a load before the answers queued ahead of it went out
-    /// (the link goes quiet before a save or a reboot): those may still report the values it
-    /// replaced.
-    fn accept(&mut self, i: usize, value: f32, ahead: bool, at: u64) {
-        let before = parameters::values(&self.model);
-        if let Some(pos) = self.pending_sets.iter().position(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
-            // Older sets of the same parameter were answered before it, one way or the other
-            // (taken and replaced, when their answers are still queued).
-            if ahead {
-                for &(j, v, _) in self.pending_sets.iter().take(pos) {
-                    if j == i {
-                        self.stale.push((j, v.to_bits()));
-                    }
-                }
-            }
-            // The board took them in order, so their side effects stand: an RCMAP set swaps
-            // another channel, which the later set of the same parameter does not undo.
-            let earlier: Vec<f32> = self.pending_sets.iter().take(pos).filter(|&&(j, _, _)| j == i).map(|&(_, v, _)| v).collect();
-            for v in earlier {
-                let mut next = self.model;
-                if parameters::set(&mut next, i, v, false).is_ok() {
-                    self.model = next;
-                }
-            }
-            let mut k = 0;
-            self.pending_sets.retain(|&(j, _, _)| {
-                let keep = j != i || k > pos;
-                k += 1;
-                keep
-            });
+    /// The board's link task received the first `delivered` bytes the ground station sent,
+    /// with changes restricted or not (armed, as the status it last observed says): it took or
+    /// refused every PARAM_SET among them by the rules in force then.
+    pub fn on_received(&mut self, delivered: u64, restricted: bool) {
+        for set in self.pending_sets.iter_mut().filter(|s| s.end <= delivered && s.restricted.is_none()) {
+            set.restricted = Some(restricted);
         }
-        let mut next = self.model;
-        match parameters::set(&mut next, i, value, false) {
-            Ok(_) => self.model = next,
-            Err(r) => self.violate(
-                Invariant::AcceptedIsReportedSavedLoaded,
-                at,
-                format!("the board took {} = {value}, which the table refuses in the set it reported: {}", name(i), r.rule),
-            ),
+    }
+
+    /// The board confirmed the pending set at `pos` (its answer, a value only it explains, a
+    /// save or a load showing it). It took the sets before it first, in the order they came,
+    /// each changing the parameters as the table has it (a refused one nothing): their side
+    /// effects stand (an RCMAP set swaps another channel, which a later set does not undo), and
+    /// their answers went out or were folded into later ones (an answer the transmit queue has
+    /// no room for is owed, and carries the value in force when it goes). `ahead` when this
+    /// showed in a save or a load before the answers queued ahead of it went out (the link goes
+    /// quiet before a save or a reboot): those may still report any value it replaced on the way.
+    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) {
+        let end = (pos + 1).min(self.pending_sets.len());
+        let taken: Vec<PendingSet> = self.pending_sets.drain(..end).collect();
+        let Some((last, earlier)) = taken.split_last() else {
+            return;
+        };
+        for set in earlier {
+            if let Some(next) = set.taken(&self.model) {
+                self.step_to(next, ahead);
+            }
+        }
+        match last.taken(&self.model) {
+            Some(next) => self.step_to(next, ahead),
+            None => {
+                // The reason, as the table gives it.
+                let mut next = self.model;
+                let rule =
+                    parameters::set(&mut next, last.index, last.value, last.restricted.unwrap_or(false)).err().map_or("", |r| r.rule);
+                self.violate(
+                    Invariant::AcceptedIsReportedSavedLoaded,
+                    at,
+                    format!("the board took {} = {}, which the table refuses in the set it reported: {rule}", name(last.index), last.value),
+                );
+            }
         }
         self.accepted_sets += 1;
-        let v = parameters::values(&self.model);
+    }
+
+    /// The model moves to `next`, a set the board had in force; `ahead` as in
+    /// [`Checker::take_through`].
+    fn step_to(&mut self, next: Config, ahead: bool) {
+        let (old, new) = (parameters::values(&self.model), parameters::values(&next));
         if ahead {
-            for (j, (old, new)) in before.iter().zip(v.iter()).enumerate() {
-                if old.to_bits() != new.to_bits() {
-                    self.stale.push((j, old.to_bits()));
+            for (j, (o, n)) in old.iter().zip(new.iter()).enumerate() {
+                if o.to_bits() != n.to_bits() {
+                    self.stale.push((j, o.to_bits()));
                 }
             }
         }
-        self.remember(&v);
+        self.model = next;
+        self.remember(&new);
     }
 
     /// A PARAM_VALUE of `i` carrying the value in force answers the oldest set of `i` still
@@ -246,38 +279,46 @@ impl Checker {
     /// the order they came. A later set of the same value stays pending, as do sets this
     /// answer cannot be for (a read's answer, a report of another set's swap).
     fn answered_in_force(&mut self, i: usize, value: f32) {
-        let Some(pos) = self.pending_sets.iter().position(|&(j, _, _)| j == i) else {
+        let Some(pos) = self.pending_sets.iter().position(|s| s.index == i) else {
             return;
         };
-        let Some(&(_, asked, _)) = self.pending_sets.get(pos) else {
+        let Some(set) = self.pending_sets.get(pos) else {
             return;
         };
-        let mut next = self.model;
-        let refused = parameters::set(&mut next, i, asked, false).is_err();
-        if asked.to_bits() == value.to_bits() || refused {
+        if set.value.to_bits() == value.to_bits() || set.taken(&self.model).is_none() {
             self.pending_sets.remove(pos);
         }
     }
 
-    /// The pending set of another parameter that, taken now, would move parameter `i` to
-    /// `value`.
-    fn moved_by_pending(&self, i: usize, value: f32) -> Option<(usize, f32)> {
-        self.pending_sets.iter().find_map(|&(j, v, _)| {
-            let mut next = self.model;
-            let moved = j != i
-                && parameters::set(&mut next, j, v, false).is_ok()
-                && parameters::value(&next, i).is_some_and(|x| x.to_bits() == value.to_bits());
-            moved.then_some((j, v))
-        })
+    /// The pending set whose taking, with the sets before it in the order they came, moves
+    /// parameter `i` to `value`: the board received it (a set still on the wire, and those
+    /// after it, have not been taken). Two sets of one RCMAP, say, each a swap, move a third
+    /// channel where neither alone would, and the answers owed to both go out in index order,
+    /// that channel's first.
+    fn explained_by_pending(&self, i: usize, value: f32) -> Option<usize> {
+        let mut cfg = self.model;
+        for (pos, set) in self.pending_sets.iter().enumerate() {
+            set.restricted?;
+            if let Some(next) = set.taken(&cfg) {
+                cfg = next;
+                if parameters::value(&cfg, i).is_some_and(|x| x.to_bits() == value.to_bits()) {
+                    return Some(pos);
+                }
+            }
+        }
+        None
     }
 
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
-    /// a value a PARAM_SET asked for, the board took it.
-    fn reconcile(&mut self, values: &[f32; COUNT], at: u64) {
+    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it.
+    fn reconcile(&mut self, values: &[f32; COUNT], from: u64, at: u64) {
         for (i, v) in values.iter().enumerate() {
             let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
-            if differs && self.pending_sets.iter().any(|&(j, p, _)| j == i && p.to_bits() == v.to_bits()) {
-                self.accept(i, *v, true, at);
+            if !differs {
+                continue;
+            }
+            if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
+                self.take_through(pos, true, at);
             }
         }
     }
@@ -307,13 +348,13 @@ impl Checker {
                     self.stale.retain(|&(j, _)| j != i);
                 } else if self.stale.contains(&(i, value.to_bits())) {
                     // Queued before a save or a load showed the value that replaced it.
-                } else if self.pending_sets.iter().any(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
-                    self.accept(i, *value, false, at);
-                } else if let Some((j, v)) = self.moved_by_pending(i, *value) {
-                    // Another parameter's set moved this one (an RCMAP swap), its own answer
-                    // after this one or dropped.
-                    self.accept(j, v, false, at);
-                } else if let Some(&(_, asked, _)) = self.pending_sets.iter().find(|&&(j, _, _)| j == i) {
+                } else if let Some(pos) = self.pending_sets.iter().position(|s| s.asks(i, *value)) {
+                    self.take_through(pos, false, at);
+                } else if let Some(pos) = self.explained_by_pending(i, *value) {
+                    // Sets moved this one (an RCMAP swap), their own answers after this one or
+                    // folded into it.
+                    self.take_through(pos, false, at);
+                } else if let Some(asked) = self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
                     self.violate(
                         Invariant::AcceptedIsReportedSavedLoaded,
                         at,
@@ -331,8 +372,10 @@ impl Checker {
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
-                if let Some((p1, _, seen_done)) = self.pending_storage.pop_front() {
+                if let Some((p1, start, seen_done)) = self.pending_storage.pop_front() {
                     if *result == 0 && p1 == 2.0 && !seen_done {
+                        // The sets before the reset were taken and wiped by it.
+                        self.pending_sets.retain(|s| s.start > start);
                         self.model = *self.defaults;
                         let v = parameters::values(&self.model);
                         self.remember(&v);
@@ -351,9 +394,13 @@ impl Checker {
         let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
             return;
         };
-        let before = self.model;
+        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        // Tried: kept only when the save shows it.
+        let before = self.clone();
+        // The sets before the reset were taken and wiped by it.
+        self.pending_sets.retain(|s| s.start > reset_at);
         self.model = *self.defaults;
-        self.reconcile(saved, at);
+        self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
             if let Some(entry) = self.pending_storage.get_mut(k) {
                 entry.2 = true;
@@ -361,7 +408,7 @@ impl Checker {
             let v = parameters::values(&self.model);
             self.remember(&v);
         } else {
-            self.model = before;
+            *self = before;
         }
     }
 
@@ -370,7 +417,7 @@ impl Checker {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
-        self.reconcile(&snap.values, at);
+        self.reconcile(&snap.values, 0, at);
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
             self.reset_seen_in(&snap.values, at);
         }
@@ -423,7 +470,7 @@ impl Checker {
             }
         }
         if kind == BootKind::Reset {
-            self.reconcile(&loaded, at);
+            self.reconcile(&loaded, 0, at);
             let model = parameters::values(&self.model);
             if bits(&model) != bits(&loaded) {
                 let d = first_difference(&loaded, &model);
@@ -437,7 +484,7 @@ impl Checker {
             self.violate(invariant, at, what);
         }
         self.model = *cfg;
-        self.pending_sets.retain(|&(_, _, start)| start >= delivered_bytes);
+        self.pending_sets.retain(|s| s.start >= delivered_bytes);
         self.stale.clear();
         self.pending_storage.retain(|&(_, start, _)| start >= delivered_bytes);
         self.remember(&loaded);
