@@ -427,3 +427,44 @@ fn a_set_taken_before_a_reset_is_not_taken_again_after_it() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(4.0), Some(3.0)]);
 }
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 780 ms, the
+/// transmitter off for 62 ms, the gesture again for 715 ms, then the sticks released. The
+/// link is lost only 100 ms (`RC_TIMEOUT_MS`) after the first channel's last pulse; until then
+/// the last pulses stand, so the board saw the gesture held on a good link for 1.5 s and armed,
+/// as `docs/safety.md` has it. The checker counted the hold from the transmitter's return.
+#[test]
+fn a_transmitter_gap_shorter_than_the_link_timeout_does_not_break_the_arm_gesture() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 780 },
+        Op::Pilot(Pilot::Off),
+        Op::Wait { ms: 62 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 715 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 200 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+}
+
+/// Past the link timeout the gap is a link loss: the gesture starts again, and 715 ms of it
+/// do not arm.
+#[test]
+fn a_transmitter_gap_past_the_link_timeout_starts_the_arm_gesture_again() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 780 },
+        Op::Pilot(Pilot::Off),
+        Op::Wait { ms: 150 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 715 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 200 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+    assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
+}

@@ -125,6 +125,8 @@ struct Boot {
     arm_held_ticks: u32,
     arm_released_ticks: u32,
     arm_rest_ticks: u32,
+    /// Ticks the transmitter has been off in a row.
+    off_ticks: u32,
     /// A motor test's output was seen on the last tick.
     testing: bool,
     /// A radio calibration ran on the last tick.
@@ -153,6 +155,7 @@ impl Boot {
             arm_held_ticks: 0,
             arm_released_ticks: u32::MAX,
             arm_rest_ticks: u32::MAX,
+            off_ticks: 0,
             testing: false,
             radio_calibration: false,
         })
@@ -348,7 +351,12 @@ impl Bench {
         }
         b.status = b.tick.status();
         b.ticks = b.ticks.wrapping_add(1);
-        if self.pilot == Pilot::Arm {
+        b.off_ticks = if self.pilot == Pilot::Off { b.off_ticks.saturating_add(1) } else { 0 };
+        // The link is lost only a timeout after the last pulse, and until then the last pulses
+        // stand: a transmitter off for less than that leaves the arm gesture held, as far as the
+        // board can tell (as `docs/safety.md` has it, and the safety monitor's radio model).
+        let gap = self.pilot == Pilot::Off && b.arm_released_ticks == 0 && b.off_ticks < b.cfg.rc.link_timeout_ticks;
+        if self.pilot == Pilot::Arm || gap {
             b.arm_held_ticks = if b.arm_released_ticks == 0 { b.arm_held_ticks + 1 } else { 1 };
             b.arm_released_ticks = 0;
             b.arm_rest_ticks = 0;
