@@ -468,3 +468,29 @@ fn a_transmitter_gap_past_the_link_timeout_starts_the_arm_gesture_again() {
     assert_holds(&b, Invariant::ArmedOnlyByGesture);
     assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
 }
+
+/// Found by the fuzzer (its checker, not the board): under a flood, RCMAP_YAW 2.517 (refused),
+/// RCMAP_YAW 1 (a swap with ROLL), a set of another parameter, RCMAP_ROLL 1 (the swap undone).
+/// The owed answers carry the map as it is again, ROLL = 1 and YAW = 4, the values in force on
+/// the checker's copy too; it took them for the ROLL set's answer alone, left the YAW set
+/// pending, and took it (its swap) when the other parameter's answer came. A report matches the
+/// board at some point at or after the last one matched: the sets stay pending until a report
+/// only a later point explains.
+#[test]
+fn a_swap_undone_before_its_answers_went_out_is_not_taken_later() {
+    let other = index("LINK_ATT_HZ");
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(param_set(index("RCMAP_YAW"), value_for(index("RCMAP_YAW"), 0x54))),
+        set("RCMAP_YAW", 1.0),
+        Op::Send(param_set(other, value_for(other, 0x24))),
+        set("RCMAP_ROLL", 1.0),
+        Op::Wait { ms: 64 },
+        Op::Send(param_set(other, value_for(other, 0xC6))),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 500 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x98, ops }.run(&DEFAULTS);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
+}

@@ -273,36 +273,28 @@ impl Checker {
         self.remember(&new);
     }
 
-    /// A PARAM_VALUE of `i` carrying the value in force answers the oldest set of `i` still
-    /// pending, when that set asked for this value (taken, nothing changed) or for one the table
-    /// refuses (the board echoes the value in force): the board answers a parameter's sets in
-    /// the order they came. A later set of the same value stays pending, as do sets this
-    /// answer cannot be for (a read's answer, a report of another set's swap).
-    fn answered_in_force(&mut self, i: usize, value: f32) {
-        let Some(pos) = self.pending_sets.iter().position(|s| s.index == i) else {
-            return;
-        };
-        let Some(set) = self.pending_sets.get(pos) else {
-            return;
-        };
-        if set.value.to_bits() == value.to_bits() || set.taken(&self.model).is_none() {
-            self.pending_sets.remove(pos);
+    /// Where the board may have been when it reported parameter `i` at `value`: how many of the
+    /// pending sets it had taken, the fewest that explain it (0: the model as it is). The
+    /// answers leave in the order they were queued, each with the value in force then, so a
+    /// report shows the board where the one before it did or later; the board takes the sets
+    /// in the order they came (only those it received), and an answer it has no room for is
+    /// owed and goes later, in index order, with the value then in force. Two sets of one
+    /// RCMAP, say, each a swap, move a third channel where neither alone would, and that
+    /// channel's report comes first. Committing to no more than the fewest sets keeps a report
+    /// that matches several points (a swap undone before its answers went out shows the map as
+    /// it was) from skipping sets that a later report needs.
+    fn matched_after(&self, i: usize, value: f32) -> Option<usize> {
+        let matches = |cfg: &Config| parameters::value(cfg, i).is_some_and(|x| x.to_bits() == value.to_bits());
+        if matches(&self.model) {
+            return Some(0);
         }
-    }
-
-    /// The pending set whose taking, with the sets before it in the order they came, moves
-    /// parameter `i` to `value`: the board received it (a set still on the wire, and those
-    /// after it, have not been taken). Two sets of one RCMAP, say, each a swap, move a third
-    /// channel where neither alone would, and the answers owed to both go out in index order,
-    /// that channel's first.
-    fn explained_by_pending(&self, i: usize, value: f32) -> Option<usize> {
         let mut cfg = self.model;
-        for (pos, set) in self.pending_sets.iter().enumerate() {
+        for (k, set) in self.pending_sets.iter().enumerate() {
             set.restricted?;
             if let Some(next) = set.taken(&cfg) {
                 cfg = next;
-                if parameters::value(&cfg, i).is_some_and(|x| x.to_bits() == value.to_bits()) {
-                    return Some(pos);
+                if matches(&cfg) {
+                    return Some(k + 1);
                 }
             }
         }
@@ -342,33 +334,31 @@ impl Checker {
                         format!("PARAM_VALUE {reported} with the index of {}", name(i)),
                     );
                 }
-                if current.to_bits() == value.to_bits() {
-                    self.answered_in_force(i, *value);
-                    // Answered in order: what was queued before the value in force is out.
-                    self.stale.retain(|&(j, _)| j != i);
-                } else if self.stale.contains(&(i, value.to_bits())) {
+                if current.to_bits() != value.to_bits() && self.stale.contains(&(i, value.to_bits())) {
                     // Queued before a save or a load showed the value that replaced it.
-                } else if let Some(pos) = self.pending_sets.iter().position(|s| s.asks(i, *value)) {
-                    self.take_through(pos, false, at);
-                } else if let Some(pos) = self.explained_by_pending(i, *value) {
-                    // Sets moved this one (an RCMAP swap), their own answers after this one or
-                    // folded into it.
-                    self.take_through(pos, false, at);
-                } else if let Some(asked) = self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
-                    self.violate(
-                        Invariant::AcceptedIsReportedSavedLoaded,
-                        at,
-                        format!(
-                            "a PARAM_SET of {} = {asked} answered with {value}: neither the value asked for nor the one in force ({current})",
-                            name(i)
+                    return;
+                }
+                match self.matched_after(i, *value) {
+                    Some(0) => {
+                        // Answered in order: what was queued before the value in force is out.
+                        self.stale.retain(|&(j, _)| j != i);
+                    }
+                    Some(k) => self.take_through(k - 1, false, at),
+                    None => match self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
+                        Some(asked) => self.violate(
+                            Invariant::AcceptedIsReportedSavedLoaded,
+                            at,
+                            format!(
+                                "a PARAM_SET of {} = {asked} answered with {value}: neither the value asked for nor the one in force ({current})",
+                                name(i)
+                            ),
                         ),
-                    );
-                } else {
-                    self.violate(
-                        Invariant::AcceptedIsReportedSavedLoaded,
-                        at,
-                        format!("the board reports {} = {value}; the value it accepted is {current}", name(i)),
-                    );
+                        None => self.violate(
+                            Invariant::AcceptedIsReportedSavedLoaded,
+                            at,
+                            format!("the board reports {} = {value}; the value it accepted is {current}", name(i)),
+                        ),
+                    },
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
