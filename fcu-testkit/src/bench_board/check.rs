@@ -6,7 +6,9 @@
 //! for (applied to the model with fcu-core's table rules, so a set that moves another
 //! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. The
 //! board takes sets in the order they came, by the rules in force when its link task received
-//! them (armed or not): a set confirmed means the sets before it were taken or refused first. An
+//! them (armed or not): a set confirmed means the sets before it were taken or refused first.
+//! Each report shows the board where the one before it did or later, and the model goes no
+//! further through the pending sets than a report needs. An
 //! answer the transmit queue dropped, or owed and folded into a later one, is caught up with
 //! when the value shows up later (a report, a save, a load).
 
