@@ -494,3 +494,23 @@ fn a_swap_undone_before_its_answers_went_out_is_not_taken_later() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
 }
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 1.2 s, the sticks at
+/// rest for 20 ms, then the gesture again; the board completed arming 2 ticks into the new
+/// gesture. It sees the sticks up to a receiver frame late, so the 20 ms at rest reached it
+/// just then; the checker judged by the pilot's sticks of that tick.
+#[test]
+fn arming_completes_on_a_rest_the_board_sees_a_frame_late() {
+    let ops = vec![
+        Op::Wait { ms: 40 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 1206 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 20 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 17 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
