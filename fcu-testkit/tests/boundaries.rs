@@ -514,3 +514,33 @@ fn arming_completes_on_a_rest_the_board_sees_a_frame_late() {
     assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
     assert_holds(&b, Invariant::ArmedOnlyByGesture);
 }
+
+/// Found by the fuzzer (its checker, not the board): a reboot accepted, then sets of
+/// RATE_RLL_D (469, then 57.47) and YAW_FF, then a reset of the parameters. The board saved the
+/// defaults before the answers queued ahead of the reset went out (the link goes quiet before
+/// a save), and the checker took the reset then; RATE_RLL_D = 57.47, the second set's answer
+/// still queued, then came out. The sets before a reset seen early are taken, as the board
+/// took them, and their queued answers may report what they set.
+#[test]
+fn an_answer_queued_before_a_reset_seen_early_reports_the_set_it_answers() {
+    let roll_d = index("RATE_RLL_D");
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false });
+    let ops = vec![
+        reboot_int,
+        Op::Wait { ms: 29 },
+        Op::Send(GcsFrame::ParamRead { index: 220, name: [0; 16] }),
+        set("RATE_RLL_D", 469.0),
+        set("YAW_FF", 0.0),
+        Op::Send(GcsFrame::ParamRead { index: 220, name: [0; 16] }),
+        Op::Send(param_set(roll_d, value_for(roll_d, 50))),
+        reset,
+        Op::Wait { ms: 1180 },
+    ];
+    let history = vec![Planted { sequence: 1, changes: vec![] }];
+    let b = Scenario { history, seed: 0x4a, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), roll_d), parameters::value(&DEFAULTS, roll_d));
+}

@@ -233,16 +233,11 @@ impl Checker {
     /// showed in a save or a load before the answers queued ahead of it went out (the link goes
     /// quiet before a save or a reboot): those may still report any value it replaced on the way.
     fn take_through(&mut self, pos: usize, ahead: bool, at: u64) {
-        let end = (pos + 1).min(self.pending_sets.len());
-        let taken: Vec<PendingSet> = self.pending_sets.drain(..end).collect();
-        let Some((last, earlier)) = taken.split_last() else {
+        self.pass(pos, ahead);
+        if self.pending_sets.is_empty() {
             return;
-        };
-        for set in earlier {
-            if let Some(next) = set.taken(&self.model) {
-                self.step_to(next, ahead);
-            }
         }
+        let last = self.pending_sets.remove(0);
         match last.taken(&self.model) {
             Some(next) => self.step_to(next, ahead),
             None => {
@@ -258,6 +253,18 @@ impl Checker {
             }
         }
         self.accepted_sets += 1;
+    }
+
+    /// The first `count` pending sets, as the board took them: each changes the model when the
+    /// table takes it; `ahead` as in [`Checker::take_through`].
+    fn pass(&mut self, count: usize, ahead: bool) {
+        let end = count.min(self.pending_sets.len());
+        let passed: Vec<PendingSet> = self.pending_sets.drain(..end).collect();
+        for set in passed {
+            if let Some(next) = set.taken(&self.model) {
+                self.step_to(next, ahead);
+            }
+        }
     }
 
     /// The model moves to `next`, a set the board had in force; `ahead` as in
@@ -389,9 +396,12 @@ impl Checker {
         let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
         // Tried: kept only when the save shows it.
         let before = self.clone();
-        // The sets before the reset were taken and wiped by it.
-        self.pending_sets.retain(|s| s.start > reset_at);
-        self.model = *self.defaults;
+        // The sets before the reset were taken, then wiped by it; the answers still queued for
+        // them may report what they set, or what the model had before.
+        let before_reset = self.pending_sets.iter().filter(|s| s.start < reset_at).count();
+        self.pass(before_reset, true);
+        let defaults = *self.defaults;
+        self.step_to(defaults, true);
         self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
             if let Some(entry) = self.pending_storage.get_mut(k) {
