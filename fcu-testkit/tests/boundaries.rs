@@ -544,3 +544,25 @@ fn an_answer_queued_before_a_reset_seen_early_reports_the_set_it_answers() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), roll_d), parameters::value(&DEFAULTS, roll_d));
 }
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 1.6 s, the disarm
+/// gesture 1 s, the arm gesture 40 ms, the disarm gesture 1.1 s, the sticks released: armed.
+/// After a full hold the board waits in Arming until every stick is back in a safe place,
+/// whatever the sticks do meanwhile (`docs/safety.md`); the checker counted only the last,
+/// 40 ms hold.
+#[test]
+fn arming_completes_after_a_full_hold_whatever_the_sticks_did_before_the_rest() {
+    let mut ops = vec![
+        Op::Wait { ms: 2000 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 1624 },
+        Op::Pilot(Pilot::Disarm),
+        Op::Wait { ms: 1060 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 40 },
+    ];
+    ops.extend(gesture(Pilot::Disarm));
+    let b = Scenario { history: Vec::new(), seed: 0x42, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}

@@ -135,6 +135,9 @@ struct Boot {
     /// Ticks since the pilot's sticks last allowed the board to complete arming (held the hold
     /// time, back at rest a moment ago at most).
     arm_ok_ago: u32,
+    /// The pilot held the arm gesture the hold time and the board has been arming since: it
+    /// completes once every stick is back in a safe place, whatever the sticks do meanwhile.
+    full_hold: bool,
     /// A motor test's output was seen on the last tick.
     testing: bool,
     /// A radio calibration ran on the last tick.
@@ -173,6 +176,7 @@ impl Boot {
             arm_rest_ticks: u32::MAX,
             off_ticks: 0,
             arm_ok_ago: u32::MAX,
+            full_hold: false,
             testing: false,
             radio_calibration: false,
         })
@@ -386,8 +390,10 @@ impl Bench {
         // The gesture arms once released (or at once with the reference): held at least the
         // hold time, the sticks back at rest a moment ago at most; as the board sees the sticks,
         // which may lag the pilot's by a frame or two at either end of the hold.
-        let ok = b.arm_rest_ticks <= 200 && b.arm_held_ticks.saturating_add(RADIO_LAG_TICKS) >= b.arm_hold_ticks();
+        let held_full = b.arm_held_ticks.saturating_add(RADIO_LAG_TICKS) >= b.arm_hold_ticks();
+        let ok = b.arm_rest_ticks <= 200 && (held_full || b.full_hold);
         b.arm_ok_ago = if ok { 0 } else { b.arm_ok_ago.saturating_add(1) };
+        b.full_hold = held_full || (b.full_hold && b.status.state == FlightState::Arming);
         self.after_tick(was);
         if self.boot.ticks % TICKS_PER_PERIOD == 0 {
             self.period();
