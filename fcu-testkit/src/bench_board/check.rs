@@ -508,8 +508,10 @@ mod tests {
     fn a_loaded_mix_of_two_sets_in_force_is_a_violation() {
         let mut c = Checker::new(&DEFAULTS);
         let (roll, angle) = (index("RATE_RLL_P"), index("ANGLE_MAX"));
-        for (i, v) in [(roll, 100.0), (angle, 30.0)] {
+        for (k, (i, v)) in [(roll, 100.0), (angle, 30.0)].into_iter().enumerate() {
             c.on_sent(&GcsFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v }, 35);
+            // The board received the frame (disarmed) before it answered.
+            c.on_received(35 * (k as u64 + 1), false);
             c.on_answer(&Answer::ParamValue { name: parameters::name(i).unwrap().into(), value: v, index: i as u16 }, 1);
         }
         assert_eq!(c.accepted_sets, 2);
