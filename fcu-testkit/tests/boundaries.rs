@@ -566,3 +566,30 @@ fn arming_completes_after_a_full_hold_whatever_the_sticks_did_before_the_rest() 
     assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
     assert_holds(&b, Invariant::ArmedOnlyByGesture);
 }
+
+/// Found by the fuzzer (its checker, not the board): ANG_YAW_P 0 and RATE_D_LPF_K 1 taken, then
+/// under a flood a reset of the parameters, whose acknowledgement the full transmit queue
+/// dropped (an answer without room is dropped and counted; the ground station asks again). The
+/// board reported ANG_YAW_P = 2, its default: a report only the reset explains is the reset
+/// taken.
+#[test]
+fn a_reset_whose_acknowledgement_was_dropped_shows_in_the_values_reported() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        Op::Wait { ms: 20 },
+        set("RCMAP_ROLL", 1.0),
+        set("ANG_YAW_P", 0.0),
+        Op::Wait { ms: 900 },
+        set("RATE_D_LPF_K", 1.0),
+        Op::Wait { ms: 78 },
+        Op::Flood { ms: 2000 },
+        Op::Send(GcsFrame::ParamList),
+        reset,
+        Op::Wait { ms: 900 },
+        set("RATE_D_LPF_K", 1.0),
+        Op::Wait { ms: 20 },
+    ];
+    let history = vec![Planted { sequence: u32::MAX - 11, changes: vec![] }];
+    let b = Scenario { history, seed: 0x21, ops }.run(&DEFAULTS);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}

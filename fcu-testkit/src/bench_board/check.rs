@@ -310,6 +310,35 @@ impl Checker {
         None
     }
 
+    /// A report of parameter `i` at `value` that only a pending reset of the parameters
+    /// explains, its acknowledgement dropped (the transmit queue drops an answer it has no
+    /// room for) or still queued: the model takes the sets before the reset, the reset, and as
+    /// many sets after it as the report needs. False, and nothing changed, when the reset does
+    /// not explain it either.
+    fn reset_explains(&mut self, i: usize, value: f32, at: u64) -> bool {
+        let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
+            return false;
+        };
+        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        let before = self.clone();
+        let before_reset = self.pending_sets.iter().filter(|s| s.start < reset_at).count();
+        self.pass(before_reset, false);
+        let defaults = *self.defaults;
+        self.step_to(defaults, false);
+        match self.matched_after(i, value) {
+            Some(0) => {}
+            Some(m) => self.take_through(m - 1, false, at),
+            None => {
+                *self = before;
+                return false;
+            }
+        }
+        if let Some(entry) = self.pending_storage.get_mut(k) {
+            entry.2 = true;
+        }
+        true
+    }
+
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
     /// a value a PARAM_SET sent from byte `from` on asked for, the board took it.
     fn reconcile(&mut self, values: &[f32; COUNT], from: u64, at: u64) {
@@ -353,6 +382,7 @@ impl Checker {
                         self.stale.retain(|&(j, _)| j != i);
                     }
                     Some(k) => self.take_through(k - 1, false, at),
+                    None if self.reset_explains(i, *value, at) => {}
                     None => match self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
                         Some(asked) => self.violate(
                             Invariant::AcceptedIsReportedSavedLoaded,
