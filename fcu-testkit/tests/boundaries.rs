@@ -593,3 +593,29 @@ fn a_reset_whose_acknowledgement_was_dropped_shows_in_the_values_reported() {
     let b = Scenario { history, seed: 0x21, ops }.run(&DEFAULTS);
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
 }
+
+/// Found by the fuzzer (its checker, not the board): a reboot accepted, RCMAP_ROLL 3 and
+/// RC1_REV 1 taken, then a reset of the parameters and sets of RC1_MIN and RC2_MIN. The board
+/// saved the defaults with the two sets after the reset before the reset's acknowledgement went
+/// out; the checker took the two sets on the map it had (ROLL 3) and then found no reset to
+/// explain the save. A save is matched against the reset from the model before the sets after it.
+#[test]
+fn sets_after_a_reset_seen_early_are_not_taken_before_it() {
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        reboot_int,
+        set("RCMAP_ROLL", 3.0),
+        set("RC1_REV", 1.0),
+        Op::Wait { ms: 20 },
+        reset,
+        set("RC1_MIN", 1004.0),
+        set("RC2_MIN", 500.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x23, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
+}

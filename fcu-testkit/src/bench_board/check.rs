@@ -449,9 +449,16 @@ impl Checker {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
+        let before = self.clone();
         self.reconcile(&snap.values, 0, at);
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+            // Tried from before the catching up: sets sent after a reset must not be taken on the
+            // set it wiped.
+            let reconciled = std::mem::replace(self, before);
             self.reset_seen_in(&snap.values, at);
+            if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+                *self = reconciled;
+            }
         }
         let model = parameters::values(&self.model);
         if bits(&snap.values) != bits(&model) {
