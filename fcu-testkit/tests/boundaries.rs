@@ -346,3 +346,276 @@ fn an_earlier_set_whose_answer_was_dropped_keeps_its_swap() {
         ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().map(|n| parameters::value(b.config(), index(n))).collect();
     assert_eq!(map, [Some(4.0), Some(2.0), Some(1.0), Some(3.0)]);
 }
+
+/// The RCMAP channels, in table order, as the board has them.
+fn rc_map(b: &Bench) -> Vec<Option<f32>> {
+    ["RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW"].iter().map(|n| parameters::value(b.config(), index(n))).collect()
+}
+
+/// Found by the fuzzer (its checker, not the board): under a flood, RCMAP_YAW 2 (a swap with
+/// PITCH), then RCMAP_YAW 1 (a swap with ROLL, which gets YAW's 2). The transmit queue had no
+/// room, so both sets' answers were owed and went out in index order with the values in force:
+/// ROLL = 2 first, a value neither set alone makes. The checker tried each pending set alone
+/// and took the report for a value nobody accepted; the board takes the sets in order.
+#[test]
+fn two_swaps_of_one_channel_are_reported_before_either_answer() {
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_YAW", 2.0),
+        set("RCMAP_YAW", 1.0),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1500 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(2.0), Some(4.0), Some(3.0), Some(1.0)]);
+}
+
+/// The same model for sets of different channels: RCMAP_PITCH 4 (a swap with YAW), then
+/// RCMAP_ROLL 4 (a swap with PITCH, which gets ROLL's 1), answered late under a flood. ROLL's
+/// answer and PITCH = 1 are seen before PITCH's own: the board took PITCH's set first.
+#[test]
+fn an_earlier_set_of_another_channel_is_taken_before_the_one_answered() {
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_PITCH", 4.0),
+        set("RCMAP_ROLL", 4.0),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1500 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(4.0), Some(1.0), Some(3.0), Some(2.0)]);
+}
+
+/// An RCMAP set that arrives while armed is refused (its echo carries the value in force, which
+/// the table would not refuse disarmed); it is not taken when a later set of the same channel is
+/// answered disarmed. The checker takes a set by the rules in force when the board received it.
+#[test]
+fn an_rcmap_set_refused_while_armed_is_not_taken_by_a_later_answer() {
+    let mut ops = gesture(Pilot::Arm).to_vec();
+    ops.extend([set("RCMAP_ROLL", 2.0), Op::Wait { ms: 300 }]);
+    ops.extend(gesture(Pilot::Disarm));
+    ops.extend([Op::Wait { ms: 200 }, set("RCMAP_ROLL", 3.0), Op::Wait { ms: 500 }]);
+    let b = bench(ops);
+    assert!(b.counts.arms >= 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(3.0), Some(2.0), Some(1.0), Some(4.0)]);
+}
+
+/// A set taken before a reset of the parameters is wiped by it: its answer, owed under a flood
+/// and sent after the reset with the value then in force (the default), leaves no set of it
+/// pending for a later answer to take again.
+#[test]
+fn a_set_taken_before_a_reset_is_not_taken_again_after_it() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false });
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(GcsFrame::ParamList),
+        set("RCMAP_ROLL", 2.0),
+        reset,
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 1000 },
+        set("RCMAP_YAW", 3.0),
+        Op::Wait { ms: 300 },
+        Op::Send(GcsFrame::ParamRead { index: 0, name: [0; 16] }),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(4.0), Some(3.0)]);
+}
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 780 ms, the
+/// transmitter off for 62 ms, the gesture again for 715 ms, then the sticks released. The
+/// link is lost only 100 ms (`RC_TIMEOUT_MS`) after the first channel's last pulse; until then
+/// the last pulses stand, so the board saw the gesture held on a good link for 1.5 s and armed,
+/// as `docs/safety.md` has it. The checker counted the hold from the transmitter's return.
+#[test]
+fn a_transmitter_gap_shorter_than_the_link_timeout_does_not_break_the_arm_gesture() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 780 },
+        Op::Pilot(Pilot::Off),
+        Op::Wait { ms: 62 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 715 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 200 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+}
+
+/// Past the link timeout the gap is a link loss: the gesture starts again, and 715 ms of it
+/// do not arm.
+#[test]
+fn a_transmitter_gap_past_the_link_timeout_starts_the_arm_gesture_again() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 780 },
+        Op::Pilot(Pilot::Off),
+        Op::Wait { ms: 150 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 715 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 200 },
+    ];
+    let b = bench(ops);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+    assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
+}
+
+/// Found by the fuzzer (its checker, not the board): under a flood, RCMAP_YAW 2.517 (refused),
+/// RCMAP_YAW 1 (a swap with ROLL), a set of another parameter, RCMAP_ROLL 1 (the swap undone).
+/// The owed answers carry the map as it is again, ROLL = 1 and YAW = 4, the values in force on
+/// the checker's copy too; it took them for the ROLL set's answer alone, left the YAW set
+/// pending, and took it (its swap) when the other parameter's answer came. A report matches the
+/// board at some point at or after the last one matched: the sets stay pending until a report
+/// only a later point explains.
+#[test]
+fn a_swap_undone_before_its_answers_went_out_is_not_taken_later() {
+    let other = index("LINK_ATT_HZ");
+    let ops = vec![
+        Op::Flood { ms: 1000 },
+        Op::Send(param_set(index("RCMAP_YAW"), value_for(index("RCMAP_YAW"), 0x54))),
+        set("RCMAP_YAW", 1.0),
+        Op::Send(param_set(other, value_for(other, 0x24))),
+        set("RCMAP_ROLL", 1.0),
+        Op::Wait { ms: 64 },
+        Op::Send(param_set(other, value_for(other, 0xC6))),
+        Op::Flood { ms: 1000 },
+        Op::Wait { ms: 500 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x98, ops }.run(&DEFAULTS);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
+}
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 1.2 s, the sticks at
+/// rest for 20 ms, then the gesture again; the board completed arming 2 ticks into the new
+/// gesture. It sees the sticks up to a receiver frame late, so the 20 ms at rest reached it
+/// just then; the checker judged by the pilot's sticks of that tick.
+#[test]
+fn arming_completes_on_a_rest_the_board_sees_a_frame_late() {
+    let ops = vec![
+        Op::Wait { ms: 40 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 1206 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 20 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 17 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
+
+/// Found by the fuzzer (its checker, not the board): a reboot accepted, then sets of
+/// RATE_RLL_D (469, then 57.47) and YAW_FF, then a reset of the parameters. The board saved the
+/// defaults before the answers queued ahead of the reset went out (the link goes quiet before
+/// a save), and the checker took the reset then; RATE_RLL_D = 57.47, the second set's answer
+/// still queued, then came out. The sets before a reset seen early are taken, as the board
+/// took them, and their queued answers may report what they set.
+#[test]
+fn an_answer_queued_before_a_reset_seen_early_reports_the_set_it_answers() {
+    let roll_d = index("RATE_RLL_D");
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false });
+    let ops = vec![
+        reboot_int,
+        Op::Wait { ms: 29 },
+        Op::Send(GcsFrame::ParamRead { index: 220, name: [0; 16] }),
+        set("RATE_RLL_D", 469.0),
+        set("YAW_FF", 0.0),
+        Op::Send(GcsFrame::ParamRead { index: 220, name: [0; 16] }),
+        Op::Send(param_set(roll_d, value_for(roll_d, 50))),
+        reset,
+        Op::Wait { ms: 1180 },
+    ];
+    let history = vec![Planted { sequence: 1, changes: vec![] }];
+    let b = Scenario { history, seed: 0x4a, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), roll_d), parameters::value(&DEFAULTS, roll_d));
+}
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 1.6 s, the disarm
+/// gesture 1 s, the arm gesture 40 ms, the disarm gesture 1.1 s, the sticks released: armed.
+/// After a full hold the board waits in Arming until every stick is back in a safe place,
+/// whatever the sticks do meanwhile (`docs/safety.md`); the checker counted only the last,
+/// 40 ms hold.
+#[test]
+fn arming_completes_after_a_full_hold_whatever_the_sticks_did_before_the_rest() {
+    let mut ops = vec![
+        Op::Wait { ms: 2000 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 1624 },
+        Op::Pilot(Pilot::Disarm),
+        Op::Wait { ms: 1060 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 40 },
+    ];
+    ops.extend(gesture(Pilot::Disarm));
+    let b = Scenario { history: Vec::new(), seed: 0x42, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
+
+/// Found by the fuzzer (its checker, not the board): ANG_YAW_P 0 and RATE_D_LPF_K 1 taken, then
+/// under a flood a reset of the parameters, whose acknowledgement the full transmit queue
+/// dropped (an answer without room is dropped and counted; the ground station asks again). The
+/// board reported ANG_YAW_P = 2, its default: a report only the reset explains is the reset
+/// taken.
+#[test]
+fn a_reset_whose_acknowledgement_was_dropped_shows_in_the_values_reported() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        Op::Wait { ms: 20 },
+        set("RCMAP_ROLL", 1.0),
+        set("ANG_YAW_P", 0.0),
+        Op::Wait { ms: 900 },
+        set("RATE_D_LPF_K", 1.0),
+        Op::Wait { ms: 78 },
+        Op::Flood { ms: 2000 },
+        Op::Send(GcsFrame::ParamList),
+        reset,
+        Op::Wait { ms: 900 },
+        set("RATE_D_LPF_K", 1.0),
+        Op::Wait { ms: 20 },
+    ];
+    let history = vec![Planted { sequence: u32::MAX - 11, changes: vec![] }];
+    let b = Scenario { history, seed: 0x21, ops }.run(&DEFAULTS);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}
+
+/// Found by the fuzzer (its checker, not the board): a reboot accepted, RCMAP_ROLL 3 and
+/// RC1_REV 1 taken, then a reset of the parameters and sets of RC1_MIN and RC2_MIN. The board
+/// saved the defaults with the two sets after the reset before the reset's acknowledgement went
+/// out; the checker took the two sets on the map it had (ROLL 3) and then found no reset to
+/// explain the save. A save is matched against the reset from the model before the sets after it.
+#[test]
+fn sets_after_a_reset_seen_early_are_not_taken_before_it() {
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        reboot_int,
+        set("RCMAP_ROLL", 3.0),
+        set("RC1_REV", 1.0),
+        Op::Wait { ms: 20 },
+        reset,
+        set("RC1_MIN", 1004.0),
+        set("RC2_MIN", 500.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x23, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
+}

@@ -35,6 +35,11 @@ pub const UART_CHUNK_BYTES: usize = 128;
 /// The firmware's receive ring (DMA), bytes: what arrives while nothing reads it beyond that
 /// overwrites the oldest.
 pub const RX_RING_BYTES: usize = 6 * 1024;
+/// How late the board may see the pilot's sticks, control ticks: a channel's pulse ends up to a
+/// receiver frame (20 ms at 50 Hz) after the sticks move, and the next frame's may be the first
+/// the decoder hands over; two frames, 40 ms. The arming checks allow the board's view of a
+/// gesture to lag the pilot's by this much.
+pub const RADIO_LAG_TICKS: u32 = 32;
 /// The battery the bench supply holds, mV.
 pub const BATTERY_MV: u32 = 3900;
 
@@ -126,6 +131,14 @@ struct Boot {
     arm_held_ticks: u32,
     arm_released_ticks: u32,
     arm_rest_ticks: u32,
+    /// Ticks the transmitter has been off in a row.
+    off_ticks: u32,
+    /// Ticks since the pilot's sticks last allowed the board to complete arming (held the hold
+    /// time, back at rest a moment ago at most).
+    arm_ok_ago: u32,
+    /// The pilot held the arm gesture the hold time and the board has been arming since: it
+    /// completes once every stick is back in a safe place, whatever the sticks do meanwhile.
+    full_hold: bool,
     /// A motor test's output was seen on the last tick.
     testing: bool,
     /// A radio calibration ran on the last tick.
@@ -133,6 +146,14 @@ struct Boot {
 }
 
 impl Boot {
+    /// How long the arm gesture must be held, control ticks (at once with the reference).
+    fn arm_hold_ticks(&self) -> u32 {
+        match self.cfg.supervisor {
+            SupervisorConfig::Safe(s) => s.arm_hold_ticks,
+            SupervisorConfig::Reference => 1,
+        }
+    }
+
     fn new(cfg: Config, source: snapshot::Source, defaults: &'static Config) -> Result<Boot, String> {
         let fc = FlightController::new(cfg).map_err(|e| e.to_string())?;
         let decoder = fc.edge_decoder();
@@ -154,6 +175,9 @@ impl Boot {
             arm_held_ticks: 0,
             arm_released_ticks: u32::MAX,
             arm_rest_ticks: u32::MAX,
+            off_ticks: 0,
+            arm_ok_ago: u32::MAX,
+            full_hold: false,
             testing: false,
             radio_calibration: false,
         })
@@ -349,7 +373,12 @@ impl Bench {
         }
         b.status = b.tick.status();
         b.ticks = b.ticks.wrapping_add(1);
-        if self.pilot == Pilot::Arm {
+        b.off_ticks = if self.pilot == Pilot::Off { b.off_ticks.saturating_add(1) } else { 0 };
+        // The link is lost only a timeout after the last pulse, and until then the last pulses
+        // stand: a transmitter off for less than that leaves the arm gesture held, as far as the
+        // board can tell (as `docs/safety.md` has it, and the safety monitor's radio model).
+        let gap = self.pilot == Pilot::Off && b.arm_released_ticks == 0 && b.off_ticks < b.cfg.rc.link_timeout_ticks;
+        if self.pilot == Pilot::Arm || gap {
             b.arm_held_ticks = if b.arm_released_ticks == 0 { b.arm_held_ticks + 1 } else { 1 };
             b.arm_released_ticks = 0;
             b.arm_rest_ticks = 0;
@@ -359,6 +388,13 @@ impl Bench {
                 b.arm_rest_ticks = b.arm_rest_ticks.saturating_add(1);
             }
         }
+        // The gesture arms once released (or at once with the reference): held at least the
+        // hold time, the sticks back at rest a moment ago at most; as the board sees the sticks,
+        // which may lag the pilot's by a frame or two at either end of the hold.
+        let held_full = b.arm_held_ticks.saturating_add(RADIO_LAG_TICKS) >= b.arm_hold_ticks();
+        let ok = b.arm_rest_ticks <= 200 && (held_full || b.full_hold);
+        b.arm_ok_ago = if ok { 0 } else { b.arm_ok_ago.saturating_add(1) };
+        b.full_hold = held_full || (b.full_hold && b.status.state == FlightState::Arming);
         self.after_tick(was);
         if self.boot.ticks % TICKS_PER_PERIOD == 0 {
             self.period();
@@ -380,19 +416,17 @@ impl Bench {
         }
         if now.state == FlightState::Armed && !matches!(was.state, FlightState::Armed | FlightState::FailsafeLevel) {
             self.counts.arms += 1;
-            let hold = match b.cfg.supervisor {
-                SupervisorConfig::Safe(s) => s.arm_hold_ticks,
-                SupervisorConfig::Reference => 1,
-            };
-            // The gesture arms once released (or at once with the reference): held at least
-            // the hold time, the sticks back at rest a moment ago at most.
-            if !(b.arm_rest_ticks <= 200 && b.arm_held_ticks >= hold) {
+            if b.arm_ok_ago > RADIO_LAG_TICKS {
                 self.checker.violate(
                     Invariant::ArmedOnlyByGesture,
                     t,
                     format!(
-                        "{:?} -> Armed with the pilot's arm gesture held {} ticks (hold {hold}), released {} ticks ago, at rest for {}",
-                        was.state, b.arm_held_ticks, b.arm_released_ticks, b.arm_rest_ticks
+                        "{:?} -> Armed with the pilot's arm gesture held {} ticks (hold {}), released {} ticks ago, at rest for {}",
+                        was.state,
+                        b.arm_held_ticks,
+                        b.arm_hold_ticks(),
+                        b.arm_released_ticks,
+                        b.arm_rest_ticks
                     ),
                 );
             }
@@ -452,6 +486,9 @@ impl Bench {
         let now_ms = b.now_ms();
         b.task.observe(now_ms, &observed);
         let rx: Vec<u8> = b.rx.drain(..).collect();
+        // The station takes or refuses a set by the status it observed just now.
+        self.checker.on_received(self.uplink_delivered, self.boot.status.state.changes_restricted());
+        let b = &mut self.boot;
         b.task.receive(now_ms, &rx);
         b.mavlink_on = b.mavlink_on || b.task.speaks_mavlink_from_boot() || b.task.heard();
         if !b.mavlink_on {

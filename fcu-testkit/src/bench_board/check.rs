@@ -4,9 +4,13 @@
 //! The ground station's view of the parameters (`model`) starts from what the board loaded and
 //! changes only by what the board confirmed: a PARAM_VALUE carrying a value a PARAM_SET asked
 //! for (applied to the model with fcu-core's table rules, so a set that moves another
-//! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. An
-//! answer the transmit queue dropped is caught up with when the value shows up later (a report,
-//! a save, a load).
+//! parameter moves it there too), and a PREFLIGHT_STORAGE reset acknowledged as accepted. The
+//! board takes sets in the order they came, by the rules in force when its link task received
+//! them (armed or not): a set confirmed means the sets before it were taken or refused first.
+//! Each report shows the board where the one before it did or later, and the model goes no
+//! further through the pending sets than a report needs. An
+//! answer the transmit queue dropped, or owed and folded into a later one, is caught up with
+//! when the value shows up later (a report, a save, a load).
 
 use std::collections::VecDeque;
 
@@ -87,6 +91,31 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
     }
 }
 
+/// A PARAM_SET the ground station sent and has not seen confirmed yet.
+#[derive(Clone, Copy, Debug)]
+struct PendingSet {
+    index: usize,
+    value: f32,
+    /// Where its frame starts and ends in the bytes sent.
+    start: u64,
+    end: u64,
+    /// Whether changes were restricted (armed) when the board's link task received the whole
+    /// frame; `None` while it has not.
+    restricted: Option<bool>,
+}
+
+impl PendingSet {
+    /// `cfg` as the board leaves it taking this set, or `None` when the table refuses it.
+    fn taken(&self, cfg: &Config) -> Option<Config> {
+        let mut next = *cfg;
+        parameters::set(&mut next, self.index, self.value, self.restricted.unwrap_or(false)).ok().map(|_| next)
+    }
+
+    fn asks(&self, i: usize, value: f32) -> bool {
+        self.index == i && self.value.to_bits() == value.to_bits()
+    }
+}
+
 /// Keeps at most this many violations of each invariant.
 const KEEP: usize = 4;
 
@@ -94,9 +123,8 @@ const KEEP: usize = 4;
 pub struct Checker {
     defaults: &'static Config,
     model: Config,
-    /// PARAM_SETs sent and not confirmed yet: (index, value, where the frame starts in the
-    /// bytes sent).
-    pending_sets: Vec<(usize, f32, u64)>,
+    /// PARAM_SETs sent and not confirmed yet, in the order sent.
+    pending_sets: Vec<PendingSet>,
     /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, where they
     /// start, and whether a reset among them was already seen done (in a save ahead of its
     /// acknowledgement).
@@ -179,7 +207,7 @@ impl Checker {
         match *frame {
             GcsFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
-                    self.pending_sets.push((i, value, at));
+                    self.pending_sets.push(PendingSet { index: i, value, start: at, end: self.sent_bytes, restricted: None });
                 }
             }
             GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
@@ -187,97 +215,140 @@ impl Checker {
         }
     }
 
-    /// The board confirmed parameter `i` at `value`, a PARAM_SET having asked for it; `ahead`
-    /// when that showed in a save or a load before the answers queued ahead of it went out
-    /// (the link goes quiet before a save or a reboot): those may still report the values it
-    /// replaced.
-    fn accept(&mut self, i: usize, value: f32, ahead: bool, at: u64) {
-        let before = parameters::values(&self.model);
-        if let Some(pos) = self.pending_sets.iter().position(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
-            // Older sets of the same parameter were answered before it, one way or the other
-            // (taken and replaced, when their answers are still queued).
-            if ahead {
-                for &(j, v, _) in self.pending_sets.iter().take(pos) {
-                    if j == i {
-                        self.stale.push((j, v.to_bits()));
-                    }
-                }
-            }
-            // The board took them in order, so their side effects stand: an RCMAP set swaps
-            // another channel, which the later set of the same parameter does not undo.
-            let earlier: Vec<f32> = self.pending_sets.iter().take(pos).filter(|&&(j, _, _)| j == i).map(|&(_, v, _)| v).collect();
-            for v in earlier {
-                let mut next = self.model;
-                if parameters::set(&mut next, i, v, false).is_ok() {
-                    self.model = next;
-                }
-            }
-            let mut k = 0;
-            self.pending_sets.retain(|&(j, _, _)| {
-                let keep = j != i || k > pos;
-                k += 1;
-                keep
-            });
+    /// The board's link task received the first `delivered` bytes the ground station sent,
+    /// with changes restricted or not (armed, as the status it last observed says): it took or
+    /// refused every PARAM_SET among them by the rules in force then.
+    pub fn on_received(&mut self, delivered: u64, restricted: bool) {
+        for set in self.pending_sets.iter_mut().filter(|s| s.end <= delivered && s.restricted.is_none()) {
+            set.restricted = Some(restricted);
         }
-        let mut next = self.model;
-        match parameters::set(&mut next, i, value, false) {
-            Ok(_) => self.model = next,
-            Err(r) => self.violate(
-                Invariant::AcceptedIsReportedSavedLoaded,
-                at,
-                format!("the board took {} = {value}, which the table refuses in the set it reported: {}", name(i), r.rule),
-            ),
+    }
+
+    /// The board confirmed the pending set at `pos` (its answer, a value only it explains, a
+    /// save or a load showing it). It took the sets before it first, in the order they came,
+    /// each changing the parameters as the table has it (a refused one nothing): their side
+    /// effects stand (an RCMAP set swaps another channel, which a later set does not undo), and
+    /// their answers went out or were folded into later ones (an answer the transmit queue has
+    /// no room for is owed, and carries the value in force when it goes). `ahead` when this
+    /// showed in a save or a load before the answers queued ahead of it went out (the link goes
+    /// quiet before a save or a reboot): those may still report any value it replaced on the way.
+    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) {
+        self.pass(pos, ahead);
+        if self.pending_sets.is_empty() {
+            return;
+        }
+        let last = self.pending_sets.remove(0);
+        match last.taken(&self.model) {
+            Some(next) => self.step_to(next, ahead),
+            None => {
+                // The reason, as the table gives it.
+                let mut next = self.model;
+                let rule =
+                    parameters::set(&mut next, last.index, last.value, last.restricted.unwrap_or(false)).err().map_or("", |r| r.rule);
+                self.violate(
+                    Invariant::AcceptedIsReportedSavedLoaded,
+                    at,
+                    format!("the board took {} = {}, which the table refuses in the set it reported: {rule}", name(last.index), last.value),
+                );
+            }
         }
         self.accepted_sets += 1;
-        let v = parameters::values(&self.model);
+    }
+
+    /// The first `count` pending sets, as the board took them: each changes the model when the
+    /// table takes it; `ahead` as in [`Checker::take_through`].
+    fn pass(&mut self, count: usize, ahead: bool) {
+        let end = count.min(self.pending_sets.len());
+        let passed: Vec<PendingSet> = self.pending_sets.drain(..end).collect();
+        for set in passed {
+            if let Some(next) = set.taken(&self.model) {
+                self.step_to(next, ahead);
+            }
+        }
+    }
+
+    /// The model moves to `next`, a set the board had in force; `ahead` as in
+    /// [`Checker::take_through`].
+    fn step_to(&mut self, next: Config, ahead: bool) {
+        let (old, new) = (parameters::values(&self.model), parameters::values(&next));
         if ahead {
-            for (j, (old, new)) in before.iter().zip(v.iter()).enumerate() {
-                if old.to_bits() != new.to_bits() {
-                    self.stale.push((j, old.to_bits()));
+            for (j, (o, n)) in old.iter().zip(new.iter()).enumerate() {
+                if o.to_bits() != n.to_bits() {
+                    self.stale.push((j, o.to_bits()));
                 }
             }
         }
-        self.remember(&v);
+        self.model = next;
+        self.remember(&new);
     }
 
-    /// A PARAM_VALUE of `i` carrying the value in force answers the oldest set of `i` still
-    /// pending, when that set asked for this value (taken, nothing changed) or for one the table
-    /// refuses (the board echoes the value in force): the board answers a parameter's sets in
-    /// the order they came. A later set of the same value stays pending, as do sets this
-    /// answer cannot be for (a read's answer, a report of another set's swap).
-    fn answered_in_force(&mut self, i: usize, value: f32) {
-        let Some(pos) = self.pending_sets.iter().position(|&(j, _, _)| j == i) else {
-            return;
-        };
-        let Some(&(_, asked, _)) = self.pending_sets.get(pos) else {
-            return;
-        };
-        let mut next = self.model;
-        let refused = parameters::set(&mut next, i, asked, false).is_err();
-        if asked.to_bits() == value.to_bits() || refused {
-            self.pending_sets.remove(pos);
+    /// Where the board may have been when it reported parameter `i` at `value`: how many of the
+    /// pending sets it had taken, the fewest that explain it (0: the model as it is). The
+    /// answers leave in the order they were queued, each with the value in force then, so a
+    /// report shows the board where the one before it did or later; the board takes the sets
+    /// in the order they came (only those it received), and an answer it has no room for is
+    /// owed and goes later, in index order, with the value then in force. Two sets of one
+    /// RCMAP, say, each a swap, move a third channel where neither alone would, and that
+    /// channel's report comes first. Committing to no more than the fewest sets keeps a report
+    /// that matches several points (a swap undone before its answers went out shows the map as
+    /// it was) from skipping sets that a later report needs.
+    fn matched_after(&self, i: usize, value: f32) -> Option<usize> {
+        let matches = |cfg: &Config| parameters::value(cfg, i).is_some_and(|x| x.to_bits() == value.to_bits());
+        if matches(&self.model) {
+            return Some(0);
         }
+        let mut cfg = self.model;
+        for (k, set) in self.pending_sets.iter().enumerate() {
+            set.restricted?;
+            if let Some(next) = set.taken(&cfg) {
+                cfg = next;
+                if matches(&cfg) {
+                    return Some(k + 1);
+                }
+            }
+        }
+        None
     }
 
-    /// The pending set of another parameter that, taken now, would move parameter `i` to
-    /// `value`.
-    fn moved_by_pending(&self, i: usize, value: f32) -> Option<(usize, f32)> {
-        self.pending_sets.iter().find_map(|&(j, v, _)| {
-            let mut next = self.model;
-            let moved = j != i
-                && parameters::set(&mut next, j, v, false).is_ok()
-                && parameters::value(&next, i).is_some_and(|x| x.to_bits() == value.to_bits());
-            moved.then_some((j, v))
-        })
+    /// A report of parameter `i` at `value` that only a pending reset of the parameters
+    /// explains, its acknowledgement dropped (the transmit queue drops an answer it has no
+    /// room for) or still queued: the model takes the sets before the reset, the reset, and as
+    /// many sets after it as the report needs. False, and nothing changed, when the reset does
+    /// not explain it either.
+    fn reset_explains(&mut self, i: usize, value: f32, at: u64) -> bool {
+        let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
+            return false;
+        };
+        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        let before = self.clone();
+        let before_reset = self.pending_sets.iter().filter(|s| s.start < reset_at).count();
+        self.pass(before_reset, false);
+        let defaults = *self.defaults;
+        self.step_to(defaults, false);
+        match self.matched_after(i, value) {
+            Some(0) => {}
+            Some(m) => self.take_through(m - 1, false, at),
+            None => {
+                *self = before;
+                return false;
+            }
+        }
+        if let Some(entry) = self.pending_storage.get_mut(k) {
+            entry.2 = true;
+        }
+        true
     }
 
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
-    /// a value a PARAM_SET asked for, the board took it.
-    fn reconcile(&mut self, values: &[f32; COUNT], at: u64) {
+    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it.
+    fn reconcile(&mut self, values: &[f32; COUNT], from: u64, at: u64) {
         for (i, v) in values.iter().enumerate() {
             let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
-            if differs && self.pending_sets.iter().any(|&(j, p, _)| j == i && p.to_bits() == v.to_bits()) {
-                self.accept(i, *v, true, at);
+            if !differs {
+                continue;
+            }
+            if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
+                self.take_through(pos, true, at);
             }
         }
     }
@@ -301,38 +372,39 @@ impl Checker {
                         format!("PARAM_VALUE {reported} with the index of {}", name(i)),
                     );
                 }
-                if current.to_bits() == value.to_bits() {
-                    self.answered_in_force(i, *value);
-                    // Answered in order: what was queued before the value in force is out.
-                    self.stale.retain(|&(j, _)| j != i);
-                } else if self.stale.contains(&(i, value.to_bits())) {
+                if current.to_bits() != value.to_bits() && self.stale.contains(&(i, value.to_bits())) {
                     // Queued before a save or a load showed the value that replaced it.
-                } else if self.pending_sets.iter().any(|&(j, v, _)| j == i && v.to_bits() == value.to_bits()) {
-                    self.accept(i, *value, false, at);
-                } else if let Some((j, v)) = self.moved_by_pending(i, *value) {
-                    // Another parameter's set moved this one (an RCMAP swap), its own answer
-                    // after this one or dropped.
-                    self.accept(j, v, false, at);
-                } else if let Some(&(_, asked, _)) = self.pending_sets.iter().find(|&&(j, _, _)| j == i) {
-                    self.violate(
-                        Invariant::AcceptedIsReportedSavedLoaded,
-                        at,
-                        format!(
-                            "a PARAM_SET of {} = {asked} answered with {value}: neither the value asked for nor the one in force ({current})",
-                            name(i)
+                    return;
+                }
+                match self.matched_after(i, *value) {
+                    Some(0) => {
+                        // Answered in order: what was queued before the value in force is out.
+                        self.stale.retain(|&(j, _)| j != i);
+                    }
+                    Some(k) => self.take_through(k - 1, false, at),
+                    None if self.reset_explains(i, *value, at) => {}
+                    None => match self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
+                        Some(asked) => self.violate(
+                            Invariant::AcceptedIsReportedSavedLoaded,
+                            at,
+                            format!(
+                                "a PARAM_SET of {} = {asked} answered with {value}: neither the value asked for nor the one in force ({current})",
+                                name(i)
+                            ),
                         ),
-                    );
-                } else {
-                    self.violate(
-                        Invariant::AcceptedIsReportedSavedLoaded,
-                        at,
-                        format!("the board reports {} = {value}; the value it accepted is {current}", name(i)),
-                    );
+                        None => self.violate(
+                            Invariant::AcceptedIsReportedSavedLoaded,
+                            at,
+                            format!("the board reports {} = {value}; the value it accepted is {current}", name(i)),
+                        ),
+                    },
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
-                if let Some((p1, _, seen_done)) = self.pending_storage.pop_front() {
+                if let Some((p1, start, seen_done)) = self.pending_storage.pop_front() {
                     if *result == 0 && p1 == 2.0 && !seen_done {
+                        // The sets before the reset were taken and wiped by it.
+                        self.pending_sets.retain(|s| s.start > start);
                         self.model = *self.defaults;
                         let v = parameters::values(&self.model);
                         self.remember(&v);
@@ -351,9 +423,16 @@ impl Checker {
         let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
             return;
         };
-        let before = self.model;
-        self.model = *self.defaults;
-        self.reconcile(saved, at);
+        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        // Tried: kept only when the save shows it.
+        let before = self.clone();
+        // The sets before the reset were taken, then wiped by it; the answers still queued for
+        // them may report what they set, or what the model had before.
+        let before_reset = self.pending_sets.iter().filter(|s| s.start < reset_at).count();
+        self.pass(before_reset, true);
+        let defaults = *self.defaults;
+        self.step_to(defaults, true);
+        self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
             if let Some(entry) = self.pending_storage.get_mut(k) {
                 entry.2 = true;
@@ -361,7 +440,7 @@ impl Checker {
             let v = parameters::values(&self.model);
             self.remember(&v);
         } else {
-            self.model = before;
+            *self = before;
         }
     }
 
@@ -370,9 +449,16 @@ impl Checker {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
-        self.reconcile(&snap.values, at);
+        let before = self.clone();
+        self.reconcile(&snap.values, 0, at);
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+            // Tried from before the catching up: sets sent after a reset must not be taken on the
+            // set it wiped.
+            let reconciled = std::mem::replace(self, before);
             self.reset_seen_in(&snap.values, at);
+            if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+                *self = reconciled;
+            }
         }
         let model = parameters::values(&self.model);
         if bits(&snap.values) != bits(&model) {
@@ -423,7 +509,7 @@ impl Checker {
             }
         }
         if kind == BootKind::Reset {
-            self.reconcile(&loaded, at);
+            self.reconcile(&loaded, 0, at);
             let model = parameters::values(&self.model);
             if bits(&model) != bits(&loaded) {
                 let d = first_difference(&loaded, &model);
@@ -437,7 +523,7 @@ impl Checker {
             self.violate(invariant, at, what);
         }
         self.model = *cfg;
-        self.pending_sets.retain(|&(_, _, start)| start >= delivered_bytes);
+        self.pending_sets.retain(|s| s.start >= delivered_bytes);
         self.stale.clear();
         self.pending_storage.retain(|&(_, start, _)| start >= delivered_bytes);
         self.remember(&loaded);
@@ -459,8 +545,10 @@ mod tests {
     fn a_loaded_mix_of_two_sets_in_force_is_a_violation() {
         let mut c = Checker::new(&DEFAULTS);
         let (roll, angle) = (index("RATE_RLL_P"), index("ANGLE_MAX"));
-        for (i, v) in [(roll, 100.0), (angle, 30.0)] {
+        for (k, (i, v)) in [(roll, 100.0), (angle, 30.0)].into_iter().enumerate() {
             c.on_sent(&GcsFrame::ParamSet { name: name16(parameters::name(i).unwrap()), value: v }, 35);
+            // The board received the frame (disarmed) before it answered.
+            c.on_received(35 * (k as u64 + 1), false);
             c.on_answer(&Answer::ParamValue { name: parameters::name(i).unwrap().into(), value: v, index: i as u16 }, 1);
         }
         assert_eq!(c.accepted_sets, 2);
