@@ -88,7 +88,9 @@ impl Image {
             let n = s.name().unwrap_or("");
             let size = s.size() as u32;
             match n {
-                ".vector_table" | ".text" | ".rodata" => flash_bytes += size,
+                // memory.x puts the constants in `.rodata.sector0`.
+                ".vector_table" | ".text" => flash_bytes += size,
+                _ if n.starts_with(".rodata") => flash_bytes += size,
                 ".data" => {
                     flash_bytes += size;
                     ram_bytes += size;

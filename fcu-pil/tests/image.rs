@@ -208,10 +208,7 @@ fn steps_fly_the_same_on_the_image() {
 
 #[test]
 fn link_short_flies_the_same_on_the_image() {
-    // Issue 28, a defect of the core on this base: in ALT_MODE 0 the failsafe descends on the
-    // height estimate, and when the link is back the drone falls from about 1.1 m to the
-    // floor, armed (in-process: fcu-testkit's `short_link_loss_recovers` fails too).
-    same_as_in_process_but("link-short", &["altitude > 0.3 m"]);
+    same_as_in_process("link-short");
 }
 
 #[test]
@@ -257,16 +254,13 @@ fn verdict(passed: bool) -> &'static str {
 /// report read from the STATUS lines.
 #[test]
 fn althold_hover_flies_on_the_image_as_in_process() {
-    // Issue 28: the hold's RMS is 0.073 m in-process against its 0.05 m.
-    same_as_in_process_but("althold-hover", &["height RMS error"]);
+    same_as_in_process("althold-hover");
 }
 
 /// The link-loss failsafe's descent on the height estimate, on the image.
 #[test]
 fn failsafe_descent_flies_on_the_image_as_in_process() {
-    // Issue 28: in-process the touchdown is at 0.502 m/s (≤ 0.5) and the disarm 1.019 s after
-    // it (≤ 1 s).
-    same_as_in_process_but("failsafe-descent", &["touchdown after", "disarmed within"]);
+    same_as_in_process("failsafe-descent");
 }
 
 /// Boot with a sensor that answers a wrong WHO_AM_I: no flight, the FATAL line repeats, the
