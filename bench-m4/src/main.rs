@@ -25,12 +25,12 @@ use cortex_m_semihosting::{debug, hprintln};
 use fcu_core::althold::{AltitudeSettings, Vertical, VerticalCommand, VerticalInput};
 use fcu_core::altitude::{self, AltMode, AltitudeConfig, AltitudeEstimate, AltitudeEstimator, AltitudeStatus};
 use fcu_core::baro::{self, BaroFault, BaroHealthConfig, BaroMonitor, BaroSample, RawBaro};
-use fcu_core::mixer::MixerConfig;
-use fcu_core::rc::StickCounts;
 use fcu_core::flight::{FlightController, OuterJob, TickOutput};
 use fcu_core::imu::RawImu;
 use fcu_core::math::{Quat, Vec3};
+use fcu_core::mixer::MixerConfig;
 use fcu_core::rc::PulseBatch;
+use fcu_core::rc::StickCounts;
 use fcu_core::supervisor::FlightState;
 use fcu_core::Config;
 
