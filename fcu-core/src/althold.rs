@@ -6,7 +6,8 @@
 //! The hold is a cascade run at the outer rate (160 Hz): height error → climb rate (P) →
 //! collective throttle (PI on the climb rate, with the hover throttle as feedforward). Its output
 //! is in throttle stick counts ([`StickCounts`]), the unit the tick's throttle map already reads:
-//! the tick flies it in place of the stick's throttle and does nothing else with it.
+//! the tick flies it in place of the stick's throttle and does nothing else with it. A descent
+//! the stick asks slows near the floor to the failsafe's rate ([`LAND_SLOW_M`]).
 //!
 //! Ground and air:
 //! - armed before the take-off, or after a landing, the drone is on the ground: the estimator
@@ -28,7 +29,7 @@ use crate::rc::StickCounts;
 pub struct HoldConfig {
     /// Climb and descent rate at full stick, m/s.
     pub climb_rate_max_m_s: f32,
-    /// The link-loss failsafe's descent, m/s.
+    /// The link-loss failsafe's descent, and the stick's fastest near the floor, m/s.
     pub fs_descent_rate_m_s: f32,
     /// Throttle stick travel either side of its centre that asks for no climb.
     pub deadband: StickCounts,
@@ -127,6 +128,13 @@ pub const LAND_TIME_S: f32 = 0.5;
 pub const LAND_ACCEL_M_S2: f32 = 0.5;
 pub const LAND_ACCEL_FILTER_S: f32 = 0.1;
 pub const LAND_HEIGHT_M: f32 = 0.75;
+/// The stick's descent slows near the floor (the landing speed, ArduPilot's and PX4's
+/// LAND_SPEED): at most the failsafe's descent rate below this height above the take-off level,
+/// m, which a touchdown at the set rate stays within even with the estimate this far off…
+pub const LAND_SLOW_M: f32 = 0.5;
+/// …rising to the full rate over this much above it, m: the speed target follows the height, so
+/// the throttle has no step (a 1 m/s descent brakes at 1.2 m/s², an eighth of the hover's thrust).
+pub const LAND_SLOW_BAND_M: f32 = 0.5;
 /// The failsafe holds the height this long before it descends, s (the level stage of the
 /// manual failsafe, in which a brief loss comes back).
 pub const FS_LEVEL_S: f32 = 1.0;
@@ -361,6 +369,7 @@ impl Vertical {
                 self.stick_centred = true;
             }
             let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
+            let rate = rate.max(-self.descent_limit_m_s(est.height_m));
             let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
             self.out_average += self.dt_s / (CARRY_AVERAGE_S + self.dt_s) * (t - self.out_average);
             landed = !self.airborne && rate <= 0.0;
@@ -546,6 +555,17 @@ impl Vertical {
     /// Near the take-off level and not moving: the estimate's climb rate and the accelerometer.
     fn still(&self, climb_m_s: f32, height_m: f32) -> bool {
         climb_m_s.abs() < LAND_SPEED_M_S && self.accel_filtered_m_s2.abs() < LAND_ACCEL_M_S2 && height_m < LAND_HEIGHT_M
+    }
+
+    /// The fastest descent the stick may ask at `height_m`, m/s: the failsafe's rate near the
+    /// floor, blended up to the full rate over [`LAND_SLOW_BAND_M`]. Never under the failsafe's
+    /// (at least 0.1 m/s): an estimate that is off, or not a number, slows a landing but never
+    /// stops it short of the floor, where the landing detector must see it.
+    fn descent_limit_m_s(&self, height_m: f32) -> f32 {
+        let h = &self.cfg.hold;
+        let share = (height_m - LAND_SLOW_M) / LAND_SLOW_BAND_M;
+        let share = if share.is_nan() { 0.0 } else { limit(share, 0.0, 1.0) };
+        h.fs_descent_rate_m_s + (h.climb_rate_max_m_s - h.fs_descent_rate_m_s).max(0.0) * share
     }
 
     /// The failsafe descent's time cap from `height_m`, control ticks.

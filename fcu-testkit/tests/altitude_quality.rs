@@ -97,6 +97,24 @@ fn the_failsafe_lands_gently_and_never_stops_the_motors_in_the_air() {
     assert!(t <= scenario::FAILSAFE_TOUCHDOWN_MAX_M_S, "touchdown {t:.3} m/s over the goal");
 }
 
+/// Landing by stick at the bottom in hold: the descent slows near the floor (issue 28's
+/// touchdown goal, the failsafe's), and the motors never stop in the air on any airframe.
+#[test]
+fn the_stick_at_the_bottom_in_hold_lands_gently() {
+    let mut touchdown = Vec::new();
+    for seed in SEEDS {
+        let (log, _, m) = fly("althold-hover", seed);
+        let rule = metrics::check(
+            &log,
+            &Criterion::MotorsOffOnlyBelow { from_s: scenario::ARM_RELEASE_S, max_m: scenario::MOTORS_OFF_MAX_HEIGHT_M },
+        );
+        assert!(rule.passed, "seed {seed}: {}", rule.detail);
+        touchdown.push(m.touchdown_speed_m_s.unwrap_or(f64::NAN));
+    }
+    let t = report("touchdown speed (stick at the bottom in hold)", "m/s", &touchdown);
+    assert!(t <= scenario::STICK_TOUCHDOWN_MAX_M_S, "touchdown {t:.3} m/s over the goal");
+}
+
 #[test]
 fn the_failsafe_disarms_within_1_s_of_the_touchdown() {
     let d = report("disarmed after touchdown (failsafe)", "s", &per_seed("failsafe-descent", |m| m.disarmed_after_touchdown_s));

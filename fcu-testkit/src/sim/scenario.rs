@@ -674,6 +674,9 @@ pub const HOLD_RMS_GUSTS_MAX_M: f64 = 0.15;
 pub const HOLD_DRIFT_MAX_M: f64 = 0.10;
 pub const FAILSAFE_TOUCHDOWN_MAX_M_S: f64 = 0.5;
 pub const FAILSAFE_DISARM_AFTER_TOUCHDOWN_MAX_S: f64 = 1.0;
+/// Landing by stick in hold: the failsafe's touchdown goal, which the hold's slower descent near
+/// the floor (`LAND_SLOW_M`) meets too, m/s.
+pub const STICK_TOUCHDOWN_MAX_M_S: f64 = 0.5;
 pub const MOTORS_OFF_MAX_HEIGHT_M: f64 = 0.3;
 pub const BARO_FAULT_HEIGHT_LOST_MAX_M: f64 = 0.2;
 
@@ -718,6 +721,7 @@ fn althold_hover(name: &str) -> Scenario {
         Criterion::HeightNear { from_s: 10.0, to_s: 40.0, target_m: HOVER_ALT_M, tolerance_m: 0.25 },
         Criterion::HeightRmsBelow { from_s: 10.0, to_s: 40.0, max_m: HOLD_RMS_CALM_MAX_M },
         Criterion::HeightDriftBelow { from_s: 10.0, to_s: 40.0, max_m: HOLD_DRIFT_MAX_M },
+        Criterion::TouchdownSpeedBelow { after_s: 41.0, max_m_s: STICK_TOUCHDOWN_MAX_M_S },
         Criterion::MotorsOffOnlyBelow { from_s: ARM_RELEASE_S, max_m: MOTORS_OFF_MAX_HEIGHT_M },
     ]);
     s
