@@ -32,6 +32,7 @@ mod gcs;
 #[cfg(test)]
 mod gcs_tests;
 mod heading;
+mod in_force;
 mod output;
 mod sensors;
 mod supervision;

@@ -1,7 +1,7 @@
 //! The block of five ticks the outer step runs on: each tick's accelerometer words and the
 //! running sum of the low-passed gyro, handed out as an [`OuterJob`] when the block is full.
 
-use super::supervision::InForce;
+use super::in_force::InForce;
 use crate::filter::{accumulate, BLOCK};
 use crate::imu::{Decoder, Offsets};
 use crate::rc::{StickCounts, Sticks};

@@ -3,6 +3,7 @@
 
 use super::derived::TickParams;
 use super::gcs::{Gcs, TestOutput};
+use super::in_force::InForce;
 use super::sensors::Sensors;
 use crate::althold::VerticalCommand;
 use crate::gcs::GcsInput;
@@ -17,40 +18,6 @@ pub struct ForcedRadio {
     pub link: bool,
     pub armed: bool,
     pub cal_request: bool,
-}
-
-/// The supervisor's last decision and what follows from it and the sticks, kept until the
-/// supervisor decides again.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct InForce {
-    pub(super) decision: Decision,
-    /// The sticks the pipeline flies with: the radio's, or the failsafe's while it holds.
-    pub(super) sticks: Sticks,
-    /// Whether their throttle is low (motors stopped, integrators and yaw reset).
-    pub(super) throttle_low: bool,
-    /// The throttle the sticks (or the failsafe) ask: `sticks.thr` unless the altitude hold
-    /// flies its own ([`VerticalCommand::throttle`]).
-    pub(super) command_thr: StickCounts,
-}
-
-impl InForce {
-    /// A new decision, and what follows from it and the radio's sticks: the one writer of all
-    /// three, written in place (docs/performance.md, «in place»).
-    #[inline(always)]
-    fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams, hold: Option<StickCounts>) {
-        self.decision = decision;
-        self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);
-        self.command_thr = self.sticks.thr;
-        if let Some(t) = hold {
-            self.sticks.thr = t;
-        }
-        self.throttle_low = p.rc.throttle_low(&self.sticks);
-    }
-}
-
-/// The sticks the failsafe flies with: centred (level, no yaw) and the held throttle.
-fn failsafe_sticks(throttle: StickCounts) -> Sticks {
-    Sticks { thr: throttle, ..Sticks::default() }
 }
 
 /// What the radio said besides the sticks and the link: the reference's gestures as its
