@@ -619,3 +619,35 @@ fn sets_after_a_reset_seen_early_are_not_taken_before_it() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
 }
+
+fn command(command: u16, first: f32, fifth: f32) -> Op {
+    Op::Send(GcsFrame::Command { command, params: [first, 0.0, 0.0, 0.0, fifth, 0.0, 0.0], int: false })
+}
+
+/// Found by the fuzzer (its checker, not the board): a reboot accepted, a reset of the
+/// parameters, ALT_DEADBAND_US 255 (the board at its defaults). The board saved the defaults
+/// with the set before the reset's acknowledgement went out; the set alone explained the save,
+/// so the checker took it and left the reset pending, and the reset's acknowledgement then
+/// wiped the set (the report of 255 and the load after the reboot were violations). The board
+/// takes the frames in the order they came: taking a set sent after a reset takes the reset
+/// first. The same cause, other inputs: RATE_RLL_P 984 and RATE_PIT_P 3218.39 after a reset,
+/// LINK_RC_HZ answered with 32 after a reset.
+#[test]
+fn a_set_sent_after_a_reset_is_not_wiped_by_the_reset_acknowledgement() {
+    let deadband = index("ALT_DEADBAND_US");
+    let ops = vec![
+        command(cmd::DO_MOTOR_TEST, 2.0, 1.0),
+        command(cmd::PREFLIGHT_CALIBRATION, 21196.0, 0.0),
+        reboot(),
+        Op::Wait { ms: 40 },
+        command(cmd::PREFLIGHT_CALIBRATION, 1.0, 1.0),
+        command(cmd::PREFLIGHT_STORAGE, 2.0, 0.0),
+        set("ALT_DEADBAND_US", 255.0),
+        command(cmd::PREFLIGHT_CALIBRATION, 2.0, 1.0),
+        Op::Wait { ms: 320 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x7a, ops }.run(&DEFAULTS);
+    assert_eq!((b.counts.saves, b.counts.reboots), (1, 1), "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), deadband), Some(255.0));
+}

@@ -238,6 +238,7 @@ impl Checker {
             return;
         }
         let last = self.pending_sets.remove(0);
+        self.reset_before(last.start, ahead);
         match last.taken(&self.model) {
             Some(next) => self.step_to(next, ahead),
             None => {
@@ -261,9 +262,27 @@ impl Checker {
         let end = count.min(self.pending_sets.len());
         let passed: Vec<PendingSet> = self.pending_sets.drain(..end).collect();
         for set in passed {
+            self.reset_before(set.start, ahead);
             if let Some(next) = set.taken(&self.model) {
                 self.step_to(next, ahead);
             }
+        }
+    }
+
+    /// A set sent from byte `start` is being taken: the board takes the frames in the order
+    /// they came, so a reset of the parameters sent before it was taken first, whatever its
+    /// acknowledgement has not shown yet (the sets before the reset were taken before this
+    /// one). Without it, a save that shows the set, and that the set alone explains (the model
+    /// at the defaults already), left the reset pending, and its acknowledgement wiped the set.
+    fn reset_before(&mut self, start: u64, ahead: bool) {
+        let mut reset = false;
+        for entry in self.pending_storage.iter_mut().filter(|e| e.0 == 2.0 && !e.2 && e.1 < start) {
+            entry.2 = true;
+            reset = true;
+        }
+        if reset {
+            let defaults = *self.defaults;
+            self.step_to(defaults, ahead);
         }
     }
 
@@ -325,6 +344,9 @@ impl Checker {
         self.pass(before_reset, false);
         let defaults = *self.defaults;
         self.step_to(defaults, false);
+        if let Some(entry) = self.pending_storage.get_mut(k) {
+            entry.2 = true;
+        }
         match self.matched_after(i, value) {
             Some(0) => {}
             Some(m) => self.take_through(m - 1, false, at),
@@ -432,6 +454,9 @@ impl Checker {
         self.pass(before_reset, true);
         let defaults = *self.defaults;
         self.step_to(defaults, true);
+        if let Some(entry) = self.pending_storage.get_mut(k) {
+            entry.2 = true;
+        }
         self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
             if let Some(entry) = self.pending_storage.get_mut(k) {
