@@ -651,3 +651,27 @@ fn a_set_sent_after_a_reset_is_not_wiped_by_the_reset_acknowledgement() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), deadband), Some(255.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): under a flood, RCMAP_THROTTLE 1 (a swap
+/// with ROLL: ROLL 3), ALT_POS_P 6.78, a reboot accepted, then RCMAP_ROLL 1 (the swap undone),
+/// which the board took before the reboot's save. The checker caught up with the save in
+/// index order: ROLL matched, ALT_POS_P did not, and taking its set took the THROTTLE swap
+/// before it, which moved ROLL (already looked at) to 3. It now looks again until no set is
+/// taken, and the ROLL set undoes the swap as on the board. The same cause: RCMAP_ROLL 2 and
+/// RCMAP_PITCH 2 around a reboot (`RCMAP_ROLL = 1 against 2 accepted`).
+#[test]
+fn a_swap_taken_while_catching_up_with_a_save_is_undone_by_a_later_set_in_it() {
+    let ops = vec![
+        Op::Flood { ms: 2000 },
+        set("RCMAP_THROTTLE", 1.0),
+        set("ALT_POS_P", 6.781609),
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true }),
+        Op::Wait { ms: 100 },
+        set("RCMAP_ROLL", 1.0),
+        Op::Wait { ms: 200 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x9c, ops }.run(&DEFAULTS);
+    assert_eq!((b.counts.saves, b.counts.reboots), (1, 1), "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
+}

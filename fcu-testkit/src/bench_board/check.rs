@@ -362,15 +362,24 @@ impl Checker {
     }
 
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
-    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it.
+    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it. Taking a set
+    /// takes the ones before it, whose side effects (an RCMAP swap) may move a parameter
+    /// already looked at, so the parameters are looked at again until no set is taken (each
+    /// pass that takes one leaves fewer pending).
     fn reconcile(&mut self, values: &[f32; COUNT], from: u64, at: u64) {
-        for (i, v) in values.iter().enumerate() {
-            let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
-            if !differs {
-                continue;
+        loop {
+            let pending = self.pending_sets.len();
+            for (i, v) in values.iter().enumerate() {
+                let differs = parameters::value(&self.model, i).is_some_and(|m| m.to_bits() != v.to_bits());
+                if !differs {
+                    continue;
+                }
+                if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
+                    self.take_through(pos, true, at);
+                }
             }
-            if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
-                self.take_through(pos, true, at);
+            if self.pending_sets.len() == pending {
+                return;
             }
         }
     }
