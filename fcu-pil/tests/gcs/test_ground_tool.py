@@ -186,7 +186,8 @@ class Served(unittest.TestCase):
             header = f.readline().strip()
         self.assertEqual(header, "t_s,state,armed,link,roll_deg,pitch_deg,yaw_deg,est_roll_deg,est_pitch_deg,"
                                  "roll_target_deg,pitch_target_deg,yaw_target_deg,yaw_rate_dps,m1,m2,m3,m4,alt_m,"
-                                 "battery_v,thr_us")
+                                 "battery_v,thr_us,est_alt_m,alt_target_m,climb_m_s,est_climb_m_s,vmode,alt_mode,"
+                                 "baro_fault")
         last = rows[-1]
         self.assertEqual((last["state"], last["armed"]), ("disarmed", "0"))
         # On the bench: level, motors off, the throttle low (the stick's low end, about 1000 us).
