@@ -229,8 +229,6 @@ pub struct Vertical {
 }
 
 impl Vertical {
-    // Cold (boot and a parameter change), and called from both: one copy in flash.
-    #[inline(never)]
     pub fn new(cfg: AltitudeSettings, tick_hz: f32, mixer: &crate::mixer::MixerConfig) -> Vertical {
         Vertical {
             monitor: BaroMonitor::new(cfg.baro),
@@ -264,7 +262,6 @@ impl Vertical {
     /// New settings (a parameter change): the estimator takes its new time constant and thrust
     /// scale with its state kept (those change only on the ground), the hold its new numbers; the
     /// health check's numbers are no parameter.
-    #[inline(never)]
     pub fn set_config(&mut self, cfg: AltitudeSettings) {
         self.estimator.set_config(cfg.estimator);
         if !self.airborne {

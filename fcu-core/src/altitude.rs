@@ -27,8 +27,6 @@ pub const ISA_EXPONENT: f32 = 0.190_263;
 /// some 400 m of the reference level (`|x|` < 0.05) and 1 mm at 850 m (`|x|` = 0.1), far below
 /// f32's own rounding. A drone flies within a few hundred metres of its take-off level; the
 /// series costs a fraction of `powf`'s instructions and of its 900 bytes of flash.
-// One copy in flash: the estimator calls it from three places.
-#[inline(never)]
 pub fn baro_height_m(pressure_pa: f32, reference_pa: f32) -> f32 {
     if !(pressure_pa > 0.0 && reference_pa > 0.0) {
         return f32::NAN;

@@ -136,9 +136,7 @@ impl Stream {
         period_ms != 0 && (now_ms.wrapping_sub(self.next_ms) as i32) >= 0
     }
 
-    /// The due message went out: the next is due a period later. Out of line: one copy for
-    /// every stream.
-    #[inline(never)]
+    /// The due message went out: the next is due a period later.
     pub(crate) fn sent(&mut self, now_ms: u32, period_ms: u16) {
         let period = u32::from(period_ms);
         self.next_ms =
@@ -343,9 +341,7 @@ impl<const TX: usize> Link<TX> {
     }
 }
 
-/// Counts one more, saturating. Out of line: inlined at each of its twenty-odd counters, its
-/// saturating add cost 60 B more.
-#[inline(never)]
+/// Counts one more, saturating.
 pub(crate) fn bump(counter: &mut u32) {
     *counter = counter.saturating_add(1);
 }

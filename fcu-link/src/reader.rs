@@ -102,9 +102,7 @@ pub struct Frame<'a> {
 impl Frame<'_> {
     /// Payload byte `at`, 0 past the bytes received (MAVLink 2 drops a payload's trailing
     /// zeros). For messages whose fields the link reads as bytes: no decode through the
-    /// crate's generated code, which is a copy of code for each message. Out of line: a call
-    /// is shorter than its bounds check at each of its twenty uses.
-    #[inline(never)]
+    /// crate's generated code, which is a copy of code for each message.
     pub fn byte(&self, at: usize) -> u8 {
         self.payload.get(at).copied().unwrap_or(0)
     }
