@@ -195,9 +195,7 @@ impl FrameReader {
                 }
                 self.len += 1;
                 if self.len == self.header_len() {
-                    // The header is in: the payload length gives the whole frame's.
-                    let total = self.header_len() + usize::from(self.buf[1]) + CRC_LEN;
-                    self.phase = Phase::Frame { need: total };
+                    self.header_in();
                     return None;
                 }
                 if self.len < need {
@@ -233,25 +231,80 @@ impl FrameReader {
         }
     }
 
-    /// Decides on the complete frame in `buf[..len]`.
+    /// The header is in `buf`: it gives the frame's length, or shows that the candidate is no
+    /// frame the link keeps (an unknown incompatibility flag, a message it does not handle, a
+    /// length the message does not allow). Then the header's bytes after the start byte are
+    /// read again: line noise holds start bytes followed by headers that claim any length, up
+    /// to 255 bytes, and trusting that length swallowed the frames that followed it (after a
+    /// burst of noise, a ground station's requests for seconds). A frame of a message the link
+    /// does not handle has its payload hunted through the same way; a start byte in it rarely
+    /// makes a header of a handled message, and a frame that begins within a header dropped is
+    /// found by reading that header's bytes again. The header is at most 10 bytes and the
+    /// shortest frame kept is longer, so reading them again never completes a frame.
+    fn header_in(&mut self) {
+        match self.header_verdict() {
+            Ok(total) => self.phase = Phase::Frame { need: total },
+            Err(counter) => {
+                bump(counter);
+                let mut again = [0u8; V2_HEADER];
+                let n = self.len.saturating_sub(1);
+                for (slot, &byte) in again.iter_mut().zip(self.buf.get(1..self.len).unwrap_or_default()) {
+                    *slot = byte;
+                }
+                self.phase = Phase::Idle;
+                self.len = 0;
+                for &byte in again.get(..n).unwrap_or_default() {
+                    // A header dropped among these reads its own bytes again before the rest
+                    // (a recursion at most nine deep: each level holds fewer bytes).
+                    let _never_whole = self.push(byte);
+                }
+            }
+        }
+    }
+
+    /// The whole frame's length (header, payload, CRC) from the header in `buf`, or the
+    /// counter of the reason it is no frame the link keeps.
+    fn header_verdict(&mut self) -> Result<usize, &mut u32> {
+        let v2 = self.is_v2();
+        let payload_len = usize::from(self.buf[1]);
+        if v2 && self.buf[2] & !IFLAG_SIGNED != 0 {
+            // An unknown incompatibility flag may change the header's layout itself.
+            return Err(&mut self.stats.incompatible);
+        }
+        let Some(handled) = handled_message(self.message_id()) else {
+            return Err(&mut self.stats.unknown_id);
+        };
+        let length_ok = if v2 {
+            payload_len >= 1 && payload_len <= usize::from(handled.v2_max_len)
+        } else {
+            payload_len == usize::from(handled.v1_len)
+        };
+        if !length_ok {
+            return Err(&mut self.stats.bad_length);
+        }
+        Ok(self.header_len() + payload_len + CRC_LEN)
+    }
+
+    fn message_id(&self) -> u32 {
+        if self.is_v2() {
+            u32::from_le_bytes([self.buf[7], self.buf[8], self.buf[9], 0])
+        } else {
+            u32::from(self.buf[5])
+        }
+    }
+
+    /// Decides on the complete frame in `buf[..len]`, whose header [`Self::header_in`] took.
+    /// A bad CRC drops the whole candidate: its header named a message the link handles with
+    /// a length it allows, which noise makes about once in 7,000 MAVLink 1 start bytes (and
+    /// far less often for MAVLink 2, whose message ids are three bytes), so reading its bytes
+    /// again is not worth a second buffer.
     fn finish(&mut self) -> Option<Frame<'_>> {
         let v2 = self.is_v2();
         let payload_len = usize::from(self.buf[1]);
-        let (message_id, sequence, system_id, component_id) = if v2 {
-            if self.buf[2] & !IFLAG_SIGNED != 0 {
-                // An unknown incompatibility flag may change the header's layout itself.
-                bump(&mut self.stats.incompatible);
-                return None;
-            }
-            let id = u32::from_le_bytes([self.buf[7], self.buf[8], self.buf[9], 0]);
-            (id, self.buf[4], self.buf[5], self.buf[6])
-        } else {
-            (u32::from(self.buf[5]), self.buf[2], self.buf[3], self.buf[4])
-        };
-        let Some(handled) = handled_message(message_id) else {
-            bump(&mut self.stats.unknown_id);
-            return None;
-        };
+        let message_id = self.message_id();
+        let (sequence, system_id, component_id) =
+            if v2 { (self.buf[4], self.buf[5], self.buf[6]) } else { (self.buf[2], self.buf[3], self.buf[4]) };
+        let handled = handled_message(message_id)?;
         let header = self.header_len();
         let crc_at = header + payload_len;
         let (Some(covered), Some(&[lo, hi])) = (self.buf.get(1..crc_at), self.buf.get(crc_at..crc_at + 2)) else {
@@ -264,15 +317,6 @@ impl FrameReader {
         }
         if v2 && self.buf[2] & IFLAG_SIGNED != 0 {
             bump(&mut self.stats.signed);
-            return None;
-        }
-        let length_ok = if v2 {
-            payload_len >= 1 && payload_len <= usize::from(handled.v2_max_len)
-        } else {
-            payload_len == usize::from(handled.v1_len)
-        };
-        if !length_ok {
-            bump(&mut self.stats.bad_length);
             return None;
         }
         bump(&mut self.stats.frames);
