@@ -17,6 +17,8 @@ pub const RING_BYTES: usize = 6 * 1024;
 /// DMA2 stream 2, channel 4: USART1_RX (stream 5 is the other choice; 2 is free).
 const STREAM: usize = 2;
 const CHANNEL: u8 = 4;
+/// Reads of EN after clearing it: one byte transfer is a few bus cycles, far fewer than this.
+const EN_READBACK_TRIES: u32 = 1000;
 
 /// The ring, written by the DMA. Atomics: the CPU reads what another bus master wrote, with
 /// no `unsafe`.
@@ -32,10 +34,17 @@ impl UartRx {
     /// Starts the stream and USART1's receive requests. USART1 must be enabled, with RE set,
     /// and DMA2's clock on.
     pub fn start(dma: DMA2, usart: &usart1::RegisterBlock) -> Self {
-        // RM0368 §9.3.18, the stream configuration procedure: stream off, flags cleared,
-        // addresses and count, then the configuration and EN.
+        // RM0368 §9.3.17, the stream configuration procedure: stream off and EN read back as
+        // 0 (a transfer in flight finishes first), flags cleared, addresses and count, then
+        // the configuration and EN. After reset the stream is off and EN reads 0 at once; the
+        // read-back is bounded so that a stream that never stops cannot hang the boot.
         let stream = dma.st(STREAM);
         stream.cr().write(|w| w.en().clear_bit());
+        for _ in 0..EN_READBACK_TRIES {
+            if stream.cr().read().en().bit_is_clear() {
+                break;
+            }
+        }
         dma.lifcr().write(|w| w.cfeif2().clear().cdmeif2().clear().cteif2().clear().chtif2().clear().ctcif2().clear());
         let dr = usart.dr().as_ptr() as u32;
         let memory = RING.as_ptr() as u32;
