@@ -334,6 +334,36 @@ fn the_stick_at_the_bottom_lands_idles_and_the_supervisor_disarms() {
     assert!(!r.decision.motors_enabled);
 }
 
+/// The pilot changes their mind on the floor: the stick raised after the touchdown, before the
+/// landing is detected or after it (the motors idling, the automatic disarm counting), takes the
+/// drone off again, still armed.
+#[test]
+fn the_stick_raised_after_a_landing_takes_off_again_before_the_disarm() {
+    for wait_s in [0.2, 1.0, 3.0] {
+        let mut r = Rig::new(AltMode::Hold);
+        r.take_off_to(1.5);
+        let mut down_for = 0.0;
+        let mut t = 0.0;
+        while down_for < wait_s {
+            r.run(Rig::thr(0), STEP_S);
+            t += STEP_S;
+            assert!(t < 10.0, "no touchdown: {} m", r.plant.z_m);
+            if r.plant.z_m == 0.0 {
+                down_for += STEP_S;
+            }
+        }
+        if wait_s >= 1.0 {
+            assert_eq!(r.cmd.throttle, Some(StickCounts(0)), "{wait_s} s after the touchdown: not idling");
+        }
+        assert_eq!(r.decision.state, FlightState::Armed, "{wait_s} s after the touchdown");
+        let mut peak = 0.0f32;
+        r.watch(Rig::thr(3600), 3.0, |r| peak = peak.max(r.plant.z_m));
+        assert!(peak > 0.8, "{wait_s} s after the touchdown the stick up climbed to {peak} m only");
+        assert_eq!(r.decision.state, FlightState::Armed);
+        assert!(!r.cmd.landed, "climbing, still landed");
+    }
+}
+
 /// Landing by stick (issue 28's goal for the failsafe, 0.5 m/s at the touchdown, now for the
 /// stick too): the stick at the bottom descends at the full rate high up, slows to the failsafe's
 /// rate near the floor without a throttle step, on the nominal airframe, a light one and one 30 %

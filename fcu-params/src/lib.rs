@@ -1015,7 +1015,7 @@ pub static TABLE: [Param; COUNT] = [
         3.0,
         Any,
         Disarmed,
-        "link-loss failsafe with a healthy height estimate: the descent's rate to the landing"
+        "descent rate to a landing: the link-loss failsafe's (with a healthy height estimate), and altitude hold's stick descent below 0.5 m"
     ),
     alt!(
         "ALT_DEADBAND_US",
