@@ -255,7 +255,7 @@ mod app {
         /// What the link task hands the control loop: accepted configuration changes for
         /// both halves, the station's commands (disarm, motor test, calibrations, a save
         /// running) for the control tick.
-        mailbox: crate::link_task::Mailbox,
+        mailbox: fcu_gcs::Mailbox,
         /// Fed by the control tick; stretched by the link task around a flash erase.
         watchdog: Option<Watchdog>,
         /// The UART speaks MAVLink: from boot (the link's protocol parameter), or from the first
@@ -337,7 +337,7 @@ mod app {
             radio_mutes: 0,
             bus,
             latest: None,
-            mailbox: crate::link_task::Mailbox::new(cfg),
+            mailbox: fcu_gcs::Mailbox::new(cfg),
             watchdog,
             mavlink_on: link.speaks_mavlink_from_boot(),
         };

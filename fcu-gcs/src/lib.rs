@@ -9,7 +9,9 @@
 //!   [`fcu_link::Vehicle`], with the rules for what a ground station may ask (fcu-core's, in
 //!   [`fcu_core::gcs`]) and the deferred save and reboot;
 //! - [`Service`]: one period of the link task's work, the link and the station together, and
-//!   the pacing that lets an acknowledgement out before the flash stalls or the board resets.
+//!   the pacing that lets an acknowledgement out before the flash stalls or the board resets;
+//! - [`Mailbox`]: what the link task hands the control loop (a configuration change, the
+//!   commands), taken between ticks, the outer step following the tick.
 // The unit tests run on the host with std (fcu-link's mock vehicle and decoder allocate).
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
@@ -31,8 +33,10 @@
 #[path = "../../fcu-link/tests/support/mod.rs"]
 mod test_support;
 
+pub mod mailbox;
 pub mod service;
 pub mod station;
 
+pub use mailbox::Mailbox;
 pub use service::{Observed, Service, ToControl};
 pub use station::{Due, Station};

@@ -1,0 +1,74 @@
+//! The mailbox between the link task and the control loop: what the tick takes, the outer step
+//! follows; what the tick refuses reaches neither half.
+
+use fcu_core::flight::{ChangeKind, ConfigChange, ControlTick, FlightController};
+use fcu_core::supervisor::SupervisorConfig;
+use fcu_core::Config;
+use fcu_gcs::Mailbox;
+
+fn tick() -> ControlTick {
+    FlightController::new(Config::default()).expect("the default configuration is valid").into_parts().0
+}
+
+fn with_pitch_p(kp: f32) -> Config {
+    let mut cfg = Config::default();
+    cfg.control.pitch.inner_kp = kp;
+    cfg
+}
+
+fn change(cfg: Config) -> Option<ConfigChange> {
+    Some(ConfigChange { cfg, kind: ChangeKind::InFlight })
+}
+
+#[test]
+fn a_change_the_tick_takes_reaches_the_outer_step_once() {
+    let mut tick = tick();
+    let mut mailbox = Mailbox::new(Config::default());
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), None, "nothing posted, nothing for the outer step");
+    mailbox.post(change(with_pitch_p(40.0)), None);
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), Some(with_pitch_p(40.0)));
+    assert_eq!(mailbox.config_for_outer(), None, "taken once");
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), None, "the tick takes a change once");
+}
+
+#[test]
+fn a_newer_change_replaces_one_the_tick_has_not_taken() {
+    let mut tick = tick();
+    let mut mailbox = Mailbox::new(Config::default());
+    mailbox.post(change(with_pitch_p(40.0)), None);
+    mailbox.post(None, None);
+    mailbox.post(change(with_pitch_p(45.0)), None);
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), Some(with_pitch_p(45.0)));
+}
+
+#[test]
+fn a_change_the_tick_refuses_reaches_neither_half_and_the_next_one_is_taken() {
+    let mut tick = tick();
+    let mut mailbox = Mailbox::new(Config::default());
+    // Another kind of supervisor needs a new controller: the tick refuses it.
+    let mut other = Config::default();
+    other.supervisor = SupervisorConfig::Reference;
+    mailbox.post(change(other), None);
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), None, "the outer step must not run a change the tick refused");
+    mailbox.post(change(with_pitch_p(40.0)), None);
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), Some(with_pitch_p(40.0)));
+}
+
+#[test]
+fn a_change_taken_waits_for_the_outer_step_even_if_a_refused_one_follows() {
+    let mut tick = tick();
+    let mut mailbox = Mailbox::new(Config::default());
+    mailbox.post(change(with_pitch_p(40.0)), None);
+    mailbox.deliver_to_tick(&mut tick);
+    let mut other = Config::default();
+    other.supervisor = SupervisorConfig::Reference;
+    mailbox.post(change(other), None);
+    mailbox.deliver_to_tick(&mut tick);
+    assert_eq!(mailbox.config_for_outer(), Some(with_pitch_p(40.0)), "the outer step follows the tick's last taken change");
+}
