@@ -11,9 +11,11 @@ fn tick() -> ControlTick {
 }
 
 fn with_pitch_p(kp: f32) -> Config {
-    let mut cfg = Config::default();
-    cfg.control.pitch.inner_kp = kp;
-    cfg
+    let d = Config::default();
+    Config {
+        control: fcu_core::control::ControlConfig { pitch: fcu_core::control::AxisGains { inner_kp: kp, ..d.control.pitch }, ..d.control },
+        ..d
+    }
 }
 
 fn change(cfg: Config) -> Option<ConfigChange> {
@@ -50,8 +52,7 @@ fn a_change_the_tick_refuses_reaches_neither_half_and_the_next_one_is_taken() {
     let mut tick = tick();
     let mut mailbox = Mailbox::new(Config::default());
     // Another kind of supervisor needs a new controller: the tick refuses it.
-    let mut other = Config::default();
-    other.supervisor = SupervisorConfig::Reference;
+    let other = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
     mailbox.post(change(other), None);
     mailbox.deliver_to_tick(&mut tick);
     assert_eq!(mailbox.config_for_outer(), None, "the outer step must not run a change the tick refused");
@@ -66,8 +67,7 @@ fn a_change_taken_waits_for_the_outer_step_even_if_a_refused_one_follows() {
     let mut mailbox = Mailbox::new(Config::default());
     mailbox.post(change(with_pitch_p(40.0)), None);
     mailbox.deliver_to_tick(&mut tick);
-    let mut other = Config::default();
-    other.supervisor = SupervisorConfig::Reference;
+    let other = Config { supervisor: SupervisorConfig::Reference, ..Config::default() };
     mailbox.post(change(other), None);
     mailbox.deliver_to_tick(&mut tick);
     assert_eq!(mailbox.config_for_outer(), Some(with_pitch_p(40.0)), "the outer step follows the tick's last taken change");
