@@ -223,35 +223,41 @@ pub fn is_newer(a: u32, b: u32) -> bool {
 /// sector and slot. Whole records are at most `2 · SLOTS` consecutive numbers apart (every save
 /// numbers its snapshot after the newest whole record), so "newest" is an order among them.
 fn newest_record(sectors: [&[u32]; 2], before: Option<u32>, ours_only: bool) -> Option<(Record, Location)> {
-    let eligible = |seq: u32| before.is_none_or(|b| is_newer(b, seq));
-    let wanted = |r: &Record| !(ours_only && matches!(r, Record::OtherTable { .. }));
-    let slots = || (0..2).flat_map(|s| (0..SLOTS).map(move |k| Location { sector: s, slot: k }));
-    let words_at = |at: Location| sectors.get(at.sector).copied().unwrap_or(&[]);
-    let seq_at = |at: Location| slot(words_at(at), at.slot).get(SEQ).copied();
     // The CRC of every slot is the cost of a boot and of a save's plan, so the record with the
     // newest number among those that begin with the magic word is checked first: when it is
     // whole, as it nearly always is, no other record can win and none costs a CRC below.
-    let mut likely: Option<(u32, Location)> = None;
-    for at in slots() {
-        let starts = slot(words_at(at), at.slot).first() == Some(&MAGIC);
-        if let (true, Some(seq)) = (starts, seq_at(at)) {
-            if eligible(seq) && likely.is_none_or(|(l, _)| is_newer(seq, l)) {
-                likely = Some((seq, at));
+    let mut likely: Option<(u32, usize, usize)> = None;
+    for (s, words) in sectors.iter().enumerate() {
+        for k in 0..SLOTS {
+            if let [MAGIC, seq, ..] = *slot(words, k) {
+                if before.is_none_or(|b| is_newer(b, seq)) && likely.is_none_or(|(l, _, _)| is_newer(seq, l)) {
+                    likely = Some((seq, s, k));
+                }
             }
         }
     }
-    let mut best: Option<(Record, Location)> =
-        likely.and_then(|(_, at)| inspect(from_slot(words_at(at), at.slot)).filter(wanted).map(|r| (r, at)));
-    for at in slots() {
-        // The sequence word first: a record that could not win costs no CRC.
-        let Some(seq) = seq_at(at) else { continue };
-        let wins =
-            |(r, b): &(Record, Location)| is_newer(seq, r.sequence()) || (seq == r.sequence() && (at.sector, at.slot) < (b.sector, b.slot));
-        if !eligible(seq) || !best.as_ref().is_none_or(wins) {
-            continue;
+    let mut best: Option<(Record, Location)> = None;
+    let consider = |s: usize, k: usize, best: &mut Option<(Record, Location)>| {
+        let words = sectors.get(s).copied().unwrap_or(&[]);
+        match inspect(from_slot(words, k)) {
+            Some(Record::OtherTable { .. }) if ours_only => {}
+            Some(r) => *best = Some((r, Location { sector: s, slot: k })),
+            None => {}
         }
-        if let Some(r) = inspect(from_slot(words_at(at), at.slot)).filter(wanted) {
-            best = Some((r, at));
+    };
+    if let Some((_, s, k)) = likely {
+        consider(s, k, &mut best);
+    }
+    for (s, words) in sectors.iter().enumerate() {
+        for k in 0..SLOTS {
+            // The sequence word first: a record that could not win costs no CRC. Of two with
+            // one number, the lower place wins.
+            let Some(&seq) = slot(words, k).get(SEQ) else { continue };
+            let wins =
+                best.as_ref().is_none_or(|(r, at)| is_newer(seq, r.sequence()) || (seq == r.sequence() && (s, k) < (at.sector, at.slot)));
+            if before.is_none_or(|b| is_newer(b, seq)) && wins {
+                consider(s, k, &mut best);
+            }
         }
     }
     best
