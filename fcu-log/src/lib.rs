@@ -133,6 +133,37 @@ fn or_empty(v: f64, decimals: usize) -> String {
 }
 
 impl LogRow {
+    /// An armed, level row at `t_s` with nothing happening: motors at 900 counts, 1 m up, the
+    /// battery at 4 V, the throttle at 1500 µs, the vertical columns absent. What tests of the
+    /// metrics and the plot build their logs from, changing the columns they look at.
+    pub fn steady(t_s: f64) -> LogRow {
+        LogRow {
+            t_s,
+            state: FlightState::Armed,
+            armed: true,
+            link_tx: true,
+            link_core: true,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+            yaw_rate_dps: 0.0,
+            est_roll_deg: 0.0,
+            est_pitch_deg: 0.0,
+            roll_target_deg: 0.0,
+            pitch_target_deg: 0.0,
+            yaw_target_deg: 0.0,
+            yaw_rate_cmd_dps: 0.0,
+            motors: [900; 4],
+            alt_m: 1.0,
+            battery_v: 4.0,
+            thr_us: 1500.0,
+            calibrated: true,
+            calibrating: false,
+            calibration_restarts: 0,
+            vertical: Vertical::ABSENT,
+        }
+    }
+
     /// This row as one line of the flight's CSV (under [`CSV_HEADER`]).
     pub fn write_csv(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
         let r = self;

@@ -239,34 +239,6 @@ fn state_panel(area: &Panel<'_>, rows: &[&LogRow], t_end: f64) -> Result<(), Str
 mod tests {
     use super::*;
 
-    fn row(t_s: f64) -> LogRow {
-        LogRow {
-            t_s,
-            state: FlightState::Armed,
-            armed: true,
-            link_tx: true,
-            link_core: true,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            yaw_deg: 0.0,
-            yaw_rate_dps: 0.0,
-            est_roll_deg: 0.0,
-            est_pitch_deg: 0.0,
-            roll_target_deg: 0.0,
-            pitch_target_deg: 0.0,
-            yaw_target_deg: 0.0,
-            yaw_rate_cmd_dps: 0.0,
-            motors: [900; 4],
-            alt_m: 1.0,
-            battery_v: 4.0,
-            thr_us: 1500.0,
-            calibrated: true,
-            calibrating: false,
-            calibration_restarts: 0,
-            vertical: crate::Vertical::ABSENT,
-        }
-    }
-
     /// The `points` of every polyline drawn in `color` (`#RRGGBB`).
     fn polylines(svg: &str, color: &str) -> Vec<usize> {
         svg.split("<polyline ")
@@ -283,7 +255,7 @@ mod tests {
         let rows: Vec<LogRow> = (0..1000)
             .map(|k| {
                 let t = f64::from(k) / 100.0;
-                let mut r = row(t);
+                let mut r = LogRow::steady(t);
                 let held = (2.0..4.0).contains(&t) || (6.0..8.0).contains(&t);
                 r.vertical = crate::Vertical {
                     est_alt_m: 1.01,

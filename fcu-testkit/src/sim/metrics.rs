@@ -486,31 +486,7 @@ mod tests {
         let rows = (1..=(secs * TICK_HZ).round() as usize)
             .map(|k| {
                 let t_s = k as f64 / TICK_HZ;
-                let mut r = LogRow {
-                    t_s,
-                    state: FlightState::Armed,
-                    armed: true,
-                    link_tx: true,
-                    link_core: true,
-                    roll_deg: 0.0,
-                    pitch_deg: 0.0,
-                    yaw_deg: 0.0,
-                    yaw_rate_dps: 0.0,
-                    est_roll_deg: 0.0,
-                    est_pitch_deg: 0.0,
-                    roll_target_deg: 0.0,
-                    pitch_target_deg: 0.0,
-                    yaw_target_deg: 0.0,
-                    yaw_rate_cmd_dps: 0.0,
-                    motors: [900; 4],
-                    alt_m: 1.0,
-                    battery_v: 4.0,
-                    thr_us: 1500.0,
-                    calibrated: true,
-                    calibrating: false,
-                    calibration_restarts: 0,
-                    vertical: Vertical { climb_m_s: 0.0, ..Vertical::ABSENT },
-                };
+                let mut r = LogRow { vertical: Vertical { climb_m_s: 0.0, ..Vertical::ABSENT }, ..LogRow::steady(t_s) };
                 f(t_s, &mut r);
                 r
             })
