@@ -474,7 +474,6 @@ pub fn lines(m: &Metrics) -> Vec<(&'static str, String)> {
 
 #[cfg(test)]
 mod tests {
-    use fcu_core::supervisor::FlightState;
 
     use super::*;
     use crate::sim::{plant::PlantParams, Profile, Vertical};
