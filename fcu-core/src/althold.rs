@@ -287,9 +287,40 @@ impl Vertical {
     /// One outer step: the burst read since the last (`baro`), the attitude and the block's mean
     /// accelerometer (body mg, offsets removed), and the flight state.
     pub fn step(&mut self, baro: Option<RawBaro>, quat: Quat, accel_mg: Vec3, i: &VerticalInput) -> (VerticalCommand, AltitudeStatus) {
-        // 1. The barometer's health. A fault is reported until a healthy sample comes (the
-        // check names it only on the samples it judges); a spike is a sample not used, not a
-        // sick sensor: it does not make the estimate unhealthy.
+        let pressure = self.take_baro(baro);
+        let baro_fault = self.last_fault;
+        let was_failsafe = self.follow_flight_state(i);
+        let est = self.estimate(pressure, quat, accel_mg, i);
+        let healthy = self.healthy();
+
+        // The hold, or the stick (with what the hold gave carried until the stick crosses it).
+        let hold_wanted = healthy && i.motors_enabled && (self.cfg.mode == AltMode::Hold || i.failsafe);
+        let (throttle, landed) =
+            if hold_wanted { self.held_throttle(&est, i) } else { (self.stick_throttle(was_failsafe, &est, i), false) };
+        self.has_flown |= self.airborne;
+        let throttle = throttle.map(|t| StickCounts(limit(t, 0.0, f32::from(i.full_scale.0) * 2.0) as i16));
+
+        let descent_cap_ticks = if healthy && i.motors_enabled { self.descent_cap_ticks(est.height_m) } else { 0 };
+        let status = AltitudeStatus {
+            mode: self.cfg.mode,
+            holding: hold_wanted,
+            failsafe_descent: hold_wanted && i.failsafe,
+            height_m: est.height_m,
+            climb_m_s: est.vertical_speed_m_s,
+            target_m: if hold_wanted { self.engaged } else { None },
+            pressure_pa: self.pressure_pa,
+            temperature_c: self.temperature_c,
+            baro_fault,
+            estimate_healthy: healthy,
+        };
+        (VerticalCommand { throttle, descent_cap_ticks, landed }, status)
+    }
+
+    /// The barometer's health, and its pressure if this step has a sample to use. A fault is
+    /// reported until a healthy sample comes (the check names it only on the samples it
+    /// judges); a spike is a sample not used, not a sick sensor: it does not make the estimate
+    /// unhealthy.
+    fn take_baro(&mut self, baro: Option<RawBaro>) -> Option<f32> {
         let pressure = match self.monitor.check(baro) {
             Ok(Some(s)) => {
                 self.pressure_pa = Some(s.pressure_pa);
@@ -310,9 +341,12 @@ impl Vertical {
         if !sick {
             self.since_fault_steps = self.since_fault_steps.saturating_add(1);
         }
-        let baro_fault = self.last_fault;
+        pressure
+    }
 
-        // 2. Arming: the take-off point is here.
+    /// Arming makes the take-off point here; disarmed, nothing flies. Returns whether the last
+    /// step was in the failsafe.
+    fn follow_flight_state(&mut self, i: &VerticalInput) -> bool {
         if i.motors_enabled && !self.was_enabled {
             self.estimator.rezero();
             self.airborne = false;
@@ -329,8 +363,12 @@ impl Vertical {
         self.was_enabled = i.motors_enabled;
         let was_failsafe = self.failsafe_steps > 0;
         self.failsafe_steps = if i.failsafe { self.failsafe_steps.saturating_add(1) } else { 0 };
+        was_failsafe
+    }
 
-        // 3. The estimate, on the ground state of the last step and the throttle flown.
+    /// The estimate, on the ground state of the last step and the throttle flown, and the
+    /// vertical acceleration the landing check filters.
+    fn estimate(&mut self, pressure: Option<f32>, quat: Quat, accel_mg: Vec3, i: &VerticalInput) -> AltitudeEstimate {
         let accel_up = vertical_accel_m_s2(quat, accel_mg);
         let thrust = self.thrust_share(i.flown, i.min_throttle);
         if let (Some(p), true) = (pressure, i.motors_enabled && !self.airborne) {
@@ -346,75 +384,59 @@ impl Vertical {
         }
         let on_ground = !i.motors_enabled || !self.airborne;
         let est = self.estimator.update(accel_up, pressure, thrust, on_ground);
-        let healthy = self.healthy();
         let accel = accel_up - est.accel_bias_m_s2;
         if accel.is_finite() {
             self.accel_filtered_m_s2 += self.dt_s / (LAND_ACCEL_FILTER_S + self.dt_s) * (accel - self.accel_filtered_m_s2);
         }
+        est
+    }
 
-        // 4. The hold, or the stick (with what the hold gave carried until the stick crosses it).
-        let hold_wanted = healthy && i.motors_enabled && (self.cfg.mode == AltMode::Hold || i.failsafe);
-        let mut landed = false;
-        let throttle = if hold_wanted {
-            if self.engaged.is_none() {
-                // On the ground the stick takes off at once; in the air it must come to the
-                // dead band first.
-                self.stick_centred = !self.airborne;
-            }
-            let rate = self.rate_asked(i);
-            if rate == 0.0 {
-                self.stick_centred = true;
-            }
-            let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
-            let rate = rate.max(-self.descent_limit_m_s(est.height_m));
-            let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
-            self.out_average += self.dt_s / (CARRY_AVERAGE_S + self.dt_s) * (t - self.out_average);
-            landed = !self.airborne && rate <= 0.0;
-            Some(t)
+    /// The hold's throttle (the failsafe's descent included), and whether it has landed.
+    fn held_throttle(&mut self, est: &AltitudeEstimate, i: &VerticalInput) -> (Option<f32>, bool) {
+        if self.engaged.is_none() {
+            // On the ground the stick takes off at once; in the air it must come to the
+            // dead band first.
+            self.stick_centred = !self.airborne;
+        }
+        let rate = self.rate_asked(i);
+        if rate == 0.0 {
+            self.stick_centred = true;
+        }
+        let rate = if self.stick_centred || i.failsafe { rate } else { 0.0 };
+        let rate = rate.max(-self.descent_limit_m_s(est.height_m));
+        let t = self.hold(rate, est.height_m, est.vertical_speed_m_s, i);
+        self.out_average += self.dt_s / (CARRY_AVERAGE_S + self.dt_s) * (t - self.out_average);
+        (Some(t), !self.airborne && rate <= 0.0)
+    }
+
+    /// Without the hold: the stick's throttle (`None`), or the hold's thrust carried until
+    /// the stick crosses it, or idle on the ground in hold without an estimate.
+    fn stick_throttle(&mut self, was_failsafe: bool, est: &AltitudeEstimate, i: &VerticalInput) -> Option<f32> {
+        if self.engaged.take().is_some() {
+            // The link back after the failsafe's descent: the stick the pilot holds is live
+            // again, and a stick above the thrust carried (the pilot climbing) takes over at
+            // once; below it, as it comes up to it. Otherwise (a mode change, a barometer
+            // fault) from whichever side the live stick is.
+            let c = self.out_average;
+            let from_below = was_failsafe || f32::from(i.command.0) < c;
+            self.carry = Some((c, from_below));
+        }
+        let carried = self.carry.and_then(|(c, from_below)| {
+            let crossed = if from_below { f32::from(i.command.0) >= c } else { f32::from(i.command.0) <= c };
+            (!crossed).then_some(c)
+        });
+        self.carry = carried.map(|c| (c, self.carry.is_some_and(|(_, b)| b)));
+        // ALT_MODE 1 without a healthy estimate before the take-off: the stick means "hold"
+        // (its centre is several times the hover), so it takes nothing off the ground; the
+        // motors idle and the automatic disarm counts.
+        let grounded = self.cfg.mode == AltMode::Hold && i.motors_enabled && !self.has_flown && carried.is_none();
+        let flown = if grounded { 0.0 } else { carried.unwrap_or(f32::from(i.command.0)) };
+        self.manual_ground_state(flown, est, i);
+        if grounded {
+            Some(0.0)
         } else {
-            if self.engaged.take().is_some() {
-                // The link back after the failsafe's descent: the stick the pilot holds is
-                // live again, and a stick above the thrust carried (the pilot climbing) takes
-                // over at once; below it, as it comes up to it. Otherwise (a mode change, a
-                // barometer fault) from whichever side the live stick is.
-                let c = self.out_average;
-                let from_below = was_failsafe || f32::from(i.command.0) < c;
-                self.carry = Some((c, from_below));
-            }
-            let carried = self.carry.and_then(|(c, from_below)| {
-                let crossed = if from_below { f32::from(i.command.0) >= c } else { f32::from(i.command.0) <= c };
-                (!crossed).then_some(c)
-            });
-            self.carry = carried.map(|c| (c, self.carry.is_some_and(|(_, b)| b)));
-            // ALT_MODE 1 without a healthy estimate before the take-off: the stick means
-            // "hold" (its centre is several times the hover), so it takes nothing off the
-            // ground; the motors idle and the automatic disarm counts.
-            let grounded = self.cfg.mode == AltMode::Hold && i.motors_enabled && !self.has_flown && carried.is_none();
-            let flown = if grounded { 0.0 } else { carried.unwrap_or(f32::from(i.command.0)) };
-            self.manual_ground_state(flown, &est, i);
-            if grounded {
-                Some(0.0)
-            } else {
-                carried
-            }
-        };
-        self.has_flown |= self.airborne;
-        let throttle = throttle.map(|t| StickCounts(limit(t, 0.0, f32::from(i.full_scale.0) * 2.0) as i16));
-
-        let descent_cap_ticks = if healthy && i.motors_enabled { self.descent_cap_ticks(est.height_m) } else { 0 };
-        let status = AltitudeStatus {
-            mode: self.cfg.mode,
-            holding: hold_wanted,
-            failsafe_descent: hold_wanted && i.failsafe,
-            height_m: est.height_m,
-            climb_m_s: est.vertical_speed_m_s,
-            target_m: if hold_wanted { self.engaged } else { None },
-            pressure_pa: self.pressure_pa,
-            temperature_c: self.temperature_c,
-            baro_fault,
-            estimate_healthy: healthy,
-        };
-        (VerticalCommand { throttle, descent_cap_ticks, landed }, status)
+            carried
+        }
     }
 
     /// The climb rate asked, m/s: the failsafe's (hold, then descend), or the stick's beyond the
@@ -443,46 +465,13 @@ impl Vertical {
         let h = self.cfg.hold;
         let floor = f32::from(i.min_throttle.0) + 1.0;
         let top = f32::from(i.full_scale.0) * 2.0;
-        let flown = f32::from(i.flown.0);
         let entering = self.engaged.is_none();
         if entering {
-            // Entering: the height now is the target; in the air the throttle flown is the
-            // hover (no jump), on the ground the one learned or set.
-            self.engaged = Some(height_m);
-            self.carry = None;
-            self.integral = 0.0;
-            // Motors turning above the throttle cut when the hold takes over (the failsafe, a
-            // mode change): flying, or about to, whatever the ground state thought; the hold
-            // never takes a drone it might be flying for one on the floor.
-            if flown > floor {
-                self.airborne = true;
-                self.land_steps = 0;
-            }
-            if self.airborne {
-                self.hover = limit(flown, floor, top);
-                self.out = self.hover;
-            } else {
-                self.out = 0.0;
-            }
-            self.out_average = self.out;
+            self.engage(height_m, f32::from(i.flown.0), floor, top);
         }
-        let dt = self.dt_s;
         if !self.airborne {
             self.engaged = Some(height_m);
-            if rate > 0.0 {
-                // Take-off: ramp from the bottom to the hover throttle, then the loops fly.
-                let step = self.hover.max(floor) * dt / TAKEOFF_RAMP_S;
-                self.out = (self.out.max(floor) + step).min(top);
-                if self.out >= LIFTOFF_FRACTION * self.hover {
-                    self.airborne = true;
-                    self.land_steps = 0;
-                    // Bumpless: the integral takes what the ramp reached.
-                    self.integral = self.out - self.hover - h.vel_p * (rate - climb_m_s);
-                }
-            } else {
-                self.out = 0.0;
-            }
-            return self.out;
+            return self.take_off(rate, climb_m_s, floor, top);
         }
         // Asked for a rate, the rate is flown and the target is where the drone is; centred, the
         // target stays where the stick came back and the height loop holds it.
@@ -503,27 +492,72 @@ impl Vertical {
         let unlimited = self.hover + self.integral + h.vel_p * error;
         // Integrate unless the throttle is pinned in that direction.
         if !((unlimited >= top && error > 0.0) || (unlimited <= floor && error < 0.0)) {
-            self.integral = limit(self.integral + h.vel_i * error * dt, -self.hover, top);
+            self.integral = limit(self.integral + h.vel_i * error * self.dt_s, -self.hover, top);
         }
         let out = limit(self.hover + self.integral + h.vel_p * error, floor, top);
         self.out = if out.is_finite() { out } else { self.hover };
         if !self.integral.is_finite() {
             self.integral = 0.0;
         }
-        // Landing: asked down, the throttle well under the hover, the height still.
+        self.detect_landing(rate, climb_m_s, height_m);
+        self.out
+    }
+
+    /// Entering the hold: the height now is the target; in the air the throttle flown is the
+    /// hover (no jump), on the ground the one learned or set.
+    fn engage(&mut self, height_m: f32, flown: f32, floor: f32, top: f32) {
+        self.engaged = Some(height_m);
+        self.carry = None;
+        self.integral = 0.0;
+        // Motors turning above the throttle cut when the hold takes over (the failsafe, a
+        // mode change): flying, or about to, whatever the ground state thought; the hold
+        // never takes a drone it might be flying for one on the floor.
+        if flown > floor {
+            self.airborne = true;
+            self.land_steps = 0;
+        }
+        if self.airborne {
+            self.hover = limit(flown, floor, top);
+            self.out = self.hover;
+        } else {
+            self.out = 0.0;
+        }
+        self.out_average = self.out;
+    }
+
+    /// On the ground: idle, or, asked up, the take-off's ramp from the bottom to the hover
+    /// throttle, after which the loops fly.
+    fn take_off(&mut self, rate: f32, climb_m_s: f32, floor: f32, top: f32) -> f32 {
+        if rate > 0.0 {
+            let step = self.hover.max(floor) * self.dt_s / TAKEOFF_RAMP_S;
+            self.out = (self.out.max(floor) + step).min(top);
+            if self.out >= LIFTOFF_FRACTION * self.hover {
+                self.airborne = true;
+                self.land_steps = 0;
+                // Bumpless: the integral takes what the ramp reached.
+                self.integral = self.out - self.hover - self.cfg.hold.vel_p * (rate - climb_m_s);
+            }
+        } else {
+            self.out = 0.0;
+        }
+        self.out
+    }
+
+    /// Landed: asked down, the throttle well under the hover, the height still, for
+    /// [`LAND_TIME_S`]. Then the motors idle.
+    fn detect_landing(&mut self, rate: f32, climb_m_s: f32, height_m: f32) {
         let holding = self.hover + self.integral;
         if rate < 0.0 && self.out < LAND_FRACTION * holding.max(self.hover) && self.still(climb_m_s, height_m) {
             self.land_steps = self.land_steps.saturating_add(1);
         } else {
             self.land_steps = 0;
         }
-        if self.land_steps as f32 * dt >= LAND_TIME_S {
+        if self.land_steps as f32 * self.dt_s >= LAND_TIME_S {
             self.airborne = false;
             self.land_steps = 0;
             self.out = 0.0;
             self.integral = 0.0;
         }
-        self.out
     }
 
     /// Without the hold: airborne once the throttle flown reaches the lift-off share of the
