@@ -395,6 +395,23 @@ pub fn check(log: &FlightLog, c: &Criterion) -> Verdict {
             let first = log.rows.iter().find(|r| r.calibrated).map(|r| r.t_s);
             (first.is_some_and(|f| f <= t_s), format!("calibrated at {}", fmt_opt(first, " s")))
         }
+        Criterion::HeightRmsBelow { .. }
+        | Criterion::HeightDriftBelow { .. }
+        | Criterion::HeightNear { .. }
+        | Criterion::TouchdownSpeedBelow { .. }
+        | Criterion::DisarmedAfterTouchdownWithin { .. }
+        | Criterion::MotorsOffOnlyBelow { .. }
+        | Criterion::HeightLostLeavingHoldBelow { .. }
+        | Criterion::BaroFaultReportedWithin { .. }
+        | Criterion::VerticalModeHolds { .. }
+        | Criterion::VerticalModeSeen { .. } => check_vertical(log, c),
+    };
+    Verdict { criterion: describe(c), passed, detail }
+}
+
+/// The criteria on the height, the landing and the vertical mode ([`check`]'s other half).
+fn check_vertical(log: &FlightLog, c: &Criterion) -> (bool, String) {
+    match *c {
         Criterion::HeightRmsBelow { from_s, to_s, max_m } => {
             let v = height_rms_m(log, from_s, to_s);
             (v.is_some_and(|v| v <= max_m), format!("RMS {}", fmt_opt(v, " m")))
@@ -443,8 +460,8 @@ pub fn check(log: &FlightLog, c: &Criterion) -> Verdict {
             let seen = window(log, from_s, to_s).any(|r| r.vertical.mode == Some(mode));
             (seen, if seen { "seen".into() } else { "not seen".into() })
         }
-    };
-    Verdict { criterion: describe(c), passed, detail }
+        _ => (false, format!("{} is not a criterion on the height", describe(c))),
+    }
 }
 
 pub fn check_all(log: &FlightLog, s: &Scenario) -> Vec<Verdict> {
