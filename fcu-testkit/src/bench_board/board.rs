@@ -406,6 +406,9 @@ impl Bench {
         let b = &mut self.boot;
         let now = b.status;
         let t = self.time_ticks;
+        if self.checker.trace && now.state != was.state {
+            eprintln!("{:>6} ms {:?} -> {:?}", t * u64::from(TICK_US) / 1000, was.state, now.state);
+        }
         let recent = b.arm_released_ticks <= 200;
         if now.state == FlightState::Arming && was.state != FlightState::Arming && !recent {
             self.checker.violate(

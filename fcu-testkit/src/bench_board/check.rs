@@ -91,6 +91,17 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
     }
 }
 
+/// A frame the ground station sent, for a trace.
+fn describe(frame: &GcsFrame) -> String {
+    match frame {
+        GcsFrame::ParamSet { name: n, value } => match parameters::index_of(n) {
+            Some(i) => format!("PARAM_SET {} = {value}", name(i)),
+            None => format!("PARAM_SET (unknown) = {value}"),
+        },
+        other => format!("{other:?}"),
+    }
+}
+
 /// A PARAM_SET the ground station sent and has not seen confirmed yet.
 #[derive(Clone, Copy, Debug)]
 struct PendingSet {
@@ -139,6 +150,9 @@ pub struct Checker {
     violations: Vec<Violation>,
     /// Sets the board confirmed.
     pub accepted_sets: u32,
+    /// Prints every event the checker sees, and its model's verdicts, to stderr (for replaying
+    /// a fuzz input: `cargo run -p fcu-testkit --example boundaries_replay`).
+    pub trace: bool,
 }
 
 impl Checker {
@@ -154,6 +168,7 @@ impl Checker {
             written: Vec::new(),
             violations: Vec::new(),
             accepted_sets: 0,
+            trace: false,
         }
     }
 
@@ -167,6 +182,9 @@ impl Checker {
     }
 
     pub fn violate(&mut self, invariant: Invariant, at_ticks: u64, what: String) {
+        if self.trace {
+            eprintln!("{:>6} ms VIOLATION {invariant:?}: {what}", at_ticks * u64::from(TICK_US) / 1000);
+        }
         if self.violations.iter().filter(|v| v.invariant == invariant).count() < KEEP {
             self.violations.push(Violation { invariant, at_ms: at_ticks * u64::from(TICK_US) / 1000, what });
         }
@@ -204,6 +222,9 @@ impl Checker {
     pub fn on_sent(&mut self, frame: &GcsFrame, bytes: usize) {
         let at = self.sent_bytes;
         self.sent_bytes += bytes as u64;
+        if self.trace && !matches!(frame, GcsFrame::ParamRead { .. }) {
+            eprintln!("          sent @{at}: {}", describe(frame));
+        }
         match *frame {
             GcsFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
@@ -221,6 +242,9 @@ impl Checker {
     pub fn on_received(&mut self, delivered: u64, restricted: bool) {
         for set in self.pending_sets.iter_mut().filter(|s| s.end <= delivered && s.restricted.is_none()) {
             set.restricted = Some(restricted);
+            if self.trace {
+                eprintln!("          received @{}: PARAM_SET {} = {}, restricted {restricted}", set.start, name(set.index), set.value);
+            }
         }
     }
 
@@ -386,6 +410,9 @@ impl Checker {
 
     /// An answer of the board, as it left the link.
     pub fn on_answer(&mut self, answer: &Answer, at: u64) {
+        if self.trace {
+            eprintln!("{:>6} ms answer {answer:?} (pending {})", at * u64::from(TICK_US) / 1000, self.pending_sets.len());
+        }
         match answer {
             Answer::ParamValue { name: reported, value, index } => {
                 let i = usize::from(*index);
@@ -483,6 +510,14 @@ impl Checker {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
+        if self.trace {
+            let d = first_difference(&snap.values, &parameters::values(&self.model));
+            eprintln!(
+                "{:>6} ms saved (sequence {:#x}); first difference from the model: {d}",
+                at * u64::from(TICK_US) / 1000,
+                snap.sequence
+            );
+        }
         let before = self.clone();
         self.reconcile(&snap.values, 0, at);
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
@@ -513,6 +548,9 @@ impl Checker {
     /// unless answered; the frames after them are still on the wire, for the new boot).
     pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, delivered_bytes: u64, at: u64) {
         let loaded = parameters::values(cfg);
+        if self.trace {
+            eprintln!("{:>6} ms boot {kind:?} from {source:?}, {delivered_bytes} bytes delivered", at * u64::from(TICK_US) / 1000);
+        }
         let sectors = flash.sectors();
         let intact: Vec<&Written> = self
             .written
