@@ -675,3 +675,43 @@ fn a_swap_taken_while_catching_up_with_a_save_is_undone_by_a_later_set_in_it() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
 }
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 720 ms, the sticks at
+/// rest for 16 ms, the gesture again for 720 ms, then released; the board armed. A receiver frame
+/// takes the sticks at its start, every 20 ms: no frame started in those 16 ms, so the board was
+/// sent the gesture unbroken for 1.46 s. The checker judged the pilot's sticks, not the frames.
+#[test]
+fn a_release_shorter_than_a_radio_frame_that_no_frame_carried_does_not_break_the_gesture() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 16 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 100 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x52, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
+
+/// The same release, long enough that a frame carries it: the gesture starts again, and two
+/// holds of 720 ms do not arm.
+#[test]
+fn a_release_a_radio_frame_carried_starts_the_arm_gesture_again() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 60 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 100 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x52, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
