@@ -715,3 +715,47 @@ fn a_release_a_radio_frame_carried_starts_the_arm_gesture_again() {
     assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
     assert_holds(&b, Invariant::ArmedOnlyByGesture);
 }
+
+/// Found by the fuzzer (its checker, not the board): a save asked for, then RATE_RLL_I 3218.39,
+/// 3735.63 and 3218.39 again. The board took all three and saved before their answers went
+/// out (the link goes quiet before a save); the answers carry 3218.39, 3735.63, 3218.39, each
+/// the value in force when it was queued. The first answer equals the value in force, and the
+/// checker took it for an answer of the present, forgetting 3735.63 as a value still to come.
+#[test]
+fn a_value_set_back_before_a_save_is_reported_in_the_order_set() {
+    let ops = vec![
+        save(),
+        Op::Wait { ms: 15 },
+        set("RATE_RLL_I", 3218.3909),
+        set("RATE_RLL_I", 3735.632),
+        set("RATE_RLL_I", 3218.3909),
+        set("RATE_PIT_I", 1772.0),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!(b.counts.saves, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_RLL_I")), Some(3218.3909));
+}
+
+/// Found by the fuzzer (its checker, not the board): before a save, RATE_PIT_D 344.83, 459.77,
+/// 344.83 twice, ANGLE_MAX, 459.77. Each set is answered, so 344.83 is reported twice in a
+/// row before 459.77; the checker let each value it knew was past stand for one answer only.
+#[test]
+fn a_value_set_twice_in_a_row_before_a_save_is_reported_twice() {
+    let ops = vec![
+        save(),
+        Op::Wait { ms: 15 },
+        set("RATE_PIT_D", 344.82758),
+        set("RATE_PIT_D", 459.7701),
+        set("RATE_PIT_D", 344.82758),
+        set("RATE_PIT_D", 344.82758),
+        set("ANGLE_MAX", 42.931034),
+        set("RATE_PIT_D", 459.7701),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!(b.counts.saves, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), Some(459.7701));
+}

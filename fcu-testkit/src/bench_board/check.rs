@@ -430,8 +430,18 @@ impl Checker {
                         format!("PARAM_VALUE {reported} with the index of {}", name(i)),
                     );
                 }
-                if current.to_bits() != value.to_bits() && self.stale.contains(&(i, value.to_bits())) {
-                    // Queued before a save or a load showed the value that replaced it.
+                if let Some(k) = self.stale.iter().position(|&(j, b)| j == i && b == value.to_bits()) {
+                    // Queued before a save or a load showed the value that replaced it. The
+                    // answers leave in the order queued, each with the value in force when it
+                    // was queued: this parameter's values before this one are past, this one may
+                    // be reported again (several sets of one value, each answered). The value in
+                    // force now may have been in force before too (A, B, A taken together): the
+                    // earliest match commits to the least.
+                    let mut n = 0;
+                    self.stale.retain(|&(j, _)| {
+                        n += 1;
+                        j != i || n > k
+                    });
                     return;
                 }
                 match self.matched_after(i, *value) {
