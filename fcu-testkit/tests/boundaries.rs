@@ -759,3 +759,29 @@ fn a_value_set_twice_in_a_row_before_a_save_is_reported_twice() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), Some(459.7701));
 }
+
+/// Found by the fuzzer (its checker, not the board): RC4_MAX 2500 sent while the board was
+/// arming (refused: only while disarmed; the echo carries the value in force, so the set stays
+/// pending), then, disarmed, a save and RC4_MAX 2500 again, taken while the link is quiet for
+/// the save (its answer goes after it). The checker caught up with the save from the earliest
+/// set of 2500, the refused one, and called it taken against the table.
+#[test]
+fn a_set_refused_while_arming_is_not_the_one_a_later_save_shows() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 300 },
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 300 },
+        Op::Send(GcsFrame::ParamList),
+        save(),
+        Op::Wait { ms: 15 },
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!((b.counts.arms, b.counts.saves), (0, 1), "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
+}

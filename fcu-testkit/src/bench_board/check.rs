@@ -256,15 +256,19 @@ impl Checker {
     /// no room for is owed, and carries the value in force when it goes). `ahead` when this
     /// showed in a save or a load before the answers queued ahead of it went out (the link goes
     /// quiet before a save or a reboot): those may still report any value it replaced on the way.
-    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) {
+    /// False when the table refuses the set at `pos` (a violation).
+    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) -> bool {
         self.pass(pos, ahead);
         if self.pending_sets.is_empty() {
-            return;
+            return true;
         }
         let last = self.pending_sets.remove(0);
         self.reset_before(last.start, ahead);
-        match last.taken(&self.model) {
-            Some(next) => self.step_to(next, ahead),
+        let taken = match last.taken(&self.model) {
+            Some(next) => {
+                self.step_to(next, ahead);
+                true
+            }
             None => {
                 // The reason, as the table gives it.
                 let mut next = self.model;
@@ -275,9 +279,11 @@ impl Checker {
                     at,
                     format!("the board took {} = {}, which the table refuses in the set it reported: {rule}", name(last.index), last.value),
                 );
+                false
             }
-        }
+        };
         self.accepted_sets += 1;
+        taken
     }
 
     /// The first `count` pending sets, as the board took them: each changes the model when the
@@ -373,7 +379,9 @@ impl Checker {
         }
         match self.matched_after(i, value) {
             Some(0) => {}
-            Some(m) => self.take_through(m - 1, false, at),
+            Some(m) => {
+                self.take_through(m - 1, false, at);
+            }
             None => {
                 *self = before;
                 return false;
@@ -398,8 +406,27 @@ impl Checker {
                 if !differs {
                     continue;
                 }
-                if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
-                    self.take_through(pos, true, at);
+                // The earliest set that asks for the value and that the board took: one it
+                // refused (an RC endpoint set while armed, say, its echo the value in force)
+                // leaves the value to a later set of it.
+                let asking: Vec<usize> = (0..self.pending_sets.len())
+                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.start >= from && s.asks(i, *v)))
+                    .collect();
+                let Some((&last, earlier)) = asking.split_last() else {
+                    continue;
+                };
+                let taken = earlier.iter().find_map(|&pos| {
+                    let mut trial = self.clone();
+                    // A refusal found on trial is no finding.
+                    trial.trace = false;
+                    trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
+                });
+                match taken {
+                    Some(trial) => *self = trial,
+                    // The last one, taken or a violation.
+                    None => {
+                        self.take_through(last, true, at);
+                    }
                 }
             }
             if self.pending_sets.len() == pending {
@@ -449,7 +476,9 @@ impl Checker {
                         // Answered in order: what was queued before the value in force is out.
                         self.stale.retain(|&(j, _)| j != i);
                     }
-                    Some(k) => self.take_through(k - 1, false, at),
+                    Some(k) => {
+                        self.take_through(k - 1, false, at);
+                    }
                     None if self.reset_explains(i, *value, at) => {}
                     None => match self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
                         Some(asked) => self.violate(
