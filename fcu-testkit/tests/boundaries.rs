@@ -785,3 +785,34 @@ fn a_set_refused_while_arming_is_not_the_one_a_later_save_shows() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): after a flood, a reboot accepted (the link
+/// goes quiet for the save before it, while the flood's answers drain), a reset, RATE_RLL_P,
+/// RATE_PIT_D and RC4_MAX set, another reset, RATE_RLL_P and RC4_MAX set again. The board took
+/// them in order and saved before rebooting: the defaults with RATE_RLL_P and RC4_MAX, RATE_PIT_D
+/// wiped by the second reset. The checker caught up set by set from the earliest set of each
+/// value, which took RATE_PIT_D on the way to the first RC4_MAX set, and found no explanation.
+#[test]
+fn a_set_wiped_by_a_second_reset_is_not_in_the_save_after_it() {
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = || Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        Op::Flood { ms: 800 },
+        reboot_int,
+        Op::Wait { ms: 30 },
+        reset(),
+        set("RATE_RLL_P", 3150.0),
+        set("RATE_PIT_D", 374.0),
+        set("RC4_MAX", 2500.0),
+        reset(),
+        set("RATE_RLL_P", 3150.0),
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert!(b.counts.saves >= 1 && b.counts.reboots == 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), parameters::value(&DEFAULTS, index("RATE_PIT_D")));
+    assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
+}

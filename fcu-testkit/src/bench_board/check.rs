@@ -562,10 +562,20 @@ impl Checker {
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
             // Tried from before the catching up: sets sent after a reset must not be taken on the
             // set it wiped.
-            let reconciled = std::mem::replace(self, before);
+            let reconciled = std::mem::replace(self, before.clone());
             self.reset_seen_in(&snap.values, at);
             if bits(&snap.values) != bits(&parameters::values(&self.model)) {
-                *self = reconciled;
+                // The board saves between link periods, each of which takes every frame
+                // received: every set received so far, each reset among them where it came.
+                // Catching up set by set takes the earliest set of a value, which a reset
+                // after it may have wiped (the value set again after the reset is the one in
+                // the save); the sets all taken in order are what the board did.
+                *self = before;
+                let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
+                self.pass(received, true);
+                if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+                    *self = reconciled;
+                }
             }
         }
         let model = parameters::values(&self.model);
