@@ -816,3 +816,29 @@ fn a_set_wiped_by_a_second_reset_is_not_in_the_save_after_it() {
     assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), parameters::value(&DEFAULTS, index("RATE_PIT_D")));
     assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
 }
+
+/// Found by the fuzzer on the board of 20de103 (fcu-link's reader, fixed since): a power cut in
+/// the middle of a flood's request left the tail of a frame in the receive ring after the boot;
+/// the reader took a false header in it and swallowed the command and the GESTURE_US set after
+/// it, which were never answered, while a later set's answer made the checker take them.
+#[test]
+fn a_set_sent_after_a_power_cut_that_split_a_request_is_taken() {
+    // The flood's requests and a heartbeat put the cut where it splits a request.
+    let mut ops: Vec<Op> = (0..4).map(|_| Op::Flood { ms: 1400 }).collect();
+    ops.extend([
+        Op::Send(GcsFrame::Heartbeat),
+        Op::Flood { ms: 1400 },
+        Op::Send(GcsFrame::Command { command: 1106, params: [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false }),
+        set("GESTURE_US", 177.0),
+        Op::CutNow,
+        Op::Wait { ms: 3000 },
+        set("RATE_YAW_I", 2126.0),
+        Op::Wait { ms: 500 },
+        Op::Send(GcsFrame::ParamRead { index: index("GESTURE_US") as i16, name: [0; 16] }),
+        Op::Wait { ms: 100 },
+    ]);
+    let b = Scenario { history: Vec::new(), seed: 0x4a, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.power_cuts, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("GESTURE_US")), Some(177.0));
+}
