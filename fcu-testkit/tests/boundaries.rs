@@ -675,3 +675,170 @@ fn a_swap_taken_while_catching_up_with_a_save_is_undone_by_a_later_set_in_it() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(rc_map(&b), [Some(1.0), Some(2.0), Some(3.0), Some(4.0)]);
 }
+
+/// Found by the fuzzer (its checker, not the board): the arm gesture held 720 ms, the sticks at
+/// rest for 16 ms, the gesture again for 720 ms, then released; the board armed. A receiver frame
+/// takes the sticks at its start, every 20 ms: no frame started in those 16 ms, so the board was
+/// sent the gesture unbroken for 1.46 s. The checker judged the pilot's sticks, not the frames.
+#[test]
+fn a_release_shorter_than_a_radio_frame_that_no_frame_carried_does_not_break_the_gesture() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 16 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 100 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x52, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
+
+/// The same release, long enough that a frame carries it: the gesture starts again, and two
+/// holds of 720 ms do not arm.
+#[test]
+fn a_release_a_radio_frame_carried_starts_the_arm_gesture_again() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 60 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 720 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 100 },
+    ];
+    let b = Scenario { history: Vec::new(), seed: 0x52, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.arms, 0, "{:?}", b.counts);
+    assert_holds(&b, Invariant::ArmedOnlyByGesture);
+}
+
+/// Found by the fuzzer (its checker, not the board): a save asked for, then RATE_RLL_I 3218.39,
+/// 3735.63 and 3218.39 again. The board took all three and saved before their answers went
+/// out (the link goes quiet before a save); the answers carry 3218.39, 3735.63, 3218.39, each
+/// the value in force when it was queued. The first answer equals the value in force, and the
+/// checker took it for an answer of the present, forgetting 3735.63 as a value still to come.
+#[test]
+fn a_value_set_back_before_a_save_is_reported_in_the_order_set() {
+    let ops = vec![
+        save(),
+        Op::Wait { ms: 15 },
+        set("RATE_RLL_I", 3218.3909),
+        set("RATE_RLL_I", 3735.632),
+        set("RATE_RLL_I", 3218.3909),
+        set("RATE_PIT_I", 1772.0),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!(b.counts.saves, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_RLL_I")), Some(3218.3909));
+}
+
+/// Found by the fuzzer (its checker, not the board): before a save, RATE_PIT_D 344.83, 459.77,
+/// 344.83 twice, ANGLE_MAX, 459.77. Each set is answered, so 344.83 is reported twice in a
+/// row before 459.77; the checker let each value it knew was past stand for one answer only.
+#[test]
+fn a_value_set_twice_in_a_row_before_a_save_is_reported_twice() {
+    let ops = vec![
+        save(),
+        Op::Wait { ms: 15 },
+        set("RATE_PIT_D", 344.82758),
+        set("RATE_PIT_D", 459.7701),
+        set("RATE_PIT_D", 344.82758),
+        set("RATE_PIT_D", 344.82758),
+        set("ANGLE_MAX", 42.931034),
+        set("RATE_PIT_D", 459.7701),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!(b.counts.saves, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), Some(459.7701));
+}
+
+/// Found by the fuzzer (its checker, not the board): RC4_MAX 2500 sent while the board was
+/// arming (refused: only while disarmed; the echo carries the value in force, so the set stays
+/// pending), then, disarmed, a save and RC4_MAX 2500 again, taken while the link is quiet for
+/// the save (its answer goes after it). The checker caught up with the save from the earliest
+/// set of 2500, the refused one, and called it taken against the table.
+#[test]
+fn a_set_refused_while_arming_is_not_the_one_a_later_save_shows() {
+    let ops = vec![
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 300 },
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 300 },
+        Op::Send(GcsFrame::ParamList),
+        save(),
+        Op::Wait { ms: 15 },
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 500 },
+    ];
+    let b = bench(ops);
+    assert_eq!((b.counts.arms, b.counts.saves), (0, 1), "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
+}
+
+/// Found by the fuzzer (its checker, not the board): after a flood, a reboot accepted (the link
+/// goes quiet for the save before it, while the flood's answers drain), a reset, RATE_RLL_P,
+/// RATE_PIT_D and RC4_MAX set, another reset, RATE_RLL_P and RC4_MAX set again. The board took
+/// them in order and saved before rebooting: the defaults with RATE_RLL_P and RC4_MAX, RATE_PIT_D
+/// wiped by the second reset. The checker caught up set by set from the earliest set of each
+/// value, which took RATE_PIT_D on the way to the first RC4_MAX set, and found no explanation.
+#[test]
+fn a_set_wiped_by_a_second_reset_is_not_in_the_save_after_it() {
+    let reboot_int =
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_REBOOT_SHUTDOWN, params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let reset = || Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let ops = vec![
+        Op::Flood { ms: 800 },
+        reboot_int,
+        Op::Wait { ms: 30 },
+        reset(),
+        set("RATE_RLL_P", 3150.0),
+        set("RATE_PIT_D", 374.0),
+        set("RC4_MAX", 2500.0),
+        reset(),
+        set("RATE_RLL_P", 3150.0),
+        set("RC4_MAX", 2500.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert!(b.counts.saves >= 1 && b.counts.reboots == 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_PIT_D")), parameters::value(&DEFAULTS, index("RATE_PIT_D")));
+    assert_eq!(parameters::value(b.config(), index("RC4_MAX")), Some(2500.0));
+}
+
+/// Found by the fuzzer on the board of 20de103 (fcu-link's reader, fixed since): a power cut in
+/// the middle of a flood's request left the tail of a frame in the receive ring after the boot;
+/// the reader took a false header in it and swallowed the command and the GESTURE_US set after
+/// it, which were never answered, while a later set's answer made the checker take them.
+#[test]
+fn a_set_sent_after_a_power_cut_that_split_a_request_is_taken() {
+    // The flood's requests and a heartbeat put the cut where it splits a request.
+    let mut ops: Vec<Op> = (0..4).map(|_| Op::Flood { ms: 1400 }).collect();
+    ops.extend([
+        Op::Send(GcsFrame::Heartbeat),
+        Op::Flood { ms: 1400 },
+        Op::Send(GcsFrame::Command { command: 1106, params: [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: false }),
+        set("GESTURE_US", 177.0),
+        Op::CutNow,
+        Op::Wait { ms: 3000 },
+        set("RATE_YAW_I", 2126.0),
+        Op::Wait { ms: 500 },
+        Op::Send(GcsFrame::ParamRead { index: index("GESTURE_US") as i16, name: [0; 16] }),
+        Op::Wait { ms: 100 },
+    ]);
+    let b = Scenario { history: Vec::new(), seed: 0x4a, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.power_cuts, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("GESTURE_US")), Some(177.0));
+}

@@ -198,6 +198,10 @@ pub struct Bench {
     radio: PwmReceiver,
     imu: LevelImu,
     pilot: Pilot,
+    /// The pilot's sticks as the last radio frame carried them: a frame takes the sticks at its
+    /// start, 20 ms apart, so a movement shorter than that may never be sent. The arming checks
+    /// judge the gesture the board was sent.
+    sent: Pilot,
     edges: Vec<CaptureEdge>,
     /// Bytes the ground station sent that are still on the wire.
     uplink: VecDeque<u8>,
@@ -236,6 +240,7 @@ impl Bench {
             radio: PwmReceiver::new(seed),
             imu: LevelImu::new(seed),
             pilot: Pilot::Neutral,
+            sent: Pilot::Neutral,
             edges: Vec::new(),
             uplink: VecDeque::new(),
             uplink_credit: 0.0,
@@ -360,6 +365,9 @@ impl Bench {
             b.tick.take_gcs(&g);
         }
         self.edges.clear();
+        if self.radio.frame_starts_next_tick() {
+            self.sent = self.pilot;
+        }
         self.radio.tick(&frame, 0, &mut self.edges);
         for e in &self.edges {
             b.decoder.on_edge(*e);
@@ -373,18 +381,19 @@ impl Bench {
         }
         b.status = b.tick.status();
         b.ticks = b.ticks.wrapping_add(1);
-        b.off_ticks = if self.pilot == Pilot::Off { b.off_ticks.saturating_add(1) } else { 0 };
+        let sent = self.sent;
+        b.off_ticks = if sent == Pilot::Off { b.off_ticks.saturating_add(1) } else { 0 };
         // The link is lost only a timeout after the last pulse, and until then the last pulses
         // stand: a transmitter off for less than that leaves the arm gesture held, as far as the
         // board can tell (as `docs/safety.md` has it, and the safety monitor's radio model).
-        let gap = self.pilot == Pilot::Off && b.arm_released_ticks == 0 && b.off_ticks < b.cfg.rc.link_timeout_ticks;
-        if self.pilot == Pilot::Arm || gap {
+        let gap = sent == Pilot::Off && b.arm_released_ticks == 0 && b.off_ticks < b.cfg.rc.link_timeout_ticks;
+        if sent == Pilot::Arm || gap {
             b.arm_held_ticks = if b.arm_released_ticks == 0 { b.arm_held_ticks + 1 } else { 1 };
             b.arm_released_ticks = 0;
             b.arm_rest_ticks = 0;
         } else {
             b.arm_released_ticks = b.arm_released_ticks.saturating_add(1);
-            if self.pilot == Pilot::Neutral {
+            if sent == Pilot::Neutral {
                 b.arm_rest_ticks = b.arm_rest_ticks.saturating_add(1);
             }
         }
@@ -406,6 +415,9 @@ impl Bench {
         let b = &mut self.boot;
         let now = b.status;
         let t = self.time_ticks;
+        if self.checker.trace && now.state != was.state {
+            eprintln!("{:>6} ms {:?} -> {:?}", t * u64::from(TICK_US) / 1000, was.state, now.state);
+        }
         let recent = b.arm_released_ticks <= 200;
         if now.state == FlightState::Arming && was.state != FlightState::Arming && !recent {
             self.checker.violate(

@@ -91,6 +91,17 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
     }
 }
 
+/// A frame the ground station sent, for a trace.
+fn describe(frame: &GcsFrame) -> String {
+    match frame {
+        GcsFrame::ParamSet { name: n, value } => match parameters::index_of(n) {
+            Some(i) => format!("PARAM_SET {} = {value}", name(i)),
+            None => format!("PARAM_SET (unknown) = {value}"),
+        },
+        other => format!("{other:?}"),
+    }
+}
+
 /// A PARAM_SET the ground station sent and has not seen confirmed yet.
 #[derive(Clone, Copy, Debug)]
 struct PendingSet {
@@ -139,6 +150,9 @@ pub struct Checker {
     violations: Vec<Violation>,
     /// Sets the board confirmed.
     pub accepted_sets: u32,
+    /// Prints every event the checker sees, and its model's verdicts, to stderr (for replaying
+    /// a fuzz input: `cargo run -p fcu-testkit --example boundaries_replay`).
+    pub trace: bool,
 }
 
 impl Checker {
@@ -154,6 +168,7 @@ impl Checker {
             written: Vec::new(),
             violations: Vec::new(),
             accepted_sets: 0,
+            trace: false,
         }
     }
 
@@ -167,6 +182,9 @@ impl Checker {
     }
 
     pub fn violate(&mut self, invariant: Invariant, at_ticks: u64, what: String) {
+        if self.trace {
+            eprintln!("{:>6} ms VIOLATION {invariant:?}: {what}", at_ticks * u64::from(TICK_US) / 1000);
+        }
         if self.violations.iter().filter(|v| v.invariant == invariant).count() < KEEP {
             self.violations.push(Violation { invariant, at_ms: at_ticks * u64::from(TICK_US) / 1000, what });
         }
@@ -204,6 +222,9 @@ impl Checker {
     pub fn on_sent(&mut self, frame: &GcsFrame, bytes: usize) {
         let at = self.sent_bytes;
         self.sent_bytes += bytes as u64;
+        if self.trace && !matches!(frame, GcsFrame::ParamRead { .. }) {
+            eprintln!("          sent @{at}: {}", describe(frame));
+        }
         match *frame {
             GcsFrame::ParamSet { name, value } => {
                 if let Some(i) = parameters::index_of(&name) {
@@ -221,6 +242,9 @@ impl Checker {
     pub fn on_received(&mut self, delivered: u64, restricted: bool) {
         for set in self.pending_sets.iter_mut().filter(|s| s.end <= delivered && s.restricted.is_none()) {
             set.restricted = Some(restricted);
+            if self.trace {
+                eprintln!("          received @{}: PARAM_SET {} = {}, restricted {restricted}", set.start, name(set.index), set.value);
+            }
         }
     }
 
@@ -232,15 +256,19 @@ impl Checker {
     /// no room for is owed, and carries the value in force when it goes). `ahead` when this
     /// showed in a save or a load before the answers queued ahead of it went out (the link goes
     /// quiet before a save or a reboot): those may still report any value it replaced on the way.
-    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) {
+    /// False when the table refuses the set at `pos` (a violation).
+    fn take_through(&mut self, pos: usize, ahead: bool, at: u64) -> bool {
         self.pass(pos, ahead);
         if self.pending_sets.is_empty() {
-            return;
+            return true;
         }
         let last = self.pending_sets.remove(0);
         self.reset_before(last.start, ahead);
-        match last.taken(&self.model) {
-            Some(next) => self.step_to(next, ahead),
+        let taken = match last.taken(&self.model) {
+            Some(next) => {
+                self.step_to(next, ahead);
+                true
+            }
             None => {
                 // The reason, as the table gives it.
                 let mut next = self.model;
@@ -251,9 +279,11 @@ impl Checker {
                     at,
                     format!("the board took {} = {}, which the table refuses in the set it reported: {rule}", name(last.index), last.value),
                 );
+                false
             }
-        }
+        };
         self.accepted_sets += 1;
+        taken
     }
 
     /// The first `count` pending sets, as the board took them: each changes the model when the
@@ -349,7 +379,9 @@ impl Checker {
         }
         match self.matched_after(i, value) {
             Some(0) => {}
-            Some(m) => self.take_through(m - 1, false, at),
+            Some(m) => {
+                self.take_through(m - 1, false, at);
+            }
             None => {
                 *self = before;
                 return false;
@@ -374,8 +406,27 @@ impl Checker {
                 if !differs {
                     continue;
                 }
-                if let Some(pos) = self.pending_sets.iter().position(|s| s.start >= from && s.asks(i, *v)) {
-                    self.take_through(pos, true, at);
+                // The earliest set that asks for the value and that the board took: one it
+                // refused (an RC endpoint set while armed, say, its echo the value in force)
+                // leaves the value to a later set of it.
+                let asking: Vec<usize> = (0..self.pending_sets.len())
+                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.start >= from && s.asks(i, *v)))
+                    .collect();
+                let Some((&last, earlier)) = asking.split_last() else {
+                    continue;
+                };
+                let taken = earlier.iter().find_map(|&pos| {
+                    let mut trial = self.clone();
+                    // A refusal found on trial is no finding.
+                    trial.trace = false;
+                    trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
+                });
+                match taken {
+                    Some(trial) => *self = trial,
+                    // The last one, taken or a violation.
+                    None => {
+                        self.take_through(last, true, at);
+                    }
                 }
             }
             if self.pending_sets.len() == pending {
@@ -386,6 +437,9 @@ impl Checker {
 
     /// An answer of the board, as it left the link.
     pub fn on_answer(&mut self, answer: &Answer, at: u64) {
+        if self.trace {
+            eprintln!("{:>6} ms answer {answer:?} (pending {})", at * u64::from(TICK_US) / 1000, self.pending_sets.len());
+        }
         match answer {
             Answer::ParamValue { name: reported, value, index } => {
                 let i = usize::from(*index);
@@ -403,8 +457,18 @@ impl Checker {
                         format!("PARAM_VALUE {reported} with the index of {}", name(i)),
                     );
                 }
-                if current.to_bits() != value.to_bits() && self.stale.contains(&(i, value.to_bits())) {
-                    // Queued before a save or a load showed the value that replaced it.
+                if let Some(k) = self.stale.iter().position(|&(j, b)| j == i && b == value.to_bits()) {
+                    // Queued before a save or a load showed the value that replaced it. The
+                    // answers leave in the order queued, each with the value in force when it
+                    // was queued: this parameter's values before this one are past, this one may
+                    // be reported again (several sets of one value, each answered). The value in
+                    // force now may have been in force before too (A, B, A taken together): the
+                    // earliest match commits to the least.
+                    let mut n = 0;
+                    self.stale.retain(|&(j, _)| {
+                        n += 1;
+                        j != i || n > k
+                    });
                     return;
                 }
                 match self.matched_after(i, *value) {
@@ -412,7 +476,9 @@ impl Checker {
                         // Answered in order: what was queued before the value in force is out.
                         self.stale.retain(|&(j, _)| j != i);
                     }
-                    Some(k) => self.take_through(k - 1, false, at),
+                    Some(k) => {
+                        self.take_through(k - 1, false, at);
+                    }
                     None if self.reset_explains(i, *value, at) => {}
                     None => match self.pending_sets.iter().find(|s| s.index == i).map(|s| s.value) {
                         Some(asked) => self.violate(
@@ -483,15 +549,33 @@ impl Checker {
         let Some(snap) = snapshot::decode(&plan.words) else {
             return self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, "a save wrote a snapshot that does not decode".into());
         };
+        if self.trace {
+            let d = first_difference(&snap.values, &parameters::values(&self.model));
+            eprintln!(
+                "{:>6} ms saved (sequence {:#x}); first difference from the model: {d}",
+                at * u64::from(TICK_US) / 1000,
+                snap.sequence
+            );
+        }
         let before = self.clone();
         self.reconcile(&snap.values, 0, at);
         if bits(&snap.values) != bits(&parameters::values(&self.model)) {
             // Tried from before the catching up: sets sent after a reset must not be taken on the
             // set it wiped.
-            let reconciled = std::mem::replace(self, before);
+            let reconciled = std::mem::replace(self, before.clone());
             self.reset_seen_in(&snap.values, at);
             if bits(&snap.values) != bits(&parameters::values(&self.model)) {
-                *self = reconciled;
+                // The board saves between link periods, each of which takes every frame
+                // received: every set received so far, each reset among them where it came.
+                // Catching up set by set takes the earliest set of a value, which a reset
+                // after it may have wiped (the value set again after the reset is the one in
+                // the save); the sets all taken in order are what the board did.
+                *self = before;
+                let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
+                self.pass(received, true);
+                if bits(&snap.values) != bits(&parameters::values(&self.model)) {
+                    *self = reconciled;
+                }
             }
         }
         let model = parameters::values(&self.model);
@@ -513,6 +597,9 @@ impl Checker {
     /// unless answered; the frames after them are still on the wire, for the new boot).
     pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, delivered_bytes: u64, at: u64) {
         let loaded = parameters::values(cfg);
+        if self.trace {
+            eprintln!("{:>6} ms boot {kind:?} from {source:?}, {delivered_bytes} bytes delivered", at * u64::from(TICK_US) / 1000);
+        }
         let sectors = flash.sectors();
         let intact: Vec<&Written> = self
             .written

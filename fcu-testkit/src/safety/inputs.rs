@@ -102,6 +102,13 @@ impl PwmReceiver {
         self.injected.push((offset_counts, CaptureEdge { channel, capture_counts: 0, level_high }));
     }
 
+    /// Whether a frame starts during the next control tick: the transmitter sends the sticks
+    /// as they are at a frame's start, and a stick movement that no frame start falls in
+    /// never reaches the receiver's output.
+    pub fn frame_starts_next_tick(&self) -> bool {
+        self.next_frame < self.now + COUNTS_PER_TICK
+    }
+
     /// The edges of the next control tick, appended to `out` oldest first. `frame` is what
     /// frames starting during this tick carry; `glitches` spikes are added to each of them.
     pub fn tick(&mut self, frame: &RadioFrame, glitches: u8, out: &mut Vec<CaptureEdge>) {
