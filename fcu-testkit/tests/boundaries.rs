@@ -842,3 +842,33 @@ fn a_set_sent_after_a_power_cut_that_split_a_request_is_taken() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), index("GESTURE_US")), Some(177.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): RATE_PIT_D 472 taken, a flood, then in one
+/// burst two storage commands the board does not support, twelve unknown commands and a reset
+/// of the parameters. The transmit queue had no room for the reset's acknowledgement, and the
+/// board, armed later, refused seven saves. The checker matched acknowledgements to storage
+/// commands first come, first served, so the first refusal answered the reset, and RATE_PIT_D
+/// reported at its default afterwards had no explanation. An acknowledgement answers the first
+/// pending command that can have its result; a reset before it, taken disarmed, whose answer
+/// was dropped, wiped the sets.
+#[test]
+fn a_reset_whose_acknowledgement_was_dropped_is_not_answered_by_a_later_refusal() {
+    let storage = |first: f32, int: bool| {
+        Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [first, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int })
+    };
+    let mut ops = vec![Op::Wait { ms: 1_000 }, set("RATE_PIT_D", 472.0), Op::Wait { ms: 250 }, Op::Flood { ms: 1_800 }];
+    ops.extend([storage(0.5, true), storage(-1.0, false)]);
+    ops.extend((0..14).map(|_| command(882, -1.0, 0.0)));
+    ops.extend([storage(2.0, false), Op::Pilot(Pilot::Disarm), Op::Wait { ms: 1_020 }]);
+    ops.extend([Op::Pilot(Pilot::Arm), Op::Wait { ms: 1_100 }, Op::Pilot(Pilot::Neutral), Op::Wait { ms: 100 }]);
+    ops.extend((0..7).map(|_| storage(1.0, true)));
+    ops.extend([Op::Wait { ms: 1_500 }, Op::Send(GcsFrame::ParamList), Op::Wait { ms: 2_000 }]);
+    let b = bench(ops);
+    assert_eq!(b.counts.arms, 1, "{:?}", b.counts);
+    assert_eq!(
+        parameters::value(b.config(), index("RATE_PIT_D")),
+        parameters::value(&DEFAULTS, index("RATE_PIT_D")),
+        "the reset was not taken"
+    );
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}

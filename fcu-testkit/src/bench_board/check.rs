@@ -127,6 +127,41 @@ impl PendingSet {
     }
 }
 
+/// A PREFLIGHT_STORAGE command sent and not acknowledged yet.
+#[derive(Clone, Copy, Debug)]
+struct PendingStorage {
+    param1: f32,
+    /// Where its frame starts and ends in what the ground station sent.
+    start: u64,
+    end: u64,
+    /// A reset already seen done (in a save ahead of its acknowledgement).
+    seen_done: bool,
+    /// Whether changes were restricted when the board received it (`None`: not yet received).
+    restricted: Option<bool>,
+}
+
+impl PendingStorage {
+    fn is_reset(&self) -> bool {
+        self.param1 == 2.0
+    }
+
+    /// Whether the board's answer to it can have this result: MAV_RESULT_UNSUPPORTED for a
+    /// param1 other than save (1) and reset (2); for those, TEMPORARILY_REJECTED while changes
+    /// are restricted, else ACCEPTED (or a failure).
+    fn can_answer(&self, result: u8) -> bool {
+        const ACCEPTED: u8 = 0;
+        const TEMPORARILY_REJECTED: u8 = 1;
+        const UNSUPPORTED: u8 = 3;
+        let known = self.param1 == 1.0 || self.param1 == 2.0;
+        match result {
+            UNSUPPORTED => !known,
+            ACCEPTED => known && self.restricted != Some(true),
+            TEMPORARILY_REJECTED => known && self.restricted != Some(false),
+            _ => known,
+        }
+    }
+}
+
 /// Keeps at most this many violations of each invariant.
 const KEEP: usize = 4;
 
@@ -136,10 +171,8 @@ pub struct Checker {
     model: Config,
     /// PARAM_SETs sent and not confirmed yet, in the order sent.
     pending_sets: Vec<PendingSet>,
-    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet: their param1, where they
-    /// start, and whether a reset among them was already seen done (in a save ahead of its
-    /// acknowledgement).
-    pending_storage: VecDeque<(f32, u64, bool)>,
+    /// PREFLIGHT_STORAGE commands sent and not acknowledged yet, in the order sent.
+    pending_storage: VecDeque<PendingStorage>,
     /// Bytes the ground station sent.
     sent_bytes: u64,
     /// Values replaced by a set seen in a save or a load before its answer: (index, bits).
@@ -231,7 +264,13 @@ impl Checker {
                     self.pending_sets.push(PendingSet { index: i, value, start: at, end: self.sent_bytes, restricted: None });
                 }
             }
-            GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back((params[0], at, false)),
+            GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params, .. } => self.pending_storage.push_back(PendingStorage {
+                param1: params[0],
+                start: at,
+                end: self.sent_bytes,
+                seen_done: false,
+                restricted: None,
+            }),
             _ => {}
         }
     }
@@ -240,6 +279,9 @@ impl Checker {
     /// with changes restricted or not (armed, as the status it last observed says): it took or
     /// refused every PARAM_SET among them by the rules in force then.
     pub fn on_received(&mut self, delivered: u64, restricted: bool) {
+        for cmd in self.pending_storage.iter_mut().filter(|c| c.end <= delivered && c.restricted.is_none()) {
+            cmd.restricted = Some(restricted);
+        }
         for set in self.pending_sets.iter_mut().filter(|s| s.end <= delivered && s.restricted.is_none()) {
             set.restricted = Some(restricted);
             if self.trace {
@@ -306,8 +348,8 @@ impl Checker {
     /// at the defaults already), left the reset pending, and its acknowledgement wiped the set.
     fn reset_before(&mut self, start: u64, ahead: bool) {
         let mut reset = false;
-        for entry in self.pending_storage.iter_mut().filter(|e| e.0 == 2.0 && !e.2 && e.1 < start) {
-            entry.2 = true;
+        for entry in self.pending_storage.iter_mut().filter(|e| e.is_reset() && !e.seen_done && e.start < start) {
+            entry.seen_done = true;
             reset = true;
         }
         if reset {
@@ -359,23 +401,51 @@ impl Checker {
         None
     }
 
+    /// A PREFLIGHT_STORAGE acknowledgement. It carries the command's number and the result,
+    /// not which of the commands sent it answers: the board answers them in the order it got
+    /// them, but an answer the full transmit queue has no room for is dropped. So it answers
+    /// the first pending command that can have this result (an unsupported param1, a save or
+    /// reset refused while changes were restricted, or taken), and the ones before it had
+    /// their answers dropped: a reset among those, taken (changes were not restricted when it
+    /// came), wiped the sets before it, as its acknowledgement would have said.
+    fn on_storage_ack(&mut self, result: u8) {
+        let Some(k) = self.pending_storage.iter().position(|c| c.can_answer(result)) else {
+            // No command this answer fits: the oldest's, as the board answers in order.
+            let _oldest = self.pending_storage.pop_front();
+            return;
+        };
+        let dropped: Vec<PendingStorage> = self.pending_storage.drain(..k).collect();
+        let answered = self.pending_storage.pop_front();
+        let reset_taken = |c: &PendingStorage| c.is_reset() && !c.seen_done && c.restricted == Some(false);
+        let resets =
+            dropped.iter().filter(|c| reset_taken(c)).chain(answered.iter().filter(|c| result == 0 && !c.seen_done && c.is_reset()));
+        let last_reset = resets.map(|c| c.start).last();
+        if let Some(start) = last_reset {
+            // The sets before the reset were taken and wiped by it.
+            self.pending_sets.retain(|s| s.start > start);
+            self.model = *self.defaults;
+            let v = parameters::values(&self.model);
+            self.remember(&v);
+        }
+    }
+
     /// A report of parameter `i` at `value` that only a pending reset of the parameters
     /// explains, its acknowledgement dropped (the transmit queue drops an answer it has no
     /// room for) or still queued: the model takes the sets before the reset, the reset, and as
     /// many sets after it as the report needs. False, and nothing changed, when the reset does
     /// not explain it either.
     fn reset_explains(&mut self, i: usize, value: f32, at: u64) -> bool {
-        let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
+        let Some(k) = self.pending_storage.iter().position(|e| e.is_reset() && !e.seen_done) else {
             return false;
         };
-        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        let reset_at = self.pending_storage.get(k).map_or(0, |e| e.start);
         let before = self.clone();
         let before_reset = self.pending_sets.iter().filter(|s| s.start < reset_at).count();
         self.pass(before_reset, false);
         let defaults = *self.defaults;
         self.step_to(defaults, false);
         if let Some(entry) = self.pending_storage.get_mut(k) {
-            entry.2 = true;
+            entry.seen_done = true;
         }
         match self.matched_after(i, value) {
             Some(0) => {}
@@ -388,7 +458,7 @@ impl Checker {
             }
         }
         if let Some(entry) = self.pending_storage.get_mut(k) {
-            entry.2 = true;
+            entry.seen_done = true;
         }
         true
     }
@@ -497,17 +567,7 @@ impl Checker {
                     },
                 }
             }
-            Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => {
-                if let Some((p1, start, seen_done)) = self.pending_storage.pop_front() {
-                    if *result == 0 && p1 == 2.0 && !seen_done {
-                        // The sets before the reset were taken and wiped by it.
-                        self.pending_sets.retain(|s| s.start > start);
-                        self.model = *self.defaults;
-                        let v = parameters::values(&self.model);
-                        self.remember(&v);
-                    }
-                }
-            }
+            Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => self.on_storage_ack(*result),
             _ => {}
         }
     }
@@ -517,10 +577,10 @@ impl Checker {
     /// queue behind each other). A save that the defaults, and the sets asked for since, explain
     /// is that reset seen early: the model takes it then, and not again at its acknowledgement.
     fn reset_seen_in(&mut self, saved: &[f32; COUNT], at: u64) {
-        let Some(k) = self.pending_storage.iter().position(|&(p1, _, seen_done)| p1 == 2.0 && !seen_done) else {
+        let Some(k) = self.pending_storage.iter().position(|e| e.is_reset() && !e.seen_done) else {
             return;
         };
-        let reset_at = self.pending_storage.get(k).map_or(0, |&(_, start, _)| start);
+        let reset_at = self.pending_storage.get(k).map_or(0, |e| e.start);
         // Tried: kept only when the save shows it.
         let before = self.clone();
         // The sets before the reset were taken, then wiped by it; the answers still queued for
@@ -530,12 +590,12 @@ impl Checker {
         let defaults = *self.defaults;
         self.step_to(defaults, true);
         if let Some(entry) = self.pending_storage.get_mut(k) {
-            entry.2 = true;
+            entry.seen_done = true;
         }
         self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
             if let Some(entry) = self.pending_storage.get_mut(k) {
-                entry.2 = true;
+                entry.seen_done = true;
             }
             let v = parameters::values(&self.model);
             self.remember(&v);
@@ -646,7 +706,7 @@ impl Checker {
         self.model = *cfg;
         self.pending_sets.retain(|s| s.start >= delivered_bytes);
         self.stale.clear();
-        self.pending_storage.retain(|&(_, start, _)| start >= delivered_bytes);
+        self.pending_storage.retain(|e| e.start >= delivered_bytes);
         self.remember(&loaded);
     }
 }
