@@ -419,7 +419,7 @@ impl Checker {
         let reset_taken = |c: &PendingStorage| c.is_reset() && !c.seen_done && c.restricted == Some(false);
         let resets =
             dropped.iter().filter(|c| reset_taken(c)).chain(answered.iter().filter(|c| result == 0 && !c.seen_done && c.is_reset()));
-        let last_reset = resets.map(|c| c.start).last();
+        let last_reset = resets.map(|c| c.start).next_back();
         if let Some(start) = last_reset {
             // The sets before the reset were taken and wiped by it.
             self.pending_sets.retain(|s| s.start > start);
