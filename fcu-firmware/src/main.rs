@@ -320,7 +320,7 @@ mod app {
         let (tick_timer, tick_start) = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
         let (adc, battery_pin) = start_battery(dp.ADC1, gpiob.pb1, &mut rcc);
 
-        let fc = fcu_core::FlightController::new(cfg).unwrap_or_else(|e| halt(&mut leds, Some(&mut uart.tx), e.field()));
+        let fc = fcu_core::FlightController::new(&cfg).unwrap_or_else(|e| halt(&mut leds, Some(&mut uart.tx), e.field()));
         let decoder = fc.edge_decoder();
         let (edges_out, edges_in) = cx.local.edge_queue.split();
         let (inner, outer) = fc.into_parts();
