@@ -609,11 +609,8 @@ mod app {
         for (sensor, answer) in Sensor::ALL.into_iter().zip(answers.iter_mut()) {
             *answer = init_sensor(bus, sensor);
             if sensor.identifies(*answer) {
-                let mut line = LineBuf::<64>::new();
-                line.push_str(sensor.name());
-                line.push_str(" initialized and enabled");
-                line.finish_line();
-                uart.send(line.as_bytes());
+                uart.send(sensor.name().as_bytes());
+                uart.send(b" initialized and enabled\n");
             }
         }
         BootVerdict::from_answers(answers)
