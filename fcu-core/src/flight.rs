@@ -557,7 +557,7 @@ impl OuterStep {
     /// state kept.
     pub fn take_config(&mut self, cfg: &Config) {
         self.params = Derived::new(cfg).outer;
-        match (&mut self.vertical, cfg.altitude) {
+        match (&mut self.vertical, &cfg.altitude) {
             (Some(v), Some(a)) => v.set_config(a),
             (v, a) => *v = a.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
         }
