@@ -385,7 +385,7 @@ fn run_altitude(cal: &Calibration) -> AltitudeStats {
     let mut flown = StickCounts(540);
     for (k, slot) in hold_instr.iter_mut().enumerate() {
         if k == 160 {
-            v.set_config(AltitudeSettings { mode: AltMode::Hold, ..manual });
+            v.set_config(&AltitudeSettings { mode: AltMode::Hold, ..manual });
         }
         let input = VerticalInput {
             motors_enabled: true,
