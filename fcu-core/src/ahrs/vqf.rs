@@ -312,14 +312,15 @@ impl Vqf {
         let p_motion = sq(cfg.bias_sigma_motion_dps * 100.0);
         let bias_motion_w = sq(p_motion) / bias_v + p_motion;
         let acc_lp = LowPass3::new(cfg.tau_acc_s, cfg.dt_s);
+        let rest_lp = LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s);
         Vqf {
             cfg,
             gyr_q: Quat::IDENTITY,
             acc_q: Quat::IDENTITY,
             q: Quat::IDENTITY,
             acc_lp,
-            rest_gyr_lp: LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s),
-            rest_acc_lp: LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s),
+            rest_gyr_lp: rest_lp,
+            rest_acc_lp: rest_lp,
             motion_r_lp: [acc_lp; 3],
             motion_bias_lp: acc_lp,
             rest_s: 0.0,
