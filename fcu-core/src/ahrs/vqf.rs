@@ -380,8 +380,10 @@ impl Vqf {
         let (gyr_q, acc_q, q, bias, bias_p) = (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p);
         self.step(acc, gyr);
         if !(self.q.is_finite() && self.bias_rad_s.is_finite()) {
-            let fresh = Vqf::new(self.cfg);
-            *self = Vqf { gyr_q, acc_q, q, bias_rad_s: bias, bias_p, rest_allowed: self.rest_allowed, ..fresh };
+            let rest_allowed = self.rest_allowed;
+            *self = Vqf::new(self.cfg);
+            (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p, self.rest_allowed) =
+                (gyr_q, acc_q, q, bias, bias_p, rest_allowed);
         }
     }
 
