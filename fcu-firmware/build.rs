@@ -9,7 +9,10 @@ fn main() {
     let memory_x = manifest_dir.join("..").join("memory.x");
     fs::copy(&memory_x, out.join("memory.x")).expect("copy ../memory.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
-    for arg in ["--nmagic", "-Tlink.x", "-Tdefmt.x"] {
+    // --icf=all: the linker folds identical functions into one (compiler-builtins' word-aligned
+    // memcpy/memclr variants, the panic stubs); nothing here compares function addresses.
+    // docs/performance.md, "Profiles".
+    for arg in ["--nmagic", "-Tlink.x", "-Tdefmt.x", "--icf=all"] {
         println!("cargo:rustc-link-arg-bins={arg}");
     }
     println!("cargo:rerun-if-changed={}", memory_x.display());

@@ -226,7 +226,7 @@ type OuterFn = fn(&mut FlightController, &OuterJob);
 /// Fly the recording with one profile; `Err` says what went wrong (motors not running, no outer
 /// steps, not armed).
 fn run_profile(cfg: Config, cal: &Calibration, needs_armed_state: bool) -> Result<Stats, &'static str> {
-    let mut fc = FlightController::new(cfg).map_err(|e| e.field())?;
+    let mut fc = FlightController::new(&cfg).map_err(|e| e.field())?;
     // Reached through opaque pointers: the measured code is the real, whole call, never
     // interleaved by the optimiser with this loop's input generation.
     let tick: TickFn = black_box(FlightController::tick);
@@ -385,7 +385,7 @@ fn run_altitude(cal: &Calibration) -> AltitudeStats {
     let mut flown = StickCounts(540);
     for (k, slot) in hold_instr.iter_mut().enumerate() {
         if k == 160 {
-            v.set_config(AltitudeSettings { mode: AltMode::Hold, ..manual });
+            v.set_config(&AltitudeSettings { mode: AltMode::Hold, ..manual });
         }
         let input = VerticalInput {
             motors_enabled: true,

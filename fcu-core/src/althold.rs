@@ -262,12 +262,12 @@ impl Vertical {
     /// New settings (a parameter change): the estimator takes its new time constant and thrust
     /// scale with its state kept (those change only on the ground), the hold its new numbers; the
     /// health check's numbers are no parameter.
-    pub fn set_config(&mut self, cfg: AltitudeSettings) {
-        self.estimator.set_config(cfg.estimator);
+    pub fn set_config(&mut self, cfg: &AltitudeSettings) {
+        self.estimator.set_config(&cfg.estimator);
         if !self.airborne {
             self.hover = f32::from(cfg.hold.hover_throttle.0);
         }
-        self.cfg = cfg;
+        self.cfg = *cfg;
     }
 
     /// The estimate may be flown on: referenced, and no barometer fault for

@@ -139,7 +139,7 @@ impl Rig {
 
     fn set_mode(&mut self, mode: AltMode) {
         let cfg = AltitudeSettings { mode, ..AltitudeSettings::DEFAULT };
-        self.v.set_config(cfg);
+        self.v.set_config(&cfg);
     }
 
     /// The throttle the tick flies: the hold's, or the sticks' (the failsafe's held one).
@@ -678,7 +678,7 @@ proptest::proptest! {
             estimator: AltitudeConfig { thrust_scale_pa: scale, ..AltitudeConfig::DEFAULT },
             ..AltitudeSettings::DEFAULT
         };
-        r.v.set_config(cfg);
+        r.v.set_config(&cfg);
         for b in &bursts {
             let burst = b.map(|(st, p, t)| RawBaro { status: st, pressure_counts: p >> 8, temperature_counts: t });
             let input = VerticalInput {

@@ -240,9 +240,9 @@ impl AltitudeEstimator {
 
     /// New tunables, the state kept (a parameter change on the ground: the take-off's re-zero
     /// and the floor settle what a new time constant or thrust scale moves).
-    pub fn set_config(&mut self, cfg: AltitudeConfig) {
-        self.k = Self::gains(&cfg);
-        self.cfg = cfg;
+    pub fn set_config(&mut self, cfg: &AltitudeConfig) {
+        self.k = Self::gains(cfg);
+        self.cfg = *cfg;
     }
 
     /// The barometer's own height of `pressure_pa` above the reference (the take-off level once
@@ -775,7 +775,7 @@ mod tests {
             est.update(0.0, baro_due(step).then_some(pressure_at(1.0)), 0.0, false);
         }
         let before = est.estimate();
-        est.set_config(AltitudeConfig { time_constant_s: 3.0, ..AltitudeConfig::DEFAULT });
+        est.set_config(&AltitudeConfig { time_constant_s: 3.0, ..AltitudeConfig::DEFAULT });
         assert_eq!(est.estimate(), before);
         assert_eq!(est.k, AltitudeEstimator::new(AltitudeConfig { time_constant_s: 3.0, ..AltitudeConfig::DEFAULT }).k);
     }

@@ -210,11 +210,11 @@ pub struct FlightController {
 
 impl FlightController {
     /// Build from a configuration; an invalid one is refused with the field that is wrong.
-    pub fn new(cfg: Config) -> Result<Self, ConfigError> {
+    pub fn new(cfg: &Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
-        let derived = Derived::new(&cfg);
-        let outer_step = OuterStep::new(&cfg, derived.outer)?;
-        Ok(FlightController { control_tick: ControlTick::new(&cfg, derived.tick), outer_step, cfg })
+        let derived = Derived::new(cfg);
+        let outer_step = OuterStep::new(cfg, derived.outer)?;
+        Ok(FlightController { control_tick: ControlTick::new(cfg, derived.tick), outer_step, cfg: *cfg })
     }
 
     /// The configuration in force: the one given to [`new`](Self::new), or the last one
@@ -557,7 +557,7 @@ impl OuterStep {
     /// state kept.
     pub fn take_config(&mut self, cfg: &Config) {
         self.params = Derived::new(cfg).outer;
-        match (&mut self.vertical, cfg.altitude) {
+        match (&mut self.vertical, &cfg.altitude) {
             (Some(v), Some(a)) => v.set_config(a),
             (v, a) => *v = a.map(|a| Vertical::new(a, cfg.timing.integration_hz, &cfg.mixer)),
         }
@@ -578,7 +578,7 @@ mod tests {
     fn the_configuration_read_back_is_the_one_given_while_the_gains_scale_the_tick() {
         // A sagged battery: the outer step's first result carries a thrust gain of (4.0/3.4)².
         let cfg = Config::default();
-        let mut fc = FlightController::new(cfg).unwrap();
+        let mut fc = FlightController::new(&cfg).unwrap();
         fc.set_battery_mv(3400);
         let radio = ForcedRadio { width_counts: [6000, 6000, 8000, 6000], link: true, armed: false, cal_request: false };
         let mut k = 0;
@@ -604,7 +604,7 @@ mod tests {
     #[test]
     fn the_tick_values_are_the_configuration_scaled_by_the_gains_in_force_whatever_came_before() {
         let cfg = Config::default();
-        let mut fc = FlightController::new(cfg).unwrap();
+        let mut fc = FlightController::new(&cfg).unwrap();
         let mut r = fc.control_tick.outer;
         for (thrust, rate) in [(1.1, 1.3), (1.27, 0.93), (0.81, 1.117), (1.05, 1.01), (1.173, 0.997)] {
             r.gains = Gains { thrust, rate };
@@ -671,7 +671,7 @@ mod tests {
     fn the_same_configuration_applied_in_flight_changes_nothing() {
         // Every stage keeps its state: a controller given its own configuration again flies on
         // bit for bit as one that was not.
-        let mut a = FlightController::new(flown()).unwrap();
+        let mut a = FlightController::new(&flown()).unwrap();
         let mut b = a.clone();
         assert!(fly(&mut a, 0, 3000, &FLYING) == fly(&mut b, 0, 3000, &FLYING));
         assert!(a.changes_restricted(), "{:?}", a.status().state);
@@ -692,7 +692,7 @@ mod tests {
 
     #[test]
     fn a_gain_change_in_flight_applies_at_once_and_keeps_the_integrators() {
-        let mut a = FlightController::new(flown()).unwrap();
+        let mut a = FlightController::new(&flown()).unwrap();
         fly(&mut a, 0, 3000, &FLYING);
         let mut b = a.clone();
         let mut cfg = flown();
@@ -708,7 +708,7 @@ mod tests {
 
     #[test]
     fn a_ground_only_change_asked_for_disarmed_and_carried_out_armed_is_refused() {
-        let mut fc = FlightController::new(flown()).unwrap();
+        let mut fc = FlightController::new(&flown()).unwrap();
         fly(&mut fc, 0, 1990, &ForcedRadio { armed: false, ..FLYING });
         assert!(!fc.changes_restricted(), "{:?}", fc.status().state);
         // Asked for while disarmed (the parameters crate classified it then), carried out by
@@ -753,7 +753,7 @@ mod tests {
 
     #[test]
     fn the_split_halves_take_a_change_as_the_whole_controller_does() {
-        let mut whole = FlightController::new(flown()).unwrap();
+        let mut whole = FlightController::new(&flown()).unwrap();
         fly(&mut whole, 0, 3000, &FLYING);
         let (mut tick, mut outer) = whole.clone().into_parts();
         let mut cfg = flown();
@@ -768,7 +768,7 @@ mod tests {
 
     #[test]
     fn the_safe_supervisor_takes_new_failsafe_times_disarmed() {
-        let mut fc = FlightController::new(Config::default()).unwrap();
+        let mut fc = FlightController::new(&Config::default()).unwrap();
         fly(&mut fc, 0, 100, &ForcedRadio { armed: false, ..FLYING });
         let mut cfg = Config::default();
         if let crate::supervisor::SupervisorConfig::Safe(s) = &mut cfg.supervisor {
@@ -812,7 +812,7 @@ mod tests {
 
     #[test]
     fn the_outer_step_reports_the_height_and_the_barometer_and_names_its_fault() {
-        let mut fc = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        let mut fc = FlightController::new(&with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
         fly_with_baro(&mut fc, 0, 2500, &ForcedRadio { armed: false, ..FLYING }, usize::MAX);
         fly_with_baro(&mut fc, 2500, 4000, &FLYING, usize::MAX);
         let a = fc.status().altitude;
@@ -834,8 +834,8 @@ mod tests {
         // band. Manual: the stick's throttle runs the motors. Hold: on the ground, centred, the
         // hold idles (the throttle cut stops the motors) until the stick asks for a climb.
         let centred = ForcedRadio { width_counts: [6100, 5900, 6150, 6300], ..FLYING };
-        let mut manual = FlightController::new(with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
-        let mut hold = FlightController::new(with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
+        let mut manual = FlightController::new(&with_alt_mode(crate::altitude::AltMode::Manual)).unwrap();
+        let mut hold = FlightController::new(&with_alt_mode(crate::altitude::AltMode::Hold)).unwrap();
         // Armed with the throttle low (as the safe supervisor arms), then the stick centred.
         let disarmed = ForcedRadio { armed: false, width_counts: [6100, 5900, 4400, 6300], ..centred };
         let armed_low = ForcedRadio { armed: true, ..disarmed };
@@ -867,7 +867,7 @@ mod tests {
         let decoder = Decoder::new(&ImuConfig::REFERENCE);
         let radio = ForcedRadio { width_counts: [6000; 4], link: false, armed: false, cal_request: false };
         for change_at in 0..BLOCK {
-            let mut fc = FlightController::new(Config::reference()).unwrap();
+            let mut fc = FlightController::new(&Config::reference()).unwrap();
             let mut k = 0;
             // Start-up settling and calibration, up to the first job: a block starts next.
             while fc.tick_forced(sample(k), &radio).outer_job.is_none() {

@@ -630,7 +630,7 @@ mod tests {
     }
 
     fn boot_status() -> Status {
-        let fc = crate::FlightController::new(crate::Config::default()).expect("default config is valid");
+        let fc = crate::FlightController::new(&crate::Config::default()).expect("default config is valid");
         fc.status()
     }
 

@@ -23,7 +23,7 @@ const NO_SAT: Saturation = Saturation::NONE;
 /// Run the whole controller with a level IMU turning about z at `rate_dps`, throttle half up
 /// and the link given directly, for `ticks` ticks after boot; returns the yaw estimate.
 fn yaw_after(cfg: Config, rate_dps: f32, ticks: u32) -> f32 {
-    let mut fc = FlightController::new(cfg).unwrap();
+    let mut fc = FlightController::new(&cfg).unwrap();
     let radio = ForcedRadio { width_counts: [5862, 6151, 6000, 6397], link: true, armed: false, cal_request: false };
     let level = |gz: i16, n: u32| RawImu { accel: [(n % 3) as i16 - 1, 0, 8197], gyro: [0, 0, gz] };
     for n in 0..1600 {
@@ -228,7 +228,7 @@ fn level_job(sticks: Sticks, throttle_low: bool) -> OuterJob {
 
 /// One outer step from level with `sticks`, throttle up: the rate demands.
 fn outer_demand(cfg: Config, sticks: Sticks) -> [f32; 3] {
-    let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+    let (_, mut outer) = FlightController::new(&cfg).unwrap().into_parts();
     outer.run(&level_job(sticks, false)).rate_demand_rad_s
 }
 
@@ -255,7 +255,7 @@ fn without_yaw_shaping(mut cfg: Config) -> Config {
 /// Outer steps (level, not turning) with the sticks `at(step)`: per step the heading target's
 /// rate (its change times 160 steps a second) and the yaw rate demand.
 fn yaw_turn(cfg: Config, steps: usize, at: impl Fn(usize) -> (Sticks, bool)) -> Vec<(f32, f32)> {
-    let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+    let (_, mut outer) = FlightController::new(&cfg).unwrap().into_parts();
     let mut last_target = 0.0;
     (0..steps)
         .map(|k| {
@@ -330,7 +330,7 @@ fn d16_the_shaped_yaw_rate_starts_from_rest_after_the_throttle_was_low() {
 #[test]
 fn status_reports_the_yaw_rate_the_stick_asks_for() {
     // Forced radio, the rudder at +1800 counts of 2000 beyond the dead band, throttle up.
-    let mut fc = FlightController::new(Config::default()).unwrap();
+    let mut fc = FlightController::new(&Config::default()).unwrap();
     let turning = ForcedRadio { width_counts: [6000, 6000, 8000, 7800], link: true, armed: false, cal_request: false };
     let level = RawImu { accel: [0, 0, 8197], gyro: [0, 0, 0] };
     for _ in 0..10 {
@@ -349,7 +349,7 @@ fn status_reports_the_yaw_rate_the_stick_asks_for() {
 #[test]
 fn d14_the_thrust_gain_follows_the_battery() {
     let gain_after = |cfg: Config, readings_mv: &[(u32, u32)]| {
-        let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+        let (_, mut outer) = FlightController::new(&cfg).unwrap().into_parts();
         let job = level_job(Sticks::default(), true);
         let mut g = f32::NAN;
         for &(mv, steps) in readings_mv {
@@ -406,7 +406,7 @@ fn d17_a_rate_error_asks_for_the_same_thrust_at_any_throttle() {
     // The rate loop's gain at a throttle stick, from one outer step (no battery reading, so
     // the thrust gain is 1 and only the thrust curve acts).
     let rate_gain = |cfg: Config, thr: i16| {
-        let (_, mut outer) = FlightController::new(cfg).unwrap().into_parts();
+        let (_, mut outer) = FlightController::new(&cfg).unwrap().into_parts();
         outer.run(&level_job(Sticks::new(0, 0, thr, 0), false)).gains.rate
     };
     let d = Config::default();
@@ -433,7 +433,7 @@ fn d17_a_rate_error_asks_for_the_same_thrust_at_any_throttle() {
 fn d17_the_thrust_curve_scales_the_rate_loop_but_not_the_throttle_map() {
     // Flown through the whole controller: the rate loop in force follows the rate gain, the
     // throttle map follows only the battery's thrust gain.
-    let fc = FlightController::new(Config::default()).unwrap();
+    let fc = FlightController::new(&Config::default()).unwrap();
     let before = *fc.config();
     let result = fcu_core::flight::OuterResult {
         quat: fcu_core::math::Quat::IDENTITY,
@@ -461,7 +461,7 @@ fn d12_the_debug_line_is_rate_limited_and_status_lines_follow_state_changes() {
     let mut r = Reporter::firmware();
     let snapshots_per_s = 800 / u32::from(fcu_core::telemetry::SNAPSHOT_EVERY_TICKS);
     let (mut debug, mut status) = (0, 0);
-    let mut st = FlightController::new(Config::default()).unwrap().status();
+    let mut st = FlightController::new(&Config::default()).unwrap().status();
     for n in 0..snapshots_per_s {
         st.state = if n < snapshots_per_s / 2 { FlightState::Disarmed } else { FlightState::Armed };
         let e = r.observe(&st);

@@ -320,7 +320,7 @@ mod app {
         let (tick_timer, tick_start) = TickTimer::new(dp.TIM9, cfg.timing.tick_timer_psc, cfg.timing.tick_timer_arr, &mut rcc);
         let (adc, battery_pin) = start_battery(dp.ADC1, gpiob.pb1, &mut rcc);
 
-        let fc = fcu_core::FlightController::new(cfg).unwrap_or_else(|e| halt(&mut leds, Some(&mut uart.tx), e.field()));
+        let fc = fcu_core::FlightController::new(&cfg).unwrap_or_else(|e| halt(&mut leds, Some(&mut uart.tx), e.field()));
         let decoder = fc.edge_decoder();
         let (edges_out, edges_in) = cx.local.edge_queue.split();
         let (inner, outer) = fc.into_parts();
@@ -609,11 +609,8 @@ mod app {
         for (sensor, answer) in Sensor::ALL.into_iter().zip(answers.iter_mut()) {
             *answer = init_sensor(bus, sensor);
             if sensor.identifies(*answer) {
-                let mut line = LineBuf::<64>::new();
-                line.push_str(sensor.name());
-                line.push_str(" initialized and enabled");
-                line.finish_line();
-                uart.send(line.as_bytes());
+                uart.send(sensor.name().as_bytes());
+                uart.send(b" initialized and enabled\n");
             }
         }
         BootVerdict::from_answers(answers)

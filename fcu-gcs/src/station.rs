@@ -575,7 +575,7 @@ mod tests {
     use fcu_core::supervisor::Blockers;
 
     fn status(state: FlightState, sticks: Sticks, blockers: Blockers) -> Status {
-        let mut s = FlightController::new(Config::default()).unwrap().status();
+        let mut s = FlightController::new(&Config::default()).unwrap().status();
         s.state = state;
         s.sticks = sticks;
         s.blockers = blockers;

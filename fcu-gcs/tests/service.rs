@@ -40,7 +40,7 @@ impl Board {
     fn new() -> Board {
         let cfg = Config::default();
         Board {
-            fc: FlightController::new(cfg).unwrap(),
+            fc: FlightController::new(&cfg).unwrap(),
             service: Service::new(cfg, &Config::DEFAULT, fcu_params::snapshot::Source::NoSnapshot, LinkConfig::DEFAULT),
             now_ms: 0,
             ticks: 0,

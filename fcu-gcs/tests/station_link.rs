@@ -27,7 +27,7 @@ fn ack_of(sent: &[Sent]) -> (u16, MavResult) {
 }
 
 fn station(state: FlightState, sticks: Sticks) -> Station {
-    let mut s: Status = FlightController::new(Config::default()).unwrap().status();
+    let mut s: Status = FlightController::new(&Config::default()).unwrap().status();
     s.state = state;
     s.sticks = sticks;
     let mut st = Station::new(Config::default(), &Config::DEFAULT);

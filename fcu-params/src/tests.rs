@@ -683,7 +683,7 @@ fn while_restricted_only_in_flight_parameters_change_and_a_setting_no_parameter_
 
 #[test]
 fn a_refused_apply_changes_nothing_and_a_taken_one_reaches_the_controller() {
-    let mut fc = FlightController::new(Config::default()).unwrap();
+    let mut fc = FlightController::new(&Config::default()).unwrap();
     assert_eq!(apply(&mut fc, &with("RC1_TRIM", 1470.0)), Ok(()));
     assert_eq!(fc.config(), &with("RC1_TRIM", 1470.0));
     let mut mixer = *fc.config();

@@ -28,7 +28,7 @@ struct Flying {
 
 impl Flying {
     fn new(cfg: Config) -> Flying {
-        let mut f = Flying { fc: FlightController::new(cfg).unwrap_or_else(|e| panic!("{e}")), noise: 1 };
+        let mut f = Flying { fc: FlightController::new(&cfg).unwrap_or_else(|e| panic!("{e}")), noise: 1 };
         let neutral = [5862, 6151, 4000, 6397];
         let arm = [4400, 4400, 4000, 7800];
         let fly = [5862, 6151, 6400, 6397];

@@ -79,7 +79,7 @@ pub fn parse_input(text: &str) -> Result<Vec<InputRow>, CsvError> {
 
 /// Run the rows through a fresh flight controller with `cfg`.
 pub fn run(cfg: Config, rows: &[InputRow]) -> Result<Vec<OutputRow>, fcu_core::ConfigError> {
-    let mut fc = FlightController::new(cfg)?;
+    let mut fc = FlightController::new(&cfg)?;
     Ok(rows
         .iter()
         .map(|row| {

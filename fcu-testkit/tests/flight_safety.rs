@@ -46,7 +46,7 @@ struct Bench {
 
 impl Bench {
     fn new(cfg: Config) -> Bench {
-        let fc = FlightController::new(cfg).unwrap();
+        let fc = FlightController::new(&cfg).unwrap();
         let decoder = fc.edge_decoder();
         let spacing = 10_000;
         let mut imu = LevelImu::new(12_345);

@@ -29,7 +29,7 @@ struct Lockstep {
 impl Lockstep {
     fn new(profile: Profile) -> Lockstep {
         let build = |table_only: bool| {
-            let mut fc = FlightController::new(profile.config()).unwrap_or_else(|e| panic!("{e}"));
+            let mut fc = FlightController::new(&profile.config()).unwrap_or_else(|e| panic!("{e}"));
             fc.set_table_only(table_only);
             let decoder = fc.edge_decoder();
             (fc, decoder)

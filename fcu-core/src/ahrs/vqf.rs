@@ -312,14 +312,15 @@ impl Vqf {
         let p_motion = sq(cfg.bias_sigma_motion_dps * 100.0);
         let bias_motion_w = sq(p_motion) / bias_v + p_motion;
         let acc_lp = LowPass3::new(cfg.tau_acc_s, cfg.dt_s);
+        let rest_lp = LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s);
         Vqf {
             cfg,
             gyr_q: Quat::IDENTITY,
             acc_q: Quat::IDENTITY,
             q: Quat::IDENTITY,
             acc_lp,
-            rest_gyr_lp: LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s),
-            rest_acc_lp: LowPass3::new(cfg.rest_filter_tau_s, cfg.dt_s),
+            rest_gyr_lp: rest_lp,
+            rest_acc_lp: rest_lp,
             motion_r_lp: [acc_lp; 3],
             motion_bias_lp: acc_lp,
             rest_s: 0.0,
@@ -379,8 +380,10 @@ impl Vqf {
         let (gyr_q, acc_q, q, bias, bias_p) = (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p);
         self.step(acc, gyr);
         if !(self.q.is_finite() && self.bias_rad_s.is_finite()) {
-            let fresh = Vqf::new(self.cfg);
-            *self = Vqf { gyr_q, acc_q, q, bias_rad_s: bias, bias_p, rest_allowed: self.rest_allowed, ..fresh };
+            let rest_allowed = self.rest_allowed;
+            *self = Vqf::new(self.cfg);
+            (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p, self.rest_allowed) =
+                (gyr_q, acc_q, q, bias, bias_p, rest_allowed);
         }
     }
 

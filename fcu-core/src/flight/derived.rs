@@ -22,7 +22,10 @@ impl Derived {
     /// The one place where a configuration becomes the values the pipeline works with, at
     /// unity gains.
     pub(crate) fn new(cfg: &Config) -> Derived {
-        Derived { tick: TickParams::new(cfg, Gains::UNITY), outer: OuterParams::new(cfg) }
+        let tick = TickParams::new(cfg, Gains::UNITY);
+        // Both halves read the sensor's words the same way: one decoder, made once.
+        let outer = OuterParams::new(cfg, tick.decoder);
+        Derived { tick, outer }
     }
 }
 
@@ -143,9 +146,10 @@ pub(crate) struct OuterParams {
 }
 
 impl OuterParams {
-    pub(crate) fn new(cfg: &Config) -> OuterParams {
+    /// `decoder`: the tick's, made from the same configuration ([`Derived::new`]).
+    pub(crate) fn new(cfg: &Config, decoder: Decoder) -> OuterParams {
         OuterParams {
-            decoder: Decoder::new(&cfg.imu),
+            decoder,
             rc: cfg.rc,
             control: cfg.control,
             reference_arithmetic: cfg.reference_arithmetic,

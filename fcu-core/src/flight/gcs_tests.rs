@@ -25,7 +25,7 @@ struct Bench {
 impl Bench {
     /// Booted, calibrated, past the boot settling: disarmed with nothing against arming.
     fn new() -> Bench {
-        let mut b = Bench { fc: FlightController::new(Config::default()).unwrap(), k: 0 };
+        let mut b = Bench { fc: FlightController::new(&Config::default()).unwrap(), k: 0 };
         b.run(&REST, 2400);
         let st = b.fc.status();
         assert_eq!((st.state, st.blockers.is_empty()), (FlightState::Disarmed, true), "{:?}", st.blockers);

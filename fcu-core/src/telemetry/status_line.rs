@@ -711,7 +711,7 @@ mod tests {
 
     #[test]
     fn the_cores_status_at_boot_with_the_firmwares_counters() {
-        let fc = crate::FlightController::new(crate::Config::default()).expect("default config is valid");
+        let fc = crate::FlightController::new(&crate::Config::default()).expect("default config is valid");
         let f = StatusFields {
             battery_mv: 3950,
             outer_overruns: 1,

@@ -155,7 +155,7 @@ impl Boot {
     }
 
     fn new(cfg: Config, source: snapshot::Source, defaults: &'static Config) -> Result<Boot, String> {
-        let fc = FlightController::new(cfg).map_err(|e| e.to_string())?;
+        let fc = FlightController::new(&cfg).map_err(|e| e.to_string())?;
         let decoder = fc.edge_decoder();
         let status = fc.status();
         let (tick, mut outer) = fc.into_parts();

@@ -22,7 +22,7 @@ pub struct Rig {
 
 impl Rig {
     pub fn new(cfg: Config, seed: u64) -> Result<Rig, ConfigError> {
-        let fc = FlightController::new(cfg)?;
+        let fc = FlightController::new(&cfg)?;
         Ok(Rig {
             monitor: SafetyMonitor::new(&cfg),
             decoder: fc.edge_decoder(),

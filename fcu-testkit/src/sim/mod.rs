@@ -182,7 +182,7 @@ pub const BARO_READ_EVERY_OUTER_STEPS: u32 = 2;
 
 impl InProcess {
     pub fn new(cfg: Config) -> Result<InProcess, SimError> {
-        let fc = FlightController::new(cfg).map_err(|e| SimError::Config(e.to_string()))?;
+        let fc = FlightController::new(&cfg).map_err(|e| SimError::Config(e.to_string()))?;
         let decoder = fc.edge_decoder();
         Ok(InProcess { fc, decoder, outer_steps: 0 })
     }
