@@ -7,7 +7,7 @@ use fcu_core::Config;
 use fcu_gcs::Mailbox;
 
 fn tick() -> ControlTick {
-    FlightController::new(Config::default()).expect("the default configuration is valid").into_parts().0
+    FlightController::new(&Config::default()).expect("the default configuration is valid").into_parts().0
 }
 
 fn with_pitch_p(kp: f32) -> Config {
