@@ -379,7 +379,9 @@ impl Vqf {
         // restart from their initial state.
         let (gyr_q, acc_q, q, bias, bias_p) = (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p);
         self.step(acc, gyr);
-        if !(self.q.is_finite() && self.bias_rad_s.is_finite()) {
+        // The strapdown's own quaternion too: a finite but enormous rate makes it NaN while the
+        // step returns before `q`, and every later step would keep it, the attitude frozen.
+        if !(self.q.is_finite() && self.gyr_q.is_finite() && self.bias_rad_s.is_finite()) {
             let rest_allowed = self.rest_allowed;
             *self = Vqf::new(self.cfg);
             (self.gyr_q, self.acc_q, self.q, self.bias_rad_s, self.bias_p, self.rest_allowed) =
@@ -598,6 +600,20 @@ mod tests {
         v.update([0.0, 0.0, 1000.0], [f32::INFINITY, 0.0, 0.0]);
         v.update([0.0; 3], [0.0; 3]);
         assert_eq!(v, before);
+    }
+
+    #[test]
+    fn a_finite_but_enormous_rate_does_not_freeze_the_attitude() {
+        let mut v = Vqf::new(VqfConfig::DEFAULT);
+        v.update([0.0, 0.0, 1000.0], [0.0; 3]);
+        v.update([0.0, 0.0, 1000.0], [f32::MAX, 0.0, 0.0]);
+        assert!(v.quat().is_finite());
+        // The drone turns a quarter of a turn about the vertical: the attitude follows.
+        for _ in 0..160 {
+            v.update([0.0, 0.0, 1000.0], [0.0, 0.0, 90_000.0]);
+        }
+        let yaw = crate::math::quat_yaw_rad(v.quat());
+        assert!((yaw - core::f32::consts::FRAC_PI_2).abs() < 1e-2, "the attitude froze: yaw {yaw}");
     }
 
     #[test]
