@@ -236,28 +236,27 @@ fn newest_record(sectors: [&[u32]; 2], before: Option<u32>, ours_only: bool) -> 
             }
         }
     }
+    // Then every slot, the likely one first (0: it, if any; n > 0: slot n - 1 in order).
     let mut best: Option<(Record, Location)> = None;
-    let consider = |s: usize, k: usize, best: &mut Option<(Record, Location)>| {
+    for n in 0..=2 * SLOTS {
+        let (s, k) = match (n, likely) {
+            (0, Some((_, s, k))) => (s, k),
+            (0, None) => continue,
+            _ => ((n - 1) / SLOTS, (n - 1) % SLOTS),
+        };
         let words = sectors.get(s).copied().unwrap_or(&[]);
+        // The sequence word first: a record that could not win costs no CRC. Of two with one
+        // number, the lower place wins.
+        let Some(&seq) = slot(words, k).get(SEQ) else { continue };
+        let wins =
+            best.as_ref().is_none_or(|(r, at)| is_newer(seq, r.sequence()) || (seq == r.sequence() && (s, k) < (at.sector, at.slot)));
+        if !(before.is_none_or(|b| is_newer(b, seq)) && wins) {
+            continue;
+        }
         match inspect(from_slot(words, k)) {
             Some(Record::OtherTable { .. }) if ours_only => {}
-            Some(r) => *best = Some((r, Location { sector: s, slot: k })),
+            Some(r) => best = Some((r, Location { sector: s, slot: k })),
             None => {}
-        }
-    };
-    if let Some((_, s, k)) = likely {
-        consider(s, k, &mut best);
-    }
-    for (s, words) in sectors.iter().enumerate() {
-        for k in 0..SLOTS {
-            // The sequence word first: a record that could not win costs no CRC. Of two with
-            // one number, the lower place wins.
-            let Some(&seq) = slot(words, k).get(SEQ) else { continue };
-            let wins =
-                best.as_ref().is_none_or(|(r, at)| is_newer(seq, r.sequence()) || (seq == r.sequence() && (s, k) < (at.sector, at.slot)));
-            if before.is_none_or(|b| is_newer(b, seq)) && wins {
-                consider(s, k, &mut best);
-            }
         }
     }
     best
