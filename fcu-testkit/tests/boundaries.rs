@@ -872,3 +872,38 @@ fn a_reset_whose_acknowledgement_was_dropped_is_not_answered_by_a_later_refusal(
     );
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
 }
+
+/// Found by the fuzzer (its checker, not the board): RC2_REV -1 taken, then RC2_REV 1 sent while
+/// the board was arming, refused (only while disarmed; its echo is -1, the value in force, so the
+/// set stays pending). Disarmed again, a reboot accepted and a reset of the parameters: the board
+/// saved the defaults, RC2_REV 1 among them, before the reset's acknowledgement went out. The
+/// checker caught up with the save from the refused set, the only one asking for 1, and called
+/// it taken against the table, before it looked at the reset that explains the save. The board
+/// never took the set: RC2_REV stayed -1 until the reset.
+#[test]
+fn a_ground_only_set_refused_while_arming_is_not_the_reset_a_later_save_shows() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let rev = index("RC2_REV");
+    let ops = vec![
+        set("RC2_REV", -1.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 300 },
+        set("RC2_REV", 1.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 300 },
+        Op::Flood { ms: 800 },
+        reboot(),
+        Op::Wait { ms: 30 },
+        reset,
+        set("RATE_RLL_P", 3150.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert_eq!((b.counts.arms, b.counts.reboots), (0, 1), "{:?}", b.counts);
+    assert!(b.counts.saves >= 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), rev), parameters::value(&DEFAULTS, rev));
+    assert_eq!(parameters::value(&DEFAULTS, rev), Some(1.0));
+}

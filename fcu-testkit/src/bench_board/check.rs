@@ -478,31 +478,45 @@ impl Checker {
                 }
                 // The earliest set that asks for the value and that the board took: one it
                 // refused (an RC endpoint set while armed, say, its echo the value in force)
-                // leaves the value to a later set of it.
-                let asking: Vec<usize> = (0..self.pending_sets.len())
+                // leaves the value to a later set of it. When the table refuses every one, none
+                // explains the value: a reset taken on the way to another parameter's set may
+                // (a ground-only set refused while arming asks for the default), and what is
+                // left unexplained is the caller's violation.
+                let taken = (0..self.pending_sets.len())
                     .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.start >= from && s.asks(i, *v)))
-                    .collect();
-                let Some((&last, earlier)) = asking.split_last() else {
-                    continue;
-                };
-                let taken = earlier.iter().find_map(|&pos| {
-                    let mut trial = self.clone();
-                    // A refusal found on trial is no finding.
-                    trial.trace = false;
-                    trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
-                });
-                match taken {
-                    Some(trial) => *self = trial,
-                    // The last one, taken or a violation.
-                    None => {
-                        self.take_through(last, true, at);
-                    }
+                    .find_map(|pos| {
+                        let mut trial = self.clone();
+                        // A refusal found on trial is no finding.
+                        trial.trace = false;
+                        trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
+                    });
+                if let Some(trial) = taken {
+                    *self = trial;
                 }
             }
             if self.pending_sets.len() == pending {
                 return;
             }
         }
+    }
+
+    /// For a message: the first parameter where `values` differ from the model, when a pending
+    /// set asks for its value there and the table refuses that set by the rules in force when
+    /// the board received it (a ground-only change while armed, say): the board took a change
+    /// it must refuse.
+    fn refused_asking(&self, values: &[f32; COUNT]) -> String {
+        let Some(i) = (0..COUNT)
+            .find(|&i| parameters::value(&self.model, i).is_some_and(|m| values.get(i).is_some_and(|v| m.to_bits() != v.to_bits())))
+        else {
+            return String::new();
+        };
+        let refusal = self.pending_sets.iter().filter(|s| values.get(i).is_some_and(|v| s.asks(i, *v))).find_map(|s| {
+            let mut next = self.model;
+            parameters::set(&mut next, s.index, s.value, s.restricted.unwrap_or(false)).err().map(|r| r.rule)
+        });
+        refusal.map_or(String::new(), |rule| {
+            format!(" (the board took {} = {}, which the table refuses: {rule})", name(i), values.get(i).copied().unwrap_or(f32::NAN))
+        })
     }
 
     /// An answer of the board, as it left the link.
@@ -641,7 +655,12 @@ impl Checker {
         let model = parameters::values(&self.model);
         if bits(&snap.values) != bits(&model) {
             let d = first_difference(&snap.values, &model);
-            self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, format!("saved a set other than the one accepted: {d} accepted"));
+            let refused = self.refused_asking(&snap.values);
+            self.violate(
+                Invariant::AcceptedIsReportedSavedLoaded,
+                at,
+                format!("saved a set other than the one accepted: {d} accepted{refused}"),
+            );
         }
         self.written.push(Written {
             sector: plan.sector,
@@ -694,7 +713,11 @@ impl Checker {
             let model = parameters::values(&self.model);
             if bits(&model) != bits(&loaded) {
                 let d = first_difference(&loaded, &model);
-                found.push((Invariant::AcceptedIsReportedSavedLoaded, format!("after a reboot command loaded ({source:?}) {d} accepted")));
+                let refused = self.refused_asking(&loaded);
+                found.push((
+                    Invariant::AcceptedIsReportedSavedLoaded,
+                    format!("after a reboot command loaded ({source:?}) {d} accepted{refused}"),
+                ));
             }
         }
         if kind == BootKind::PowerCut && !self.history.contains(&bits(&loaded)) {
@@ -747,5 +770,27 @@ mod tests {
         let angle = index("ANGLE_MAX");
         c.on_answer(&Answer::ParamValue { name: "ANGLE_MAX".into(), value: 33.0, index: angle as u16 }, 1);
         assert!(c.first(Invariant::AcceptedIsReportedSavedLoaded).is_some());
+    }
+
+    /// The board taking a ground-only set it refused while arming is still a violation, and
+    /// says so, when nothing else (a reset) explains the value it then shows.
+    #[test]
+    fn a_ground_only_set_the_board_refused_and_then_shows_is_a_violation() {
+        let mut c = Checker::new(&DEFAULTS);
+        let rev = index("RC2_REV");
+        let send = |c: &mut Checker, v: f32, restricted: bool, at: u64| {
+            c.on_sent(&GcsFrame::ParamSet { name: name16("RC2_REV"), value: v }, 35);
+            c.on_received(c.sent_bytes, restricted);
+            c.on_answer(&Answer::ParamValue { name: "RC2_REV".into(), value: -1.0, index: rev as u16 }, at);
+        };
+        send(&mut c, -1.0, false, 1);
+        // Refused while arming: the echo is the value in force.
+        send(&mut c, 1.0, true, 2);
+        assert!(c.violations().is_empty(), "{:?}", c.violations());
+        let mut shown = c.model;
+        parameters::set(&mut shown, rev, 1.0, false).unwrap();
+        c.on_boot(&shown, snapshot::Source::NoSnapshot, &Flash::new(), BootKind::Reset, c.sent_bytes, 3);
+        let v = c.first(Invariant::AcceptedIsReportedSavedLoaded).expect("a violation");
+        assert!(v.what.contains("which the table refuses: only while disarmed"), "{v}");
     }
 }
