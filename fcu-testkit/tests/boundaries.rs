@@ -907,3 +907,24 @@ fn a_ground_only_set_refused_while_arming_is_not_the_reset_a_later_save_shows() 
     assert_eq!(parameters::value(b.config(), rev), parameters::value(&DEFAULTS, rev));
     assert_eq!(parameters::value(&DEFAULTS, rev), Some(1.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): RATE_YAW_D 362.07 taken, a reboot accepted
+/// (the board saves what is unsaved first, each time the link is quiet), then in one burst a
+/// reset of the parameters, RATE_PIT_P, a second reset, RATE_YAW_D 362.07 nine times and
+/// RATE_YAW_D 60, its default. The board saved the defaults after a reset, the frames after it
+/// still on the wire, then saved RATE_YAW_D 362.07 after the second reset and the sets. The
+/// checker caught up with the first save from the set of 60, the only one asking for the value
+/// saved, which the board had not received yet; that took every set before it, and the second
+/// save had nothing left to explain it. A set still on the wire explains nothing the board saved.
+#[test]
+fn a_set_still_on_the_wire_does_not_explain_a_save() {
+    let reset = || Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let mut ops = vec![set("RATE_YAW_D", 362.06897), Op::Wait { ms: 100 }, reboot(), Op::Wait { ms: 20 }];
+    ops.extend([reset(), set("RATE_PIT_P", 3218.3909), reset()]);
+    ops.extend((0..9).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RATE_YAW_D", 60.0), Op::Wait { ms: 500 }]);
+    let b = bench(ops);
+    assert!(b.counts.saves >= 2 && b.counts.reboots == 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
+}

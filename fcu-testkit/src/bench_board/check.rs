@@ -464,7 +464,7 @@ impl Checker {
     }
 
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
-    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it. Taking a set
+    /// a value a PARAM_SET sent from byte `from` on, and received, asked for, the board took it. Taking a set
     /// takes the ones before it, whose side effects (an RCMAP swap) may move a parameter
     /// already looked at, so the parameters are looked at again until no set is taken (each
     /// pass that takes one leaves fewer pending).
@@ -482,8 +482,11 @@ impl Checker {
                 // explains the value: a reset taken on the way to another parameter's set may
                 // (a ground-only set refused while arming asks for the default), and what is
                 // left unexplained is the caller's violation.
+                // Only a set the board received: one still on the wire (behind a backlog of
+                // frames) explains nothing it saved or loaded, and taking it would take every
+                // set before it, which a later save or answer may still show as to come.
                 let taken = (0..self.pending_sets.len())
-                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.start >= from && s.asks(i, *v)))
+                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.restricted.is_some() && s.start >= from && s.asks(i, *v)))
                     .find_map(|pos| {
                         let mut trial = self.clone();
                         // A refusal found on trial is no finding.
