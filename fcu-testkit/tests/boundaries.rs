@@ -928,3 +928,35 @@ fn a_set_still_on_the_wire_does_not_explain_a_save() {
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
     assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
 }
+
+/// Found by the fuzzer (its checker, not the board): after a flood, RATE_PIT_P 4942.53 and
+/// RATE_YAW_D 362.07 taken, a reboot accepted (the board saves what is unsaved first), RATE_RLL_I
+/// 3218.39, RATE_YAW_D 60 (its default) and 362.07 again, an unknown command, more sets of
+/// RATE_YAW_D, a reset of the parameters, and RATE_RLL_I and RATE_PIT_P set again. The board took
+/// them all, the reset's acknowledgement not out before the reboot, and saved the defaults with RATE_RLL_I and
+/// RATE_PIT_P before rebooting. The checker explained the save with the set of 60 alone, then
+/// took the answer of the 362.07 after it, queued before the save; at the reboot nothing it had
+/// left pending put RATE_YAW_D back at 60 (`after a reboot command loaded ... RATE_YAW_D = 60
+/// against 362.06897`). A reboot comes after the board took every frame it received and saved
+/// them: the load is matched against every set received taken in order, the reset among them.
+#[test]
+fn a_reboot_loads_the_reset_the_board_took_after_a_set_of_the_default() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    // param1 0: no reboot (answered unsupported).
+    let no_reboot = || command(cmd::PREFLIGHT_REBOOT_SHUTDOWN, 0.0, 0.0);
+    let mut ops = vec![Op::Wait { ms: 35 }, Op::Flood { ms: 800 }, Op::Wait { ms: 40 }];
+    ops.extend([set("RATE_PIT_P", 4942.529), set("ALT_DEADBAND_US", 289.65518)]);
+    ops.extend((0..4).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RC1_MAX", 1787.3563), set("RC1_MIN", 1787.3563), reboot(), set("RC1_MAX", 1787.3563), set("RC1_MIN", 1787.3563)]);
+    ops.extend([no_reboot(), set("RATE_RLL_I", 3218.3909), Op::Wait { ms: 40 }]);
+    ops.extend([no_reboot(), set("RATE_YAW_D", 60.0), set("RATE_YAW_D", 362.06897), reboot(), no_reboot(), Op::Wait { ms: 60 }]);
+    ops.push(Op::Send(GcsFrame::Command { command: 721, params: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true }));
+    ops.extend((0..4).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RATE_YAW_D", 494.25287), set("ALT_DEADBAND_US", 257.47125), reset]);
+    ops.extend([set("RATE_RLL_I", 3218.3909), set("RATE_PIT_P", 4942.529), Op::Wait { ms: 140 }]);
+    let b = Scenario { history: Vec::new(), seed: 12, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
+    assert_eq!(parameters::value(b.config(), index("RATE_RLL_I")), Some(3218.3909));
+}
