@@ -960,3 +960,26 @@ fn a_reboot_loads_the_reset_the_board_took_after_a_set_of_the_default() {
     assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
     assert_eq!(parameters::value(b.config(), index("RATE_RLL_I")), Some(3218.3909));
 }
+
+/// Found by the fuzzer (its checker, not the board): the flash held a set the table refuses
+/// (RC2_REV 0.264, not a whole number), so the board started from the defaults; RATE_PIT_I
+/// 1436.78 taken and saved, and a power cut fell on the save's last word, the commit word, with
+/// every bit it clears already cleared. The record was whole, and the board loaded it after the
+/// cut; the bench told the checker nothing of a save cut short, which then expected the refused
+/// set's fallback, the defaults (`RefusedSnapshotFallsBack`). The same cause:
+/// `PowerCut: loaded (Snapshot 2) other than the newest save (sequence 0x1)`.
+#[test]
+fn a_save_cut_at_its_last_word_fully_programmed_is_loaded() {
+    let pit_i = index("RATE_PIT_I");
+    let history = vec![Planted { sequence: 1, changes: vec![(index("RC2_REV"), 0.26436782)] }];
+    let ops = vec![
+        set("RATE_PIT_I", 1436.7816),
+        Op::CutAtWord(PowerCut { at_word: snapshot::RECORD_WORDS as u32 - 1, partial_bits: 0 }),
+        save(),
+        Op::Wait { ms: 300 },
+    ];
+    let b = Scenario { history, seed: 0x64, ops }.run(&DEFAULTS);
+    assert_eq!((b.counts.cuts_in_flash, b.counts.power_cuts), (1, 1), "{:?}", b.counts);
+    assert!(b.checker.violations().is_empty(), "{:?}", b.checker.violations());
+    assert_eq!(parameters::value(b.config(), pit_i), Some(1436.7816));
+}

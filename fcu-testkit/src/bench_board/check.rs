@@ -674,6 +674,21 @@ impl Checker {
         });
     }
 
+    /// A power cut fell in the middle of programming a save's words. Only the last word cut
+    /// with every bit it clears cleared leaves the record whole (the commit word is written
+    /// last): then the board made the save, and the loader may find it, so it is judged and
+    /// kept as one. A record cut anywhere else is not whole, and a boot must pass over it.
+    pub fn on_save_cut(&mut self, plan: &SavePlan, flash: &Flash, at: u64) {
+        let whole =
+            flash.sectors().get(plan.sector).and_then(|s| s.get(plan.first_word..plan.first_word + RECORD_WORDS)) == Some(&plan.words[..]);
+        if self.trace {
+            eprintln!("{:>6} ms a power cut in a save's words; the record whole: {whole}", at * u64::from(TICK_US) / 1000);
+        }
+        if whole {
+            self.on_saved(plan, at);
+        }
+    }
+
     /// The board booted with `cfg`, found as `source` in `flash`; the first `delivered_bytes`
     /// the ground station sent had reached the board before (what they asked died with it,
     /// unless answered; the frames after them are still on the wire, for the new boot).
