@@ -872,3 +872,114 @@ fn a_reset_whose_acknowledgement_was_dropped_is_not_answered_by_a_later_refusal(
     );
     assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
 }
+
+/// Found by the fuzzer (its checker, not the board): RC2_REV -1 taken, then RC2_REV 1 sent while
+/// the board was arming, refused (only while disarmed; its echo is -1, the value in force, so the
+/// set stays pending). Disarmed again, a reboot accepted and a reset of the parameters: the board
+/// saved the defaults, RC2_REV 1 among them, before the reset's acknowledgement went out. The
+/// checker caught up with the save from the refused set, the only one asking for 1, and called
+/// it taken against the table, before it looked at the reset that explains the save. The board
+/// never took the set: RC2_REV stayed -1 until the reset.
+#[test]
+fn a_ground_only_set_refused_while_arming_is_not_the_reset_a_later_save_shows() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let rev = index("RC2_REV");
+    let ops = vec![
+        set("RC2_REV", -1.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Arm),
+        Op::Wait { ms: 300 },
+        set("RC2_REV", 1.0),
+        Op::Wait { ms: 100 },
+        Op::Pilot(Pilot::Neutral),
+        Op::Wait { ms: 300 },
+        Op::Flood { ms: 800 },
+        reboot(),
+        Op::Wait { ms: 30 },
+        reset,
+        set("RATE_RLL_P", 3150.0),
+        Op::Wait { ms: 300 },
+    ];
+    let b = bench(ops);
+    assert_eq!((b.counts.arms, b.counts.reboots), (0, 1), "{:?}", b.counts);
+    assert!(b.counts.saves >= 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), rev), parameters::value(&DEFAULTS, rev));
+    assert_eq!(parameters::value(&DEFAULTS, rev), Some(1.0));
+}
+
+/// Found by the fuzzer (its checker, not the board): RATE_YAW_D 362.07 taken, a reboot accepted
+/// (the board saves what is unsaved first, each time the link is quiet), then in one burst a
+/// reset of the parameters, RATE_PIT_P, a second reset, RATE_YAW_D 362.07 nine times and
+/// RATE_YAW_D 60, its default. The board saved the defaults after a reset, the frames after it
+/// still on the wire, then saved RATE_YAW_D 362.07 after the second reset and the sets. The
+/// checker caught up with the first save from the set of 60, the only one asking for the value
+/// saved, which the board had not received yet; that took every set before it, and the second
+/// save had nothing left to explain it. A set still on the wire explains nothing the board saved.
+#[test]
+fn a_set_still_on_the_wire_does_not_explain_a_save() {
+    let reset = || Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    let mut ops = vec![set("RATE_YAW_D", 362.06897), Op::Wait { ms: 100 }, reboot(), Op::Wait { ms: 20 }];
+    ops.extend([reset(), set("RATE_PIT_P", 3218.3909), reset()]);
+    ops.extend((0..9).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RATE_YAW_D", 60.0), Op::Wait { ms: 500 }]);
+    let b = bench(ops);
+    assert!(b.counts.saves >= 2 && b.counts.reboots == 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
+}
+
+/// Found by the fuzzer (its checker, not the board): after a flood, RATE_PIT_P 4942.53 and
+/// RATE_YAW_D 362.07 taken, a reboot accepted (the board saves what is unsaved first), RATE_RLL_I
+/// 3218.39, RATE_YAW_D 60 (its default) and 362.07 again, an unknown command, more sets of
+/// RATE_YAW_D, a reset of the parameters, and RATE_RLL_I and RATE_PIT_P set again. The board took
+/// them all, the reset's acknowledgement not out before the reboot, and saved the defaults with RATE_RLL_I and
+/// RATE_PIT_P before rebooting. The checker explained the save with the set of 60 alone, then
+/// took the answer of the 362.07 after it, queued before the save; at the reboot nothing it had
+/// left pending put RATE_YAW_D back at 60 (`after a reboot command loaded ... RATE_YAW_D = 60
+/// against 362.06897`). A reboot comes after the board took every frame it received and saved
+/// them: the load is matched against every set received taken in order, the reset among them.
+#[test]
+fn a_reboot_loads_the_reset_the_board_took_after_a_set_of_the_default() {
+    let reset = Op::Send(GcsFrame::Command { command: cmd::PREFLIGHT_STORAGE, params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true });
+    // param1 0: no reboot (answered unsupported).
+    let no_reboot = || command(cmd::PREFLIGHT_REBOOT_SHUTDOWN, 0.0, 0.0);
+    let mut ops = vec![Op::Wait { ms: 35 }, Op::Flood { ms: 800 }, Op::Wait { ms: 40 }];
+    ops.extend([set("RATE_PIT_P", 4942.529), set("ALT_DEADBAND_US", 289.65518)]);
+    ops.extend((0..4).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RC1_MAX", 1787.3563), set("RC1_MIN", 1787.3563), reboot(), set("RC1_MAX", 1787.3563), set("RC1_MIN", 1787.3563)]);
+    ops.extend([no_reboot(), set("RATE_RLL_I", 3218.3909), Op::Wait { ms: 40 }]);
+    ops.extend([no_reboot(), set("RATE_YAW_D", 60.0), set("RATE_YAW_D", 362.06897), reboot(), no_reboot(), Op::Wait { ms: 60 }]);
+    ops.push(Op::Send(GcsFrame::Command { command: 721, params: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], int: true }));
+    ops.extend((0..4).map(|_| set("RATE_YAW_D", 362.06897)));
+    ops.extend([set("RATE_YAW_D", 494.25287), set("ALT_DEADBAND_US", 257.47125), reset]);
+    ops.extend([set("RATE_RLL_I", 3218.3909), set("RATE_PIT_P", 4942.529), Op::Wait { ms: 140 }]);
+    let b = Scenario { history: Vec::new(), seed: 12, ops }.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+    assert_eq!(parameters::value(b.config(), index("RATE_YAW_D")), Some(60.0));
+    assert_eq!(parameters::value(b.config(), index("RATE_RLL_I")), Some(3218.3909));
+}
+
+/// Found by the fuzzer (its checker, not the board): the flash held a set the table refuses
+/// (RC2_REV 0.264, not a whole number), so the board started from the defaults; RATE_PIT_I
+/// 1436.78 taken and saved, and a power cut fell on the save's last word, the commit word, with
+/// every bit it clears already cleared. The record was whole, and the board loaded it after the
+/// cut; the bench told the checker nothing of a save cut short, which then expected the refused
+/// set's fallback, the defaults (`RefusedSnapshotFallsBack`). The same cause:
+/// `PowerCut: loaded (Snapshot 2) other than the newest save (sequence 0x1)`.
+#[test]
+fn a_save_cut_at_its_last_word_fully_programmed_is_loaded() {
+    let pit_i = index("RATE_PIT_I");
+    let history = vec![Planted { sequence: 1, changes: vec![(index("RC2_REV"), 0.26436782)] }];
+    let ops = vec![
+        set("RATE_PIT_I", 1436.7816),
+        Op::CutAtWord(PowerCut { at_word: snapshot::RECORD_WORDS as u32 - 1, partial_bits: 0 }),
+        save(),
+        Op::Wait { ms: 300 },
+    ];
+    let b = Scenario { history, seed: 0x64, ops }.run(&DEFAULTS);
+    assert_eq!((b.counts.cuts_in_flash, b.counts.power_cuts), (1, 1), "{:?}", b.counts);
+    assert!(b.checker.violations().is_empty(), "{:?}", b.checker.violations());
+    assert_eq!(parameters::value(b.config(), pit_i), Some(1436.7816));
+}

@@ -580,6 +580,7 @@ impl Bench {
         }
         if self.flash.program(plan.sector, plan.first_word, &plan.words).is_err() {
             self.counts.cuts_in_flash += 1;
+            self.checker.on_save_cut(&plan, &self.flash, self.time_ticks);
             return self.power_cut();
         }
         self.checker.on_saved(&plan, self.time_ticks);

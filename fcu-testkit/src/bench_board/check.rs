@@ -464,7 +464,7 @@ impl Checker {
     }
 
     /// Catches up with sets whose answer was dropped: where `values` differ from the model by
-    /// a value a PARAM_SET sent from byte `from` on asked for, the board took it. Taking a set
+    /// a value a PARAM_SET sent from byte `from` on, and received, asked for, the board took it. Taking a set
     /// takes the ones before it, whose side effects (an RCMAP swap) may move a parameter
     /// already looked at, so the parameters are looked at again until no set is taken (each
     /// pass that takes one leaves fewer pending).
@@ -478,31 +478,48 @@ impl Checker {
                 }
                 // The earliest set that asks for the value and that the board took: one it
                 // refused (an RC endpoint set while armed, say, its echo the value in force)
-                // leaves the value to a later set of it.
-                let asking: Vec<usize> = (0..self.pending_sets.len())
-                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.start >= from && s.asks(i, *v)))
-                    .collect();
-                let Some((&last, earlier)) = asking.split_last() else {
-                    continue;
-                };
-                let taken = earlier.iter().find_map(|&pos| {
-                    let mut trial = self.clone();
-                    // A refusal found on trial is no finding.
-                    trial.trace = false;
-                    trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
-                });
-                match taken {
-                    Some(trial) => *self = trial,
-                    // The last one, taken or a violation.
-                    None => {
-                        self.take_through(last, true, at);
-                    }
+                // leaves the value to a later set of it. When the table refuses every one, none
+                // explains the value: a reset taken on the way to another parameter's set may
+                // (a ground-only set refused while arming asks for the default), and what is
+                // left unexplained is the caller's violation.
+                // Only a set the board received: one still on the wire (behind a backlog of
+                // frames) explains nothing it saved or loaded, and taking it would take every
+                // set before it, which a later save or answer may still show as to come.
+                let taken = (0..self.pending_sets.len())
+                    .filter(|&k| self.pending_sets.get(k).is_some_and(|s| s.restricted.is_some() && s.start >= from && s.asks(i, *v)))
+                    .find_map(|pos| {
+                        let mut trial = self.clone();
+                        // A refusal found on trial is no finding.
+                        trial.trace = false;
+                        trial.take_through(pos, true, at).then_some(Checker { trace: self.trace, ..trial })
+                    });
+                if let Some(trial) = taken {
+                    *self = trial;
                 }
             }
             if self.pending_sets.len() == pending {
                 return;
             }
         }
+    }
+
+    /// For a message: the first parameter where `values` differ from the model, when a pending
+    /// set asks for its value there and the table refuses that set by the rules in force when
+    /// the board received it (a ground-only change while armed, say): the board took a change
+    /// it must refuse.
+    fn refused_asking(&self, values: &[f32; COUNT]) -> String {
+        let Some(i) = (0..COUNT)
+            .find(|&i| parameters::value(&self.model, i).is_some_and(|m| values.get(i).is_some_and(|v| m.to_bits() != v.to_bits())))
+        else {
+            return String::new();
+        };
+        let refusal = self.pending_sets.iter().filter(|s| values.get(i).is_some_and(|v| s.asks(i, *v))).find_map(|s| {
+            let mut next = self.model;
+            parameters::set(&mut next, s.index, s.value, s.restricted.unwrap_or(false)).err().map(|r| r.rule)
+        });
+        refusal.map_or(String::new(), |rule| {
+            format!(" (the board took {} = {}, which the table refuses: {rule})", name(i), values.get(i).copied().unwrap_or(f32::NAN))
+        })
     }
 
     /// An answer of the board, as it left the link.
@@ -641,7 +658,12 @@ impl Checker {
         let model = parameters::values(&self.model);
         if bits(&snap.values) != bits(&model) {
             let d = first_difference(&snap.values, &model);
-            self.violate(Invariant::AcceptedIsReportedSavedLoaded, at, format!("saved a set other than the one accepted: {d} accepted"));
+            let refused = self.refused_asking(&snap.values);
+            self.violate(
+                Invariant::AcceptedIsReportedSavedLoaded,
+                at,
+                format!("saved a set other than the one accepted: {d} accepted{refused}"),
+            );
         }
         self.written.push(Written {
             sector: plan.sector,
@@ -650,6 +672,21 @@ impl Checker {
             values: snap.values,
             by_board: true,
         });
+    }
+
+    /// A power cut fell in the middle of programming a save's words. Only the last word cut
+    /// with every bit it clears cleared leaves the record whole (the commit word is written
+    /// last): then the board made the save, and the loader may find it, so it is judged and
+    /// kept as one. A record cut anywhere else is not whole, and a boot must pass over it.
+    pub fn on_save_cut(&mut self, plan: &SavePlan, flash: &Flash, at: u64) {
+        let whole =
+            flash.sectors().get(plan.sector).and_then(|s| s.get(plan.first_word..plan.first_word + RECORD_WORDS)) == Some(&plan.words[..]);
+        if self.trace {
+            eprintln!("{:>6} ms a power cut in a save's words; the record whole: {whole}", at * u64::from(TICK_US) / 1000);
+        }
+        if whole {
+            self.on_saved(plan, at);
+        }
     }
 
     /// The board booted with `cfg`, found as `source` in `flash`; the first `delivered_bytes`
@@ -690,11 +727,30 @@ impl Checker {
             }
         }
         if kind == BootKind::Reset {
+            let before = self.clone();
             self.reconcile(&loaded, 0, at);
+            if bits(&loaded) != bits(&parameters::values(&self.model)) {
+                // A reboot comes in a link period, after the board took every frame it had
+                // received and saved what they changed: every set received so far, each reset
+                // among them where it came. Catching up set by set may have committed to an
+                // explanation of an earlier save or answer that stopped short (a set of the
+                // default rather than the reset the board took after it, its acknowledgement
+                // dropped), which a later answer then moved past.
+                let reconciled = std::mem::replace(self, before);
+                let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
+                self.pass(received, true);
+                if bits(&loaded) != bits(&parameters::values(&self.model)) {
+                    *self = reconciled;
+                }
+            }
             let model = parameters::values(&self.model);
             if bits(&model) != bits(&loaded) {
                 let d = first_difference(&loaded, &model);
-                found.push((Invariant::AcceptedIsReportedSavedLoaded, format!("after a reboot command loaded ({source:?}) {d} accepted")));
+                let refused = self.refused_asking(&loaded);
+                found.push((
+                    Invariant::AcceptedIsReportedSavedLoaded,
+                    format!("after a reboot command loaded ({source:?}) {d} accepted{refused}"),
+                ));
             }
         }
         if kind == BootKind::PowerCut && !self.history.contains(&bits(&loaded)) {
@@ -747,5 +803,27 @@ mod tests {
         let angle = index("ANGLE_MAX");
         c.on_answer(&Answer::ParamValue { name: "ANGLE_MAX".into(), value: 33.0, index: angle as u16 }, 1);
         assert!(c.first(Invariant::AcceptedIsReportedSavedLoaded).is_some());
+    }
+
+    /// The board taking a ground-only set it refused while arming is still a violation, and
+    /// says so, when nothing else (a reset) explains the value it then shows.
+    #[test]
+    fn a_ground_only_set_the_board_refused_and_then_shows_is_a_violation() {
+        let mut c = Checker::new(&DEFAULTS);
+        let rev = index("RC2_REV");
+        let send = |c: &mut Checker, v: f32, restricted: bool, at: u64| {
+            c.on_sent(&GcsFrame::ParamSet { name: name16("RC2_REV"), value: v }, 35);
+            c.on_received(c.sent_bytes, restricted);
+            c.on_answer(&Answer::ParamValue { name: "RC2_REV".into(), value: -1.0, index: rev as u16 }, at);
+        };
+        send(&mut c, -1.0, false, 1);
+        // Refused while arming: the echo is the value in force.
+        send(&mut c, 1.0, true, 2);
+        assert!(c.violations().is_empty(), "{:?}", c.violations());
+        let mut shown = c.model;
+        parameters::set(&mut shown, rev, 1.0, false).unwrap();
+        c.on_boot(&shown, snapshot::Source::NoSnapshot, &Flash::new(), BootKind::Reset, c.sent_bytes, 3);
+        let v = c.first(Invariant::AcceptedIsReportedSavedLoaded).expect("a violation");
+        assert!(v.what.contains("which the table refuses: only while disarmed"), "{v}");
     }
 }
