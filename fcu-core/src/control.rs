@@ -458,7 +458,7 @@ struct RateAxis {
 impl RateAxis {
     /// One axis, one tick, for a finite error `e = demand − rate`, with the derivative on the
     /// measurement or on the error and with or without anti-windup.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     #[allow(clippy::too_many_arguments)] // the per-tick values of one axis, kept in registers
     fn command<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
         &mut self,
@@ -541,7 +541,7 @@ impl RateLoop {
         }
     }
 
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     fn commands_of_axes<const ON_MEASUREMENT: bool, const ANTI_WINDUP: bool>(
         &mut self,
         cfg: &ControlConfig,
@@ -583,7 +583,7 @@ impl RateLoop {
 /// (`over`: conditional integration, since what the clamp holds back would only have to be
 /// unwound later). Compared by sign bits (docs/performance.md, «sign bits»): with `e = ±0`
 /// the integrator cannot move, so which way a zero counts does not matter.
-#[inline(always)]
+#[inline(always)] // docs/performance.md, «inlined into the tick».
 fn winds_up(e: f32, saturated_dirs: u8, unclamped: f32, over: bool) -> bool {
     let e_negative = e.is_sign_negative();
     let mixer_blocks = saturated_dirs & if e_negative { 2 } else { 1 } != 0;
@@ -593,7 +593,7 @@ fn winds_up(e: f32, saturated_dirs: u8, unclamped: f32, over: bool) -> bool {
 /// The reference's clamp: `if v > lim {lim} else if v < −lim {−lim} else {v}`, for the
 /// validated `lim ≥ 0`, as one magnitude test (docs/performance.md): the same result for
 /// every `v`, NaN included (it passes through, as in C; the mixer's final clamp catches it).
-#[inline(always)]
+#[inline(always)] // docs/performance.md, «inlined into the tick».
 fn clamp_symmetric(v: f32, lim: f32) -> f32 {
     if v.abs() > lim {
         if v > 0.0 {

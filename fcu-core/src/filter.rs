@@ -86,7 +86,7 @@ struct BiquadState {
 }
 
 impl BiquadState {
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     fn update(&mut self, c: &BiquadCoeffs, x: f32) -> f32 {
         let y = c.b0 * x + c.b1 * self.x1 + c.b2 * self.x2 + c.a1 * self.y1 + c.a2 * self.y2;
         self.x2 = self.x1;
@@ -184,7 +184,7 @@ pub const BLOCK: usize = 5;
 /// Add one sample to a running block sum. The reference averages a block of [`BLOCK`]
 /// stored vectors as an f32 sum from 0.0 over slots 0..4, then `× 0.2`: a sum kept tick by
 /// tick from 0.0, in slot order, is that sum bit for bit (same order, same roundings).
-#[inline(always)]
+#[inline(always)] // docs/performance.md, «inlined into the tick».
 pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
     for (s, x) in sum.iter_mut().zip(x) {
         *s += x;
@@ -194,7 +194,7 @@ pub fn accumulate(sum: &mut [f32; 3], x: [f32; 3]) {
 /// The mean of a block from its sum: `sum · 0.2`, in f64 as the reference (reference
 /// arithmetic) or in f32. Always inlined, so that a caller's constant `false` leaves no f64
 /// code behind (the firmware, built without the `reference` feature).
-#[inline(always)]
+#[inline(always)] // docs/performance.md, «inlined into the tick».
 pub fn block_mean(sum: [f32; 3], reference_arithmetic: bool) -> [f32; 3] {
     sum.map(|s| if reference_arithmetic { (f64::from(s) * 0.2) as f32 } else { s * 0.2 })
 }

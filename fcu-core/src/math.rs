@@ -194,7 +194,7 @@ pub fn quat_to_tilt(q: Quat) -> Tilt {
 /// `quat_to_tilt`, or with `reference_arithmetic == false` the same expressions in f32.
 /// Always inlined, so that a caller's constant `false` leaves no f64 code behind (the
 /// firmware, built without the `reference` feature).
-#[inline(always)]
+#[inline(always)] // docs/performance.md, «inlined into the tick».
 pub fn quat_to_tilt_with(q: Quat, reference_arithmetic: bool) -> Tilt {
     let (q0, q1, q2, q3) = (q.w, q.x, q.y, q.z);
     let q0q0 = q0 * q0;

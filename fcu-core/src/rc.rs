@@ -138,7 +138,7 @@ impl RcMap {
 
     /// The function input `input` carries (yaw for an input no other function names, which a
     /// valid map never leaves).
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub fn function(&self, input: usize) -> Function {
         if input == usize::from(self.roll) {
             Function::Roll

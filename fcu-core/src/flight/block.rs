@@ -38,7 +38,7 @@ pub(super) struct Block {
 
 impl Block {
     /// One tick's sample; true when the block is full and its job is due.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn add(&mut self, accel: [i16; 3], gyro_mdps: [f32; 3]) -> bool {
         if let Some(words) = self.accel_words.0.get_mut(self.len) {
             *words = accel;
@@ -58,7 +58,7 @@ impl Block {
     }
 
     /// The full block's job, with what the rest of the tick adds to it; the next block starts.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn take_job(&mut self, offsets: Offsets, in_force: &InForce, yaw_est_rad: f32, yaw_target_reset: bool) -> OuterJob {
         let job = OuterJob {
             accel_words: self.accel_words,

@@ -101,14 +101,14 @@ impl TickParams {
     /// Evaluate the reference's double-precision expressions in `f64`. A constant `false`
     /// without the `reference` feature, so its `f64` branches are not compiled into the image
     /// (`Config::validate` refuses the flag there).
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(crate) fn reference_arithmetic(&self) -> bool {
         cfg!(feature = "reference") && self.reference_arithmetic
     }
 
     /// The reference's double dt when its arithmetic is on; always `None` without the
     /// `reference` feature.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(crate) fn reference_dt_s(&self) -> Option<f64> {
         #[cfg(feature = "reference")]
         if self.reference_arithmetic {
@@ -160,7 +160,7 @@ impl OuterParams {
 
     /// As [`TickParams::reference_arithmetic`]: a constant `false` without the `reference`
     /// feature.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(crate) fn reference_arithmetic(&self) -> bool {
         cfg!(feature = "reference") && self.reference_arithmetic
     }

@@ -20,7 +20,7 @@ pub(super) struct HeadingEstimate {
 
 impl HeadingEstimate {
     /// One tick of yaw rate, rad/s.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn integrate(&mut self, yaw_rate_rad_s: f32, throttle_low: bool, p: &TickParams) {
         self.yaw_est_rad = match p.reference_dt_s() {
             // The reference integrates in double (its dt is a C double).
@@ -42,7 +42,7 @@ impl HeadingEstimate {
     }
 
     /// For a job: whether the heading target restarts at 0 (and the next job starts afresh).
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn take_target_reset(&mut self) -> bool {
         core::mem::take(&mut self.low_since_job)
     }

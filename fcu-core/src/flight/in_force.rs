@@ -23,7 +23,7 @@ pub(super) struct InForce {
 impl InForce {
     /// A new decision, and what follows from it and the radio's sticks: the one writer of all
     /// three, written in place (docs/performance.md, «in place»).
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn decided(&mut self, decision: Decision, radio_sticks: Sticks, p: &TickParams, hold: Option<StickCounts>) {
         self.decision = decision;
         self.sticks = decision.failsafe_throttle.map_or(radio_sticks, failsafe_sticks);

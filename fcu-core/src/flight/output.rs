@@ -37,7 +37,7 @@ impl Output {
     /// Rate loop and mixer while the supervisor lets the motors run, then the guard: last and
     /// unconditional. With the motors not allowed to run, a ground station's motor test
     /// (`test`, read only then) drives its one motor, unless a sensor fault is latched.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn run(
         &mut self,
         p: &TickParams,

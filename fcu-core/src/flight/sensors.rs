@@ -87,7 +87,7 @@ impl Sensors {
     }
 
     /// A calibration is asked for or running: [`calibrate`](Self::calibrate) has work to do.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn calibration_due(&self) -> bool {
         self.cal_pending || !self.calibrator.is_idle()
     }
@@ -126,7 +126,7 @@ impl Sensors {
     }
 
     /// The gyro of this reading, offsets removed and low-passed, mdps, body axes.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn gyro_mdps(&mut self, gyro: [i16; 3], decoder: &Decoder) -> [f32; 3] {
         let gyro_mdps = self.offsets.gyro(decoder.gyro_mdps(gyro));
         let gyro_f = self.gyro_lpf.update(gyro_mdps.map(|g| g as f32));

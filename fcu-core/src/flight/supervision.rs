@@ -106,7 +106,7 @@ impl Supervision {
     }
 
     /// One tick's capture pulses.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn receive(&mut self, p: &TickParams, pulses: &PulseBatch) -> RadioFlags {
         let rc = &p.rc;
         match self.machine {
@@ -134,7 +134,7 @@ impl Supervision {
     }
 
     /// This tick's decision, now in force; whether it asks for a calibration.
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     pub(super) fn decide(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         self.ticks = self.ticks.saturating_add(1);
         // In steady flight, with nothing new from the radio and no sensor fault, the decision
@@ -245,13 +245,13 @@ impl Supervision {
     }
 
     #[cfg(feature = "test-switches")]
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     fn repeats_allowed(&self) -> bool {
         !self.table_only
     }
 
     #[cfg(not(feature = "test-switches"))]
-    #[inline(always)]
+    #[inline(always)] // docs/performance.md, «inlined into the tick».
     fn repeats_allowed(&self) -> bool {
         true
     }
