@@ -359,7 +359,7 @@ impl RcConfig {
 
     /// The reference's `update_rc_data` for one input: width → stick (int16), through the map
     /// and the input's endpoints. An input out of range is read as input 3.
-    #[inline]
+    #[inline] // docs/performance.md, «inlined into the tick».
     pub fn stick_from_width(&self, input: usize, width_counts: u16) -> StickCounts {
         let f = self.map.function(input);
         let e = self.inputs.get(input).copied().unwrap_or_else(|| self.input_for(f));
