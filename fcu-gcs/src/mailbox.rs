@@ -1,8 +1,7 @@
 //! The one resource through which the link task hands the control loop what it accepted.
 //!
 //! The firmware shares it between its link task and its control and outer tasks (each access
-//! under a lock); the host's model of the board uses the same type, so the hand-over it tests
-//! is the one the board runs.
+//! under a lock). Here, on the host, its rules are tested (`tests/mailbox.rs`).
 
 use fcu_core::flight::{ChangeKind, ConfigChange, ControlTick};
 use fcu_core::gcs::GcsInput;
