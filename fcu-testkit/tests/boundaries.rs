@@ -983,3 +983,23 @@ fn a_save_cut_at_its_last_word_fully_programmed_is_loaded() {
     assert!(b.checker.violations().is_empty(), "{:?}", b.checker.violations());
     assert_eq!(parameters::value(b.config(), pit_i), Some(1436.7816));
 }
+
+/// Found by the fuzzer (its checker, not the board; run 19's input, kept whole): in one burst
+/// sets, saves, a reboot and, last, a reset of the parameters. The board took every frame it had
+/// received before it rebooted, the reset last, saved the defaults and loaded them; the reset's
+/// acknowledgement never went out. Matching the load against every set received took the sets,
+/// and no set came after the reset to take it on the way: a reset received after the last set,
+/// taken disarmed, is taken too.
+#[test]
+fn a_reset_after_the_last_set_before_a_reboot_is_in_what_the_reboot_loads() {
+    const INPUT: [u8; 109] = [
+        111, 52, 157, 111, 52, 157, 111, 1, 0, 113, 113, 113, 113, 113, 113, 113, 16, 48, 144, 113, 113, 113, 113, 113, 113, 113, 113, 141,
+        113, 113, 113, 113, 113, 113, 113, 48, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113,
+        113, 113, 35, 113, 113, 113, 0, 109, 113, 113, 113, 113, 35, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113, 113,
+        113, 113, 113, 113, 113, 113, 113, 113, 65, 82, 77, 95, 72, 79, 76, 68, 95, 77, 83, 113, 113, 53, 112, 239, 111, 48, 112, 239,
+    ];
+    let scenario = Scenario::from_bytes(&INPUT);
+    let b = scenario.run(&DEFAULTS);
+    assert_eq!(b.counts.reboots, 1, "{:?}", b.counts);
+    assert_holds(&b, Invariant::AcceptedIsReportedSavedLoaded);
+}

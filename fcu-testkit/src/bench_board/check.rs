@@ -358,6 +358,21 @@ impl Checker {
         }
     }
 
+    /// Every reset of the parameters the board received with changes not restricted, and not
+    /// seen done yet, as the board took them (before a reboot, which comes after every frame
+    /// received).
+    fn resets_received(&mut self) {
+        let mut reset = false;
+        for entry in self.pending_storage.iter_mut().filter(|e| e.is_reset() && !e.seen_done && e.restricted == Some(false)) {
+            entry.seen_done = true;
+            reset = true;
+        }
+        if reset {
+            let defaults = *self.defaults;
+            self.step_to(defaults, true);
+        }
+    }
+
     /// The model moves to `next`, a set the board had in force; `ahead` as in
     /// [`Checker::take_through`].
     fn step_to(&mut self, next: Config, ahead: bool) {
@@ -650,6 +665,9 @@ impl Checker {
                 *self = before;
                 let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
                 self.pass(received, true);
+                // A reset received after the last of those sets, taken disarmed: taking the sets
+                // never reached it, and its acknowledgement may have died with the reboot.
+                self.resets_received();
                 if bits(&snap.values) != bits(&parameters::values(&self.model)) {
                     *self = reconciled;
                 }
@@ -739,6 +757,9 @@ impl Checker {
                 let reconciled = std::mem::replace(self, before);
                 let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
                 self.pass(received, true);
+                // A reset received after the last of those sets, taken disarmed: taking the sets
+                // never reached it, and its acknowledgement may have died with the reboot.
+                self.resets_received();
                 if bits(&loaded) != bits(&parameters::values(&self.model)) {
                     *self = reconciled;
                 }
