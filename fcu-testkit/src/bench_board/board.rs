@@ -14,7 +14,7 @@ use fcu_gcs::{Observed, Service, ToControl};
 use fcu_link::LinkConfig;
 use fcu_params::snapshot;
 
-use super::check::{BootKind, Checker, Invariant};
+use super::check::{ms, BootKind, Checker, Invariant};
 use super::flash::{Flash, PowerCut};
 use super::gcs::{AnswerReader, GcsFrame};
 use crate::safety::{sticks, LevelImu, PwmReceiver, RadioFrame};
@@ -184,7 +184,7 @@ impl Boot {
     }
 
     fn now_ms(&self) -> u32 {
-        (u64::from(self.ticks) * u64::from(TICK_US) / 1000) as u32
+        ms(u64::from(self.ticks)) as u32
     }
 }
 
@@ -303,7 +303,7 @@ impl Bench {
 
     /// Bench time, ms since switched on.
     pub fn time_ms(&self) -> u64 {
-        self.time_ticks * u64::from(TICK_US) / 1000
+        ms(self.time_ticks)
     }
 
     /// Runs the operations in order.
@@ -416,7 +416,7 @@ impl Bench {
         let now = b.status;
         let t = self.time_ticks;
         if self.checker.trace && now.state != was.state {
-            eprintln!("{:>6} ms {:?} -> {:?}", t * u64::from(TICK_US) / 1000, was.state, now.state);
+            eprintln!("{:>6} ms {:?} -> {:?}", ms(t), was.state, now.state);
         }
         let recent = b.arm_released_ticks <= 200;
         if now.state == FlightState::Arming && was.state != FlightState::Arming && !recent {

@@ -91,6 +91,11 @@ fn first_difference(a: &[f32; COUNT], b: &[f32; COUNT]) -> String {
     }
 }
 
+/// Control ticks as milliseconds of bench time.
+pub(crate) fn ms(ticks: u64) -> u64 {
+    ticks * u64::from(TICK_US) / 1000
+}
+
 /// A frame the ground station sent, for a trace.
 fn describe(frame: &GcsFrame) -> String {
     match frame {
@@ -216,10 +221,10 @@ impl Checker {
 
     pub fn violate(&mut self, invariant: Invariant, at_ticks: u64, what: String) {
         if self.trace {
-            eprintln!("{:>6} ms VIOLATION {invariant:?}: {what}", at_ticks * u64::from(TICK_US) / 1000);
+            eprintln!("{:>6} ms VIOLATION {invariant:?}: {what}", ms(at_ticks));
         }
         if self.violations.iter().filter(|v| v.invariant == invariant).count() < KEEP {
-            self.violations.push(Violation { invariant, at_ms: at_ticks * u64::from(TICK_US) / 1000, what });
+            self.violations.push(Violation { invariant, at_ms: ms(at_ticks), what });
         }
     }
 
@@ -347,29 +352,30 @@ impl Checker {
     /// one). Without it, a save that shows the set, and that the set alone explains (the model
     /// at the defaults already), left the reset pending, and its acknowledgement wiped the set.
     fn reset_before(&mut self, start: u64, ahead: bool) {
+        self.take_resets(|e| e.start < start, ahead);
+    }
+
+    /// Every set the board received so far, taken in order with each reset among them where
+    /// it came, and a reset received after the last of them (taken disarmed): what the board's
+    /// link periods did before it saved or rebooted, each taking every frame received. A
+    /// reset's acknowledgement may have died with the reboot.
+    fn take_every_received(&mut self) {
+        let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
+        self.pass(received, true);
+        self.take_resets(|e| e.restricted == Some(false), true);
+    }
+
+    /// The pending resets of the parameters `which` picks, not seen done yet, as the board
+    /// took them: the model at the defaults.
+    fn take_resets(&mut self, which: impl Fn(&PendingStorage) -> bool, ahead: bool) {
         let mut reset = false;
-        for entry in self.pending_storage.iter_mut().filter(|e| e.is_reset() && !e.seen_done && e.start < start) {
+        for entry in self.pending_storage.iter_mut().filter(|e| e.is_reset() && !e.seen_done && which(e)) {
             entry.seen_done = true;
             reset = true;
         }
         if reset {
             let defaults = *self.defaults;
             self.step_to(defaults, ahead);
-        }
-    }
-
-    /// Every reset of the parameters the board received with changes not restricted, and not
-    /// seen done yet, as the board took them (before a reboot, which comes after every frame
-    /// received).
-    fn resets_received(&mut self) {
-        let mut reset = false;
-        for entry in self.pending_storage.iter_mut().filter(|e| e.is_reset() && !e.seen_done && e.restricted == Some(false)) {
-            entry.seen_done = true;
-            reset = true;
-        }
-        if reset {
-            let defaults = *self.defaults;
-            self.step_to(defaults, true);
         }
     }
 
@@ -472,9 +478,6 @@ impl Checker {
                 return false;
             }
         }
-        if let Some(entry) = self.pending_storage.get_mut(k) {
-            entry.seen_done = true;
-        }
         true
     }
 
@@ -540,7 +543,7 @@ impl Checker {
     /// An answer of the board, as it left the link.
     pub fn on_answer(&mut self, answer: &Answer, at: u64) {
         if self.trace {
-            eprintln!("{:>6} ms answer {answer:?} (pending {})", at * u64::from(TICK_US) / 1000, self.pending_sets.len());
+            eprintln!("{:>6} ms answer {answer:?} (pending {})", ms(at), self.pending_sets.len());
         }
         match answer {
             Answer::ParamValue { name: reported, value, index } => {
@@ -626,9 +629,6 @@ impl Checker {
         }
         self.reconcile(saved, reset_at, at);
         if bits(saved) == bits(&parameters::values(&self.model)) {
-            if let Some(entry) = self.pending_storage.get_mut(k) {
-                entry.seen_done = true;
-            }
             let v = parameters::values(&self.model);
             self.remember(&v);
         } else {
@@ -643,11 +643,7 @@ impl Checker {
         };
         if self.trace {
             let d = first_difference(&snap.values, &parameters::values(&self.model));
-            eprintln!(
-                "{:>6} ms saved (sequence {:#x}); first difference from the model: {d}",
-                at * u64::from(TICK_US) / 1000,
-                snap.sequence
-            );
+            eprintln!("{:>6} ms saved (sequence {:#x}); first difference from the model: {d}", ms(at), snap.sequence);
         }
         let before = self.clone();
         self.reconcile(&snap.values, 0, at);
@@ -663,11 +659,7 @@ impl Checker {
                 // after it may have wiped (the value set again after the reset is the one in
                 // the save); the sets all taken in order are what the board did.
                 *self = before;
-                let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
-                self.pass(received, true);
-                // A reset received after the last of those sets, taken disarmed: taking the sets
-                // never reached it, and its acknowledgement may have died with the reboot.
-                self.resets_received();
+                self.take_every_received();
                 if bits(&snap.values) != bits(&parameters::values(&self.model)) {
                     *self = reconciled;
                 }
@@ -700,7 +692,7 @@ impl Checker {
         let whole =
             flash.sectors().get(plan.sector).and_then(|s| s.get(plan.first_word..plan.first_word + RECORD_WORDS)) == Some(&plan.words[..]);
         if self.trace {
-            eprintln!("{:>6} ms a power cut in a save's words; the record whole: {whole}", at * u64::from(TICK_US) / 1000);
+            eprintln!("{:>6} ms a power cut in a save's words; the record whole: {whole}", ms(at));
         }
         if whole {
             self.on_saved(plan, at);
@@ -713,7 +705,7 @@ impl Checker {
     pub fn on_boot(&mut self, cfg: &Config, source: snapshot::Source, flash: &Flash, kind: BootKind, delivered_bytes: u64, at: u64) {
         let loaded = parameters::values(cfg);
         if self.trace {
-            eprintln!("{:>6} ms boot {kind:?} from {source:?}, {delivered_bytes} bytes delivered", at * u64::from(TICK_US) / 1000);
+            eprintln!("{:>6} ms boot {kind:?} from {source:?}, {delivered_bytes} bytes delivered", ms(at));
         }
         let sectors = flash.sectors();
         let intact: Vec<&Written> = self
@@ -755,11 +747,7 @@ impl Checker {
                 // default rather than the reset the board took after it, its acknowledgement
                 // dropped), which a later answer then moved past.
                 let reconciled = std::mem::replace(self, before);
-                let received = self.pending_sets.iter().take_while(|s| s.restricted.is_some()).count();
-                self.pass(received, true);
-                // A reset received after the last of those sets, taken disarmed: taking the sets
-                // never reached it, and its acknowledgement may have died with the reboot.
-                self.resets_received();
+                self.take_every_received();
                 if bits(&loaded) != bits(&parameters::values(&self.model)) {
                     *self = reconciled;
                 }
