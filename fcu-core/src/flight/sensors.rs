@@ -93,9 +93,8 @@ impl Sensors {
     }
 
     /// The start-up settling and average (the tick stops there until the first offsets exist)
-    /// and a requested average. The 800 Hz path only reaches it while a calibration is asked
-    /// for or running (docs/performance.md, «calibration off the path»).
-    #[inline(never)]
+    /// and a requested average, while a calibration is asked for or running.
+    #[inline(never)] // docs/performance.md, «calibration off the path».
     pub(super) fn calibrate(&mut self, imu: RawImu, decoder: &Decoder, block: &mut Block) -> AfterCalibration {
         if self.calibrator.in_startup() {
             if self.calibrator.settle() {

@@ -148,10 +148,8 @@ impl Supervision {
         self.decide_now(p, sensors, tilt_rad, flags)
     }
 
-    /// The supervisor decides. Apart from [`decide`](Self::decide) and never inlined into it,
-    /// so that a steady tick, which only checks that the decision stands, pays for none of
-    /// this path's registers (docs/performance.md, «repeat steady flight»).
-    #[inline(never)]
+    /// The supervisor decides (a tick that [`decide`](Self::decide) does not find steady).
+    #[inline(never)] // docs/performance.md, «repeat steady flight».
     fn decide_now(&mut self, p: &TickParams, sensors: &Sensors, tilt_rad: f32, flags: RadioFlags) -> bool {
         let radio = self.receiver.state();
         let decision = match &mut self.machine {
