@@ -143,6 +143,18 @@ struct PendingStorage {
     seen_done: bool,
     /// Whether changes were restricted when the board received it (`None`: not yet received).
     restricted: Option<bool>,
+    /// A command sent after it was answered: the board answers in the order it received, so
+    /// this one's answer was dropped (the transmit queue had no room) and no later answer is
+    /// its. A reset stays pending for what it may explain (its frame may also have been lost
+    /// in a receive ring that overflowed, so it is not taken at once).
+    answer_dropped: bool,
+}
+
+/// A command other than PREFLIGHT_STORAGE sent and not acknowledged yet: where its frame starts.
+#[derive(Clone, Copy, Debug)]
+struct PendingCommand {
+    command: u16,
+    start: u64,
 }
 
 impl PendingStorage {
@@ -178,6 +190,9 @@ pub struct Checker {
     pending_sets: Vec<PendingSet>,
     /// PREFLIGHT_STORAGE commands sent and not acknowledged yet, in the order sent.
     pending_storage: VecDeque<PendingStorage>,
+    /// The other commands sent and not acknowledged yet, in the order sent: their answers
+    /// tell which storage answers were dropped.
+    pending_commands: VecDeque<PendingCommand>,
     /// Bytes the ground station sent.
     sent_bytes: u64,
     /// Values replaced by a set seen in a save or a load before its answer: (index, bits).
@@ -200,6 +215,7 @@ impl Checker {
             model: *defaults,
             pending_sets: Vec::new(),
             pending_storage: VecDeque::new(),
+            pending_commands: VecDeque::new(),
             sent_bytes: 0,
             stale: Vec::new(),
             history: vec![bits(&parameters::values(defaults))],
@@ -275,7 +291,9 @@ impl Checker {
                 end: self.sent_bytes,
                 seen_done: false,
                 restricted: None,
+                answer_dropped: false,
             }),
+            GcsFrame::Command { command, .. } => self.pending_commands.push_back(PendingCommand { command, start: at }),
             _ => {}
         }
     }
@@ -430,13 +448,17 @@ impl Checker {
     /// their answers dropped: a reset among those, taken (changes were not restricted when it
     /// came), wiped the sets before it, as its acknowledgement would have said.
     fn on_storage_ack(&mut self, result: u8) {
-        let Some(k) = self.pending_storage.iter().position(|c| c.can_answer(result)) else {
+        let Some(k) = self.pending_storage.iter().position(|c| !c.answer_dropped && c.can_answer(result)) else {
             // No command this answer fits: the oldest's, as the board answers in order.
             let _oldest = self.pending_storage.pop_front();
             return;
         };
         let dropped: Vec<PendingStorage> = self.pending_storage.drain(..k).collect();
         let answered = self.pending_storage.pop_front();
+        if let Some(start) = answered.map(|c| c.start) {
+            // The commands sent before it were answered before it, or their answers dropped.
+            self.pending_commands.retain(|c| c.start > start);
+        }
         let reset_taken = |c: &PendingStorage| c.is_reset() && !c.seen_done && c.restricted == Some(false);
         let resets =
             dropped.iter().filter(|c| reset_taken(c)).chain(answered.iter().filter(|c| result == 0 && !c.seen_done && c.is_reset()));
@@ -447,6 +469,24 @@ impl Checker {
             self.model = *self.defaults;
             let v = parameters::values(&self.model);
             self.remember(&v);
+        }
+    }
+
+    /// The acknowledgement of a command other than PREFLIGHT_STORAGE. It answers the first such
+    /// command pending, or a later one if that one's answer was dropped: either way the board
+    /// had answered every command sent before the first, so a storage command among them that
+    /// is still pending had its answer dropped, and no acknowledgement to come is its.
+    fn on_command_ack(&mut self, command: u16) {
+        let Some(k) = self.pending_commands.iter().position(|c| c.command == command) else {
+            return;
+        };
+        let start = self.pending_commands.get(k).map_or(0, |c| c.start);
+        self.pending_commands.drain(..=k);
+        // A save or an unknown command settled: its answer would only mislead the matching.
+        // A reset not yet seen done stays, for what it may explain.
+        self.pending_storage.retain(|e| e.start > start || (e.is_reset() && !e.seen_done));
+        for e in self.pending_storage.iter_mut().filter(|e| e.start < start) {
+            e.answer_dropped = true;
         }
     }
 
@@ -603,6 +643,7 @@ impl Checker {
                 }
             }
             Answer::CommandAck { command: cmd::PREFLIGHT_STORAGE, result } => self.on_storage_ack(*result),
+            Answer::CommandAck { command, .. } => self.on_command_ack(*command),
             _ => {}
         }
     }
@@ -772,6 +813,7 @@ impl Checker {
         self.pending_sets.retain(|s| s.start >= delivered_bytes);
         self.stale.clear();
         self.pending_storage.retain(|e| e.start >= delivered_bytes);
+        self.pending_commands.retain(|c| c.start >= delivered_bytes);
         self.remember(&loaded);
     }
 }
